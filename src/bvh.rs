@@ -1,0 +1,174 @@
+//! A bounding volume hierarchy over photon planes, for rays from one origin.
+//!
+//! The general-purpose structure: it answers any ray from the gathering origin, at the cost of
+//! a traversal per ray. Planes are long and thin, so their boxes overlap a lot; the screen-space
+//! [`crate::raster`] is the fast path for camera images, this one the baseline it is measured
+//! against (and a second independent path for the hit-equality tests).
+
+use crate::gather::{CameraRay, GatherContext};
+use crate::medium::Medium;
+use crate::photon_plane::PhotonPlane;
+use crate::raster::GatherStats;
+use crate::weights::Denominator;
+use glam::{DVec3, Vec3};
+
+const LEAF_SIZE: usize = 4;
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    min: Vec3,
+    max: Vec3,
+    /// Leaf: planes `first..first + count` of `order`; inner: children at `first`, `first + 1`.
+    first: u32,
+    count: u32,
+}
+
+pub struct PlaneBvh {
+    nodes: Vec<Node>,
+    order: Vec<u32>,
+}
+
+impl PlaneBvh {
+    /// Builds over the planes' polygons inside the box, relative to `origin` (median split on the
+    /// longest axis of the centroids).
+    pub fn build(planes: &[PhotonPlane], medium: &Medium, origin: DVec3) -> Self {
+        let margin = 1e-6 * medium.diagonal();
+        let boxes: Vec<(Vec3, Vec3)> = planes
+            .iter()
+            .map(|p| {
+                let poly = p.polygon_in_box(medium, margin);
+                let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+                for &v in poly.points() {
+                    lo = lo.min(v - origin);
+                    hi = hi.max(v - origin);
+                }
+                // Grow by the f32 rounding of the coordinates.
+                let pad = 1e-5 * (hi - lo).max_element().max(1e-30)
+                    + 1e-6 * (lo.abs().max(hi.abs())).max_element();
+                ((lo - pad).as_vec3(), (hi + pad).as_vec3())
+            })
+            .collect();
+        let mut order: Vec<u32> = (0..planes.len() as u32)
+            .filter(|&i| boxes[i as usize].0.x.is_finite())
+            .collect();
+        let mut nodes = vec![Node {
+            min: Vec3::ZERO,
+            max: Vec3::ZERO,
+            first: 0,
+            count: 0,
+        }];
+        let len = order.len();
+        build_node(&mut nodes, 0, &mut order, 0, len, &boxes);
+        PlaneBvh { nodes, order }
+    }
+
+    /// One ray's estimate, testing only planes whose boxes the ray's segment crosses.
+    pub fn gather<D: Denominator>(
+        &self,
+        ctx: &GatherContext,
+        weights: &D,
+        ray: &CameraRay,
+    ) -> (Vec3, GatherStats) {
+        let (mut sum, mut stats) = (Vec3::ZERO, GatherStats::default());
+        if self.order.is_empty() || !(ray.t0 <= ray.t1) {
+            return (sum, stats);
+        }
+        let inv = ray.dir.recip();
+        let mut stack = [0u32; 64];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = &self.nodes[stack[top] as usize];
+            // Slab test (the origin is the gathering origin, so the box is already relative).
+            let (a, b) = (node.min * inv, node.max * inv);
+            let (near, far) = (
+                a.min(b).max_element().max(ray.t0),
+                a.max(b).min_element().min(ray.t1),
+            );
+            if !(near <= far) {
+                continue;
+            }
+            if node.count > 0 {
+                for &i in &self.order[node.first as usize..(node.first + node.count) as usize] {
+                    let view = &ctx.views[i as usize];
+                    stats.tests += 1;
+                    if let Some(hit) = view.hit(ray) {
+                        stats.hits += 1;
+                        sum += ctx.contribution(weights, view, ray, &hit);
+                    }
+                }
+            } else if top + 2 <= stack.len() {
+                stack[top] = node.first;
+                stack[top + 1] = node.first + 1;
+                top += 2;
+            }
+        }
+        (sum, stats)
+    }
+}
+
+fn build_node(
+    nodes: &mut Vec<Node>,
+    index: usize,
+    order: &mut [u32],
+    start: usize,
+    end: usize,
+    boxes: &[(Vec3, Vec3)],
+) {
+    let items = &mut order[start..end];
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    let (mut clo, mut chi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for &i in items.iter() {
+        let (a, b) = boxes[i as usize];
+        lo = lo.min(a);
+        hi = hi.max(b);
+        clo = clo.min(a + b);
+        chi = chi.max(a + b);
+    }
+    if items.len() <= LEAF_SIZE || nodes.len() > (1 << 30) {
+        nodes[index] = Node {
+            min: lo,
+            max: hi,
+            first: start as u32,
+            count: items.len() as u32,
+        };
+        return;
+    }
+    let extent = chi - clo;
+    let axis = if extent.x >= extent.y && extent.x >= extent.z {
+        0
+    } else if extent.y >= extent.z {
+        1
+    } else {
+        2
+    };
+    let mid = items.len() / 2;
+    items.select_nth_unstable_by(mid, |&i, &j| {
+        let (ci, cj) = (
+            boxes[i as usize].0 + boxes[i as usize].1,
+            boxes[j as usize].0 + boxes[j as usize].1,
+        );
+        ci[axis].total_cmp(&cj[axis])
+    });
+    let first = nodes.len();
+    nodes.push(Node {
+        min: Vec3::ZERO,
+        max: Vec3::ZERO,
+        first: 0,
+        count: 0,
+    });
+    nodes.push(Node {
+        min: Vec3::ZERO,
+        max: Vec3::ZERO,
+        first: 0,
+        count: 0,
+    });
+    nodes[index] = Node {
+        min: lo,
+        max: hi,
+        first: first as u32,
+        count: 0,
+    };
+    build_node(nodes, first, order, start, start + mid, boxes);
+    build_node(nodes, first + 1, order, start + mid, end, boxes);
+}

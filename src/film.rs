@@ -1,0 +1,263 @@
+//! Pixel buffers and image files: linear float EXR, tone-mapped sRGB PNG.
+//!
+//! Every file is written to a temporary name beside its destination and renamed over it, so a
+//! destination holds either its old contents or the complete new image, never part of one.
+
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// A linear RGB image, row-major, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec3>,
+}
+
+impl Film {
+    pub fn new(width: u32, height: u32) -> Self {
+        Film {
+            width,
+            height,
+            pixels: vec![Vec3::ZERO; width as usize * height as usize],
+        }
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> Vec3 {
+        self.pixels[y as usize * self.width as usize + x as usize]
+    }
+
+    /// Mean over pixels and channels.
+    pub fn mean(&self) -> f64 {
+        self.pixels
+            .iter()
+            .map(|p| (p.x + p.y + p.z) as f64)
+            .sum::<f64>()
+            / (3.0 * self.pixels.len().max(1) as f64)
+    }
+
+    /// Largest channel value.
+    pub fn max(&self) -> f32 {
+        self.pixels
+            .iter()
+            .map(|p| p.max_element())
+            .fold(0.0, f32::max)
+    }
+
+    pub fn all_finite_non_negative(&self) -> bool {
+        self.pixels
+            .iter()
+            .all(|p| p.is_finite() && p.min_element() >= 0.0)
+    }
+}
+
+/// The image formats, chosen by file extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    Exr,
+    Png,
+}
+
+impl ImageFormat {
+    pub fn from_path(path: &Path) -> Result<Self> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("exr") => Ok(ImageFormat::Exr),
+            Some("png") => Ok(ImageFormat::Png),
+            _ => bail!(
+                "{}: the output must end in .exr (linear float) or .png (tone-mapped sRGB)",
+                path.display()
+            ),
+        }
+    }
+}
+
+/// Checks before any work that `path` can be written: a known extension and an existing,
+/// writable directory (probed by creating and removing a temporary file).
+pub fn check_writable(path: &Path) -> Result<()> {
+    ImageFormat::from_path(path)?;
+    let dir = parent_dir(path);
+    if !dir.is_dir() {
+        bail!(
+            "{}: the output directory {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    if path.is_dir() {
+        bail!("{}: is a directory", path.display());
+    }
+    let probe = temporary_path(path);
+    std::fs::File::create(&probe)
+        .with_context(|| format!("{}: cannot write to {}", path.display(), dir.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// A hidden temporary name beside `path`, unique to this process.
+pub fn temporary_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    parent_dir(path).join(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Writes through `write` to a temporary file, then renames it to `path`; on any failure the
+/// temporary file is removed and `path` is untouched.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let tmp = temporary_path(path);
+    let result = write(&tmp).and_then(|()| {
+        std::fs::rename(&tmp, path).with_context(|| {
+            format!(
+                "{}: cannot move the finished file into place",
+                path.display()
+            )
+        })
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Writes bytes whole or not at all.
+pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomically(path, |tmp| {
+        let mut f = std::fs::File::create(tmp)
+            .with_context(|| format!("{}: cannot create", tmp.display()))?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        Ok(())
+    })
+}
+
+/// sRGB encoding of a linear value in [0, 1].
+pub fn srgb_encode(x: f32) -> f32 {
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// 8-bit sRGB of a linear value scaled by 2^exposure, clamped.
+pub fn to_srgb8(x: f32, exposure: f32) -> u8 {
+    let v = (x * exposure.exp2()).clamp(0.0, 1.0);
+    (srgb_encode(v) * 255.0 + 0.5) as u8
+}
+
+impl Film {
+    /// Writes the image by the path's extension; PNG is tone-mapped by `exposure` stops.
+    pub fn save(&self, path: &Path, exposure: f32) -> Result<()> {
+        match ImageFormat::from_path(path)? {
+            ImageFormat::Exr => self.save_exr(path),
+            ImageFormat::Png => self.save_png(path, exposure),
+        }
+    }
+
+    pub fn save_exr(&self, path: &Path) -> Result<()> {
+        write_atomically(path, |tmp| {
+            let w = self.width as usize;
+            exr::prelude::write_rgb_file(tmp, w, self.height as usize, |x, y| {
+                let p = self.pixels[y * w + x];
+                (p.x, p.y, p.z)
+            })
+            .with_context(|| format!("{}: cannot write EXR", path.display()))
+        })
+    }
+
+    /// The tone-mapped 8-bit sRGB image.
+    pub fn to_rgb8(&self, exposure: f32) -> image::RgbImage {
+        image::RgbImage::from_fn(self.width, self.height, |x, y| {
+            let p = self.get(x, y);
+            image::Rgb([
+                to_srgb8(p.x, exposure),
+                to_srgb8(p.y, exposure),
+                to_srgb8(p.z, exposure),
+            ])
+        })
+    }
+
+    pub fn save_png(&self, path: &Path, exposure: f32) -> Result<()> {
+        save_rgb8_png(&self.to_rgb8(exposure), path)
+    }
+
+    /// Reads the first RGB(A) layer of an EXR file.
+    pub fn load_exr(path: &Path) -> Result<Film> {
+        use exr::prelude::*;
+        let image = read_first_rgba_layer_from_file(
+            path,
+            |resolution, _| Film::new(resolution.width() as u32, resolution.height() as u32),
+            |film: &mut Film, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let w = film.width as usize;
+                film.pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
+            },
+        )
+        .with_context(|| format!("{}: cannot read as an EXR image", path.display()))?;
+        Ok(image.layer_data.channel_data.pixels)
+    }
+}
+
+/// Encodes a PNG in memory, then writes it whole.
+pub fn save_rgb8_png(img: &image::RgbImage, path: &Path) -> Result<()> {
+    let mut bytes = Vec::new();
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .with_context(|| format!("{}: cannot encode PNG", path.display()))?;
+    write_file_atomically(path, &bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exr_round_trips_and_leaves_no_temporary_file() {
+        let dir = std::env::temp_dir().join(format!("fogplanes-film-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut film = Film::new(5, 3);
+        for (i, p) in film.pixels.iter_mut().enumerate() {
+            *p = Vec3::new(i as f32, 0.5 * i as f32, 1e-3);
+        }
+        let path = dir.join("a.exr");
+        film.save(&path, 0.0).unwrap();
+        assert_eq!(Film::load_exr(&path).unwrap(), film);
+        film.save(&dir.join("a.png"), 0.0).unwrap();
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 2, "{names:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn unknown_extensions_and_missing_directories_are_refused() {
+        assert!(check_writable(Path::new("out.jpg")).is_err());
+        assert!(check_writable(Path::new("/no/such/dir/out.exr")).is_err());
+    }
+
+    #[test]
+    fn srgb_endpoints() {
+        assert_eq!(to_srgb8(0.0, 0.0), 0);
+        assert_eq!(to_srgb8(1.0, 0.0), 255);
+        assert_eq!(to_srgb8(0.25, 2.0), 255);
+        assert_eq!(to_srgb8(f32::NAN, 0.0), 0);
+    }
+}

@@ -1,0 +1,366 @@
+//! One camera ray against one photon plane: the hit test and the weighted contribution
+//! C = K / (N P_l D) of SPEC section 2. Everything here is f32 and relative to the ray origin,
+//! prepared once per plane so that a hit costs a few dot products and one exponential.
+//!
+//! Every intersection structure ([`crate::raster`], [`crate::bvh`], the brute-force loop
+//! [`GatherContext::gather_brute_force`]) finds candidate planes and calls [`PlaneView::hit`] and
+//! [`GatherContext::contribution`]; they differ only in which planes they try.
+
+use crate::photon_plane::PhotonPlane;
+use crate::scene::Scene;
+use crate::weights::{Denominator, HitLocal, PlaneFrame};
+use glam::{DVec3, Vec3};
+
+/// A camera ray: unit direction (f32, origin at the camera) and its segment `[t0, t1]` inside
+/// the medium before the first light panel.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CameraRay {
+    pub dir: Vec3,
+    pub t0: f32,
+    pub t1: f32,
+}
+
+/// A plane prepared for rays from one origin `o`.
+///
+/// With b = y0 - o and the plane normal n_P = d x wl, the hit `o + t we = y0 + a d + r wl` solves
+/// by Cramer's rule with the common determinant det = we . n_P (SPEC's det(alpha)):
+/// t det = b . n_P, a det = we . (wl x b), r det = we . (b x d).
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneView {
+    pub normal: Vec3,
+    /// (d(alpha_perp) x wl) with d(alpha_perp) = -sin(alpha) u + cos(alpha) v: det(alpha_perp).
+    pub normal_perp: Vec3,
+    pub a_axis: Vec3,
+    pub r_axis: Vec3,
+    pub t_det: f32,
+    pub frame: PlaneFrame,
+    /// power / N: the hit-independent factor of C.
+    pub scale: Vec3,
+    /// Index into [`GatherContext::shadowed`], or `u32::MAX` when no other light can shadow it.
+    pub shadow: u32,
+}
+
+/// A hit of a ray on a plane.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Camera distance, chord parameter, plane distance (SPEC section 2), and det(alpha).
+    pub t: f32,
+    pub a: f32,
+    pub r: f32,
+    pub det: f32,
+}
+
+impl PlaneView {
+    pub fn new(
+        plane: &PhotonPlane,
+        scene: &Scene,
+        origin: DVec3,
+        planes_total: usize,
+        shadow: u32,
+    ) -> Self {
+        let light = &scene.lights[plane.light];
+        let b = plane.origin - origin;
+        let normal = plane.chord.cross(plane.direction);
+        let (sin_a, cos_a) = plane.alpha.sin_cos();
+        let chord_perp = -sin_a * light.u + cos_a * light.v;
+        PlaneView {
+            normal: normal.as_vec3(),
+            normal_perp: chord_perp.cross(plane.direction).as_vec3(),
+            a_axis: plane.direction.cross(b).as_vec3(),
+            r_axis: b.cross(plane.chord).as_vec3(),
+            t_det: b.dot(normal) as f32,
+            frame: PlaneFrame::new(
+                plane.width,
+                plane.alpha,
+                plane.p0,
+                plane.q0,
+                light.width,
+                light.height,
+            ),
+            scale: (plane.power / planes_total as f64).as_vec3(),
+            shadow,
+        }
+    }
+
+    /// Where the ray with unit direction `we` meets the plane within `[t0, t1]`, if it does.
+    #[inline(always)]
+    pub fn hit(&self, ray: &CameraRay) -> Option<Hit> {
+        let det = ray.dir.dot(self.normal);
+        if det == 0.0 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let t = self.t_det * inv;
+        let a = ray.dir.dot(self.a_axis) * inv;
+        let r = ray.dir.dot(self.r_axis) * inv;
+        let inside = t >= ray.t0 && t <= ray.t1 && a >= 0.0 && a <= self.frame.width && r >= 0.0;
+        inside.then_some(Hit { t, a, r, det })
+    }
+}
+
+/// The geometry needed to test whether a plane's light path is blocked by another panel.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowedPlane {
+    /// Chord start y0 relative to the origin, chord direction, sweep direction wl.
+    pub origin: Vec3,
+    pub chord: Vec3,
+    pub direction: Vec3,
+    /// Bit k set: light k may block.
+    pub occluders: u64,
+}
+
+/// A light panel as an occluder, relative to the origin.
+#[derive(Clone, Copy, Debug)]
+pub struct Occluder {
+    pub corner: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+    pub n: Vec3,
+    pub width: f32,
+    pub height: f32,
+}
+
+impl Occluder {
+    /// Whether the segment `y + s wl`, `s` in `(0, r)`, crosses the panel.
+    #[inline]
+    pub fn blocks(&self, y: Vec3, wl: Vec3, r: f32) -> bool {
+        let denom = wl.dot(self.n);
+        if denom == 0.0 {
+            return false;
+        }
+        let s = (self.corner - y).dot(self.n) / denom;
+        if !(s > 1e-6 * r && s < r * (1.0 - 1e-6)) {
+            return false;
+        }
+        let rel = y + s * wl - self.corner;
+        let (p, q) = (rel.dot(self.u), rel.dot(self.v));
+        p >= 0.0 && p <= self.width && q >= 0.0 && q <= self.height
+    }
+}
+
+/// Extinction, with the common grey case (one exponential per hit) recognised.
+#[derive(Clone, Copy, Debug)]
+pub struct Extinction {
+    pub sigma_t: Vec3,
+    pub grey: bool,
+}
+
+impl Extinction {
+    pub fn new(sigma_t: DVec3) -> Self {
+        Extinction {
+            sigma_t: sigma_t.as_vec3(),
+            grey: sigma_t.x == sigma_t.y && sigma_t.y == sigma_t.z,
+        }
+    }
+
+    /// exp(-sigma_t length).
+    #[inline(always)]
+    pub fn transmittance(&self, length: f32) -> Vec3 {
+        if self.grey {
+            Vec3::splat((-self.sigma_t.x * length).exp())
+        } else {
+            Vec3::new(
+                (-self.sigma_t.x * length).exp(),
+                (-self.sigma_t.y * length).exp(),
+                (-self.sigma_t.z * length).exp(),
+            )
+        }
+    }
+}
+
+/// All planes prepared for rays from one origin.
+pub struct GatherContext {
+    pub origin: DVec3,
+    pub views: Vec<PlaneView>,
+    pub shadowed: Vec<ShadowedPlane>,
+    pub occluders: Vec<Occluder>,
+    pub extinction: Extinction,
+}
+
+impl GatherContext {
+    /// Prepares `planes` (a set of N = planes.len()) for rays from `origin`.
+    pub fn new(scene: &Scene, planes: &[PhotonPlane], origin: DVec3) -> Self {
+        use rayon::prelude::*;
+        let occluders = scene
+            .lights
+            .iter()
+            .map(|l| Occluder {
+                corner: (l.corner - origin).as_vec3(),
+                u: l.u.as_vec3(),
+                v: l.v.as_vec3(),
+                n: l.n.as_vec3(),
+                width: l.width as f32,
+                height: l.height as f32,
+            })
+            .collect();
+        let masks: Vec<u64> = planes
+            .par_iter()
+            .map(|p| possible_occluders(scene, p))
+            .collect();
+        let mut shadowed = Vec::new();
+        let mut shadow_index = Vec::with_capacity(planes.len());
+        for (p, &mask) in planes.iter().zip(&masks) {
+            if mask == 0 {
+                shadow_index.push(u32::MAX);
+            } else {
+                shadow_index.push(shadowed.len() as u32);
+                shadowed.push(ShadowedPlane {
+                    origin: (p.origin - origin).as_vec3(),
+                    chord: p.chord.as_vec3(),
+                    direction: p.direction.as_vec3(),
+                    occluders: mask,
+                });
+            }
+        }
+        let n = planes.len();
+        let views = planes
+            .par_iter()
+            .zip(shadow_index.par_iter())
+            .map(|(p, &s)| PlaneView::new(p, scene, origin, n, s))
+            .collect();
+        GatherContext {
+            origin,
+            views,
+            shadowed,
+            occluders,
+            extinction: Extinction::new(scene.medium.sigma_t()),
+        }
+    }
+
+    /// The contribution C of a hit (SPEC section 2): power Tr_cam(t) Tr(x, y') V(x, y') / (N D),
+    /// zero when D is zero or the light path is blocked. Never NaN or infinite.
+    #[inline(always)]
+    pub fn contribution<D: Denominator>(
+        &self,
+        weights: &D,
+        view: &PlaneView,
+        ray: &CameraRay,
+        hit: &Hit,
+    ) -> Vec3 {
+        let local = HitLocal {
+            det: hit.det,
+            det_perp: ray.dir.dot(view.normal_perp),
+            a: hit.a,
+        };
+        let d = weights.denominator(&view.frame, &local);
+        if !(d > 0.0) {
+            return Vec3::ZERO;
+        }
+        if view.shadow != u32::MAX && self.is_shadowed(&self.shadowed[view.shadow as usize], hit) {
+            return Vec3::ZERO;
+        }
+        // Tr_cam(t) Tr(x, y') = exp(-sigma_t ((t - t0) + r)): both segments lie inside the box.
+        let c = view.scale * self.extinction.transmittance((hit.t - ray.t0) + hit.r) / d;
+        // D can underflow to a denormal only on a set of probability ~0; drop such a hit rather
+        // than let an infinity through.
+        if c.is_finite() { c } else { Vec3::ZERO }
+    }
+
+    fn is_shadowed(&self, s: &ShadowedPlane, hit: &Hit) -> bool {
+        let y = s.origin + hit.a * s.chord;
+        let mut mask = s.occluders;
+        while mask != 0 {
+            let k = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if self.occluders[k].blocks(y, s.direction, hit.r) {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The estimate for one ray by testing every plane (the reference path for tests), with the
+    /// number of hits.
+    pub fn gather_brute_force<D: Denominator>(&self, weights: &D, ray: &CameraRay) -> (Vec3, u64) {
+        let (mut sum, mut hits) = (Vec3::ZERO, 0);
+        for view in &self.views {
+            if let Some(hit) = view.hit(ray) {
+                hits += 1;
+                sum += self.contribution(weights, view, ray, &hit);
+            }
+        }
+        (sum, hits)
+    }
+}
+
+/// The other lights whose panel may cross the plane's polygon (a bit per light), so that the
+/// per-hit visibility test runs only where it can matter. Conservative: a light is kept unless
+/// its rectangle lies strictly on one side of the plane, or the polygon strictly on one side of
+/// the light.
+pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
+    let poly = plane.polygon_in_box(&scene.medium, 0.0);
+    if poly.len < 3 {
+        return 0;
+    }
+    let normal = plane.normal();
+    let eps = 1e-9 * scene.medium.diagonal();
+    let mut mask = 0u64;
+    for (k, light) in scene.lights.iter().enumerate() {
+        if k == plane.light || k >= 64 {
+            continue;
+        }
+        let sides = |values: &mut dyn Iterator<Item = f64>| {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for v in values {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+            lo <= eps && hi >= -eps
+        };
+        let light_straddles_plane = sides(
+            &mut light
+                .corners()
+                .iter()
+                .map(|&c| (c - plane.origin).dot(normal)),
+        );
+        let plane_straddles_light = sides(
+            &mut poly
+                .points()
+                .iter()
+                .map(|&v| (v - light.corner).dot(light.n)),
+        );
+        if light_straddles_plane && plane_straddles_light {
+            mask |= 1 << k;
+        }
+    }
+    mask
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photon_plane::sample_planes;
+
+    #[test]
+    fn hit_solves_the_plane_equation() {
+        let text = include_str!("../media_scenes/six_lights.toml");
+        let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let planes = sample_planes(&scene, 300, 2);
+        let o = scene.camera.position;
+        let ctx = GatherContext::new(&scene, &planes, o);
+        let mut found = 0;
+        for (p, v) in planes.iter().zip(&ctx.views) {
+            for k in 0..50 {
+                let we = scene
+                    .camera
+                    .direction(12.8 * k as f64, 7.2 * k as f64)
+                    .normalize();
+                let ray = CameraRay {
+                    dir: we.as_vec3(),
+                    t0: 0.0,
+                    t1: 1e9,
+                };
+                if let Some(h) = v.hit(&ray) {
+                    found += 1;
+                    let x = o + h.t as f64 * we;
+                    let on_plane = p.origin + h.a as f64 * p.chord + h.r as f64 * p.direction;
+                    assert!(
+                        (x - on_plane).length() < 1e-3 * (1.0 + h.t as f64),
+                        "{x} vs {on_plane}"
+                    );
+                }
+            }
+        }
+        assert!(found > 100);
+    }
+}

@@ -1,0 +1,296 @@
+//! Rectangular lights (SPEC section 1) and their chords (SPEC section 2).
+//!
+//! A light is the rectangle `corner + p U/|U| + q V/|V|`, `p` in `[0, W]`, `q` in `[0, H]`. It
+//! emits constant radiance one-sided into the hemisphere of `n = normalize(U x V)`, and it is an
+//! opaque panel: both faces block rays, the back face is black.
+
+use glam::DVec3;
+
+/// A validated rectangular light.
+#[derive(Clone, Debug)]
+pub struct RectLight {
+    pub name: String,
+    pub corner: DVec3,
+    /// Unit edge directions u, v and the normal n = u x v.
+    pub u: DVec3,
+    pub v: DVec3,
+    pub n: DVec3,
+    /// Side lengths W = |U| and H = |V|.
+    pub width: f64,
+    pub height: f64,
+    pub radiance: DVec3,
+}
+
+impl RectLight {
+    /// Builds a light from its corner and (orthogonal, non-zero) edges; the scene validates them.
+    pub fn new(name: &str, corner: DVec3, edge_u: DVec3, edge_v: DVec3, radiance: DVec3) -> Self {
+        let u = edge_u.normalize();
+        let v = edge_v.normalize();
+        RectLight {
+            name: name.to_string(),
+            corner,
+            u,
+            v,
+            n: u.cross(v).normalize(),
+            width: edge_u.length(),
+            height: edge_v.length(),
+            radiance,
+        }
+    }
+
+    pub fn area(&self) -> f64 {
+        self.width * self.height
+    }
+
+    /// The power used to choose lights: A * luminance(Le) (SPEC section 2, step 1).
+    pub fn power(&self) -> f64 {
+        self.area() * crate::luminance(self.radiance)
+    }
+
+    /// The world point at local coordinates (p, q).
+    pub fn point(&self, p: f64, q: f64) -> DVec3 {
+        self.corner + p * self.u + q * self.v
+    }
+
+    /// Local coordinates (p, q) of a world point (projected onto the light's plane).
+    pub fn local(&self, y: DVec3) -> (f64, f64) {
+        let d = y - self.corner;
+        (d.dot(self.u), d.dot(self.v))
+    }
+
+    /// The four corners, counter-clockwise seen from the front.
+    pub fn corners(&self) -> [DVec3; 4] {
+        let (eu, ev) = (self.u * self.width, self.v * self.height);
+        [
+            self.corner,
+            self.corner + eu,
+            self.corner + eu + ev,
+            self.corner + ev,
+        ]
+    }
+
+    /// Where the ray `o + t d` crosses the panel with `t` in `(t_min, t_max)`, if it does.
+    pub fn intersect(&self, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<f64> {
+        let denom = d.dot(self.n);
+        if denom == 0.0 {
+            return None;
+        }
+        let t = (self.corner - o).dot(self.n) / denom;
+        if !(t > t_min && t < t_max) {
+            return None;
+        }
+        let (p, q) = self.local(o + t * d);
+        (p >= 0.0 && p <= self.width && q >= 0.0 && q <= self.height).then_some(t)
+    }
+}
+
+/// The arithmetic the chord routines need, so that the same code serves the f64 sampling path
+/// and the f32 gathering path.
+pub trait Real:
+    Copy + PartialOrd + std::ops::Sub<Output = Self> + std::ops::Mul<Output = Self>
+{
+    const ZERO: Self;
+    /// IEEE minNum: a NaN argument is ignored (used on purpose, see [`chord_extent`]).
+    fn min_num(self, other: Self) -> Self;
+}
+
+impl Real for f32 {
+    const ZERO: f32 = 0.0;
+    fn min_num(self, other: f32) -> f32 {
+        self.min(other)
+    }
+}
+
+impl Real for f64 {
+    const ZERO: f64 = 0.0;
+    fn min_num(self, other: f64) -> f64 {
+        self.min(other)
+    }
+}
+
+/// A chord direction `(cos beta, sin beta)`, `beta` in `[0, pi)`, prepared for repeated use:
+/// the reciprocals `1/|cos beta|` and `1/sin beta` (infinite on the axes).
+#[derive(Clone, Copy, Debug)]
+pub struct ChordDirection<T> {
+    pub cos_positive: bool,
+    pub inv_abs_cos: T,
+    pub inv_sin: T,
+}
+
+impl ChordDirection<f64> {
+    /// The direction at angle `beta`, reduced to `[0, pi)` (a chord has no orientation sign).
+    pub fn from_angle(beta: f64) -> Self {
+        let beta = beta.rem_euclid(std::f64::consts::PI);
+        Self::from_cos_sin(beta.cos(), beta.sin())
+    }
+
+    /// `sin` must be `>= 0`, i.e. the angle lies in `[0, pi)`.
+    pub fn from_cos_sin(cos: f64, sin: f64) -> Self {
+        ChordDirection {
+            cos_positive: cos > 0.0,
+            inv_abs_cos: 1.0 / cos.abs(),
+            inv_sin: 1.0 / sin,
+        }
+    }
+}
+
+impl ChordDirection<f32> {
+    /// `sin` must be `>= 0`.
+    pub fn from_cos_sin(cos: f32, sin: f32) -> Self {
+        ChordDirection {
+            cos_positive: cos > 0.0,
+            inv_abs_cos: 1.0 / cos.abs(),
+            inv_sin: 1.0 / sin,
+        }
+    }
+}
+
+/// The chord of the `w x h` rectangle through the local point `(p, q)` along `dir`: the lengths
+/// `(backward, forward)` from the point to the rectangle's boundary (SPEC section 2, closed form).
+///
+/// forward = min(fx / |cos|, (h - q) / sin), backward = min(bx / |cos|, q / sin), with
+/// (fx, bx) = (w - p, p) when cos > 0 and (p, w - p) otherwise. On an axis one reciprocal is
+/// infinite; a zero distance times it is NaN, which `min_num` ignores: exactly right, because a
+/// line parallel to an edge is not bounded by it. The point must lie in the rectangle.
+#[inline(always)]
+pub fn chord_extent<T: Real>(w: T, h: T, p: T, q: T, dir: &ChordDirection<T>) -> (T, T) {
+    let (fx, bx) = if dir.cos_positive {
+        (w - p, p)
+    } else {
+        (p, w - p)
+    };
+    let forward = (fx * dir.inv_abs_cos).min_num((h - q) * dir.inv_sin);
+    let backward = (bx * dir.inv_abs_cos).min_num(q * dir.inv_sin);
+    // Rounding can put a point a hair outside; a chord length is never negative.
+    let clamp = |x: T| if x > T::ZERO { x } else { T::ZERO };
+    (clamp(backward), clamp(forward))
+}
+
+/// The chord width `width(beta, (p, q))` of SPEC section 2.
+#[inline(always)]
+pub fn chord_width<T: Real + std::ops::Add<Output = T>>(
+    w: T,
+    h: T,
+    p: T,
+    q: T,
+    dir: &ChordDirection<T>,
+) -> T {
+    let (b, f) = chord_extent(w, h, p, q, dir);
+    b + f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use std::f64::consts::PI;
+
+    /// Independent chord: clip the parametric line against each of the four edge lines.
+    fn chord_by_clipping(w: f64, h: f64, p: f64, q: f64, beta: f64) -> f64 {
+        let (c, s) = (beta.cos(), beta.sin());
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for (origin, dir, limit) in [(p, c, w), (q, s, h)] {
+            if dir.abs() < 1e-300 {
+                continue;
+            }
+            let (t0, t1) = ((0.0 - origin) / dir, (limit - origin) / dir);
+            lo = lo.max(t0.min(t1));
+            hi = hi.min(t0.max(t1));
+        }
+        (hi - lo).max(0.0)
+    }
+
+    #[test]
+    fn chord_width_matches_clipping_at_random_points() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        for _ in 0..100_000 {
+            let (w, h) = (rng.random_range(0.01..10.0), rng.random_range(0.01..10.0));
+            let (p, q) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
+            let beta = rng.random::<f64>() * PI;
+            let got = chord_width(w, h, p, q, &ChordDirection::from_angle(beta));
+            let want = chord_by_clipping(w, h, p, q, beta);
+            assert!(
+                (got - want).abs() <= 1e-9 * (w + h),
+                "w={w} h={h} p={p} q={q} beta={beta}: {got} vs {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn chord_width_on_edges_corners_and_axes() {
+        let (w, h) = (3.0, 2.0);
+        let points = [
+            (0.0, 0.0),
+            (w, 0.0),
+            (w, h),
+            (0.0, h),
+            (0.0, 1.0),
+            (w, 1.5),
+            (1.2, 0.0),
+            (2.5, h),
+        ];
+        let angles = [
+            0.0,
+            PI / 2.0,
+            PI / 4.0,
+            3.0 * PI / 4.0,
+            1e-12,
+            PI - 1e-12,
+            (h / w).atan(),
+            PI - (h / w).atan(),
+        ];
+        for &(p, q) in &points {
+            for &beta in &angles {
+                let got = chord_width(w, h, p, q, &ChordDirection::from_angle(beta));
+                let want = chord_by_clipping(w, h, p, q, beta);
+                assert!(got.is_finite() && got >= 0.0);
+                assert!(
+                    (got - want).abs() <= 1e-9,
+                    "p={p} q={q} beta={beta}: {got} vs {want}"
+                );
+            }
+        }
+        // A line along an edge spans the whole edge.
+        assert_eq!(
+            chord_width(w, h, 0.0, 0.7, &ChordDirection::from_angle(PI / 2.0)),
+            h
+        );
+        assert_eq!(
+            chord_width(w, h, 1.0, 0.0, &ChordDirection::from_angle(0.0)),
+            w
+        );
+    }
+
+    #[test]
+    fn chord_width_f32_agrees_with_f64() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(8);
+        for _ in 0..10_000 {
+            let (w, h) = (rng.random_range(0.01..10.0), rng.random_range(0.01..10.0));
+            let (p, q) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
+            let beta = rng.random::<f64>() * PI;
+            let d64 = chord_width(w, h, p, q, &ChordDirection::from_angle(beta));
+            let dir32 = ChordDirection::<f32>::from_cos_sin(beta.cos() as f32, beta.sin() as f32);
+            let d32 = chord_width(w as f32, h as f32, p as f32, q as f32, &dir32) as f64;
+            assert!((d64 - d32).abs() <= 1e-4 * (w + h) + 1e-5 * d64);
+        }
+    }
+
+    #[test]
+    fn ray_hits_panel_from_both_sides() {
+        let l = RectLight::new("l", DVec3::ZERO, DVec3::X * 2.0, DVec3::Z, DVec3::ONE);
+        // n = x cross z = -y.
+        assert!((l.n - DVec3::NEG_Y).length() < 1e-12);
+        let t = l.intersect(DVec3::new(1.0, 3.0, 0.5), DVec3::NEG_Y, 0.0, f64::INFINITY);
+        assert_eq!(t, Some(3.0));
+        let t = l.intersect(DVec3::new(1.0, -2.0, 0.5), DVec3::Y, 0.0, f64::INFINITY);
+        assert_eq!(t, Some(2.0));
+        assert_eq!(
+            l.intersect(DVec3::new(3.0, -2.0, 0.5), DVec3::Y, 0.0, f64::INFINITY),
+            None
+        );
+        assert_eq!(
+            l.intersect(DVec3::new(1.0, -2.0, 0.5), DVec3::Y, 0.0, 1.5),
+            None
+        );
+    }
+}

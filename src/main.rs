@@ -1,0 +1,416 @@
+//! The `fogplanes` command line: a thin layer over the library.
+
+use anyhow::{Context, Result, anyhow};
+use clap::{Args, Parser, Subcommand};
+use fogplanes::film::{Film, check_writable};
+use fogplanes::metrics::compare;
+use fogplanes::reference::{ReferenceOptions, render_reference};
+use fogplanes::render::{Accelerator, RenderOptions, progress_units_per_pass, render};
+use fogplanes::report::{TableOptions, run_table};
+use fogplanes::scene::{Scene, check_planes, check_spp};
+use fogplanes::weights::{Estimator, Weighting};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// Renders single scattering in fog lit by rectangular lights, with photon planes weighted by
+/// continuous and stochastic multiple importance sampling (West et al. 2020, Section 6), and
+/// measures the estimators against an independent reference.
+#[derive(Parser)]
+#[command(name = "fogplanes", version, about, long_about = None, max_term_width = 100)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene with photon planes.
+    ///
+    /// Samples the planes from the lights, intersects every camera ray with them and weights
+    /// each hit with the chosen estimator. Prints a one-line summary: estimator, planes, hits,
+    /// seconds.
+    Render(RenderArgs),
+    /// Render the independent reference (light point + equiangular distance sampling).
+    ///
+    /// Shares nothing with the photon planes but the scene. Prints its own relative standard
+    /// error and the MSE its noise adds to any comparison.
+    Reference(ReferenceArgs),
+    /// Compare an image against a reference: SMAPE, MSE, relMSE, largest absolute error.
+    Compare(CompareArgs),
+    /// Render every estimator from the same planes and rays, and write the table, panel and plot.
+    ///
+    /// Writes table.md, table.json, panel.png and error_vs_time.png (and .svg) to --out.
+    Table(TableArgs),
+}
+
+#[derive(Args)]
+struct CommonArgs {
+    /// Image size WIDTHxHEIGHT, overriding the scene's camera resolution.
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
+    resolution: Option<(u32, u32)>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_name = "T")]
+    threads: Option<usize>,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// The scene file (TOML), e.g. media_scenes/six_lights.toml.
+    scene: PathBuf,
+    /// Weighting: unweighted, cmis-cosine, smis-cosine, smis-exact or cmis-exact.
+    #[arg(long, short)]
+    estimator: Option<Estimator>,
+    /// Stratified orientations K for smis-cosine and smis-exact (2 is the paper's pair).
+    #[arg(long, value_name = "K")]
+    orientations: Option<u32>,
+    /// Number of photon planes N.
+    #[arg(long, short, value_name = "N")]
+    planes: Option<u64>,
+    /// Random seed: the image depends on it alone, not on the thread count.
+    #[arg(long, short, value_name = "S")]
+    seed: Option<u64>,
+    /// Camera samples per pixel, each a full pass over the same planes.
+    #[arg(long, value_name = "K")]
+    spp: Option<u32>,
+    /// Trace pixel centres instead of jittered samples.
+    #[arg(long)]
+    pixel_center: bool,
+    /// How rays find planes.
+    #[arg(long, value_enum, default_value_t = Accelerator::Raster)]
+    accelerator: Accelerator,
+    /// Output: .exr (linear float) or .png (tone-mapped sRGB). Default: <scene name>.exr here.
+    #[arg(long, short, value_name = "OUT")]
+    output: Option<PathBuf>,
+    /// Exposure in stops for PNG output.
+    #[arg(
+        long,
+        value_name = "EV",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    exposure: f32,
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+#[derive(Args)]
+struct ReferenceArgs {
+    scene: PathBuf,
+    /// Samples per pixel.
+    #[arg(long, value_name = "N", default_value_t = 1024)]
+    spp: u32,
+    #[arg(long, short, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Sample pixel centres (to compare with `render --pixel-center` and `table`).
+    #[arg(long)]
+    pixel_center: bool,
+    /// Output image (.exr or .png). Default: <scene name>_reference.exr here.
+    #[arg(long, short, value_name = "OUT")]
+    output: Option<PathBuf>,
+    /// Also write the per-pixel standard error as an image.
+    #[arg(long, value_name = "PATH")]
+    stderr_image: Option<PathBuf>,
+    #[arg(
+        long,
+        value_name = "EV",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    exposure: f32,
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// The image to measure (EXR).
+    image: PathBuf,
+    /// The reference (EXR).
+    reference: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct TableArgs {
+    scene: PathBuf,
+    /// Reference image (EXR) rendered with --pixel-center at the same resolution.
+    #[arg(long, value_name = "REF")]
+    reference: PathBuf,
+    #[arg(long, short, value_name = "N")]
+    planes: Option<u64>,
+    #[arg(long, short, value_name = "S")]
+    seed: Option<u64>,
+    /// Jittered rays instead of pixel centres (then the reference must be jittered too).
+    #[arg(long)]
+    jitter: bool,
+    /// Plane counts of the error-versus-time sweep, comma separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [5120u64, 10240, 20480, 40960, 81920, 163840])]
+    sweep: Vec<u64>,
+    /// Seeds per plane count in the sweep.
+    #[arg(long, default_value_t = 3)]
+    sweep_seeds: u32,
+    /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
+    #[arg(long, value_delimiter = ',', value_name = "K")]
+    orientations: Vec<u32>,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "report")]
+    out: PathBuf,
+    #[arg(
+        long,
+        value_name = "EV",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
+    exposure: f32,
+    #[command(flatten)]
+    common: CommonArgs,
+}
+
+/// An error with the exit code it deserves: 2 for bad input, 1 for everything else.
+struct Failure {
+    code: u8,
+    error: anyhow::Error,
+}
+
+fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
+    Failure {
+        code: 2,
+        error: e.into(),
+    }
+}
+
+impl<E: Into<anyhow::Error>> From<E> for Failure {
+    fn from(e: E) -> Self {
+        Failure {
+            code: 1,
+            error: e.into(),
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(a) => cmd_render(a),
+        Command::Reference(a) => cmd_reference(a),
+        Command::Compare(a) => cmd_compare(a),
+        Command::Table(a) => cmd_table(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            eprintln!("error: {:#}", f.error);
+            ExitCode::from(f.code)
+        }
+    }
+}
+
+fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+/// Loads the scene and applies the shared overrides (resolution, threads).
+fn load_scene(path: &Path, common: &CommonArgs) -> Result<Scene, Failure> {
+    let mut scene = Scene::load(path).map_err(input)?;
+    if let Some((w, h)) = common.resolution {
+        scene = scene
+            .with_resolution(w, h)
+            .map_err(|m| input(anyhow!("--resolution: {m}")))?;
+    }
+    if let Some(t) = common.threads {
+        if t == 0 || t > 1024 {
+            return Err(input(anyhow!(
+                "--threads must be between 1 and 1024, got {t}"
+            )));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .context("cannot start the worker threads")?;
+    }
+    Ok(scene)
+}
+
+fn progress_bar(quiet: bool, total: u64, what: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} (eta {eta})",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_message(what.to_string());
+    bar
+}
+
+fn default_output(scene: &Scene, suffix: &str) -> PathBuf {
+    PathBuf::from(format!("{}{suffix}.exr", scene.name))
+}
+
+fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
+    let scene = load_scene(&a.scene, &a.common)?;
+    let d = &scene.render;
+    let estimator = a.estimator.unwrap_or(d.weighting.estimator);
+    let orientations = a
+        .orientations
+        .or((estimator == d.weighting.estimator).then_some(d.weighting.orientations));
+    let orientations = orientations.filter(|_| estimator.has_orientations());
+    let weighting = Weighting::new(estimator, orientations)
+        .map_err(|m| input(anyhow!("--orientations: {m}")))?;
+    let planes = a.planes.unwrap_or(d.planes);
+    check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
+    let spp = a.spp.unwrap_or(d.spp);
+    check_spp(spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
+    fogplanes::render::check_memory(scene.camera.width, scene.camera.height, planes)
+        .map_err(|m| input(anyhow!(m)))?;
+    let output = a
+        .output
+        .clone()
+        .unwrap_or_else(|| default_output(&scene, ""));
+    check_writable(&output).map_err(input)?;
+
+    let opts = RenderOptions {
+        planes: planes as usize,
+        weighting,
+        seed: a.seed.unwrap_or(d.seed),
+        spp,
+        pixel_center: a.pixel_center,
+        accelerator: a.accelerator,
+    };
+    let bar = progress_bar(
+        a.common.quiet,
+        progress_units_per_pass(&scene, a.accelerator) * spp as u64,
+        weighting.label().as_str(),
+    );
+    let (film, stats) = render(&scene, &opts, &|| bar.inc(1));
+    bar.finish_and_clear();
+    film.save(&output, a.exposure)?;
+    println!("{}", stats.summary());
+    println!(
+        "wrote {} ({}x{}, mean {:.6}, max {:.4})",
+        output.display(),
+        film.width,
+        film.height,
+        film.mean(),
+        film.max()
+    );
+    Ok(())
+}
+
+fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
+    let scene = load_scene(&a.scene, &a.common)?;
+    check_spp(a.spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
+    let output = a
+        .output
+        .clone()
+        .unwrap_or_else(|| default_output(&scene, "_reference"));
+    check_writable(&output).map_err(input)?;
+    if let Some(p) = &a.stderr_image {
+        check_writable(p).map_err(input)?;
+    }
+    let opts = ReferenceOptions {
+        spp: a.spp,
+        seed: a.seed,
+        pixel_center: a.pixel_center,
+    };
+    let bar = progress_bar(a.common.quiet, scene.camera.height as u64, "reference");
+    let reference = render_reference(&scene, &opts, &|| bar.inc(1));
+    bar.finish_and_clear();
+    reference.mean.save(&output, a.exposure)?;
+    if let Some(p) = &a.stderr_image {
+        reference.stderr.save(p, a.exposure)?;
+    }
+    println!(
+        "reference: {} spp, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
+        a.spp,
+        reference.seconds,
+        reference.relative_stderr(),
+        reference.noise_mse(),
+        reference.noise_mse() * 1e4
+    );
+    println!("wrote {}", output.display());
+    Ok(())
+}
+
+fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
+    let image = Film::load_exr(&a.image).map_err(input)?;
+    let reference = Film::load_exr(&a.reference).map_err(input)?;
+    let m = compare(&image, &reference).map_err(input)?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&m).context("cannot format JSON")?
+        );
+    } else {
+        println!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
+        println!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
+        println!("relMSE       {:.6e}", m.rel_mse);
+        println!("max |error|  {:.6e}", m.max_abs_error);
+    }
+    Ok(())
+}
+
+fn cmd_table(a: TableArgs) -> Result<(), Failure> {
+    let scene = load_scene(&a.scene, &a.common)?;
+    let reference = Film::load_exr(&a.reference).map_err(input)?;
+    if (reference.width, reference.height) != (scene.camera.width, scene.camera.height) {
+        return Err(input(anyhow!(
+            "{}: the reference is {}x{} but the scene renders at {}x{} (use --resolution)",
+            a.reference.display(),
+            reference.width,
+            reference.height,
+            scene.camera.width,
+            scene.camera.height
+        )));
+    }
+    let planes = a.planes.unwrap_or(scene.render.planes);
+    check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
+    for &n in &a.sweep {
+        check_planes(n).map_err(|m| input(anyhow!("--sweep: {m}")))?;
+    }
+    let mut extra = Vec::new();
+    for &k in &a.orientations {
+        for e in [Estimator::SmisCosine, Estimator::SmisExact] {
+            extra.push(
+                Weighting::new(e, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?,
+            );
+        }
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
+        .map_err(input)?;
+    check_writable(&a.out.join("panel.png")).map_err(input)?;
+    let opts = TableOptions {
+        planes: planes as usize,
+        seed: a.seed.unwrap_or(scene.render.seed),
+        pixel_center: !a.jitter,
+        sweep: a.sweep.iter().map(|&n| n as usize).collect(),
+        sweep_seeds: a.sweep_seeds,
+        extra,
+        out: a.out.clone(),
+        exposure: a.exposure,
+        quiet: a.common.quiet,
+        reference_path: a.reference.clone(),
+    };
+    let table = run_table(&scene, &reference, &opts)?;
+    println!("{}", table);
+    Ok(())
+}

@@ -1,0 +1,91 @@
+//! Error metrics (SPEC section 4, as in the paper's Section 4.4 and Fig. 11).
+
+use crate::film::Film;
+use anyhow::{Result, bail};
+
+/// The error of an image against a reference, over all pixels and channels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ErrorMetrics {
+    /// mean |r - e| / (|r| + |e|), a term with both zero counting 0.
+    pub smape: f64,
+    /// mean (e - r)^2.
+    pub mse: f64,
+    /// mean (e - r)^2 / (r^2 + 1e-2), relative MSE with the usual regulariser.
+    pub rel_mse: f64,
+    /// max |e - r|.
+    pub max_abs_error: f64,
+}
+
+impl ErrorMetrics {
+    /// SMAPE x 10^2 and MSE x 10^4, as the paper prints them.
+    pub fn smape_e2(&self) -> f64 {
+        self.smape * 1e2
+    }
+    pub fn mse_e4(&self) -> f64 {
+        self.mse * 1e4
+    }
+}
+
+/// Compares `image` against `reference`; they must have the same size.
+pub fn compare(image: &Film, reference: &Film) -> Result<ErrorMetrics> {
+    if (image.width, image.height) != (reference.width, reference.height) {
+        bail!(
+            "the images differ in size: {}x{} against a {}x{} reference",
+            image.width,
+            image.height,
+            reference.width,
+            reference.height
+        );
+    }
+    let (mut smape, mut mse, mut rel, mut max) = (0.0, 0.0, 0.0, 0.0f64);
+    for (e, r) in image.pixels.iter().zip(&reference.pixels) {
+        for c in 0..3 {
+            let (e, r) = (e[c] as f64, r[c] as f64);
+            let denom = r.abs() + e.abs();
+            if denom > 0.0 {
+                smape += (r - e).abs() / denom;
+            }
+            let d2 = (e - r) * (e - r);
+            mse += d2;
+            rel += d2 / (r * r + 1e-2);
+            max = max.max((e - r).abs());
+        }
+    }
+    let n = 3.0 * image.pixels.len().max(1) as f64;
+    Ok(ErrorMetrics {
+        smape: smape / n,
+        mse: mse / n,
+        rel_mse: rel / n,
+        max_abs_error: max,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn film(values: &[[f32; 3]]) -> Film {
+        Film {
+            width: values.len() as u32,
+            height: 1,
+            pixels: values.iter().map(|v| Vec3::from_array(*v)).collect(),
+        }
+    }
+
+    #[test]
+    fn known_answers() {
+        let r = film(&[[1.0, 0.0, 2.0], [0.5, 0.5, 0.5]]);
+        let e = film(&[[3.0, 0.0, 2.0], [0.5, 1.5, 0.5]]);
+        let m = compare(&e, &r).unwrap();
+        // SMAPE terms: 2/4, 0 (both zero), 0, 0, 1/2, 0.
+        assert!((m.smape - 1.0 / 6.0).abs() < 1e-12);
+        // Squared errors: 4, 0, 0, 0, 1, 0.
+        assert!((m.mse - 5.0 / 6.0).abs() < 1e-12);
+        assert!((m.rel_mse - (4.0 / 1.01 + 1.0 / 0.26) / 6.0).abs() < 1e-9);
+        assert_eq!(m.max_abs_error, 2.0);
+        assert!((m.smape_e2() - 100.0 / 6.0).abs() < 1e-9);
+        assert_eq!(compare(&r, &r).unwrap(), ErrorMetrics::default());
+        assert!(compare(&r, &film(&[[0.0; 3]])).is_err());
+    }
+}

@@ -1,0 +1,229 @@
+//! Photon planes (SPEC section 2): sampling, and the plane's polygon inside the medium box.
+//!
+//! One plane is: a light chosen by power, an orientation alpha uniform in [0, pi), a point y
+//! uniform on the light, a direction wl cosine-distributed about the light's normal. The chord is
+//! the segment of the line through y along d(alpha) = cos(alpha) u + sin(alpha) v inside the
+//! rectangle; the plane is that chord swept along wl, clipped where it leaves the box. Taking the
+//! chord through a uniform point is sampling its offset with density width / A, the paper's
+//! p(v | alpha) = |s| / A.
+
+use crate::light::{ChordDirection, RectLight, chord_extent};
+use crate::medium::{Medium, PHASE};
+use crate::sampling::{Discrete, cosine_hemisphere, rng_for, unit_f64};
+use crate::scene::Scene;
+use glam::DVec3;
+use rand::RngCore;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// The random stream that planes draw from (see [`crate::sampling::rng_for`]).
+const PLANE_STREAM: u64 = 0x9_1A4E;
+
+/// One sampled photon plane.
+#[derive(Clone, Debug)]
+pub struct PhotonPlane {
+    /// Index of the light it was swept from.
+    pub light: usize,
+    /// Orientation alpha in [0, pi).
+    pub alpha: f64,
+    /// The uniformly sampled point y (kept for tests and diagnostics).
+    pub point: DVec3,
+    /// Start y0 of the chord (chord parameter a = 0), its unit direction d(alpha) and width.
+    pub origin: DVec3,
+    pub chord: DVec3,
+    pub width: f64,
+    /// Local coordinates (p, q) of y0 on the light.
+    pub p0: f64,
+    pub q0: f64,
+    /// The sweep direction wl, unit, in the light's front hemisphere.
+    pub direction: DVec3,
+    /// The factor of one plane's contribution that does not depend on the hit (RGB):
+    /// sigma_s rho pi Le A / P_l. A hit adds `power * Tr / D / N` (SPEC section 2: K / (N P_l D)).
+    pub power: DVec3,
+}
+
+/// Light choice by power, P_l proportional to A_l luminance(Le_l) (SPEC section 2, step 1).
+pub fn light_distribution(scene: &Scene) -> Discrete {
+    Discrete::new(
+        &scene
+            .lights
+            .iter()
+            .map(RectLight::power)
+            .collect::<Vec<_>>(),
+    )
+}
+
+/// Samples one plane from six uniform numbers in [0, 1).
+pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 6]) -> PhotonPlane {
+    let index = lights.sample(u[0]);
+    let light = &scene.lights[index];
+    let alpha = PI * u[1];
+    let (p, q) = (u[2] * light.width, u[3] * light.height);
+    let point = light.point(p, q);
+    let direction = cosine_hemisphere(u[4], u[5], light.u, light.v, light.n);
+    let (sin_a, cos_a) = alpha.sin_cos();
+    let (back, forward) = chord_extent(
+        light.width,
+        light.height,
+        p,
+        q,
+        &ChordDirection::<f64>::from_cos_sin(cos_a, sin_a),
+    );
+    let chord = cos_a * light.u + sin_a * light.v;
+    let power = scene.medium.sigma_s * PHASE * PI * light.radiance * light.area()
+        / lights.probability(index);
+    PhotonPlane {
+        light: index,
+        alpha,
+        point,
+        origin: point - back * chord,
+        chord,
+        width: back + forward,
+        p0: p - back * cos_a,
+        q0: q - back * sin_a,
+        direction,
+        power,
+    }
+}
+
+/// Samples `n` planes, plane `i` from its own generator: the set depends on the seed only.
+pub fn sample_planes(scene: &Scene, n: usize, seed: u64) -> Vec<PhotonPlane> {
+    let lights = light_distribution(scene);
+    (0..n as u64)
+        .into_par_iter()
+        .map(|i| {
+            let mut rng = rng_for(seed, PLANE_STREAM, i);
+            let u = std::array::from_fn(|_| unit_f64(rng.next_u64()));
+            sample_plane(scene, &lights, u)
+        })
+        .collect()
+}
+
+/// A convex polygon of at most [`Polygon::CAPACITY`] vertices.
+#[derive(Clone, Copy, Debug)]
+pub struct Polygon<T: Copy + Default> {
+    pub vertices: [T; Polygon::<DVec3>::CAPACITY],
+    pub len: usize,
+}
+
+impl<T: Copy + Default> Polygon<T> {
+    pub const CAPACITY: usize = 16;
+
+    pub fn from_slice(points: &[T]) -> Self {
+        let mut vertices = [T::default(); Polygon::<DVec3>::CAPACITY];
+        vertices[..points.len()].copy_from_slice(points);
+        Polygon {
+            vertices,
+            len: points.len(),
+        }
+    }
+
+    pub fn points(&self) -> &[T] {
+        &self.vertices[..self.len]
+    }
+
+    /// Sutherland-Hodgman: keeps the part where `inside(v) >= 0`, with `inside` affine.
+    pub fn clip(&self, inside: impl Fn(T) -> f64, lerp: impl Fn(T, T, f64) -> T) -> Self {
+        let mut out = Polygon {
+            vertices: [T::default(); Polygon::<DVec3>::CAPACITY],
+            len: 0,
+        };
+        let pts = self.points();
+        for (k, &cur) in pts.iter().enumerate() {
+            let next = pts[(k + 1) % pts.len()];
+            let (dc, dn) = (inside(cur), inside(next));
+            if dc >= 0.0 && out.len < Self::CAPACITY {
+                out.vertices[out.len] = cur;
+                out.len += 1;
+            }
+            if (dc >= 0.0) != (dn >= 0.0) && out.len < Self::CAPACITY {
+                out.vertices[out.len] = lerp(cur, next, dc / (dc - dn));
+                out.len += 1;
+            }
+        }
+        out
+    }
+}
+
+impl PhotonPlane {
+    /// The plane's polygon inside the medium box grown by `margin` on every side: the chord
+    /// swept along wl as far as the box diagonal, clipped by the six faces.
+    pub fn polygon_in_box(&self, medium: &Medium, margin: f64) -> Polygon<DVec3> {
+        let reach = medium.diagonal() + 2.0 * margin;
+        let (a, b) = (self.origin, self.origin + self.width * self.chord);
+        let mut poly =
+            Polygon::from_slice(&[a, b, b + reach * self.direction, a + reach * self.direction]);
+        let lerp = |p: DVec3, q: DVec3, s: f64| p + (q - p) * s;
+        for axis in 0..3 {
+            let (lo, hi) = (medium.min[axis] - margin, medium.max[axis] + margin);
+            poly = poly.clip(|v| v[axis] - lo, lerp);
+            poly = poly.clip(|v| hi - v[axis], lerp);
+        }
+        poly
+    }
+
+    /// The plane's normal d(alpha) x wl (not unit).
+    pub fn normal(&self) -> DVec3 {
+        self.chord.cross(self.direction)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scene() -> Scene {
+        let text = include_str!("../media_scenes/six_lights.toml");
+        Scene::parse(text, "six_lights.toml", "six_lights").unwrap()
+    }
+
+    #[test]
+    fn chord_contains_the_sampled_point_and_stays_on_the_light() {
+        let s = scene();
+        for p in sample_planes(&s, 2000, 3) {
+            let l = &s.lights[p.light];
+            let (pp, qq) = l.local(p.point);
+            assert!(p.width >= 0.0 && p.width <= (l.width.hypot(l.height)) * (1.0 + 1e-12));
+            // y lies on the chord.
+            let a = (p.point - p.origin).dot(p.chord);
+            assert!(a >= -1e-9 && a <= p.width + 1e-9);
+            assert!((p.origin + a * p.chord - p.point).length() < 1e-9);
+            // Both ends on the rectangle's boundary.
+            for end in [p.origin, p.origin + p.width * p.chord] {
+                let (x, y) = l.local(end);
+                let on_edge = [x, l.width - x, y, l.height - y]
+                    .iter()
+                    .any(|d| d.abs() < 1e-9);
+                assert!(on_edge, "end ({x}, {y}) of the chord through ({pp}, {qq})");
+            }
+            assert!(p.direction.dot(l.n) >= 0.0 && (p.direction.length() - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn same_seed_same_planes() {
+        let s = scene();
+        let (a, b) = (sample_planes(&s, 100, 9), sample_planes(&s, 100, 9));
+        assert!(
+            a.iter()
+                .zip(&b)
+                .all(|(x, y)| x.origin == y.origin && x.direction == y.direction)
+        );
+        let c = sample_planes(&s, 100, 10);
+        assert!(a.iter().zip(&c).any(|(x, y)| x.origin != y.origin));
+    }
+
+    #[test]
+    fn polygon_lies_in_the_box_and_on_the_plane() {
+        let s = scene();
+        for p in sample_planes(&s, 500, 4) {
+            let poly = p.polygon_in_box(&s.medium, 0.0);
+            assert!(poly.len >= 3 || p.width == 0.0);
+            let n = p.normal();
+            for &v in poly.points() {
+                assert!(s.medium.contains(v, 1e-9));
+                assert!((v - p.origin).dot(n).abs() < 1e-9);
+            }
+        }
+    }
+}

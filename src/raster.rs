@@ -1,0 +1,224 @@
+//! The intersection structure for the pinhole camera: planes rasterised in screen space.
+//!
+//! Every camera ray starts at the camera, so the rays that can hit a plane are exactly those
+//! whose image point lies in the projection of the plane's polygon (clipped to the box). Each
+//! polygon is projected once, clipped to the image, and binned into horizontal bands of rows.
+//! A band walks its planes in index order; for every row it covers, the conservative span of
+//! pixels whose squares meet the polygon is tested exactly with [`PlaneView::hit`]. The exact
+//! test decides; the span only has to contain every pixel that can hit, whatever the jitter.
+//!
+//! Each pixel's sum runs over planes in index order whatever the thread count, so images are
+//! bit-identical for a seed.
+
+use crate::camera::Camera;
+use crate::gather::{CameraRay, GatherContext};
+use crate::medium::Medium;
+use crate::photon_plane::{PhotonPlane, Polygon};
+use crate::weights::Denominator;
+use glam::{DVec2, DVec3, Vec2, Vec3};
+use rayon::prelude::*;
+
+/// Rows per band: a band's rays and sums stay in cache while its planes stream by.
+pub const BAND_ROWS: u32 = 8;
+/// Slack in pixels around a projected polygon, far above the rounding of the projection.
+const SPAN_MARGIN: f32 = 1e-2;
+
+/// Projected, image-clipped polygons of all planes, binned into bands of rows.
+pub struct ScreenRaster {
+    pub width: u32,
+    pub height: u32,
+    /// Vertices of polygon `i` are `vertices[offsets[i]..offsets[i + 1]]`, in pixel units.
+    vertices: Vec<Vec2>,
+    offsets: Vec<u32>,
+    /// Plane indices per band, ascending.
+    bands: Vec<Vec<u32>>,
+}
+
+/// Counters from one gathering pass.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GatherStats {
+    /// Ray-plane tests made and hits found.
+    pub tests: u64,
+    pub hits: u64,
+}
+
+impl std::ops::AddAssign for GatherStats {
+    fn add_assign(&mut self, o: Self) {
+        self.tests += o.tests;
+        self.hits += o.hits;
+    }
+}
+
+/// The plane's polygon as seen from the camera, clipped to the image grown by one pixel, in
+/// pixel coordinates; empty if the camera cannot see it.
+pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> Polygon<DVec2> {
+    let margin = 1e-6 * medium.diagonal();
+    let world = plane.polygon_in_box(medium, margin);
+    let mut cam = Polygon::<DVec3>::from_slice(&[]);
+    for &v in world.points() {
+        cam.vertices[cam.len] = camera.to_camera(v);
+        cam.len += 1;
+    }
+    // Only points in front of the camera can be hit; a tiny positive depth keeps the
+    // projection finite (points closer than this lie within it of the camera).
+    let near = 1e-9 * medium.diagonal().max(1e-30);
+    let cam = cam.clip(|v| v.z - near, |p, q, s| p + (q - p) * s);
+    let mut screen = Polygon::<DVec2>::from_slice(&[]);
+    for &v in cam.points() {
+        let (x, y) = camera.project(v);
+        screen.vertices[screen.len] = DVec2::new(x, y);
+        screen.len += 1;
+    }
+    let (w, h) = (camera.width as f64, camera.height as f64);
+    let lerp = |p: DVec2, q: DVec2, s: f64| p + (q - p) * s;
+    screen = screen.clip(|v| v.x + 1.0, lerp);
+    screen = screen.clip(|v| w + 1.0 - v.x, lerp);
+    screen = screen.clip(|v| v.y + 1.0, lerp);
+    screen.clip(|v| h + 1.0 - v.y, lerp)
+}
+
+impl ScreenRaster {
+    pub fn build(camera: &Camera, planes: &[PhotonPlane], medium: &Medium) -> Self {
+        let polygons: Vec<Polygon<DVec2>> = planes
+            .par_iter()
+            .map(|p| screen_polygon(camera, p, medium))
+            .collect();
+        let band_count = camera.height.div_ceil(BAND_ROWS) as usize;
+        let mut bands = vec![Vec::new(); band_count];
+        let mut vertices = Vec::new();
+        let mut offsets = Vec::with_capacity(planes.len() + 1);
+        offsets.push(0u32);
+        for (i, poly) in polygons.iter().enumerate() {
+            if poly.len >= 3 {
+                let (lo, hi) = poly
+                    .points()
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                        (lo.min(v.y), hi.max(v.y))
+                    });
+                let first =
+                    ((lo - SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS) as usize;
+                let last = ((hi + SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS)
+                    .min(band_count as u32 - 1) as usize;
+                for band in bands.iter_mut().take(last + 1).skip(first) {
+                    band.push(i as u32);
+                }
+                vertices.extend(poly.points().iter().map(|v| v.as_vec2()));
+            }
+            offsets.push(vertices.len() as u32);
+        }
+        ScreenRaster {
+            width: camera.width,
+            height: camera.height,
+            vertices,
+            offsets,
+            bands,
+        }
+    }
+
+    /// Bytes held, for the memory report.
+    pub fn bytes(&self) -> usize {
+        self.vertices.len() * 8
+            + self.offsets.len() * 4
+            + self.bands.iter().map(|b| b.len() * 4 + 24).sum::<usize>()
+    }
+
+    /// Total (band, plane) pairs: how much binning work there is.
+    pub fn bin_entries(&self) -> usize {
+        self.bands.iter().map(Vec::len).sum()
+    }
+
+    pub fn band_count(&self) -> usize {
+        self.bands.len()
+    }
+
+    /// The columns `[first, last]` whose pixel squares may meet polygon `i` in row `row`.
+    fn span(&self, i: usize, row: u32) -> Option<(u32, u32)> {
+        let poly = &self.vertices[self.offsets[i] as usize..self.offsets[i + 1] as usize];
+        let (y0, y1) = (row as f32 - SPAN_MARGIN, row as f32 + 1.0 + SPAN_MARGIN);
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (k, &p) in poly.iter().enumerate() {
+            let q = poly[(k + 1) % poly.len()];
+            let (ymin, ymax) = (p.y.min(q.y), p.y.max(q.y));
+            if ymax < y0 || ymin > y1 {
+                continue;
+            }
+            if ymax - ymin <= 0.0 {
+                lo = lo.min(p.x.min(q.x));
+                hi = hi.max(p.x.max(q.x));
+                continue;
+            }
+            // The edge's x at the ends of its part inside the row.
+            for y in [ymin.max(y0), ymax.min(y1)] {
+                let s = ((y - p.y) / (q.y - p.y)).clamp(0.0, 1.0);
+                let x = p.x + (q.x - p.x) * s;
+                lo = lo.min(x);
+                hi = hi.max(x);
+            }
+        }
+        if lo > hi {
+            return None;
+        }
+        let first = (lo - SPAN_MARGIN).floor().max(0.0);
+        let last = (hi + SPAN_MARGIN).floor().min(self.width as f32 - 1.0);
+        (first <= last).then_some((first as u32, last as u32))
+    }
+
+    /// Gathers every plane into `out` (one RGB sum per pixel, row-major), for the rays `rays`
+    /// (one per pixel), calling `on_band` after each band (for progress).
+    pub fn gather<D: Denominator>(
+        &self,
+        ctx: &GatherContext,
+        weights: &D,
+        rays: &[CameraRay],
+        out: &mut [Vec3],
+        on_band: &(dyn Fn() + Sync),
+    ) -> GatherStats {
+        let w = self.width as usize;
+        let band_pixels = BAND_ROWS as usize * w;
+        out.par_chunks_mut(band_pixels)
+            .zip(rays.par_chunks(band_pixels))
+            .enumerate()
+            .map(|(band, (sums, rays))| {
+                let stats = self.gather_band(ctx, weights, band, rays, sums);
+                on_band();
+                stats
+            })
+            .reduce(GatherStats::default, |mut a, b| {
+                a += b;
+                a
+            })
+    }
+
+    fn gather_band<D: Denominator>(
+        &self,
+        ctx: &GatherContext,
+        weights: &D,
+        band: usize,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+    ) -> GatherStats {
+        let w = self.width as usize;
+        let first_row = band as u32 * BAND_ROWS;
+        let rows = (rays.len() / w) as u32;
+        let mut stats = GatherStats::default();
+        for &plane in &self.bands[band] {
+            let view = &ctx.views[plane as usize];
+            for row in first_row..first_row + rows {
+                let Some((first, last)) = self.span(plane as usize, row) else {
+                    continue;
+                };
+                let base = (row - first_row) as usize * w;
+                stats.tests += (last - first + 1) as u64;
+                for col in first as usize..=last as usize {
+                    let ray = &rays[base + col];
+                    if let Some(hit) = view.hit(ray) {
+                        stats.hits += 1;
+                        sums[base + col] += ctx.contribution(weights, view, ray, &hit);
+                    }
+                }
+            }
+        }
+        stats
+    }
+}

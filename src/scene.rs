@@ -1,0 +1,643 @@
+//! Scene files (`media_scenes/*.toml`): the schema, its validation, and the validated [`Scene`].
+//!
+//! Every problem is reported as one [`SceneError`] that names the file, the field and what is
+//! wrong; nothing in here panics on any input.
+
+use crate::camera::Camera;
+use crate::light::RectLight;
+use crate::medium::Medium;
+use crate::weights::{Estimator, Weighting};
+use glam::DVec3;
+use serde::Deserialize;
+use std::fmt;
+use std::path::Path;
+
+/// Scene files larger than this are refused before they are read.
+pub const MAX_SCENE_FILE_BYTES: u64 = 1 << 20;
+/// The largest image side accepted.
+pub const MAX_RESOLUTION_SIDE: u32 = 1 << 15;
+
+/// A problem with a scene file or with the render settings derived from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneError {
+    pub file: String,
+    /// 1-based line and column, when the problem has a place in the text.
+    pub position: Option<(usize, usize)>,
+    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
+    pub field: String,
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let Some((line, col)) = self.position {
+            write!(f, ":{line}:{col}")?;
+        }
+        if !self.field.is_empty() {
+            write!(f, ": {}", self.field)?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// An RGB triple that may be written as a single number (grey).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rgb(pub [f64; 3]);
+
+impl<'de> Deserialize<'de> for Rgb {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Rgb;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number or an array of three numbers")
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<Rgb, E> {
+                Ok(Rgb([v; 3]))
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<Rgb, E> {
+                Ok(Rgb([v as f64; 3]))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<Rgb, E> {
+                Ok(Rgb([v as f64; 3]))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Rgb, A::Error> {
+                let mut out = [0.0; 3];
+                for (i, slot) in out.iter_mut().enumerate() {
+                    *slot = seq
+                        .next_element()?
+                        .ok_or_else(|| serde::de::Error::invalid_length(i, &self))?;
+                }
+                if seq.next_element::<f64>()?.is_some() {
+                    return Err(serde::de::Error::invalid_length(4, &self));
+                }
+                Ok(Rgb(out))
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
+}
+
+/// The file schema. Unknown keys are errors.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub camera: CameraDesc,
+    pub medium: MediumDesc,
+    #[serde(rename = "light")]
+    pub lights: Vec<LightDesc>,
+    #[serde(default)]
+    pub render: RenderDesc,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    pub position: [f64; 3],
+    pub look_at: [f64; 3],
+    pub up: [f64; 3],
+    pub vfov_deg: f64,
+    pub resolution: [u32; 2],
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct MediumDesc {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+    pub sigma_s: Rgb,
+    pub sigma_a: Rgb,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+pub struct LightDesc {
+    pub name: Option<String>,
+    pub corner: [f64; 3],
+    pub edge_u: [f64; 3],
+    pub edge_v: [f64; 3],
+    pub radiance: Rgb,
+}
+
+/// Optional defaults for rendering; the command line overrides them.
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RenderDesc {
+    pub planes: Option<u64>,
+    pub estimator: Option<String>,
+    pub orientations: Option<u32>,
+    pub seed: Option<u64>,
+    pub spp: Option<u32>,
+}
+
+/// Render settings after defaults, validated.
+#[derive(Clone, Debug)]
+pub struct RenderDefaults {
+    pub planes: u64,
+    pub weighting: Weighting,
+    pub seed: u64,
+    pub spp: u32,
+}
+
+/// A validated scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The file stem, used for default output names.
+    pub name: String,
+    pub camera: Camera,
+    pub medium: Medium,
+    pub lights: Vec<RectLight>,
+    pub render: RenderDefaults,
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let file = path.display().to_string();
+        let whole = |message: String| SceneError {
+            file: file.clone(),
+            position: None,
+            field: String::new(),
+            message,
+        };
+        let meta = std::fs::metadata(path)
+            .map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        if meta.is_dir() {
+            return Err(whole("is a directory, not a scene file".into()));
+        }
+        if meta.len() > MAX_SCENE_FILE_BYTES {
+            return Err(whole(format!(
+                "the file is {} bytes; scene files are limited to {} bytes",
+                meta.len(),
+                MAX_SCENE_FILE_BYTES
+            )));
+        }
+        let bytes =
+            std::fs::read(path).map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        let text = String::from_utf8(bytes).map_err(|e| whole(format!("not UTF-8 text ({e})")))?;
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into());
+        Scene::parse(&text, &file, &name)
+    }
+
+    /// Parses and validates scene text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str, name: &str) -> Result<Scene, SceneError> {
+        let desc = parse_file(text, file)?;
+        Scene::from_desc(&desc, file, name)
+    }
+
+    /// Validates a parsed description.
+    pub fn from_desc(desc: &SceneFile, file: &str, name: &str) -> Result<Scene, SceneError> {
+        let err = |field: String, message: String| SceneError {
+            file: file.to_string(),
+            position: None,
+            field,
+            message,
+        };
+        let vec3 = |field: &str, v: [f64; 3]| -> Result<DVec3, SceneError> {
+            if v.iter().all(|x| x.is_finite()) {
+                Ok(DVec3::from_array(v))
+            } else {
+                Err(err(field.into(), format!("must be finite, got {v:?}")))
+            }
+        };
+        let non_negative = |field: &str, v: Rgb| -> Result<DVec3, SceneError> {
+            if v.0.iter().all(|x| x.is_finite() && *x >= 0.0) {
+                Ok(DVec3::from_array(v.0))
+            } else {
+                Err(err(
+                    field.into(),
+                    format!("must be finite and non-negative, got {:?}", v.0),
+                ))
+            }
+        };
+
+        // Medium.
+        let m = &desc.medium;
+        let (min, max) = (vec3("medium.min", m.min)?, vec3("medium.max", m.max)?);
+        if !(min.cmplt(max).all()) {
+            return Err(err(
+                "medium".into(),
+                format!(
+                    "the box is empty: min {:?} must be below max {:?} on every axis",
+                    m.min, m.max
+                ),
+            ));
+        }
+        let medium = Medium {
+            min,
+            max,
+            sigma_s: non_negative("medium.sigma_s", m.sigma_s)?,
+            sigma_a: non_negative("medium.sigma_a", m.sigma_a)?,
+        };
+        let scale = medium.diagonal();
+
+        // Camera.
+        let c = &desc.camera;
+        let position = vec3("camera.position", c.position)?;
+        let look_at = vec3("camera.look_at", c.look_at)?;
+        let up = vec3("camera.up", c.up)?;
+        let view = look_at - position;
+        if !(view.length() > 0.0) || !view.length().is_finite() {
+            return Err(err(
+                "camera.look_at".into(),
+                "must differ from camera.position".into(),
+            ));
+        }
+        if !(up.length() > 0.0) || view.normalize().cross(up.normalize()).length() < 1e-9 {
+            return Err(err(
+                "camera.up".into(),
+                format!(
+                    "must not be zero or parallel to the view direction, got {:?}",
+                    c.up
+                ),
+            ));
+        }
+        if !(c.vfov_deg > 0.0 && c.vfov_deg < 180.0) {
+            return Err(err(
+                "camera.vfov_deg".into(),
+                format!(
+                    "must lie strictly between 0 and 180 degrees, got {}",
+                    c.vfov_deg
+                ),
+            ));
+        }
+        check_resolution(c.resolution).map_err(|m| err("camera.resolution".into(), m))?;
+        let camera = Camera::new(
+            position,
+            look_at,
+            up,
+            c.vfov_deg,
+            c.resolution[0],
+            c.resolution[1],
+        );
+
+        // Lights.
+        if desc.lights.is_empty() {
+            return Err(err(
+                "light".into(),
+                "the scene needs at least one [[light]]".into(),
+            ));
+        }
+        let mut lights = Vec::with_capacity(desc.lights.len());
+        for (i, l) in desc.lights.iter().enumerate() {
+            let field = |f: &str| match &l.name {
+                Some(n) => format!("light[{i}] ({n}).{f}"),
+                None => format!("light[{i}].{f}"),
+            };
+            let corner = vec3(&field("corner"), l.corner)?;
+            let eu = vec3(&field("edge_u"), l.edge_u)?;
+            let ev = vec3(&field("edge_v"), l.edge_v)?;
+            let radiance = non_negative(&field("radiance"), l.radiance)?;
+            for (name, e) in [("edge_u", eu), ("edge_v", ev)] {
+                if !(e.length() > 1e-9 * scale) {
+                    return Err(err(
+                        field(name),
+                        format!("has zero length (|{name}| = {:e})", e.length()),
+                    ));
+                }
+            }
+            let cos = eu.normalize().dot(ev.normalize());
+            if cos.abs() > 1e-6 {
+                return Err(err(
+                    field("edge_v"),
+                    format!("must be orthogonal to edge_u (the cosine between them is {cos:.3e})"),
+                ));
+            }
+            let light = RectLight::new(
+                l.name.as_deref().unwrap_or(&format!("light{i}")),
+                corner,
+                eu,
+                ev,
+                radiance,
+            );
+            if let Some(k) = light
+                .corners()
+                .iter()
+                .position(|&p| !medium.contains(p, 1e-9 * scale))
+            {
+                return Err(err(
+                    field("corner"),
+                    format!(
+                        "the light must lie inside the medium box or on its boundary; its corner {:?} does not",
+                        light.corners()[k].to_array()
+                    ),
+                ));
+            }
+            lights.push(light);
+        }
+        if !(lights.iter().map(|l| l.power()).sum::<f64>() > 0.0) {
+            return Err(err(
+                "light".into(),
+                "every light has zero power (area x luminance); nothing to render".into(),
+            ));
+        }
+
+        // Render defaults.
+        let r = &desc.render;
+        let planes = r.planes.unwrap_or(40_960);
+        check_planes(planes).map_err(|m| err("render.planes".into(), m))?;
+        let estimator = match &r.estimator {
+            Some(name) => name
+                .parse::<Estimator>()
+                .map_err(|m| err("render.estimator".into(), m))?,
+            None => Estimator::SmisExact,
+        };
+        let weighting = Weighting::new(estimator, r.orientations)
+            .map_err(|m| err("render.orientations".into(), m))?;
+        let spp = r.spp.unwrap_or(1);
+        check_spp(spp).map_err(|m| err("render.spp".into(), m))?;
+        let render = RenderDefaults {
+            planes,
+            weighting,
+            seed: r.seed.unwrap_or(1),
+            spp,
+        };
+        crate::render::check_memory(camera.width, camera.height, planes)
+            .map_err(|m| err("camera.resolution".into(), m))?;
+
+        Ok(Scene {
+            name: name.to_string(),
+            camera,
+            medium,
+            lights,
+            render,
+        })
+    }
+
+    /// The first light panel crossed by the ray `o + t we` with `t` in `(0, t_max)`: its distance
+    /// and index.
+    pub fn first_light(&self, o: DVec3, we: DVec3, t_max: f64) -> Option<(f64, usize)> {
+        let mut best = None;
+        let mut t_max = t_max;
+        for (k, l) in self.lights.iter().enumerate() {
+            if let Some(t) = l.intersect(o, we, 0.0, t_max) {
+                t_max = t;
+                best = Some((t, k));
+            }
+        }
+        best
+    }
+
+    /// What a camera ray `o + t we` (unit `we`) meets: its segment inside the medium before the
+    /// first light panel (None if empty), and the attenuated emission of that panel when its
+    /// front faces the ray (SPEC section 1, the direct term).
+    pub fn camera_segment(&self, o: DVec3, we: DVec3) -> (Option<(f64, f64)>, DVec3) {
+        let (t_surface, emission) = match self.first_light(o, we, f64::INFINITY) {
+            Some((t, k)) if we.dot(self.lights[k].n) < 0.0 => {
+                let tr = self
+                    .medium
+                    .transmittance(self.medium.length_inside(o, o + t * we));
+                (t, self.lights[k].radiance * tr)
+            }
+            Some((t, _)) => (t, DVec3::ZERO),
+            None => (f64::INFINITY, DVec3::ZERO),
+        };
+        let segment = match self.medium.clip_ray(o, we) {
+            Some((t0, t1)) if t0 < t_surface.min(t1) => Some((t0, t_surface.min(t1))),
+            _ => None,
+        };
+        (segment, emission)
+    }
+
+    /// Whether a light panel other than `except` blocks the segment from light point `y` to `x`.
+    pub fn blocked(&self, y: DVec3, x: DVec3, except: usize) -> bool {
+        let d = x - y;
+        let len = d.length();
+        if len == 0.0 {
+            return false;
+        }
+        let dir = d / len;
+        self.lights.iter().enumerate().any(|(k, l)| {
+            k != except
+                && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9))
+                    .is_some()
+        })
+    }
+
+    /// The same scene seen at another resolution.
+    pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, String> {
+        check_resolution([width, height])?;
+        let c = &self.camera;
+        let mut s = self.clone();
+        s.camera = Camera {
+            width,
+            height,
+            ..c.clone()
+        };
+        Ok(s)
+    }
+}
+
+/// Parses the TOML text into the schema, locating the error in the text.
+pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
+    let position_of = |span: Option<std::ops::Range<usize>>| {
+        span.map(|s| {
+            let before = &text[..s.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            (line, col)
+        })
+    };
+    let de = toml::Deserializer::parse(text).map_err(|e| SceneError {
+        file: file.to_string(),
+        position: position_of(e.span()),
+        field: String::new(),
+        message: format!("TOML syntax: {}", e.message().trim()),
+    })?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        SceneError {
+            file: file.to_string(),
+            position: position_of(inner.span()),
+            field: if path == "." {
+                String::new()
+            } else {
+                path.replace("light[", "light[")
+            },
+            message: inner.message().trim().to_string(),
+        }
+    })
+}
+
+pub fn check_resolution(res: [u32; 2]) -> Result<(), String> {
+    if res[0] == 0 || res[1] == 0 || res[0] > MAX_RESOLUTION_SIDE || res[1] > MAX_RESOLUTION_SIDE {
+        return Err(format!(
+            "each side must be between 1 and {MAX_RESOLUTION_SIDE} pixels, got {}x{}",
+            res[0], res[1]
+        ));
+    }
+    Ok(())
+}
+
+/// The largest plane count accepted (about 30 GB of planes would be needed beyond it).
+pub const MAX_PLANES: u64 = 1 << 27;
+
+pub fn check_planes(planes: u64) -> Result<(), String> {
+    if planes == 0 || planes > MAX_PLANES {
+        return Err(format!(
+            "the plane count must be between 1 and {MAX_PLANES}, got {planes}"
+        ));
+    }
+    Ok(())
+}
+
+pub fn check_spp(spp: u32) -> Result<(), String> {
+    if spp == 0 || spp > 1 << 16 {
+        return Err(format!(
+            "samples per pixel must be between 1 and 65536, got {spp}"
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub const MINIMAL: &str = r#"
+[camera]
+position = [0.0, 1.0, 5.0]
+look_at = [0.0, 1.0, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 40.0
+resolution = [32, 16]
+
+[medium]
+min = [-2.0, 0.0, -2.0]
+max = [2.0, 2.0, 2.0]
+sigma_s = [0.1, 0.2, 0.3]
+sigma_a = 0.05
+
+[[light]]
+name = "top"
+corner = [-0.5, 1.9, -0.5]
+edge_u = [1.0, 0.0, 0.0]
+edge_v = [0.0, 0.0, 1.0]
+radiance = 4
+"#;
+
+    fn parse(text: &str) -> Result<Scene, SceneError> {
+        Scene::parse(text, "test.toml", "test")
+    }
+
+    #[test]
+    fn minimal_scene_parses_with_grey_and_rgb_coefficients() {
+        let s = parse(MINIMAL).unwrap();
+        assert_eq!(s.medium.sigma_s, DVec3::new(0.1, 0.2, 0.3));
+        assert_eq!(s.medium.sigma_a, DVec3::splat(0.05));
+        assert_eq!(s.lights[0].radiance, DVec3::splat(4.0));
+        assert_eq!(s.render.planes, 40_960);
+        assert_eq!(s.render.weighting.estimator, Estimator::SmisExact);
+    }
+
+    fn expect_error(text: &str, field: &str, words: &str) {
+        let e = parse(text).expect_err("should fail");
+        assert!(
+            e.field.contains(field),
+            "field {:?} should contain {field:?}: {e}",
+            e.field
+        );
+        assert!(
+            e.message.contains(words),
+            "message should contain {words:?}: {e}"
+        );
+    }
+
+    #[test]
+    fn each_problem_names_its_field() {
+        expect_error(
+            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\nzoom = 2"),
+            "camera",
+            "unknown field",
+        );
+        expect_error(
+            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = \"wide\""),
+            "camera.vfov_deg",
+            "invalid type",
+        );
+        expect_error(
+            &MINIMAL.replace("vfov_deg = 40.0\n", ""),
+            "camera",
+            "missing field",
+        );
+        expect_error(
+            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"),
+            "camera.vfov_deg",
+            "between 0 and 180",
+        );
+        expect_error(
+            &MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, inf, 5.0]"),
+            "camera.position",
+            "finite",
+        );
+        expect_error(
+            &MINIMAL.replace("look_at = [0.0, 1.0, 0.0]", "look_at = [0.0, 1.0, 5.0]"),
+            "camera.look_at",
+            "differ",
+        );
+        expect_error(
+            &MINIMAL.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 3.0]"),
+            "camera.up",
+            "parallel",
+        );
+        expect_error(
+            &MINIMAL.replace("[32, 16]", "[0, 16]"),
+            "camera.resolution",
+            "between 1",
+        );
+        expect_error(
+            &MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"),
+            "medium.sigma_a",
+            "non-negative",
+        );
+        expect_error(
+            &MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"),
+            "medium",
+            "empty",
+        );
+        expect_error(
+            &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [0.0, 0.0, 0.0]"),
+            "light[0] (top).edge_u",
+            "zero length",
+        );
+        expect_error(
+            &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [1.0, 0.0, 0.3]"),
+            "light[0] (top).edge_v",
+            "orthogonal",
+        );
+        expect_error(
+            &MINIMAL.replace("corner = [-0.5, 1.9, -0.5]", "corner = [-0.5, 2.5, -0.5]"),
+            "light[0] (top).corner",
+            "inside the medium",
+        );
+        expect_error(
+            &format!("{MINIMAL}\n[render]\nplanes = 0\n"),
+            "render.planes",
+            "between 1",
+        );
+        expect_error(
+            &format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"),
+            "render.estimator",
+            "unknown estimator",
+        );
+        expect_error(
+            &MINIMAL.replace("radiance = 4", "radiance = [1, 2]"),
+            "light[0].radiance",
+            "three numbers",
+        );
+    }
+
+    #[test]
+    fn syntax_errors_carry_a_position() {
+        let e = parse(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = = 40.0")).unwrap_err();
+        assert_eq!(e.position.map(|p| p.0), Some(6), "{e}");
+        assert!(e.to_string().starts_with("test.toml:6:"), "{e}");
+    }
+}

@@ -1,0 +1,565 @@
+//! The estimators' weights: the denominator `D` of SPEC section 2, the only thing in which the
+//! estimators differ. A hit contributes `K / (N P_l D)`.
+//!
+//! Notation (SPEC section 2): `det(beta) = (d(beta) x wl) . we = cos(beta) a_u + sin(beta) a_v`,
+//! `g(beta) = width(beta, y') |det(beta)|`, the path density `p(x | beta)` of paper eq. (25) up to
+//! factors shared by all orientations.
+
+use crate::light::{ChordDirection, chord_width};
+use std::f64::consts::PI;
+use std::fmt;
+use std::str::FromStr;
+
+/// The weighting schemes, by their command-line names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Estimator {
+    /// Paper eq. (22): `D = g(alpha)`.
+    Unweighted,
+    /// Deng et al.'s analytic weight, paper eq. (26): `D = width(alpha) (1/pi) int |det|`.
+    CmisCosine,
+    /// Paper eq. (27) with the cosine weight over K stratified orientations.
+    SmisCosine,
+    /// Paper eq. (27) with exact densities over K stratified orientations.
+    SmisExact,
+    /// The optimal CMIS balance heuristic, paper eq. (24), in closed form: `D = (1/pi) int g`.
+    CmisExact,
+}
+
+impl Estimator {
+    pub const ALL: [Estimator; 5] = [
+        Estimator::Unweighted,
+        Estimator::CmisCosine,
+        Estimator::SmisCosine,
+        Estimator::SmisExact,
+        Estimator::CmisExact,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Estimator::Unweighted => "unweighted",
+            Estimator::CmisCosine => "cmis-cosine",
+            Estimator::SmisCosine => "smis-cosine",
+            Estimator::SmisExact => "smis-exact",
+            Estimator::CmisExact => "cmis-exact",
+        }
+    }
+
+    /// Whether `--orientations K` applies.
+    pub fn has_orientations(self) -> bool {
+        matches!(self, Estimator::SmisCosine | Estimator::SmisExact)
+    }
+}
+
+impl fmt::Display for Estimator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Estimator {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Estimator::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<_> = Estimator::ALL.iter().map(|e| e.name()).collect();
+                format!(
+                    "unknown estimator {s:?}; expected one of {}",
+                    names.join(", ")
+                )
+            })
+    }
+}
+
+/// The largest number of stratified orientations accepted.
+pub const MAX_ORIENTATIONS: u32 = 64;
+
+/// An estimator with its number of stratified orientations K (2 for the paper's pair).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Weighting {
+    pub estimator: Estimator,
+    pub orientations: u32,
+}
+
+impl Weighting {
+    pub fn new(estimator: Estimator, orientations: Option<u32>) -> Result<Self, String> {
+        match orientations {
+            None => Ok(Weighting {
+                estimator,
+                orientations: 2,
+            }),
+            Some(k) if !estimator.has_orientations() && k != 2 => Err(format!(
+                "--orientations applies to smis-cosine and smis-exact only, not to {estimator}"
+            )),
+            Some(k) if k == 0 || k > MAX_ORIENTATIONS => Err(format!(
+                "the number of orientations must be between 1 and {MAX_ORIENTATIONS}, got {k}"
+            )),
+            Some(k) => Ok(Weighting {
+                estimator,
+                orientations: k,
+            }),
+        }
+    }
+
+    /// A label such as `smis-exact` or `smis-exact-k4`.
+    pub fn label(&self) -> String {
+        if self.estimator.has_orientations() && self.orientations != 2 {
+            format!("{}-k{}", self.estimator, self.orientations)
+        } else {
+            self.estimator.to_string()
+        }
+    }
+}
+
+impl fmt::Display for Weighting {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.label())
+    }
+}
+
+/// What the weights need to know about a plane, in its light's local frame (f32, gathered often).
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneFrame {
+    /// width(alpha, y'): the plane's own chord, the same for every hit on it.
+    pub width: f32,
+    /// (cos alpha, sin alpha), sin >= 0.
+    pub cos_a: f32,
+    pub sin_a: f32,
+    /// Local coordinates (p, q) of the chord's start; y' = start + a (cos alpha, sin alpha).
+    pub p0: f32,
+    pub q0: f32,
+    /// The light's side lengths W and H.
+    pub light_w: f32,
+    pub light_h: f32,
+    /// The perpendicular direction alpha_perp = (alpha + pi/2) mod pi, ready for chords.
+    pub perp: ChordDirection<f32>,
+}
+
+impl PlaneFrame {
+    pub fn new(width: f64, alpha: f64, p0: f64, q0: f64, light_w: f64, light_h: f64) -> Self {
+        let (sin_a, cos_a) = alpha.sin_cos();
+        // (-sin, cos) has a negative sine when cos < 0; the same line is (sin, -cos).
+        let (pc, ps) = if cos_a >= 0.0 {
+            (-sin_a, cos_a)
+        } else {
+            (sin_a, -cos_a)
+        };
+        PlaneFrame {
+            width: width as f32,
+            cos_a: cos_a as f32,
+            sin_a: sin_a.max(0.0) as f32,
+            p0: p0 as f32,
+            q0: q0 as f32,
+            light_w: light_w as f32,
+            light_h: light_h as f32,
+            perp: ChordDirection::<f32>::from_cos_sin(pc as f32, ps as f32),
+        }
+    }
+
+    /// Light-local coordinates of the light vertex y' at chord parameter `a`, kept inside.
+    #[inline(always)]
+    pub fn vertex(&self, a: f32) -> (f32, f32) {
+        let p = (self.p0 + a * self.cos_a).clamp(0.0, self.light_w);
+        let q = (self.q0 + a * self.sin_a).clamp(0.0, self.light_h);
+        (p, q)
+    }
+}
+
+/// What the weights need to know about one hit.
+#[derive(Clone, Copy, Debug)]
+pub struct HitLocal {
+    /// det(alpha) = (d(alpha) x wl) . we and det(alpha_perp).
+    pub det: f32,
+    pub det_perp: f32,
+    /// Chord parameter of the light vertex y'.
+    pub a: f32,
+}
+
+impl HitLocal {
+    /// (a_u, a_v), undoing the rotation det(alpha) = cos a_u + sin a_v,
+    /// det(alpha_perp) = -sin a_u + cos a_v.
+    #[inline(always)]
+    pub fn a_uv(&self, f: &PlaneFrame) -> (f32, f32) {
+        (
+            f.cos_a * self.det - f.sin_a * self.det_perp,
+            f.sin_a * self.det + f.cos_a * self.det_perp,
+        )
+    }
+}
+
+/// A denominator D, specialised per estimator so that the gathering loop is monomorphised.
+pub trait Denominator: Sync + Send {
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32;
+}
+
+/// `unweighted`: D = g(alpha), paper eq. (22).
+pub struct Unweighted;
+impl Denominator for Unweighted {
+    #[inline(always)]
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        f.width * h.det.abs()
+    }
+}
+
+/// `cmis-cosine`: D = width(alpha) (2/pi) sqrt(a_u^2 + a_v^2), paper eq. (26).
+/// a_u^2 + a_v^2 = det(alpha)^2 + det(alpha_perp)^2, a rotation of the same pair.
+pub struct CmisCosine;
+impl Denominator for CmisCosine {
+    #[inline(always)]
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        f.width * std::f32::consts::FRAC_2_PI * (h.det * h.det + h.det_perp * h.det_perp).sqrt()
+    }
+}
+
+/// `smis-cosine` with the paper's perpendicular pair: D = width(alpha) (|det(alpha)| +
+/// |det(alpha_perp)|) / 2.
+pub struct SmisCosinePair;
+impl Denominator for SmisCosinePair {
+    #[inline(always)]
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        f.width * 0.5 * (h.det.abs() + h.det_perp.abs())
+    }
+}
+
+/// `smis-exact` with the paper's perpendicular pair: D = (g(alpha) + g(alpha_perp)) / 2, the
+/// perpendicular chord measured through the hit's light vertex y'.
+pub struct SmisExactPair;
+impl Denominator for SmisExactPair {
+    #[inline(always)]
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        let (p, q) = f.vertex(h.a);
+        let width_perp = chord_width(f.light_w, f.light_h, p, q, &f.perp);
+        0.5 * (f.width * h.det.abs() + width_perp * h.det_perp.abs())
+    }
+}
+
+/// `smis-cosine` and `smis-exact` with K stratified orientations alpha + k pi / K.
+pub struct StratifiedK {
+    exact: bool,
+    /// (cos, sin) of k pi / K for k = 1..K.
+    rotations: Vec<(f32, f32)>,
+}
+
+impl StratifiedK {
+    pub fn new(exact: bool, k: u32) -> Self {
+        let rotations = (1..k)
+            .map(|i| i as f64 * PI / k as f64)
+            .map(|b| (b.cos() as f32, b.sin() as f32))
+            .collect();
+        StratifiedK { exact, rotations }
+    }
+}
+
+impl Denominator for StratifiedK {
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        let (a_u, a_v) = h.a_uv(f);
+        let (p, q) = f.vertex(h.a);
+        let mut sum = if self.exact {
+            f.width * h.det.abs()
+        } else {
+            h.det.abs()
+        };
+        for &(ck, sk) in &self.rotations {
+            // beta = alpha + k pi / K, reduced to [0, pi) so that sin(beta) >= 0.
+            let (mut c, mut s) = (f.cos_a * ck - f.sin_a * sk, f.sin_a * ck + f.cos_a * sk);
+            if s < 0.0 {
+                (c, s) = (-c, -s);
+            }
+            let det = (c * a_u + s * a_v).abs();
+            sum += if self.exact {
+                chord_width(
+                    f.light_w,
+                    f.light_h,
+                    p,
+                    q,
+                    &ChordDirection::<f32>::from_cos_sin(c, s),
+                ) * det
+            } else {
+                det
+            };
+        }
+        let mean = sum / (self.rotations.len() + 1) as f32;
+        if self.exact { mean } else { f.width * mean }
+    }
+}
+
+/// `cmis-exact`: D = (1/pi) int_0^pi g(beta) d beta, closed form (f64).
+pub struct CmisExact;
+impl Denominator for CmisExact {
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        let (a_u, a_v) = h.a_uv(f);
+        let (p, q) = f.vertex(h.a);
+        cmis_exact_mean(
+            f.light_w as f64,
+            f.light_h as f64,
+            p as f64,
+            q as f64,
+            a_u as f64,
+            a_v as f64,
+        ) as f32
+    }
+}
+
+/// (1/pi) times the integral over beta in [0, pi) of g(beta) = width(beta, (p, q)) |det(beta)|,
+/// det(beta) = cos(beta) a_u + sin(beta) a_v, for the light vertex at local (p, q) of a `w x h`
+/// light: the marginal density of paper eq. (24) that the paper calls non-integrable.
+///
+/// SPEC section 2, "Closed form": split [0, pi) at pi/2, at the four corner directions and at the
+/// zero of det. On each piece the forward chord is one of fx/|cos| or (h - q)/sin, the backward
+/// one of bx/|cos| or q/sin, and det has one sign s, so g is a sum of
+///   c s sign(cos) (a_u + a_v tan beta)   with antiderivative a_u beta - a_v ln|cos beta|,
+///   c s (a_u cot beta + a_v)             with antiderivative a_u ln|sin beta| + a_v beta.
+/// A term with c = 0 (vertex on an edge) is skipped; it would be 0 * infinity at an endpoint.
+pub fn cmis_exact_mean(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> f64 {
+    let half = 0.5 * PI;
+    let zero_of_det = (-a_u).atan2(a_v).rem_euclid(PI);
+    let mut cuts = [
+        0.0,
+        half,
+        PI,
+        zero_of_det,
+        (h - q).atan2(w - p), // forward corner (w, h), cos > 0
+        q.atan2(p),           // backward corner (0, 0), cos > 0
+        (h - q).atan2(-p),    // forward corner (0, h), cos < 0
+        q.atan2(p - w),       // backward corner (w, 0), cos < 0
+    ];
+    for c in &mut cuts {
+        *c = c.clamp(0.0, PI);
+    }
+    cuts.sort_unstable_by(f64::total_cmp);
+
+    let x_term = |b: f64| a_u * b - a_v * b.cos().abs().ln();
+    let y_term = |b: f64| a_u * b.sin().abs().ln() + a_v * b;
+    let mut total = 0.0;
+    for piece in cuts.windows(2) {
+        let (lo, hi) = (piece[0], piece[1]);
+        if hi <= lo {
+            continue;
+        }
+        let mid = 0.5 * (lo + hi);
+        let (s, c) = mid.sin_cos();
+        let det_sign = (c * a_u + s * a_v).signum();
+        let (fx, bx) = if c > 0.0 { (w - p, p) } else { (p, w - p) };
+        for (cx, cy) in [(fx, h - q), (bx, q)] {
+            // Which term of min(cx / |cos|, cy / sin) holds on this piece.
+            if cx * s <= cy * c.abs() {
+                if cx > 0.0 {
+                    total += cx * det_sign * c.signum() * (x_term(hi) - x_term(lo));
+                }
+            } else if cy > 0.0 {
+                total += cy * det_sign * (y_term(hi) - y_term(lo));
+            }
+        }
+    }
+    // The integral of a non-negative function; rounding can leave a hair below zero.
+    (total / PI).max(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::quadrature::integrate;
+    use rand::{Rng, SeedableRng};
+
+    /// g(beta) computed directly, independently of the closed form's case analysis.
+    fn g(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64, beta: f64) -> f64 {
+        let width = chord_width(w, h, p, q, &ChordDirection::from_angle(beta));
+        width * (beta.cos() * a_u + beta.sin() * a_v).abs()
+    }
+
+    fn quadrature_mean(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> f64 {
+        let scale = (w + h) * (a_u.abs() + a_v.abs());
+        integrate(
+            |b| g(w, h, p, q, a_u, a_v, b),
+            0.0,
+            PI,
+            1e-13,
+            1e-15 * scale,
+        )
+        .value
+            / PI
+    }
+
+    #[test]
+    fn analytic_cosine_integral_matches_quadrature() {
+        let check = |a_u: f64, a_v: f64| {
+            let closed = std::f64::consts::FRAC_2_PI * (a_u * a_u + a_v * a_v).sqrt();
+            let scale = a_u.abs() + a_v.abs();
+            let numeric = integrate(
+                |b| (b.cos() * a_u + b.sin() * a_v).abs(),
+                0.0,
+                PI,
+                1e-13,
+                1e-300,
+            )
+            .value
+                / PI;
+            if scale == 0.0 {
+                assert_eq!(closed, 0.0);
+                assert_eq!(numeric, 0.0);
+            } else {
+                assert!(
+                    (closed - numeric).abs() <= 1e-10 * closed,
+                    "a_u={a_u} a_v={a_v}: {closed} vs {numeric}"
+                );
+            }
+        };
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+        for _ in 0..1000 {
+            check(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        }
+        check(0.0, 0.0);
+        for x in [1e-12, 0.3, -2.0, 1e6] {
+            check(x, 0.0);
+            check(0.0, x);
+        }
+        for e in 0..=12 {
+            let r = 10f64.powi(e);
+            check(1.0, r);
+            check(-r, 1.0);
+            check(1e-6, 1e-6 * r);
+        }
+    }
+
+    #[test]
+    fn cmis_exact_matches_quadrature_on_random_inputs() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
+        for i in 0..10_000 {
+            let (w, h) = (rng.random_range(0.01..5.0), rng.random_range(0.01..5.0));
+            let (p, q) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
+            let (a_u, a_v) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let closed = cmis_exact_mean(w, h, p, q, a_u, a_v);
+            let numeric = quadrature_mean(w, h, p, q, a_u, a_v);
+            assert!(
+                (closed - numeric).abs() <= 1e-9 * numeric,
+                "#{i} w={w} h={h} p={p} q={q} a=({a_u},{a_v}): {closed} vs {numeric}"
+            );
+        }
+    }
+
+    #[test]
+    fn cmis_exact_hard_cases() {
+        let (w, h) = (3.0, 2.0);
+        let vertices = [
+            (0.0, 0.0),
+            (w, 0.0),
+            (w, h),
+            (0.0, h),
+            (0.0, 0.7),
+            (w, 1.1),
+            (1.3, 0.0),
+            (2.2, h),
+            (1.5, 1.0),
+            (1e-14, 1e-14),
+            (w - 1e-14, 0.5),
+        ];
+        let dets = [
+            (1.0, 0.0),
+            (0.0, 1.0),
+            (-0.3, 0.0),
+            (0.0, -2.0),
+            (1.0, 1e-12),
+            (1e-12, -1.0),
+            (0.6, 0.8),
+            (-0.6, 0.8),
+        ];
+        for &(p, q) in &vertices {
+            for &(a_u, a_v) in &dets {
+                let closed = cmis_exact_mean(w, h, p, q, a_u, a_v);
+                let numeric = quadrature_mean(w, h, p, q, a_u, a_v);
+                assert!(closed.is_finite());
+                assert!(
+                    (closed - numeric).abs() <= 1e-9 * numeric,
+                    "p={p} q={q} a=({a_u},{a_v}): {closed} vs {numeric}"
+                );
+            }
+        }
+        assert_eq!(cmis_exact_mean(w, h, 1.0, 1.0, 0.0, 0.0), 0.0);
+        // Very thin lights, both ways round.
+        for &(w, h) in &[(1.0, 1e-3), (1e-3, 1.0), (1000.0, 1.0), (1.0, 1e-6)] {
+            for &(fp, fq) in &[(0.5, 0.5), (0.0, 0.3), (1.0, 1.0), (0.999, 0.001)] {
+                for &(a_u, a_v) in &dets {
+                    let (p, q) = (fp * w, fq * h);
+                    let closed = cmis_exact_mean(w, h, p, q, a_u, a_v);
+                    let numeric = quadrature_mean(w, h, p, q, a_u, a_v);
+                    assert!(
+                        (closed - numeric).abs() <= 1e-9 * numeric,
+                        "w={w} h={h} p={p} q={q} a=({a_u},{a_v}): {closed} vs {numeric}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn frame_and_hit(rng: &mut impl Rng) -> (PlaneFrame, HitLocal) {
+        let (w, h) = (rng.random_range(0.1..3.0), rng.random_range(0.1..3.0));
+        let alpha = rng.random::<f64>() * PI;
+        let (p, q) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
+        let dir = ChordDirection::from_angle(alpha);
+        let (back, fwd) = crate::light::chord_extent(w, h, p, q, &dir);
+        let (p0, q0) = (p - back * alpha.cos(), q - back * alpha.sin());
+        let f = PlaneFrame::new(back + fwd, alpha, p0, q0, w, h);
+        let hit = HitLocal {
+            det: rng.random_range(-1.0..1.0),
+            det_perp: rng.random_range(-1.0..1.0),
+            a: back as f32,
+        };
+        (f, hit)
+    }
+
+    #[test]
+    fn stratified_k2_reproduces_the_pair_hit_by_hit() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(5);
+        let (exact_k, cosine_k) = (StratifiedK::new(true, 2), StratifiedK::new(false, 2));
+        for _ in 0..10_000 {
+            let (f, hit) = frame_and_hit(&mut rng);
+            let (a, b) = (
+                SmisExactPair.denominator(&f, &hit),
+                exact_k.denominator(&f, &hit),
+            );
+            assert!((a - b).abs() <= 1e-5 * a.max(1e-6), "{a} vs {b}");
+            let (a, b) = (
+                SmisCosinePair.denominator(&f, &hit),
+                cosine_k.denominator(&f, &hit),
+            );
+            assert!((a - b).abs() <= 1e-5 * a.max(1e-6), "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn many_orientations_approach_the_continuous_weights() {
+        // The stratified averages are Riemann sums of the CMIS integrals.
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(6);
+        let (exact_k, cosine_k) = (StratifiedK::new(true, 64), StratifiedK::new(false, 64));
+        for _ in 0..1000 {
+            let (f, hit) = frame_and_hit(&mut rng);
+            let (c, e) = (
+                CmisCosine.denominator(&f, &hit),
+                cosine_k.denominator(&f, &hit),
+            );
+            assert!((c - e).abs() <= 0.01 * c, "cosine {c} vs {e}");
+            let (c, e) = (
+                CmisExact.denominator(&f, &hit),
+                exact_k.denominator(&f, &hit),
+            );
+            assert!((c - e).abs() <= 0.05 * c, "exact {c} vs {e}");
+        }
+    }
+
+    #[test]
+    fn names_round_trip_and_orientations_are_checked() {
+        for e in Estimator::ALL {
+            assert_eq!(e.name().parse::<Estimator>().unwrap(), e);
+        }
+        assert!("nope".parse::<Estimator>().is_err());
+        assert!(Weighting::new(Estimator::SmisExact, Some(0)).is_err());
+        assert!(Weighting::new(Estimator::CmisExact, Some(4)).is_err());
+        assert_eq!(
+            Weighting::new(Estimator::SmisExact, Some(4))
+                .unwrap()
+                .label(),
+            "smis-exact-k4"
+        );
+    }
+}
