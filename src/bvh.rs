@@ -43,32 +43,19 @@ impl PlaneBvh {
                     hi = hi.max(v - origin);
                 }
                 // Grow by the f32 rounding of the coordinates.
-                let pad = 1e-5 * (hi - lo).max_element().max(1e-30)
-                    + 1e-6 * (lo.abs().max(hi.abs())).max_element();
+                let pad = 1e-5 * (hi - lo).max_element().max(1e-30) + 1e-6 * (lo.abs().max(hi.abs())).max_element();
                 ((lo - pad).as_vec3(), (hi + pad).as_vec3())
             })
             .collect();
-        let mut order: Vec<u32> = (0..planes.len() as u32)
-            .filter(|&i| boxes[i as usize].0.x.is_finite())
-            .collect();
-        let mut nodes = vec![Node {
-            min: Vec3::ZERO,
-            max: Vec3::ZERO,
-            first: 0,
-            count: 0,
-        }];
+        let mut order: Vec<u32> = (0..planes.len() as u32).filter(|&i| boxes[i as usize].0.x.is_finite()).collect();
+        let mut nodes = vec![Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 }];
         let len = order.len();
         build_node(&mut nodes, 0, &mut order, 0, len, &boxes);
         PlaneBvh { nodes, order }
     }
 
     /// One ray's estimate, testing only planes whose boxes the ray's segment crosses.
-    pub fn gather<D: Denominator>(
-        &self,
-        ctx: &GatherContext,
-        weights: &D,
-        ray: &CameraRay,
-    ) -> (Vec3, GatherStats) {
+    pub fn gather<D: Denominator>(&self, ctx: &GatherContext, weights: &D, ray: &CameraRay) -> (Vec3, GatherStats) {
         let (mut sum, mut stats) = (Vec3::ZERO, GatherStats::default());
         if self.order.is_empty() || !(ray.t0 <= ray.t1) {
             return (sum, stats);
@@ -81,10 +68,7 @@ impl PlaneBvh {
             let node = &self.nodes[stack[top] as usize];
             // Slab test (the origin is the gathering origin, so the box is already relative).
             let (a, b) = (node.min * inv, node.max * inv);
-            let (near, far) = (
-                a.min(b).max_element().max(ray.t0),
-                a.max(b).min_element().min(ray.t1),
-            );
+            let (near, far) = (a.min(b).max_element().max(ray.t0), a.max(b).min_element().min(ray.t1));
             if !(near <= far) {
                 continue;
             }
@@ -126,12 +110,7 @@ fn build_node(
         chi = chi.max(a + b);
     }
     if items.len() <= LEAF_SIZE || nodes.len() > (1 << 30) {
-        nodes[index] = Node {
-            min: lo,
-            max: hi,
-            first: start as u32,
-            count: items.len() as u32,
-        };
+        nodes[index] = Node { min: lo, max: hi, first: start as u32, count: items.len() as u32 };
         return;
     }
     let extent = chi - clo;
@@ -144,31 +123,13 @@ fn build_node(
     };
     let mid = items.len() / 2;
     items.select_nth_unstable_by(mid, |&i, &j| {
-        let (ci, cj) = (
-            boxes[i as usize].0 + boxes[i as usize].1,
-            boxes[j as usize].0 + boxes[j as usize].1,
-        );
+        let (ci, cj) = (boxes[i as usize].0 + boxes[i as usize].1, boxes[j as usize].0 + boxes[j as usize].1);
         ci[axis].total_cmp(&cj[axis])
     });
     let first = nodes.len();
-    nodes.push(Node {
-        min: Vec3::ZERO,
-        max: Vec3::ZERO,
-        first: 0,
-        count: 0,
-    });
-    nodes.push(Node {
-        min: Vec3::ZERO,
-        max: Vec3::ZERO,
-        first: 0,
-        count: 0,
-    });
-    nodes[index] = Node {
-        min: lo,
-        max: hi,
-        first: first as u32,
-        count: 0,
-    };
+    nodes.push(Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 });
+    nodes.push(Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 });
+    nodes[index] = Node { min: lo, max: hi, first: first as u32, count: 0 };
     build_node(nodes, first, order, start, start + mid, boxes);
     build_node(nodes, first + 1, order, start + mid, end, boxes);
 }

@@ -17,14 +17,7 @@ pub struct Camera {
 
 impl Camera {
     /// The scene validates that `look_at != position` and that `up` is not parallel to the view.
-    pub fn new(
-        position: DVec3,
-        look_at: DVec3,
-        up: DVec3,
-        vfov_deg: f64,
-        width: u32,
-        height: u32,
-    ) -> Self {
+    pub fn new(position: DVec3, look_at: DVec3, up: DVec3, vfov_deg: f64, width: u32, height: u32) -> Self {
         let forward = (look_at - position).normalize();
         let right = forward.cross(up).normalize();
         Camera {
@@ -62,10 +55,7 @@ impl Camera {
     pub fn project(&self, c: DVec3) -> (f64, f64) {
         let sx = c.x / (c.z * self.tan_half_fov * self.aspect());
         let sy = c.y / (c.z * self.tan_half_fov);
-        (
-            (sx + 1.0) * 0.5 * self.width as f64,
-            (1.0 - sy) * 0.5 * self.height as f64,
-        )
+        ((sx + 1.0) * 0.5 * self.width as f64, (1.0 - sy) * 0.5 * self.height as f64)
     }
 }
 
@@ -75,14 +65,7 @@ mod tests {
 
     #[test]
     fn projection_inverts_direction_and_centre_looks_forward() {
-        let cam = Camera::new(
-            DVec3::new(0.0, 3.0, 11.0),
-            DVec3::new(0.0, 2.5, 0.0),
-            DVec3::Y,
-            45.0,
-            640,
-            360,
-        );
+        let cam = Camera::new(DVec3::new(0.0, 3.0, 11.0), DVec3::new(0.0, 2.5, 0.0), DVec3::Y, 45.0, 640, 360);
         let centre = cam.direction(320.0, 180.0).normalize();
         assert!((centre - cam.forward).length() < 1e-12);
         for &(x, y) in &[(0.0, 0.0), (12.25, 300.5), (639.9, 1.0)] {

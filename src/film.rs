@@ -18,11 +18,7 @@ pub struct Film {
 
 impl Film {
     pub fn new(width: u32, height: u32) -> Self {
-        Film {
-            width,
-            height,
-            pixels: vec![Vec3::ZERO; width as usize * height as usize],
-        }
+        Film { width, height, pixels: vec![Vec3::ZERO; width as usize * height as usize] }
     }
 
     pub fn get(&self, x: u32, y: u32) -> Vec3 {
@@ -31,25 +27,16 @@ impl Film {
 
     /// Mean over pixels and channels.
     pub fn mean(&self) -> f64 {
-        self.pixels
-            .iter()
-            .map(|p| (p.x + p.y + p.z) as f64)
-            .sum::<f64>()
-            / (3.0 * self.pixels.len().max(1) as f64)
+        self.pixels.iter().map(|p| (p.x + p.y + p.z) as f64).sum::<f64>() / (3.0 * self.pixels.len().max(1) as f64)
     }
 
     /// Largest channel value.
     pub fn max(&self) -> f32 {
-        self.pixels
-            .iter()
-            .map(|p| p.max_element())
-            .fold(0.0, f32::max)
+        self.pixels.iter().map(|p| p.max_element()).fold(0.0, f32::max)
     }
 
     pub fn all_finite_non_negative(&self) -> bool {
-        self.pixels
-            .iter()
-            .all(|p| p.is_finite() && p.min_element() >= 0.0)
+        self.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0)
     }
 }
 
@@ -62,18 +49,10 @@ pub enum ImageFormat {
 
 impl ImageFormat {
     pub fn from_path(path: &Path) -> Result<Self> {
-        match path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .as_deref()
-        {
+        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("exr") => Ok(ImageFormat::Exr),
             Some("png") => Ok(ImageFormat::Png),
-            _ => bail!(
-                "{}: the output must end in .exr (linear float) or .png (tone-mapped sRGB)",
-                path.display()
-            ),
+            _ => bail!("{}: the output must end in .exr (linear float) or .png (tone-mapped sRGB)", path.display()),
         }
     }
 }
@@ -84,18 +63,13 @@ pub fn check_writable(path: &Path) -> Result<()> {
     ImageFormat::from_path(path)?;
     let dir = parent_dir(path);
     if !dir.is_dir() {
-        bail!(
-            "{}: the output directory {} does not exist",
-            path.display(),
-            dir.display()
-        );
+        bail!("{}: the output directory {} does not exist", path.display(), dir.display());
     }
     if path.is_dir() {
         bail!("{}: is a directory", path.display());
     }
     let probe = temporary_path(path);
-    std::fs::File::create(&probe)
-        .with_context(|| format!("{}: cannot write to {}", path.display(), dir.display()))?;
+    std::fs::File::create(&probe).with_context(|| format!("{}: cannot write to {}", path.display(), dir.display()))?;
     let _ = std::fs::remove_file(&probe);
     Ok(())
 }
@@ -109,10 +83,7 @@ fn parent_dir(path: &Path) -> PathBuf {
 
 /// A hidden temporary name beside `path`, unique to this process.
 pub fn temporary_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     parent_dir(path).join(format!(".{name}.{}.tmp", std::process::id()))
 }
 
@@ -121,12 +92,8 @@ pub fn temporary_path(path: &Path) -> PathBuf {
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let tmp = temporary_path(path);
     let result = write(&tmp).and_then(|()| {
-        std::fs::rename(&tmp, path).with_context(|| {
-            format!(
-                "{}: cannot move the finished file into place",
-                path.display()
-            )
-        })
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("{}: cannot move the finished file into place", path.display()))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -137,8 +104,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
 /// Writes bytes whole or not at all.
 pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |tmp| {
-        let mut f = std::fs::File::create(tmp)
-            .with_context(|| format!("{}: cannot create", tmp.display()))?;
+        let mut f = std::fs::File::create(tmp).with_context(|| format!("{}: cannot create", tmp.display()))?;
         f.write_all(bytes)?;
         f.sync_all()?;
         Ok(())
@@ -147,11 +113,7 @@ pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// sRGB encoding of a linear value in [0, 1].
 pub fn srgb_encode(x: f32) -> f32 {
-    if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    }
+    if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 }
 }
 
 /// 8-bit sRGB of a linear value scaled by 2^exposure, clamped.
@@ -184,11 +146,7 @@ impl Film {
     pub fn to_rgb8(&self, exposure: f32) -> image::RgbImage {
         image::RgbImage::from_fn(self.width, self.height, |x, y| {
             let p = self.get(x, y);
-            image::Rgb([
-                to_srgb8(p.x, exposure),
-                to_srgb8(p.y, exposure),
-                to_srgb8(p.z, exposure),
-            ])
+            image::Rgb([to_srgb8(p.x, exposure), to_srgb8(p.y, exposure), to_srgb8(p.z, exposure)])
         })
     }
 
@@ -215,11 +173,8 @@ impl Film {
 /// Encodes a PNG in memory, then writes it whole.
 pub fn save_rgb8_png(img: &image::RgbImage, path: &Path) -> Result<()> {
     let mut bytes = Vec::new();
-    img.write_to(
-        &mut std::io::Cursor::new(&mut bytes),
-        image::ImageFormat::Png,
-    )
-    .with_context(|| format!("{}: cannot encode PNG", path.display()))?;
+    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot encode PNG", path.display()))?;
     write_file_atomically(path, &bytes)
 }
 
@@ -239,10 +194,7 @@ mod tests {
         film.save(&path, 0.0).unwrap();
         assert_eq!(Film::load_exr(&path).unwrap(), film);
         film.save(&dir.join("a.png"), 0.0).unwrap();
-        let names: Vec<_> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name())
-            .collect();
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names.len(), 2, "{names:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

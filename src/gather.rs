@@ -51,13 +51,7 @@ pub struct Hit {
 }
 
 impl PlaneView {
-    pub fn new(
-        plane: &PhotonPlane,
-        scene: &Scene,
-        origin: DVec3,
-        planes_total: usize,
-        shadow: u32,
-    ) -> Self {
+    pub fn new(plane: &PhotonPlane, scene: &Scene, origin: DVec3, planes_total: usize, shadow: u32) -> Self {
         let light = &scene.lights[plane.light];
         let b = plane.origin - origin;
         let normal = plane.chord.cross(plane.direction);
@@ -69,14 +63,7 @@ impl PlaneView {
             a_axis: plane.direction.cross(b).as_vec3(),
             r_axis: b.cross(plane.chord).as_vec3(),
             t_det: b.dot(normal) as f32,
-            frame: PlaneFrame::new(
-                plane.width,
-                plane.alpha,
-                plane.p0,
-                plane.q0,
-                light.width,
-                light.height,
-            ),
+            frame: PlaneFrame::new(plane.width, plane.alpha, plane.p0, plane.q0, light.width, light.height),
             scale: (plane.power / planes_total as f64).as_vec3(),
             shadow,
         }
@@ -147,10 +134,7 @@ pub struct Extinction {
 
 impl Extinction {
     pub fn new(sigma_t: DVec3) -> Self {
-        Extinction {
-            sigma_t: sigma_t.as_vec3(),
-            grey: sigma_t.x == sigma_t.y && sigma_t.y == sigma_t.z,
-        }
+        Extinction { sigma_t: sigma_t.as_vec3(), grey: sigma_t.x == sigma_t.y && sigma_t.y == sigma_t.z }
     }
 
     /// exp(-sigma_t length).
@@ -193,10 +177,7 @@ impl GatherContext {
                 height: l.height as f32,
             })
             .collect();
-        let masks: Vec<u64> = planes
-            .par_iter()
-            .map(|p| possible_occluders(scene, p))
-            .collect();
+        let masks: Vec<u64> = planes.par_iter().map(|p| possible_occluders(scene, p)).collect();
         let mut shadowed = Vec::new();
         let mut shadow_index = Vec::with_capacity(planes.len());
         for (p, &mask) in planes.iter().zip(&masks) {
@@ -218,30 +199,14 @@ impl GatherContext {
             .zip(shadow_index.par_iter())
             .map(|(p, &s)| PlaneView::new(p, scene, origin, n, s))
             .collect();
-        GatherContext {
-            origin,
-            views,
-            shadowed,
-            occluders,
-            extinction: Extinction::new(scene.medium.sigma_t()),
-        }
+        GatherContext { origin, views, shadowed, occluders, extinction: Extinction::new(scene.medium.sigma_t()) }
     }
 
     /// The contribution C of a hit (SPEC section 2): power Tr_cam(t) Tr(x, y') V(x, y') / (N D),
     /// zero when D is zero or the light path is blocked. Never NaN or infinite.
     #[inline(always)]
-    pub fn contribution<D: Denominator>(
-        &self,
-        weights: &D,
-        view: &PlaneView,
-        ray: &CameraRay,
-        hit: &Hit,
-    ) -> Vec3 {
-        let local = HitLocal {
-            det: hit.det,
-            det_perp: ray.dir.dot(view.normal_perp),
-            a: hit.a,
-        };
+    pub fn contribution<D: Denominator>(&self, weights: &D, view: &PlaneView, ray: &CameraRay, hit: &Hit) -> Vec3 {
+        let local = HitLocal { det: hit.det, det_perp: ray.dir.dot(view.normal_perp), a: hit.a };
         let d = weights.denominator(&view.frame, &local);
         if !(d > 0.0) {
             return Vec3::ZERO;
@@ -307,18 +272,8 @@ pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
             }
             lo <= eps && hi >= -eps
         };
-        let light_straddles_plane = sides(
-            &mut light
-                .corners()
-                .iter()
-                .map(|&c| (c - plane.origin).dot(normal)),
-        );
-        let plane_straddles_light = sides(
-            &mut poly
-                .points()
-                .iter()
-                .map(|&v| (v - light.corner).dot(light.n)),
-        );
+        let light_straddles_plane = sides(&mut light.corners().iter().map(|&c| (c - plane.origin).dot(normal)));
+        let plane_straddles_light = sides(&mut poly.points().iter().map(|&v| (v - light.corner).dot(light.n)));
         if light_straddles_plane && plane_straddles_light {
             mask |= 1 << k;
         }
@@ -341,23 +296,13 @@ mod tests {
         let mut found = 0;
         for (p, v) in planes.iter().zip(&ctx.views) {
             for k in 0..50 {
-                let we = scene
-                    .camera
-                    .direction(12.8 * k as f64, 7.2 * k as f64)
-                    .normalize();
-                let ray = CameraRay {
-                    dir: we.as_vec3(),
-                    t0: 0.0,
-                    t1: 1e9,
-                };
+                let we = scene.camera.direction(12.8 * k as f64, 7.2 * k as f64).normalize();
+                let ray = CameraRay { dir: we.as_vec3(), t0: 0.0, t1: 1e9 };
                 if let Some(h) = v.hit(&ray) {
                     found += 1;
                     let x = o + h.t as f64 * we;
                     let on_plane = p.origin + h.a as f64 * p.chord + h.r as f64 * p.direction;
-                    assert!(
-                        (x - on_plane).length() < 1e-3 * (1.0 + h.t as f64),
-                        "{x} vs {on_plane}"
-                    );
+                    assert!((x - on_plane).length() < 1e-3 * (1.0 + h.t as f64), "{x} vs {on_plane}");
                 }
             }
         }

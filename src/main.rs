@@ -86,12 +86,7 @@ struct RenderArgs {
     #[arg(long, short, value_name = "OUT")]
     output: Option<PathBuf>,
     /// Exposure in stops for PNG output.
-    #[arg(
-        long,
-        value_name = "EV",
-        default_value_t = 0.0,
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     #[command(flatten)]
     common: CommonArgs,
@@ -114,12 +109,7 @@ struct ReferenceArgs {
     /// Also write the per-pixel standard error as an image.
     #[arg(long, value_name = "PATH")]
     stderr_image: Option<PathBuf>,
-    #[arg(
-        long,
-        value_name = "EV",
-        default_value_t = 0.0,
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     #[command(flatten)]
     common: CommonArgs,
@@ -161,12 +151,7 @@ struct TableArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "report")]
     out: PathBuf,
-    #[arg(
-        long,
-        value_name = "EV",
-        default_value_t = 0.0,
-        allow_negative_numbers = true
-    )]
+    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     #[command(flatten)]
     common: CommonArgs,
@@ -179,18 +164,12 @@ struct Failure {
 }
 
 fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
-    Failure {
-        code: 2,
-        error: e.into(),
-    }
+    Failure { code: 2, error: e.into() }
 }
 
 impl<E: Into<anyhow::Error>> From<E> for Failure {
     fn from(e: E) -> Self {
-        Failure {
-            code: 1,
-            error: e.into(),
-        }
+        Failure { code: 1, error: e.into() }
     }
 }
 
@@ -212,14 +191,8 @@ fn main() -> ExitCode {
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<u32>()
-            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
-    };
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
     Ok((parse(w)?, parse(h)?))
 }
 
@@ -227,20 +200,13 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 fn load_scene(path: &Path, common: &CommonArgs) -> Result<Scene, Failure> {
     let mut scene = Scene::load(path).map_err(input)?;
     if let Some((w, h)) = common.resolution {
-        scene = scene
-            .with_resolution(w, h)
-            .map_err(|m| input(anyhow!("--resolution: {m}")))?;
+        scene = scene.with_resolution(w, h).map_err(|m| input(anyhow!("--resolution: {m}")))?;
     }
     if let Some(t) = common.threads {
         if t == 0 || t > 1024 {
-            return Err(input(anyhow!(
-                "--threads must be between 1 and 1024, got {t}"
-            )));
+            return Err(input(anyhow!("--threads must be between 1 and 1024, got {t}")));
         }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build_global()
-            .context("cannot start the worker threads")?;
+        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().context("cannot start the worker threads")?;
     }
     Ok(scene)
 }
@@ -251,11 +217,9 @@ fn progress_bar(quiet: bool, total: u64, what: &str) -> ProgressBar {
     }
     let bar = ProgressBar::new(total);
     bar.set_style(
-        ProgressStyle::with_template(
-            "{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} (eta {eta})",
-        )
-        .expect("a valid template")
-        .progress_chars("=> "),
+        ProgressStyle::with_template("{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} (eta {eta})")
+            .expect("a valid template")
+            .progress_chars("=> "),
     );
     bar.set_message(what.to_string());
     bar
@@ -269,22 +233,15 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let scene = load_scene(&a.scene, &a.common)?;
     let d = &scene.render;
     let estimator = a.estimator.unwrap_or(d.weighting.estimator);
-    let orientations = a
-        .orientations
-        .or((estimator == d.weighting.estimator).then_some(d.weighting.orientations));
+    let orientations = a.orientations.or((estimator == d.weighting.estimator).then_some(d.weighting.orientations));
     let orientations = orientations.filter(|_| estimator.has_orientations());
-    let weighting = Weighting::new(estimator, orientations)
-        .map_err(|m| input(anyhow!("--orientations: {m}")))?;
+    let weighting = Weighting::new(estimator, orientations).map_err(|m| input(anyhow!("--orientations: {m}")))?;
     let planes = a.planes.unwrap_or(d.planes);
     check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
     let spp = a.spp.unwrap_or(d.spp);
     check_spp(spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
-    fogplanes::render::check_memory(scene.camera.width, scene.camera.height, planes)
-        .map_err(|m| input(anyhow!(m)))?;
-    let output = a
-        .output
-        .clone()
-        .unwrap_or_else(|| default_output(&scene, ""));
+    fogplanes::render::check_memory(scene.camera.width, scene.camera.height, planes).map_err(|m| input(anyhow!(m)))?;
+    let output = a.output.clone().unwrap_or_else(|| default_output(&scene, ""));
     check_writable(&output).map_err(input)?;
 
     let opts = RenderOptions {
@@ -318,19 +275,12 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
 fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let scene = load_scene(&a.scene, &a.common)?;
     check_spp(a.spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
-    let output = a
-        .output
-        .clone()
-        .unwrap_or_else(|| default_output(&scene, "_reference"));
+    let output = a.output.clone().unwrap_or_else(|| default_output(&scene, "_reference"));
     check_writable(&output).map_err(input)?;
     if let Some(p) = &a.stderr_image {
         check_writable(p).map_err(input)?;
     }
-    let opts = ReferenceOptions {
-        spp: a.spp,
-        seed: a.seed,
-        pixel_center: a.pixel_center,
-    };
+    let opts = ReferenceOptions { spp: a.spp, seed: a.seed, pixel_center: a.pixel_center };
     let bar = progress_bar(a.common.quiet, scene.camera.height as u64, "reference");
     let reference = render_reference(&scene, &opts, &|| bar.inc(1));
     bar.finish_and_clear();
@@ -355,10 +305,7 @@ fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     let reference = Film::load_exr(&a.reference).map_err(input)?;
     let m = compare(&image, &reference).map_err(input)?;
     if a.json {
-        println!(
-            "{}",
-            serde_json::to_string_pretty(&m).context("cannot format JSON")?
-        );
+        println!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
     } else {
         println!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
         println!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
@@ -389,9 +336,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     let mut extra = Vec::new();
     for &k in &a.orientations {
         for e in [Estimator::SmisCosine, Estimator::SmisExact] {
-            extra.push(
-                Weighting::new(e, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?,
-            );
+            extra.push(Weighting::new(e, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?);
         }
     }
     std::fs::create_dir_all(&a.out)

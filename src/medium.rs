@@ -71,12 +71,7 @@ mod tests {
     use super::*;
 
     fn unit_box() -> Medium {
-        Medium {
-            min: DVec3::ZERO,
-            max: DVec3::ONE,
-            sigma_s: DVec3::splat(0.5),
-            sigma_a: DVec3::splat(0.5),
-        }
+        Medium { min: DVec3::ZERO, max: DVec3::ONE, sigma_s: DVec3::splat(0.5), sigma_a: DVec3::splat(0.5) }
     }
 
     #[test]

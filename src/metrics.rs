@@ -52,12 +52,7 @@ pub fn compare(image: &Film, reference: &Film) -> Result<ErrorMetrics> {
         }
     }
     let n = 3.0 * image.pixels.len().max(1) as f64;
-    Ok(ErrorMetrics {
-        smape: smape / n,
-        mse: mse / n,
-        rel_mse: rel / n,
-        max_abs_error: max,
-    })
+    Ok(ErrorMetrics { smape: smape / n, mse: mse / n, rel_mse: rel / n, max_abs_error: max })
 }
 
 #[cfg(test)]
@@ -66,11 +61,7 @@ mod tests {
     use glam::Vec3;
 
     fn film(values: &[[f32; 3]]) -> Film {
-        Film {
-            width: values.len() as u32,
-            height: 1,
-            pixels: values.iter().map(|v| Vec3::from_array(*v)).collect(),
-        }
+        Film { width: values.len() as u32, height: 1, pixels: values.iter().map(|v| Vec3::from_array(*v)).collect() }
     }
 
     #[test]

@@ -44,13 +44,7 @@ pub struct PhotonPlane {
 
 /// Light choice by power, P_l proportional to A_l luminance(Le_l) (SPEC section 2, step 1).
 pub fn light_distribution(scene: &Scene) -> Discrete {
-    Discrete::new(
-        &scene
-            .lights
-            .iter()
-            .map(RectLight::power)
-            .collect::<Vec<_>>(),
-    )
+    Discrete::new(&scene.lights.iter().map(RectLight::power).collect::<Vec<_>>())
 }
 
 /// Samples one plane from six uniform numbers in [0, 1).
@@ -62,16 +56,10 @@ pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 6]) -> PhotonPlan
     let point = light.point(p, q);
     let direction = cosine_hemisphere(u[4], u[5], light.u, light.v, light.n);
     let (sin_a, cos_a) = alpha.sin_cos();
-    let (back, forward) = chord_extent(
-        light.width,
-        light.height,
-        p,
-        q,
-        &ChordDirection::<f64>::from_cos_sin(cos_a, sin_a),
-    );
+    let (back, forward) =
+        chord_extent(light.width, light.height, p, q, &ChordDirection::<f64>::from_cos_sin(cos_a, sin_a));
     let chord = cos_a * light.u + sin_a * light.v;
-    let power = scene.medium.sigma_s * PHASE * PI * light.radiance * light.area()
-        / lights.probability(index);
+    let power = scene.medium.sigma_s * PHASE * PI * light.radiance * light.area() / lights.probability(index);
     PhotonPlane {
         light: index,
         alpha,
@@ -112,10 +100,7 @@ impl<T: Copy + Default> Polygon<T> {
     pub fn from_slice(points: &[T]) -> Self {
         let mut vertices = [T::default(); Polygon::<DVec3>::CAPACITY];
         vertices[..points.len()].copy_from_slice(points);
-        Polygon {
-            vertices,
-            len: points.len(),
-        }
+        Polygon { vertices, len: points.len() }
     }
 
     pub fn points(&self) -> &[T] {
@@ -124,10 +109,7 @@ impl<T: Copy + Default> Polygon<T> {
 
     /// Sutherland-Hodgman: keeps the part where `inside(v) >= 0`, with `inside` affine.
     pub fn clip(&self, inside: impl Fn(T) -> f64, lerp: impl Fn(T, T, f64) -> T) -> Self {
-        let mut out = Polygon {
-            vertices: [T::default(); Polygon::<DVec3>::CAPACITY],
-            len: 0,
-        };
+        let mut out = Polygon { vertices: [T::default(); Polygon::<DVec3>::CAPACITY], len: 0 };
         let pts = self.points();
         for (k, &cur) in pts.iter().enumerate() {
             let next = pts[(k + 1) % pts.len()];
@@ -151,8 +133,7 @@ impl PhotonPlane {
     pub fn polygon_in_box(&self, medium: &Medium, margin: f64) -> Polygon<DVec3> {
         let reach = medium.diagonal() + 2.0 * margin;
         let (a, b) = (self.origin, self.origin + self.width * self.chord);
-        let mut poly =
-            Polygon::from_slice(&[a, b, b + reach * self.direction, a + reach * self.direction]);
+        let mut poly = Polygon::from_slice(&[a, b, b + reach * self.direction, a + reach * self.direction]);
         let lerp = |p: DVec3, q: DVec3, s: f64| p + (q - p) * s;
         for axis in 0..3 {
             let (lo, hi) = (medium.min[axis] - margin, medium.max[axis] + margin);
@@ -191,9 +172,7 @@ mod tests {
             // Both ends on the rectangle's boundary.
             for end in [p.origin, p.origin + p.width * p.chord] {
                 let (x, y) = l.local(end);
-                let on_edge = [x, l.width - x, y, l.height - y]
-                    .iter()
-                    .any(|d| d.abs() < 1e-9);
+                let on_edge = [x, l.width - x, y, l.height - y].iter().any(|d| d.abs() < 1e-9);
                 assert!(on_edge, "end ({x}, {y}) of the chord through ({pp}, {qq})");
             }
             assert!(p.direction.dot(l.n) >= 0.0 && (p.direction.length() - 1.0).abs() < 1e-12);
@@ -204,11 +183,7 @@ mod tests {
     fn same_seed_same_planes() {
         let s = scene();
         let (a, b) = (sample_planes(&s, 100, 9), sample_planes(&s, 100, 9));
-        assert!(
-            a.iter()
-                .zip(&b)
-                .all(|(x, y)| x.origin == y.origin && x.direction == y.direction)
-        );
+        assert!(a.iter().zip(&b).all(|(x, y)| x.origin == y.origin && x.direction == y.direction));
         let c = sample_planes(&s, 100, 10);
         assert!(a.iter().zip(&c).any(|(x, y)| x.origin != y.origin));
     }

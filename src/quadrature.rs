@@ -55,37 +55,28 @@ fn gauss_kronrod(f: &mut impl FnMut(f64) -> f64, a: f64, b: f64) -> Quadrature {
             gauss += WG[j / 2] * pair;
         }
     }
-    Quadrature {
-        value: kronrod * h,
-        error: ((kronrod - gauss) * h).abs(),
-    }
+    Quadrature { value: kronrod * h, error: ((kronrod - gauss) * h).abs() }
 }
 
 /// Adaptive Gauss-Kronrod quadrature of `f` over `[a, b]` to `max(rel_tol |I|, abs_tol)`.
 /// The interval with the largest error is bisected until the total error is small enough or
 /// 4000 intervals are in use (then the best estimate is returned with its error).
-pub fn integrate(
-    mut f: impl FnMut(f64) -> f64,
-    a: f64,
-    b: f64,
-    rel_tol: f64,
-    abs_tol: f64,
-) -> Quadrature {
+pub fn integrate(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, rel_tol: f64, abs_tol: f64) -> Quadrature {
     if a == b {
-        return Quadrature {
-            value: 0.0,
-            error: 0.0,
-        };
+        return Quadrature { value: 0.0, error: 0.0 };
     }
-    let mut pieces = vec![(a, b, gauss_kronrod(&mut f, a, b))];
+    // Start from a few pieces, so that one lucky estimate cannot end the work.
+    const START: usize = 8;
+    let mut pieces: Vec<_> = (0..START)
+        .map(|k| {
+            let (lo, hi) = (a + (b - a) * k as f64 / START as f64, a + (b - a) * (k + 1) as f64 / START as f64);
+            (lo, hi, gauss_kronrod(&mut f, lo, hi))
+        })
+        .collect();
     loop {
         let value: f64 = pieces.iter().map(|p| p.2.value).sum();
         let error: f64 = pieces.iter().map(|p| p.2.error).sum();
-        let worst = pieces
-            .iter()
-            .enumerate()
-            .max_by(|x, y| x.1.2.error.total_cmp(&y.1.2.error))
-            .map(|(i, _)| i);
+        let worst = pieces.iter().enumerate().max_by(|x, y| x.1.2.error.total_cmp(&y.1.2.error)).map(|(i, _)| i);
         let done = error <= (rel_tol * value.abs()).max(abs_tol) || pieces.len() >= 4000;
         let Some(worst) = worst.filter(|_| !done) else {
             return Quadrature { value, error };
@@ -99,6 +90,46 @@ pub fn integrate(
         pieces.push((lo, mid, gauss_kronrod(&mut f, lo, mid)));
         pieces.push((mid, hi, gauss_kronrod(&mut f, mid, hi)));
     }
+}
+
+/// [`integrate`] over `[a, b]` split at `breaks` (QUADPACK's QAGP): a kink of the integrand that
+/// falls between an interval's end and its outermost node is invisible to any Gauss-Kronrod
+/// error estimate, so the places where the integrand may have kinks are given.
+pub fn integrate_with_breaks(
+    mut f: impl FnMut(f64) -> f64,
+    a: f64,
+    b: f64,
+    breaks: &[f64],
+    rel_tol: f64,
+    abs_tol: f64,
+) -> Quadrature {
+    let mut cuts: Vec<f64> = breaks.iter().copied().filter(|x| *x > a && *x < b).collect();
+    cuts.push(a);
+    cuts.push(b);
+    cuts.sort_by(f64::total_cmp);
+    let mut total = Quadrature { value: 0.0, error: 0.0 };
+    for w in cuts.windows(2) {
+        let q = integrate(&mut f, w[0], w[1], rel_tol, abs_tol / (cuts.len() - 1) as f64);
+        total.value += q.value;
+        total.error += q.error;
+    }
+    total
+}
+
+/// The chord width of a `w x h` rectangle through `(p, q)` along angle `beta`, by clipping the
+/// line with each pair of edge lines: a computation independent of [`crate::light::chord_extent`].
+pub fn chord_width_by_clipping(w: f64, h: f64, p: f64, q: f64, beta: f64) -> f64 {
+    let (c, s) = (beta.cos(), beta.sin());
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    for (origin, dir, limit) in [(p, c, w), (q, s, h)] {
+        if dir.abs() < 1e-300 {
+            continue;
+        }
+        let (t0, t1) = ((0.0 - origin) / dir, (limit - origin) / dir);
+        lo = lo.max(t0.min(t1));
+        hi = hi.min(t0.max(t1));
+    }
+    (hi - lo).max(0.0)
 }
 
 /// The single-scattering radiance (SPEC section 1, the integral term) along the ray `o + t we`
@@ -124,11 +155,7 @@ pub fn single_scattering(scene: &Scene, o: DVec3, we: DVec3, rel_tol: f64) -> DV
                         if !(cos > 0.0) || d == 0.0 {
                             return 0.0;
                         }
-                        if scene.blocked(y, x, li) {
-                            0.0
-                        } else {
-                            (-st * d).exp() * cos / d2
-                        }
+                        if scene.blocked(y, x, li) { 0.0 } else { (-st * d).exp() * cos / d2 }
                     };
                     integrate(f, 0.0, light.height, rel_tol * 0.1, 0.0).value
                 };

@@ -79,10 +79,7 @@ pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> 
 
 impl ScreenRaster {
     pub fn build(camera: &Camera, planes: &[PhotonPlane], medium: &Medium) -> Self {
-        let polygons: Vec<Polygon<DVec2>> = planes
-            .par_iter()
-            .map(|p| screen_polygon(camera, p, medium))
-            .collect();
+        let polygons: Vec<Polygon<DVec2>> = planes.par_iter().map(|p| screen_polygon(camera, p, medium)).collect();
         let band_count = camera.height.div_ceil(BAND_ROWS) as usize;
         let mut bands = vec![Vec::new(); band_count];
         let mut vertices = Vec::new();
@@ -93,13 +90,10 @@ impl ScreenRaster {
                 let (lo, hi) = poly
                     .points()
                     .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                        (lo.min(v.y), hi.max(v.y))
-                    });
-                let first =
-                    ((lo - SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS) as usize;
-                let last = ((hi + SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS)
-                    .min(band_count as u32 - 1) as usize;
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v.y), hi.max(v.y)));
+                let first = ((lo - SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS) as usize;
+                let last =
+                    ((hi + SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS).min(band_count as u32 - 1) as usize;
                 for band in bands.iter_mut().take(last + 1).skip(first) {
                     band.push(i as u32);
                 }
@@ -107,20 +101,12 @@ impl ScreenRaster {
             }
             offsets.push(vertices.len() as u32);
         }
-        ScreenRaster {
-            width: camera.width,
-            height: camera.height,
-            vertices,
-            offsets,
-            bands,
-        }
+        ScreenRaster { width: camera.width, height: camera.height, vertices, offsets, bands }
     }
 
     /// Bytes held, for the memory report.
     pub fn bytes(&self) -> usize {
-        self.vertices.len() * 8
-            + self.offsets.len() * 4
-            + self.bands.iter().map(|b| b.len() * 4 + 24).sum::<usize>()
+        self.vertices.len() * 8 + self.offsets.len() * 4 + self.bands.iter().map(|b| b.len() * 4 + 24).sum::<usize>()
     }
 
     /// Total (band, plane) pairs: how much binning work there is.

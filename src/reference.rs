@@ -35,12 +35,7 @@ impl ReferenceImage {
     /// own noise adds to any error measured against it.
     pub fn noise_mse(&self) -> f64 {
         let n = 3.0 * self.stderr.pixels.len().max(1) as f64;
-        self.stderr
-            .pixels
-            .iter()
-            .map(|s| (s.as_dvec3() * s.as_dvec3()).element_sum())
-            .sum::<f64>()
-            / n
+        self.stderr.pixels.iter().map(|s| (s.as_dvec3() * s.as_dvec3()).element_sum()).sum::<f64>() / n
     }
 
     /// Root-mean-square standard error relative to the mean pixel value.
@@ -86,11 +81,7 @@ pub fn scattering_sample(
 
 /// Renders the reference image: `spp` samples per pixel, each its own camera ray (jittered over
 /// the pixel, or through its centre) with direct emission and one scattering sample.
-pub fn render_reference(
-    scene: &Scene,
-    opts: &ReferenceOptions,
-    progress: &(dyn Fn() + Sync),
-) -> ReferenceImage {
+pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn Fn() + Sync)) -> ReferenceImage {
     let start = std::time::Instant::now();
     let cam = &scene.camera;
     let w = cam.width as usize;
@@ -107,11 +98,7 @@ pub fn render_reference(
                 let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
                 let mut fixed = None;
                 for _ in 0..opts.spp {
-                    let (sx, sy) = if opts.pixel_center {
-                        (0.5, 0.5)
-                    } else {
-                        (next(), next())
-                    };
+                    let (sx, sy) = if opts.pixel_center { (0.5, 0.5) } else { (next(), next()) };
                     let we = cam.direction(i as f64 + sx, j as f64 + sy).normalize();
                     let (segment, emission) = match (opts.pixel_center, fixed) {
                         (true, Some(f)) => f,
@@ -128,8 +115,7 @@ pub fn render_reference(
                 }
                 let n = opts.spp as f64;
                 let mean = sum / n;
-                let variance =
-                    ((sum_sq / n - mean * mean) * (n / (n - 1.0).max(1.0))).max(DVec3::ZERO);
+                let variance = ((sum_sq / n - mean * mean) * (n / (n - 1.0).max(1.0))).max(DVec3::ZERO);
                 means.push(mean.as_vec3());
                 let se = variance / n;
                 errors.push(DVec3::new(se.x.sqrt(), se.y.sqrt(), se.z.sqrt()).as_vec3());
@@ -144,9 +130,5 @@ pub fn render_reference(
         mean.pixels[j * w..(j + 1) * w].copy_from_slice(&m);
         stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);
     }
-    ReferenceImage {
-        mean,
-        stderr,
-        seconds: start.elapsed().as_secs_f64(),
-    }
+    ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() }
 }

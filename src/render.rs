@@ -12,8 +12,7 @@ use crate::raster::{GatherStats, ScreenRaster};
 use crate::sampling::pixel_jitter;
 use crate::scene::Scene;
 use crate::weights::{
-    CmisCosine, CmisExact, Denominator, Estimator, SmisCosinePair, SmisExactPair, StratifiedK,
-    Unweighted, Weighting,
+    CmisCosine, CmisExact, Denominator, Estimator, SmisCosinePair, SmisExactPair, StratifiedK, Unweighted, Weighting,
 };
 use glam::Vec3;
 use rayon::prelude::*;
@@ -69,24 +68,12 @@ pub fn camera_rays(scene: &Scene, seed: u64, pass: u32, pixel_center: bool) -> P
         .into_par_iter()
         .map(|k| {
             let (i, j) = ((k % w) as f64, (k / w) as f64);
-            let (sx, sy) = if pixel_center {
-                (0.5, 0.5)
-            } else {
-                pixel_jitter(seed, pass, k as u64)
-            };
+            let (sx, sy) = if pixel_center { (0.5, 0.5) } else { pixel_jitter(seed, pass, k as u64) };
             let we = cam.direction(i + sx, j + sy).normalize();
             let (segment, emitted) = scene.camera_segment(cam.position, we);
             let ray = match segment {
-                Some((t0, t1)) => CameraRay {
-                    dir: we.as_vec3(),
-                    t0: t0 as f32,
-                    t1: t1 as f32,
-                },
-                None => CameraRay {
-                    dir: we.as_vec3(),
-                    t0: 1.0,
-                    t1: 0.0,
-                },
+                Some((t0, t1)) => CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 },
+                None => CameraRay { dir: we.as_vec3(), t0: 1.0, t1: 0.0 },
             };
             (ray, emitted.as_vec3())
         })
@@ -113,20 +100,12 @@ impl PreparedPlanes {
         let seconds_sampling = start.elapsed().as_secs_f64();
         let start = Instant::now();
         let context = GatherContext::new(scene, &planes, scene.camera.position);
-        let raster = (accelerator == Accelerator::Raster)
-            .then(|| ScreenRaster::build(&scene.camera, &planes, &scene.medium));
-        let bvh = (accelerator == Accelerator::Bvh)
-            .then(|| PlaneBvh::build(&planes, &scene.medium, scene.camera.position));
+        let raster =
+            (accelerator == Accelerator::Raster).then(|| ScreenRaster::build(&scene.camera, &planes, &scene.medium));
+        let bvh =
+            (accelerator == Accelerator::Bvh).then(|| PlaneBvh::build(&planes, &scene.medium, scene.camera.position));
         let seconds_build = start.elapsed().as_secs_f64();
-        PreparedPlanes {
-            planes,
-            context,
-            raster,
-            bvh,
-            accelerator,
-            seconds_sampling,
-            seconds_build,
-        }
+        PreparedPlanes { planes, context, raster, bvh, accelerator, seconds_sampling, seconds_build }
     }
 
     /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`.
@@ -144,12 +123,8 @@ impl PreparedPlanes {
             (Estimator::CmisExact, _) => self.gather_with(&CmisExact, rays, sums, on_band),
             (Estimator::SmisCosine, 2) => self.gather_with(&SmisCosinePair, rays, sums, on_band),
             (Estimator::SmisExact, 2) => self.gather_with(&SmisExactPair, rays, sums, on_band),
-            (Estimator::SmisCosine, k) => {
-                self.gather_with(&StratifiedK::new(false, k), rays, sums, on_band)
-            }
-            (Estimator::SmisExact, k) => {
-                self.gather_with(&StratifiedK::new(true, k), rays, sums, on_band)
-            }
+            (Estimator::SmisCosine, k) => self.gather_with(&StratifiedK::new(false, k), rays, sums, on_band),
+            (Estimator::SmisExact, k) => self.gather_with(&StratifiedK::new(true, k), rays, sums, on_band),
         }
     }
 
@@ -174,13 +149,7 @@ impl PreparedPlanes {
                         Some(bvh) => bvh.gather(ctx, weights, ray),
                         None => {
                             let (v, hits) = ctx.gather_brute_force(weights, ray);
-                            (
-                                v,
-                                GatherStats {
-                                    tests: ctx.views.len() as u64,
-                                    hits,
-                                },
-                            )
+                            (v, GatherStats { tests: ctx.views.len() as u64, hits })
                         }
                     };
                     *sum += value;

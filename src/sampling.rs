@@ -60,15 +60,9 @@ impl Discrete {
 
     /// The index for a uniform `u` in [0, 1); never one of probability zero.
     pub fn sample(&self, u: f64) -> usize {
-        let i = self
-            .cdf
-            .partition_point(|&c| c <= u)
-            .min(self.cdf.len() - 1);
+        let i = self.cdf.partition_point(|&c| c <= u).min(self.cdf.len() - 1);
         // Rounding in the CDF could land on a zero-probability tail; step back from it.
-        (0..=i)
-            .rev()
-            .find(|&k| self.probabilities[k] > 0.0)
-            .unwrap_or(i)
+        (0..=i).rev().find(|&k| self.probabilities[k] > 0.0).unwrap_or(i)
     }
 }
 

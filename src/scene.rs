@@ -67,9 +67,7 @@ impl<'de> Deserialize<'de> for Rgb {
             fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Rgb, A::Error> {
                 let mut out = [0.0; 3];
                 for (i, slot) in out.iter_mut().enumerate() {
-                    *slot = seq
-                        .next_element()?
-                        .ok_or_else(|| serde::de::Error::invalid_length(i, &self))?;
+                    *slot = seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(i, &self))?;
                 }
                 if seq.next_element::<f64>()?.is_some() {
                     return Err(serde::de::Error::invalid_length(4, &self));
@@ -157,14 +155,8 @@ impl Scene {
     /// Reads and validates a scene file.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let file = path.display().to_string();
-        let whole = |message: String| SceneError {
-            file: file.clone(),
-            position: None,
-            field: String::new(),
-            message,
-        };
-        let meta = std::fs::metadata(path)
-            .map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        let whole = |message: String| SceneError { file: file.clone(), position: None, field: String::new(), message };
+        let meta = std::fs::metadata(path).map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
         if meta.is_dir() {
             return Err(whole("is a directory, not a scene file".into()));
         }
@@ -175,13 +167,9 @@ impl Scene {
                 MAX_SCENE_FILE_BYTES
             )));
         }
-        let bytes =
-            std::fs::read(path).map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        let bytes = std::fs::read(path).map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
         let text = String::from_utf8(bytes).map_err(|e| whole(format!("not UTF-8 text ({e})")))?;
-        let name = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "scene".into());
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
         Scene::parse(&text, &file, &name)
     }
 
@@ -193,12 +181,8 @@ impl Scene {
 
     /// Validates a parsed description.
     pub fn from_desc(desc: &SceneFile, file: &str, name: &str) -> Result<Scene, SceneError> {
-        let err = |field: String, message: String| SceneError {
-            file: file.to_string(),
-            position: None,
-            field,
-            message,
-        };
+        let err =
+            |field: String, message: String| SceneError { file: file.to_string(), position: None, field, message };
         let vec3 = |field: &str, v: [f64; 3]| -> Result<DVec3, SceneError> {
             if v.iter().all(|x| x.is_finite()) {
                 Ok(DVec3::from_array(v))
@@ -210,10 +194,7 @@ impl Scene {
             if v.0.iter().all(|x| x.is_finite() && *x >= 0.0) {
                 Ok(DVec3::from_array(v.0))
             } else {
-                Err(err(
-                    field.into(),
-                    format!("must be finite and non-negative, got {:?}", v.0),
-                ))
+                Err(err(field.into(), format!("must be finite and non-negative, got {:?}", v.0)))
             }
         };
 
@@ -223,10 +204,7 @@ impl Scene {
         if !(min.cmplt(max).all()) {
             return Err(err(
                 "medium".into(),
-                format!(
-                    "the box is empty: min {:?} must be below max {:?} on every axis",
-                    m.min, m.max
-                ),
+                format!("the box is empty: min {:?} must be below max {:?} on every axis", m.min, m.max),
             ));
         }
         let medium = Medium {
@@ -244,45 +222,26 @@ impl Scene {
         let up = vec3("camera.up", c.up)?;
         let view = look_at - position;
         if !(view.length() > 0.0) || !view.length().is_finite() {
-            return Err(err(
-                "camera.look_at".into(),
-                "must differ from camera.position".into(),
-            ));
+            return Err(err("camera.look_at".into(), "must differ from camera.position".into()));
         }
         if !(up.length() > 0.0) || view.normalize().cross(up.normalize()).length() < 1e-9 {
             return Err(err(
                 "camera.up".into(),
-                format!(
-                    "must not be zero or parallel to the view direction, got {:?}",
-                    c.up
-                ),
+                format!("must not be zero or parallel to the view direction, got {:?}", c.up),
             ));
         }
         if !(c.vfov_deg > 0.0 && c.vfov_deg < 180.0) {
             return Err(err(
                 "camera.vfov_deg".into(),
-                format!(
-                    "must lie strictly between 0 and 180 degrees, got {}",
-                    c.vfov_deg
-                ),
+                format!("must lie strictly between 0 and 180 degrees, got {}", c.vfov_deg),
             ));
         }
         check_resolution(c.resolution).map_err(|m| err("camera.resolution".into(), m))?;
-        let camera = Camera::new(
-            position,
-            look_at,
-            up,
-            c.vfov_deg,
-            c.resolution[0],
-            c.resolution[1],
-        );
+        let camera = Camera::new(position, look_at, up, c.vfov_deg, c.resolution[0], c.resolution[1]);
 
         // Lights.
         if desc.lights.is_empty() {
-            return Err(err(
-                "light".into(),
-                "the scene needs at least one [[light]]".into(),
-            ));
+            return Err(err("light".into(), "the scene needs at least one [[light]]".into()));
         }
         let mut lights = Vec::with_capacity(desc.lights.len());
         for (i, l) in desc.lights.iter().enumerate() {
@@ -296,10 +255,7 @@ impl Scene {
             let radiance = non_negative(&field("radiance"), l.radiance)?;
             for (name, e) in [("edge_u", eu), ("edge_v", ev)] {
                 if !(e.length() > 1e-9 * scale) {
-                    return Err(err(
-                        field(name),
-                        format!("has zero length (|{name}| = {:e})", e.length()),
-                    ));
+                    return Err(err(field(name), format!("has zero length (|{name}| = {:e})", e.length())));
                 }
             }
             let cos = eu.normalize().dot(ev.normalize());
@@ -309,18 +265,8 @@ impl Scene {
                     format!("must be orthogonal to edge_u (the cosine between them is {cos:.3e})"),
                 ));
             }
-            let light = RectLight::new(
-                l.name.as_deref().unwrap_or(&format!("light{i}")),
-                corner,
-                eu,
-                ev,
-                radiance,
-            );
-            if let Some(k) = light
-                .corners()
-                .iter()
-                .position(|&p| !medium.contains(p, 1e-9 * scale))
-            {
+            let light = RectLight::new(l.name.as_deref().unwrap_or(&format!("light{i}")), corner, eu, ev, radiance);
+            if let Some(k) = light.corners().iter().position(|&p| !medium.contains(p, 1e-9 * scale)) {
                 return Err(err(
                     field("corner"),
                     format!(
@@ -332,10 +278,7 @@ impl Scene {
             lights.push(light);
         }
         if !(lights.iter().map(|l| l.power()).sum::<f64>() > 0.0) {
-            return Err(err(
-                "light".into(),
-                "every light has zero power (area x luminance); nothing to render".into(),
-            ));
+            return Err(err("light".into(), "every light has zero power (area x luminance); nothing to render".into()));
         }
 
         // Render defaults.
@@ -343,31 +286,17 @@ impl Scene {
         let planes = r.planes.unwrap_or(40_960);
         check_planes(planes).map_err(|m| err("render.planes".into(), m))?;
         let estimator = match &r.estimator {
-            Some(name) => name
-                .parse::<Estimator>()
-                .map_err(|m| err("render.estimator".into(), m))?,
+            Some(name) => name.parse::<Estimator>().map_err(|m| err("render.estimator".into(), m))?,
             None => Estimator::SmisExact,
         };
-        let weighting = Weighting::new(estimator, r.orientations)
-            .map_err(|m| err("render.orientations".into(), m))?;
+        let weighting = Weighting::new(estimator, r.orientations).map_err(|m| err("render.orientations".into(), m))?;
         let spp = r.spp.unwrap_or(1);
         check_spp(spp).map_err(|m| err("render.spp".into(), m))?;
-        let render = RenderDefaults {
-            planes,
-            weighting,
-            seed: r.seed.unwrap_or(1),
-            spp,
-        };
+        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp };
         crate::render::check_memory(camera.width, camera.height, planes)
             .map_err(|m| err("camera.resolution".into(), m))?;
 
-        Ok(Scene {
-            name: name.to_string(),
-            camera,
-            medium,
-            lights,
-            render,
-        })
+        Ok(Scene { name: name.to_string(), camera, medium, lights, render })
     }
 
     /// The first light panel crossed by the ray `o + t we` with `t` in `(0, t_max)`: its distance
@@ -390,9 +319,7 @@ impl Scene {
     pub fn camera_segment(&self, o: DVec3, we: DVec3) -> (Option<(f64, f64)>, DVec3) {
         let (t_surface, emission) = match self.first_light(o, we, f64::INFINITY) {
             Some((t, k)) if we.dot(self.lights[k].n) < 0.0 => {
-                let tr = self
-                    .medium
-                    .transmittance(self.medium.length_inside(o, o + t * we));
+                let tr = self.medium.transmittance(self.medium.length_inside(o, o + t * we));
                 (t, self.lights[k].radiance * tr)
             }
             Some((t, _)) => (t, DVec3::ZERO),
@@ -413,11 +340,10 @@ impl Scene {
             return false;
         }
         let dir = d / len;
-        self.lights.iter().enumerate().any(|(k, l)| {
-            k != except
-                && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9))
-                    .is_some()
-        })
+        self.lights
+            .iter()
+            .enumerate()
+            .any(|(k, l)| k != except && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
     }
 
     /// The same scene seen at another resolution.
@@ -425,11 +351,7 @@ impl Scene {
         check_resolution([width, height])?;
         let c = &self.camera;
         let mut s = self.clone();
-        s.camera = Camera {
-            width,
-            height,
-            ..c.clone()
-        };
+        s.camera = Camera { width, height, ..c.clone() };
         Ok(s)
     }
 }
@@ -456,11 +378,7 @@ pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
         SceneError {
             file: file.to_string(),
             position: position_of(inner.span()),
-            field: if path == "." {
-                String::new()
-            } else {
-                path.replace("light[", "light[")
-            },
+            field: if path == "." { String::new() } else { path.replace("light[", "light[") },
             message: inner.message().trim().to_string(),
         }
     })
@@ -468,10 +386,7 @@ pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
 
 pub fn check_resolution(res: [u32; 2]) -> Result<(), String> {
     if res[0] == 0 || res[1] == 0 || res[0] > MAX_RESOLUTION_SIDE || res[1] > MAX_RESOLUTION_SIDE {
-        return Err(format!(
-            "each side must be between 1 and {MAX_RESOLUTION_SIDE} pixels, got {}x{}",
-            res[0], res[1]
-        ));
+        return Err(format!("each side must be between 1 and {MAX_RESOLUTION_SIDE} pixels, got {}x{}", res[0], res[1]));
     }
     Ok(())
 }
@@ -481,18 +396,14 @@ pub const MAX_PLANES: u64 = 1 << 27;
 
 pub fn check_planes(planes: u64) -> Result<(), String> {
     if planes == 0 || planes > MAX_PLANES {
-        return Err(format!(
-            "the plane count must be between 1 and {MAX_PLANES}, got {planes}"
-        ));
+        return Err(format!("the plane count must be between 1 and {MAX_PLANES}, got {planes}"));
     }
     Ok(())
 }
 
 pub fn check_spp(spp: u32) -> Result<(), String> {
     if spp == 0 || spp > 1 << 16 {
-        return Err(format!(
-            "samples per pixel must be between 1 and 65536, got {spp}"
-        ));
+        return Err(format!("samples per pixel must be between 1 and 65536, got {spp}"));
     }
     Ok(())
 }
@@ -539,69 +450,26 @@ radiance = 4
 
     fn expect_error(text: &str, field: &str, words: &str) {
         let e = parse(text).expect_err("should fail");
-        assert!(
-            e.field.contains(field),
-            "field {:?} should contain {field:?}: {e}",
-            e.field
-        );
-        assert!(
-            e.message.contains(words),
-            "message should contain {words:?}: {e}"
-        );
+        assert!(e.field.contains(field), "field {:?} should contain {field:?}: {e}", e.field);
+        assert!(e.message.contains(words), "message should contain {words:?}: {e}");
     }
 
     #[test]
     fn each_problem_names_its_field() {
-        expect_error(
-            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\nzoom = 2"),
-            "camera",
-            "unknown field",
-        );
-        expect_error(
-            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = \"wide\""),
-            "camera.vfov_deg",
-            "invalid type",
-        );
-        expect_error(
-            &MINIMAL.replace("vfov_deg = 40.0\n", ""),
-            "camera",
-            "missing field",
-        );
-        expect_error(
-            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"),
-            "camera.vfov_deg",
-            "between 0 and 180",
-        );
-        expect_error(
-            &MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, inf, 5.0]"),
-            "camera.position",
-            "finite",
-        );
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\nzoom = 2"), "camera", "unknown field");
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = \"wide\""), "camera.vfov_deg", "invalid type");
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0\n", ""), "camera", "missing field");
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"), "camera.vfov_deg", "between 0 and 180");
+        expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, inf, 5.0]"), "camera.position", "finite");
         expect_error(
             &MINIMAL.replace("look_at = [0.0, 1.0, 0.0]", "look_at = [0.0, 1.0, 5.0]"),
             "camera.look_at",
             "differ",
         );
-        expect_error(
-            &MINIMAL.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 3.0]"),
-            "camera.up",
-            "parallel",
-        );
-        expect_error(
-            &MINIMAL.replace("[32, 16]", "[0, 16]"),
-            "camera.resolution",
-            "between 1",
-        );
-        expect_error(
-            &MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"),
-            "medium.sigma_a",
-            "non-negative",
-        );
-        expect_error(
-            &MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"),
-            "medium",
-            "empty",
-        );
+        expect_error(&MINIMAL.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 3.0]"), "camera.up", "parallel");
+        expect_error(&MINIMAL.replace("[32, 16]", "[0, 16]"), "camera.resolution", "between 1");
+        expect_error(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"), "medium.sigma_a", "non-negative");
+        expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"), "medium", "empty");
         expect_error(
             &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [0.0, 0.0, 0.0]"),
             "light[0] (top).edge_u",
@@ -617,21 +485,9 @@ radiance = 4
             "light[0] (top).corner",
             "inside the medium",
         );
-        expect_error(
-            &format!("{MINIMAL}\n[render]\nplanes = 0\n"),
-            "render.planes",
-            "between 1",
-        );
-        expect_error(
-            &format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"),
-            "render.estimator",
-            "unknown estimator",
-        );
-        expect_error(
-            &MINIMAL.replace("radiance = 4", "radiance = [1, 2]"),
-            "light[0].radiance",
-            "three numbers",
-        );
+        expect_error(&format!("{MINIMAL}\n[render]\nplanes = 0\n"), "render.planes", "between 1");
+        expect_error(&format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"), "render.estimator", "unknown estimator");
+        expect_error(&MINIMAL.replace("radiance = 4", "radiance = [1, 2]"), "light[0].radiance", "three numbers");
     }
 
     #[test]

@@ -59,16 +59,10 @@ impl fmt::Display for Estimator {
 impl FromStr for Estimator {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Estimator::ALL
-            .into_iter()
-            .find(|e| e.name() == s)
-            .ok_or_else(|| {
-                let names: Vec<_> = Estimator::ALL.iter().map(|e| e.name()).collect();
-                format!(
-                    "unknown estimator {s:?}; expected one of {}",
-                    names.join(", ")
-                )
-            })
+        Estimator::ALL.into_iter().find(|e| e.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Estimator::ALL.iter().map(|e| e.name()).collect();
+            format!("unknown estimator {s:?}; expected one of {}", names.join(", "))
+        })
     }
 }
 
@@ -85,20 +79,14 @@ pub struct Weighting {
 impl Weighting {
     pub fn new(estimator: Estimator, orientations: Option<u32>) -> Result<Self, String> {
         match orientations {
-            None => Ok(Weighting {
-                estimator,
-                orientations: 2,
-            }),
-            Some(k) if !estimator.has_orientations() && k != 2 => Err(format!(
-                "--orientations applies to smis-cosine and smis-exact only, not to {estimator}"
-            )),
-            Some(k) if k == 0 || k > MAX_ORIENTATIONS => Err(format!(
-                "the number of orientations must be between 1 and {MAX_ORIENTATIONS}, got {k}"
-            )),
-            Some(k) => Ok(Weighting {
-                estimator,
-                orientations: k,
-            }),
+            None => Ok(Weighting { estimator, orientations: 2 }),
+            Some(k) if !estimator.has_orientations() && k != 2 => {
+                Err(format!("--orientations applies to smis-cosine and smis-exact only, not to {estimator}"))
+            }
+            Some(k) if k == 0 || k > MAX_ORIENTATIONS => {
+                Err(format!("the number of orientations must be between 1 and {MAX_ORIENTATIONS}, got {k}"))
+            }
+            Some(k) => Ok(Weighting { estimator, orientations: k }),
         }
     }
 
@@ -140,11 +128,7 @@ impl PlaneFrame {
     pub fn new(width: f64, alpha: f64, p0: f64, q0: f64, light_w: f64, light_h: f64) -> Self {
         let (sin_a, cos_a) = alpha.sin_cos();
         // (-sin, cos) has a negative sine when cos < 0; the same line is (sin, -cos).
-        let (pc, ps) = if cos_a >= 0.0 {
-            (-sin_a, cos_a)
-        } else {
-            (sin_a, -cos_a)
-        };
+        let (pc, ps) = if cos_a >= 0.0 { (-sin_a, cos_a) } else { (sin_a, -cos_a) };
         PlaneFrame {
             width: width as f32,
             cos_a: cos_a as f32,
@@ -181,10 +165,7 @@ impl HitLocal {
     /// det(alpha_perp) = -sin a_u + cos a_v.
     #[inline(always)]
     pub fn a_uv(&self, f: &PlaneFrame) -> (f32, f32) {
-        (
-            f.cos_a * self.det - f.sin_a * self.det_perp,
-            f.sin_a * self.det + f.cos_a * self.det_perp,
-        )
+        (f.cos_a * self.det - f.sin_a * self.det_perp, f.sin_a * self.det + f.cos_a * self.det_perp)
     }
 }
 
@@ -243,10 +224,7 @@ pub struct StratifiedK {
 
 impl StratifiedK {
     pub fn new(exact: bool, k: u32) -> Self {
-        let rotations = (1..k)
-            .map(|i| i as f64 * PI / k as f64)
-            .map(|b| (b.cos() as f32, b.sin() as f32))
-            .collect();
+        let rotations = (1..k).map(|i| i as f64 * PI / k as f64).map(|b| (b.cos() as f32, b.sin() as f32)).collect();
         StratifiedK { exact, rotations }
     }
 }
@@ -255,11 +233,7 @@ impl Denominator for StratifiedK {
     fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
         let (a_u, a_v) = h.a_uv(f);
         let (p, q) = f.vertex(h.a);
-        let mut sum = if self.exact {
-            f.width * h.det.abs()
-        } else {
-            h.det.abs()
-        };
+        let mut sum = if self.exact { f.width * h.det.abs() } else { h.det.abs() };
         for &(ck, sk) in &self.rotations {
             // beta = alpha + k pi / K, reduced to [0, pi) so that sin(beta) >= 0.
             let (mut c, mut s) = (f.cos_a * ck - f.sin_a * sk, f.sin_a * ck + f.cos_a * sk);
@@ -268,13 +242,7 @@ impl Denominator for StratifiedK {
             }
             let det = (c * a_u + s * a_v).abs();
             sum += if self.exact {
-                chord_width(
-                    f.light_w,
-                    f.light_h,
-                    p,
-                    q,
-                    &ChordDirection::<f32>::from_cos_sin(c, s),
-                ) * det
+                chord_width(f.light_w, f.light_h, p, q, &ChordDirection::<f32>::from_cos_sin(c, s)) * det
             } else {
                 det
             };
@@ -290,14 +258,7 @@ impl Denominator for CmisExact {
     fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
         let (a_u, a_v) = h.a_uv(f);
         let (p, q) = f.vertex(h.a);
-        cmis_exact_mean(
-            f.light_w as f64,
-            f.light_h as f64,
-            p as f64,
-            q as f64,
-            a_u as f64,
-            a_v as f64,
-        ) as f32
+        cmis_exact_mean(f.light_w as f64, f.light_h as f64, p as f64, q as f64, a_u as f64, a_v as f64) as f32
     }
 }
 
@@ -359,26 +320,26 @@ pub fn cmis_exact_mean(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::quadrature::integrate;
+    use crate::quadrature::{chord_width_by_clipping, integrate_with_breaks};
     use rand::{Rng, SeedableRng};
 
-    /// g(beta) computed directly, independently of the closed form's case analysis.
+    /// g(beta) computed directly (chord by clipping), independently of the closed form.
     fn g(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64, beta: f64) -> f64 {
-        let width = chord_width(w, h, p, q, &ChordDirection::from_angle(beta));
-        width * (beta.cos() * a_u + beta.sin() * a_v).abs()
+        chord_width_by_clipping(w, h, p, q, beta) * (beta.cos() * a_u + beta.sin() * a_v).abs()
+    }
+
+    /// Where g may have kinks: the zero of det and the directions to the four corners (mod pi).
+    fn kinks(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> Vec<f64> {
+        let corners = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)];
+        let mut out: Vec<f64> = corners.iter().map(|&(x, y)| (y - q).atan2(x - p).rem_euclid(PI)).collect();
+        out.push((-a_u).atan2(a_v).rem_euclid(PI));
+        out
     }
 
     fn quadrature_mean(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> f64 {
         let scale = (w + h) * (a_u.abs() + a_v.abs());
-        integrate(
-            |b| g(w, h, p, q, a_u, a_v, b),
-            0.0,
-            PI,
-            1e-13,
-            1e-15 * scale,
-        )
-        .value
-            / PI
+        let f = |b| g(w, h, p, q, a_u, a_v, b);
+        integrate_with_breaks(f, 0.0, PI, &kinks(w, h, p, q, a_u, a_v), 1e-13, 1e-15 * scale).value / PI
     }
 
     #[test]
@@ -386,23 +347,14 @@ mod tests {
         let check = |a_u: f64, a_v: f64| {
             let closed = std::f64::consts::FRAC_2_PI * (a_u * a_u + a_v * a_v).sqrt();
             let scale = a_u.abs() + a_v.abs();
-            let numeric = integrate(
-                |b| (b.cos() * a_u + b.sin() * a_v).abs(),
-                0.0,
-                PI,
-                1e-13,
-                1e-300,
-            )
-            .value
-                / PI;
+            let zero = [(-a_u).atan2(a_v).rem_euclid(PI)];
+            let det = |b: f64| (b.cos() * a_u + b.sin() * a_v).abs();
+            let numeric = integrate_with_breaks(det, 0.0, PI, &zero, 1e-13, 1e-300).value / PI;
             if scale == 0.0 {
                 assert_eq!(closed, 0.0);
                 assert_eq!(numeric, 0.0);
             } else {
-                assert!(
-                    (closed - numeric).abs() <= 1e-10 * closed,
-                    "a_u={a_u} a_v={a_v}: {closed} vs {numeric}"
-                );
+                assert!((closed - numeric).abs() <= 1e-10 * closed, "a_u={a_u} a_v={a_v}: {closed} vs {numeric}");
             }
         };
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
@@ -440,7 +392,7 @@ mod tests {
 
     #[test]
     fn cmis_exact_hard_cases() {
-        let (w, h) = (3.0, 2.0);
+        let (w, h) = (3.0f64, 2.0f64);
         let vertices = [
             (0.0, 0.0),
             (w, 0.0),
@@ -454,16 +406,8 @@ mod tests {
             (1e-14, 1e-14),
             (w - 1e-14, 0.5),
         ];
-        let dets = [
-            (1.0, 0.0),
-            (0.0, 1.0),
-            (-0.3, 0.0),
-            (0.0, -2.0),
-            (1.0, 1e-12),
-            (1e-12, -1.0),
-            (0.6, 0.8),
-            (-0.6, 0.8),
-        ];
+        let dets =
+            [(1.0, 0.0), (0.0, 1.0), (-0.3, 0.0), (0.0, -2.0), (1.0, 1e-12), (1e-12, -1.0), (0.6, 0.8), (-0.6, 0.8)];
         for &(p, q) in &vertices {
             for &(a_u, a_v) in &dets {
                 let closed = cmis_exact_mean(w, h, p, q, a_u, a_v);
@@ -500,11 +444,7 @@ mod tests {
         let (back, fwd) = crate::light::chord_extent(w, h, p, q, &dir);
         let (p0, q0) = (p - back * alpha.cos(), q - back * alpha.sin());
         let f = PlaneFrame::new(back + fwd, alpha, p0, q0, w, h);
-        let hit = HitLocal {
-            det: rng.random_range(-1.0..1.0),
-            det_perp: rng.random_range(-1.0..1.0),
-            a: back as f32,
-        };
+        let hit = HitLocal { det: rng.random_range(-1.0..1.0), det_perp: rng.random_range(-1.0..1.0), a: back as f32 };
         (f, hit)
     }
 
@@ -514,15 +454,9 @@ mod tests {
         let (exact_k, cosine_k) = (StratifiedK::new(true, 2), StratifiedK::new(false, 2));
         for _ in 0..10_000 {
             let (f, hit) = frame_and_hit(&mut rng);
-            let (a, b) = (
-                SmisExactPair.denominator(&f, &hit),
-                exact_k.denominator(&f, &hit),
-            );
+            let (a, b) = (SmisExactPair.denominator(&f, &hit), exact_k.denominator(&f, &hit));
             assert!((a - b).abs() <= 1e-5 * a.max(1e-6), "{a} vs {b}");
-            let (a, b) = (
-                SmisCosinePair.denominator(&f, &hit),
-                cosine_k.denominator(&f, &hit),
-            );
+            let (a, b) = (SmisCosinePair.denominator(&f, &hit), cosine_k.denominator(&f, &hit));
             assert!((a - b).abs() <= 1e-5 * a.max(1e-6), "{a} vs {b}");
         }
     }
@@ -534,15 +468,9 @@ mod tests {
         let (exact_k, cosine_k) = (StratifiedK::new(true, 64), StratifiedK::new(false, 64));
         for _ in 0..1000 {
             let (f, hit) = frame_and_hit(&mut rng);
-            let (c, e) = (
-                CmisCosine.denominator(&f, &hit),
-                cosine_k.denominator(&f, &hit),
-            );
+            let (c, e) = (CmisCosine.denominator(&f, &hit), cosine_k.denominator(&f, &hit));
             assert!((c - e).abs() <= 0.01 * c, "cosine {c} vs {e}");
-            let (c, e) = (
-                CmisExact.denominator(&f, &hit),
-                exact_k.denominator(&f, &hit),
-            );
+            let (c, e) = (CmisExact.denominator(&f, &hit), exact_k.denominator(&f, &hit));
             assert!((c - e).abs() <= 0.05 * c, "exact {c} vs {e}");
         }
     }
@@ -555,11 +483,6 @@ mod tests {
         assert!("nope".parse::<Estimator>().is_err());
         assert!(Weighting::new(Estimator::SmisExact, Some(0)).is_err());
         assert!(Weighting::new(Estimator::CmisExact, Some(4)).is_err());
-        assert_eq!(
-            Weighting::new(Estimator::SmisExact, Some(4))
-                .unwrap()
-                .label(),
-            "smis-exact-k4"
-        );
+        assert_eq!(Weighting::new(Estimator::SmisExact, Some(4)).unwrap().label(), "smis-exact-k4");
     }
 }
