@@ -251,14 +251,15 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film,
         let pass_rays = camera_rays(scene, opts.seed, pass, opts.pixel_center);
         stats.seconds_rays += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let mut sums = pass_rays.emission;
+        // Scattering first, emission after: every accelerator then sums in the same order.
+        let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
         let s = prepared.gather(opts.weighting, &pass_rays.rays, &mut sums, progress);
         stats.seconds_gather += t.elapsed().as_secs_f64();
         stats.hits += s.hits;
         stats.tests += s.tests;
         stats.rays += pass_rays.rays.len() as u64;
-        for (f, s) in film.pixels.iter_mut().zip(&sums) {
-            *f += *s;
+        for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
+            *f += *s + *e;
         }
     }
     let inv = 1.0 / opts.spp as f32;

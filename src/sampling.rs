@@ -27,7 +27,7 @@ pub fn unit_f64(bits: u64) -> f64 {
 
 /// The jitter (sx, sy) in [0, 1)^2 of pixel sample `pixel` in pass `pass`.
 pub fn pixel_jitter(seed: u64, pass: u32, pixel: u64) -> (f64, f64) {
-    let h = mix64(mix64(seed ^ 0x5EED_0F_F0C5) ^ mix64(((pass as u64) << 40) ^ pixel));
+    let h = mix64(mix64(seed ^ 0x5EED_F0C5) ^ mix64(((pass as u64) << 40) ^ pixel));
     (unit_f64(h), unit_f64(mix64(h)))
 }
 

@@ -378,7 +378,7 @@ pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
         SceneError {
             file: file.to_string(),
             position: position_of(inner.span()),
-            field: if path == "." { String::new() } else { path.replace("light[", "light[") },
+            field: if path == "." { String::new() } else { path },
             message: inner.message().trim().to_string(),
         }
     })

@@ -9,9 +9,7 @@ use fogplanes::gather::{CameraRay, GatherContext};
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{
-    CmisCosine, CmisExact, Denominator, SmisCosinePair, SmisExactPair, StratifiedK, Unweighted,
-};
+use fogplanes::weights::{CmisCosine, CmisExact, Denominator, SmisCosinePair, SmisExactPair, StratifiedK, Unweighted};
 use glam::{DVec3, Vec3};
 
 /// A small fog box with two lights that cannot shadow each other (each lies behind the other's
@@ -91,7 +89,10 @@ impl Tally {
     }
 }
 
-fn run(estimators: &[(&str, &dyn Fn(&GatherContext, &CameraRay) -> Vec3)], batches: u64, batch_size: usize) {
+/// One estimator: its name and the estimate for a ray from a set of prepared planes.
+type Named<'a> = (&'a str, &'a dyn Fn(&GatherContext, &CameraRay) -> Vec3);
+
+fn run(estimators: &[Named], batches: u64, batch_size: usize) {
     let scene = Scene::parse(SCENE, "unbiasedness.toml", "unbiasedness").unwrap();
     let mut failures = Vec::new();
     for case in cases() {
@@ -140,10 +141,17 @@ fn the_papers_four_estimators_match_quadrature() {
 #[test]
 fn cmis_exact_and_k_orientations_match_quadrature() {
     let e = brute(CmisExact);
-    let (k3, k4, k8) = (brute(StratifiedK::new(true, 3)), brute(StratifiedK::new(true, 4)), brute(StratifiedK::new(true, 8)));
+    let (k3, k4, k8) =
+        (brute(StratifiedK::new(true, 3)), brute(StratifiedK::new(true, 4)), brute(StratifiedK::new(true, 8)));
     let c3 = brute(StratifiedK::new(false, 3));
     run(
-        &[("cmis-exact", &e), ("smis-exact k3", &k3), ("smis-exact k4", &k4), ("smis-exact k8", &k8), ("smis-cosine k3", &c3)],
+        &[
+            ("cmis-exact", &e),
+            ("smis-exact k3", &k3),
+            ("smis-exact k4", &k4),
+            ("smis-exact k8", &k8),
+            ("smis-cosine k3", &c3),
+        ],
         400,
         10_000,
     );

@@ -1,0 +1,93 @@
+//! Plane sampling follows its densities (SPEC section 2): chi-square tests on light choice,
+//! orientation, point and direction, with fixed seeds. Each test fails when the statistic is
+//! beyond the 1e-4 upper tail of its chi-square distribution (Wilson-Hilferty approximation).
+
+use fogplanes::photon_plane::sample_planes;
+use fogplanes::scene::Scene;
+
+fn scene() -> Scene {
+    Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap()
+}
+
+/// The chi-square value with `dof` degrees of freedom exceeded with probability 1e-4.
+fn chi_square_critical(dof: usize) -> f64 {
+    let k = dof as f64;
+    let z = 3.719; // standard normal upper 1e-4 quantile
+    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
+}
+
+/// Pearson's statistic of `counts` against expected probabilities.
+fn chi_square(counts: &[u64], probabilities: &[f64]) -> f64 {
+    let n: u64 = counts.iter().sum();
+    counts.iter().zip(probabilities).map(|(&c, &p)| (c as f64 - n as f64 * p).powi(2) / (n as f64 * p)).sum()
+}
+
+fn assert_uniform(name: &str, values: impl Iterator<Item = f64>, bins: usize) {
+    let mut counts = vec![0u64; bins];
+    for v in values {
+        assert!((0.0..1.0).contains(&v), "{name}: {v} outside [0, 1)");
+        counts[(v * bins as f64) as usize] += 1;
+    }
+    let stat = chi_square(&counts, &vec![1.0 / bins as f64; bins]);
+    let critical = chi_square_critical(bins - 1);
+    println!("{name}: chi2 = {stat:.1} (critical {critical:.1})");
+    assert!(stat < critical, "{name}: chi2 = {stat:.1} beyond {critical:.1}");
+}
+
+const N: usize = 400_000;
+
+#[test]
+fn lights_are_chosen_by_power() {
+    let s = scene();
+    let planes = sample_planes(&s, N, 21);
+    let powers: Vec<f64> = s.lights.iter().map(|l| l.power()).collect();
+    let total: f64 = powers.iter().sum();
+    let mut counts = vec![0u64; s.lights.len()];
+    for p in &planes {
+        counts[p.light] += 1;
+    }
+    let stat = chi_square(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
+    assert!(stat < chi_square_critical(s.lights.len() - 1), "chi2 = {stat}, counts {counts:?}");
+}
+
+#[test]
+fn orientation_point_and_direction_follow_their_densities() {
+    let s = scene();
+    let planes = sample_planes(&s, N, 22);
+    assert_uniform("alpha / pi", planes.iter().map(|p| p.alpha / std::f64::consts::PI), 64);
+    // The point is uniform on its light: p / W and q / H uniform and independent (2D bins).
+    let local = |p: &fogplanes::photon_plane::PhotonPlane| {
+        let l = &s.lights[p.light];
+        let (x, y) = l.local(p.point);
+        ((x / l.width).clamp(0.0, 0.999_999), (y / l.height).clamp(0.0, 0.999_999))
+    };
+    assert_uniform("p / W", planes.iter().map(|p| local(p).0), 64);
+    assert_uniform("q / H", planes.iter().map(|p| local(p).1), 64);
+    assert_uniform(
+        "2D cell of (p, q)",
+        planes.iter().map(|p| {
+            let (x, y) = local(p);
+            ((x * 8.0).floor() * 8.0 + (y * 8.0).floor()) / 64.0
+        }),
+        64,
+    );
+    // pdf cos(theta) / pi: cos^2(theta) is uniform, and so is the azimuth.
+    let frame = |p: &fogplanes::photon_plane::PhotonPlane| {
+        let l = &s.lights[p.light];
+        (p.direction.dot(l.n), p.direction.dot(l.v).atan2(p.direction.dot(l.u)))
+    };
+    assert_uniform("cos^2 theta", planes.iter().map(|p| frame(p).0.powi(2).min(0.999_999)), 64);
+    assert_uniform("azimuth", planes.iter().map(|p| (frame(p).1 / std::f64::consts::TAU).rem_euclid(1.0)), 64);
+}
+
+#[test]
+fn the_chi_square_test_rejects_a_wrong_density() {
+    // The same test catches a direction sampled uniformly on the hemisphere instead.
+    let mut counts = vec![0u64; 64];
+    let n = 400_000;
+    for i in 0..n {
+        let cos = (i as f64 + 0.5) / n as f64; // uniform cos: the uniform-hemisphere density
+        counts[((cos * cos) * 64.0) as usize] += 1;
+    }
+    assert!(chi_square(&counts, &[1.0 / 64.0; 64]) > chi_square_critical(63));
+}
