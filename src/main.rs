@@ -233,8 +233,10 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let scene = load_scene(&a.scene, &a.common)?;
     let d = &scene.render;
     let estimator = a.estimator.unwrap_or(d.weighting.estimator);
-    let orientations = a.orientations.or((estimator == d.weighting.estimator).then_some(d.weighting.orientations));
-    let orientations = orientations.filter(|_| estimator.has_orientations());
+    // The scene's K applies only when the scene's estimator is the one rendered.
+    let scene_k =
+        (estimator == d.weighting.estimator && estimator.has_orientations()).then_some(d.weighting.orientations);
+    let orientations = a.orientations.or(scene_k);
     let weighting = Weighting::new(estimator, orientations).map_err(|m| input(anyhow!("--orientations: {m}")))?;
     let planes = a.planes.unwrap_or(d.planes);
     check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;

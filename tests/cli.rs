@@ -1,0 +1,98 @@
+//! The command line: outputs are written whole, bad input gets one clear line and exit code 2.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn fogplanes(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fogplanes-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn render_writes_exr_and_png_and_prints_a_summary() {
+    let dir = scratch("render");
+    for name in ["out.exr", "out.png"] {
+        let out = dir.join(name);
+        let o = fogplanes(&[
+            "render",
+            "media_scenes/six_lights.toml",
+            "--resolution",
+            "64x36",
+            "--planes",
+            "2000",
+            "--quiet",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(stdout.contains("smis-exact: 2000 planes") && stdout.contains("hits"), "{stdout}");
+    }
+    assert_eq!(files_in(&dir), ["out.exr", "out.png"]);
+    let film = fogplanes::film::Film::load_exr(&dir.join("out.exr")).unwrap();
+    assert_eq!((film.width, film.height), (64, 36));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_missing_output_directory_is_reported_before_rendering() {
+    let o = fogplanes(&["render", "media_scenes/six_lights.toml", "--quiet", "-o", "/no/such/dir/x.exr"]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("does not exist"), "{err}");
+    assert!(o.stdout.is_empty(), "nothing was rendered");
+}
+
+#[test]
+fn bad_arguments_exit_2() {
+    for args in [
+        vec!["render", "media_scenes/six_lights.toml", "--planes", "0"],
+        vec!["render", "media_scenes/six_lights.toml", "--estimator", "magic"],
+        vec!["render", "media_scenes/six_lights.toml", "--resolution", "0x10"],
+        vec!["render", "media_scenes/six_lights.toml", "--resolution", "100000x100000"],
+        vec!["render", "media_scenes/six_lights.toml", "--planes", "1000000000000"],
+        vec!["render", "media_scenes/six_lights.toml", "-o", "x.jpg"],
+        vec!["render", "media_scenes/six_lights.toml", "--estimator", "cmis-exact", "--orientations", "4"],
+        vec!["render", "no_such_scene.toml"],
+        vec!["compare", "no_such.exr", "other.exr"],
+    ] {
+        let o = fogplanes(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
+
+/// Every file in tests/bad_scenes gives one error line naming the file, exit code 2, no
+/// output.
+#[test]
+fn every_broken_scene_gives_one_clear_error() {
+    let dir = scratch("bad");
+    let mut checked = 0;
+    for entry in std::fs::read_dir("tests/bad_scenes").unwrap() {
+        let path = entry.unwrap().path();
+        let out = dir.join("out.exr");
+        let o = fogplanes(&["render", path.to_str().unwrap(), "--quiet", "-o", out.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
+        assert_eq!(err.lines().count(), 1, "{}: one line expected, got:\n{err}", path.display());
+        assert!(err.contains(path.file_name().unwrap().to_str().unwrap()), "{}: {err}", path.display());
+        assert!(files_in(&dir).is_empty(), "{}: an output was written", path.display());
+        checked += 1;
+    }
+    assert!(checked >= 10);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
