@@ -143,8 +143,18 @@ pub fn single_scattering(scene: &Scene, o: DVec3, we: DVec3, rel_tol: f64) -> DV
     };
     let sigma_t = scene.medium.sigma_t();
     let mut out = DVec3::ZERO;
+    let mut per_light = vec![[0.0f64; 3]; scene.lights.len()];
     for channel in 0..3 {
         let st = sigma_t[channel];
+        // Channels with the same extinction share the geometric integral.
+        if let Some(done) = (0..channel).find(|&c| sigma_t[c] == st) {
+            for (li, light) in scene.lights.iter().enumerate() {
+                let value = per_light[li][done];
+                per_light[li][channel] = value;
+                out[channel] += value * scene.medium.sigma_s[channel] * PHASE * light.radiance[channel];
+            }
+            continue;
+        }
         for (li, light) in scene.lights.iter().enumerate() {
             // Unoccluded geometry, then visibility through the other panels.
             let inner = |x: DVec3| {
@@ -166,6 +176,7 @@ pub fn single_scattering(scene: &Scene, o: DVec3, we: DVec3, rel_tol: f64) -> DV
             };
             let outer = |t: f64| (-st * (t - t0)).exp() * inner(o + t * we);
             let value = integrate(outer, t0, t1, rel_tol, 0.0).value;
+            per_light[li][channel] = value;
             out[channel] += value * scene.medium.sigma_s[channel] * PHASE * light.radiance[channel];
         }
     }

@@ -1,0 +1,140 @@
+//! The reference renderer (SPEC section 3) agrees with deterministic quadrature on single pixel
+//! centres within 4 of its own standard errors; and the table command writes all its files.
+
+use fogplanes::film::Film;
+use fogplanes::photon_plane::light_distribution;
+use fogplanes::quadrature::single_scattering;
+use fogplanes::reference::{ReferenceOptions, render_reference, scattering_sample};
+use fogplanes::sampling::{rng_for, unit_f64};
+use fogplanes::scene::Scene;
+use rand::RngCore;
+use std::path::Path;
+
+fn six_lights() -> Scene {
+    Scene::load(Path::new("media_scenes/six_lights.toml")).unwrap()
+}
+
+#[test]
+fn reference_samples_match_quadrature_at_pixel_centres() {
+    let scene = six_lights();
+    let lights = light_distribution(&scene);
+    let cam = &scene.camera;
+    let mut failures = Vec::new();
+    // Pixels in the open fog, beside the red spot, under the ceiling, near the edge-on amber
+    // panel (whose shadow the cyan strip's light crosses), and at the image corner.
+    for (k, &(i, j)) in [(320u32, 180u32), (600, 80), (320, 90), (455, 210), (5, 355), (150, 250)].iter().enumerate() {
+        let we = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
+        let (t0, t1) = scene.camera_segment(cam.position, we).0.unwrap();
+        let truth = single_scattering(&scene, cam.position, we, 1e-5);
+        let n = 400_000u64;
+        let mut rng = rng_for(99, 7, k as u64);
+        let (mut sum, mut sum_sq) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+        for _ in 0..n {
+            let u = std::array::from_fn(|_| unit_f64(rng.next_u64()));
+            let v = scattering_sample(&scene, &lights, cam.position, we, t0, t1, u);
+            sum += v;
+            sum_sq += v * v;
+        }
+        let mean = sum / n as f64;
+        for c in 0..3 {
+            let se = ((sum_sq[c] / n as f64 - mean[c] * mean[c]) / (n - 1) as f64).sqrt();
+            let z = (mean[c] - truth[c]) / se;
+            let line = format!(
+                "pixel ({i}, {j}) ch{c}: quadrature {:.6e}, reference {:.6e} +- {se:.2e}, z = {z:+.2}",
+                truth[c], mean[c]
+            );
+            println!("{line}");
+            if !(z.abs() <= 4.0) || !(se < 0.02 * truth[c]) {
+                failures.push(line);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn reference_image_reports_a_standard_error_that_shrinks_with_samples() {
+    let scene = six_lights().with_resolution(32, 18).unwrap();
+    let opts = |spp| ReferenceOptions { spp, seed: 3, pixel_center: true };
+    let (a, b) = (render_reference(&scene, &opts(64), &|| {}), render_reference(&scene, &opts(1024), &|| {}));
+    assert!(a.mean.all_finite_non_negative() && b.mean.all_finite_non_negative());
+    // The standard error falls as 1 / sqrt(spp): a factor 4 for 16x the samples, within 25%.
+    let ratio = a.noise_mse().sqrt() / b.noise_mse().sqrt();
+    assert!((3.0..5.0).contains(&ratio), "ratio {ratio}");
+    // The images agree within their errors: mean squared z-score near 1.
+    let mut z2 = 0.0;
+    for ((ma, mb), (sa, sb)) in
+        a.mean.pixels.iter().zip(&b.mean.pixels).zip(a.stderr.pixels.iter().zip(&b.stderr.pixels))
+    {
+        for c in 0..3 {
+            let s2 = sa[c] * sa[c] + sb[c] * sb[c];
+            if s2 > 0.0 {
+                z2 += ((ma[c] - mb[c]) * (ma[c] - mb[c]) / s2) as f64;
+            }
+        }
+    }
+    let mean_z2 = z2 / (3.0 * a.mean.pixels.len() as f64);
+    assert!(mean_z2 < 1.5, "mean squared z {mean_z2}");
+}
+
+#[test]
+fn table_writes_every_file_and_the_json_parses() {
+    let dir = std::env::temp_dir().join(format!("fogplanes-table-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let reference = dir.join("ref.exr");
+    let bin = env!("CARGO_BIN_EXE_fogplanes");
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(bin).args(args).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    let scene = "media_scenes/six_lights.toml";
+    run(&[
+        "reference",
+        scene,
+        "--resolution",
+        "48x27",
+        "--pixel-center",
+        "--spp",
+        "64",
+        "--quiet",
+        "-o",
+        reference.to_str().unwrap(),
+    ]);
+    let out = dir.join("report");
+    run(&[
+        "table",
+        scene,
+        "--resolution",
+        "48x27",
+        "--reference",
+        reference.to_str().unwrap(),
+        "--planes",
+        "1000",
+        "--sweep",
+        "250,500",
+        "--sweep-seeds",
+        "2",
+        "--orientations",
+        "3",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    for f in ["table.md", "table.json", "panel.png", "error_vs_time.png", "error_vs_time.svg"] {
+        assert!(out.join(f).metadata().map(|m| m.len() > 100).unwrap_or(false), "{f} missing or empty");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
+    let rows = json["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["estimator"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["unweighted", "cmis-cosine", "smis-cosine", "smis-exact", "cmis-exact", "smis-cosine-k3", "smis-exact-k3"]
+    );
+    assert!(rows.iter().all(|r| r["metrics"]["mse"].as_f64().unwrap() > 0.0 && r["hits"].as_u64().unwrap() > 0));
+    assert_eq!(json["sweep"].as_array().unwrap().len(), 2 * 7);
+    let img = Film::load_exr(&reference).unwrap();
+    assert_eq!((img.width, img.height), (48, 27));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
