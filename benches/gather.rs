@@ -1,1 +1,103 @@
-fn main() {}
+//! Criterion benchmarks: plane sampling, structure build, gathering per estimator, and the
+//! per-hit cost of each weighting. `cargo bench` runs them all; `cargo bench -- weight` one group.
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use fogplanes::gather::GatherContext;
+use fogplanes::photon_plane::sample_planes;
+use fogplanes::raster::ScreenRaster;
+use fogplanes::render::{Accelerator, PreparedPlanes, camera_rays};
+use fogplanes::scene::Scene;
+use fogplanes::weights::{
+    CmisCosine, CmisExact, Denominator, Estimator, HitLocal, PlaneFrame, SmisCosinePair, SmisExactPair, StratifiedK,
+    Unweighted, Weighting,
+};
+use glam::Vec3;
+use std::hint::black_box;
+use std::time::Duration;
+
+fn scene() -> Scene {
+    Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap()
+}
+
+fn planes_and_structure(c: &mut Criterion) {
+    let s = scene();
+    let mut g = c.benchmark_group("setup");
+    g.sample_size(10).measurement_time(Duration::from_secs(5));
+    g.bench_function("sample 40960 planes", |b| b.iter(|| sample_planes(&s, 40_960, black_box(1))));
+    let planes = sample_planes(&s, 40_960, 1);
+    g.bench_function("prepare 40960 plane views", |b| b.iter(|| GatherContext::new(&s, black_box(&planes), s.camera.position)));
+    g.bench_function("raster 40960 planes at 640x360", |b| b.iter(|| ScreenRaster::build(&s.camera, black_box(&planes), &s.medium)));
+    g.finish();
+}
+
+fn gathering(c: &mut Criterion) {
+    let s = scene().with_resolution(160, 90).unwrap();
+    let prepared = PreparedPlanes::new(&s, 40_960, 1, Accelerator::Raster);
+    let pass = camera_rays(&s, 1, 0, false);
+    let mut sums = vec![Vec3::ZERO; pass.rays.len()];
+    let hits = prepared.gather(Weighting::new(Estimator::Unweighted, None).unwrap(), &pass.rays, &mut sums, &|| {}).hits;
+    let mut g = c.benchmark_group("gather 160x90, 40960 planes");
+    g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
+    let mut weightings: Vec<Weighting> = Estimator::ALL.iter().map(|&e| Weighting::new(e, None).unwrap()).collect();
+    weightings.push(Weighting::new(Estimator::SmisExact, Some(4)).unwrap());
+    for w in weightings {
+        g.bench_function(BenchmarkId::from_parameter(w.label()), |b| {
+            b.iter(|| prepared.gather(w, &pass.rays, black_box(&mut sums), &|| {}))
+        });
+    }
+    g.finish();
+}
+
+/// Real hits of the benchmark scene: (frame, hit) pairs from rays through the image.
+fn sample_hits(n: usize) -> Vec<(PlaneFrame, HitLocal)> {
+    let s = scene().with_resolution(32, 18).unwrap();
+    let planes = sample_planes(&s, 40_960, 2);
+    let ctx = GatherContext::new(&s, &planes, s.camera.position);
+    let pass = camera_rays(&s, 2, 0, false);
+    let mut out = Vec::with_capacity(n);
+    'rays: for ray in &pass.rays {
+        for v in &ctx.views {
+            if let Some(h) = v.hit(ray) {
+                out.push((v.frame, HitLocal { det: h.det, det_perp: ray.dir.dot(v.normal_perp), a: h.a }));
+                if out.len() == n {
+                    break 'rays;
+                }
+            }
+        }
+    }
+    out
+}
+
+fn per_hit<D: Denominator>(g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>, name: &str, d: D, hits: &[(PlaneFrame, HitLocal)]) {
+    g.bench_function(name, |b| {
+        b.iter(|| {
+            let mut acc = 0.0f32;
+            for (f, h) in hits {
+                acc += d.denominator(black_box(f), black_box(h));
+            }
+            acc
+        })
+    });
+}
+
+fn weights(c: &mut Criterion) {
+    let hits = sample_hits(4096);
+    let mut g = c.benchmark_group("weight per hit");
+    g.throughput(Throughput::Elements(hits.len() as u64)).measurement_time(Duration::from_secs(3));
+    per_hit(&mut g, "unweighted", Unweighted, &hits);
+    per_hit(&mut g, "cmis-cosine", CmisCosine, &hits);
+    per_hit(&mut g, "smis-cosine", SmisCosinePair, &hits);
+    per_hit(&mut g, "smis-exact", SmisExactPair, &hits);
+    per_hit(&mut g, "cmis-exact", CmisExact, &hits);
+    per_hit(&mut g, "smis-exact-k4", StratifiedK::new(true, 4), &hits);
+    per_hit(&mut g, "smis-exact-k8", StratifiedK::new(true, 8), &hits);
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    // No HTML plots: they need system fonts, which a fresh machine may lack.
+    config = Criterion::default().without_plots();
+    targets = weights, planes_and_structure, gathering
+}
+criterion_main!(benches);

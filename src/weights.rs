@@ -266,51 +266,61 @@ impl Denominator for CmisExact {
 /// det(beta) = cos(beta) a_u + sin(beta) a_v, for the light vertex at local (p, q) of a `w x h`
 /// light: the marginal density of paper eq. (24) that the paper calls non-integrable.
 ///
-/// SPEC section 2, "Closed form": split [0, pi) at pi/2, at the four corner directions and at the
-/// zero of det. On each piece the forward chord is one of fx/|cos| or (h - q)/sin, the backward
-/// one of bx/|cos| or q/sin, and det has one sign s, so g is a sum of
-///   c s sign(cos) (a_u + a_v tan beta)   with antiderivative a_u beta - a_v ln|cos beta|,
-///   c s (a_u cot beta + a_v)             with antiderivative a_u ln|sin beta| + a_v beta.
-/// A term with c = 0 (vertex on an edge) is skipped; it would be 0 * infinity at an endpoint.
+/// SPEC section 2 splits [0, pi) at pi/2, the corner directions and the zero of det. The same
+/// pieces are summed here over the full circle, which needs fewer transcendental calls:
+/// width(beta) = fwd(beta) + fwd(beta + pi), with fwd(phi) the distance from (p, q) to the
+/// boundary along direction phi, and |det| has period pi, so
+///
+///   int_0^pi g = int_0^{2 pi} fwd(phi) |det(phi)| d phi.
+///
+/// The directions to the four corners cut the circle into four sectors, one per edge e, with
+/// outward normal n_e, tangent t_e (n_e turned a quarter counter-clockwise) and distance d_e.
+/// In sector e, with psi the angle from n_e, fwd = d_e / cos(psi) and
+/// det = A_n cos(psi) + A_t sin(psi), A_n = a . n_e, A_t = a . t_e, so
+///
+///   int fwd det d phi = d_e [A_n psi - A_t ln cos(psi)],
+///
+/// and at a corner r_k (offset from (p, q)) cos(psi) = d_e / |r_k|: between two corners the
+/// logarithms leave ln|r_start| - ln|r_end|. A zero of det (directions +-(-a_v, a_u)) inside a
+/// sector splits it, so that |det| is det times one sign on each arc. A sector whose edge
+/// passes through the vertex (d_e = 0) contributes nothing and is skipped, avoiding 0 * inf.
+/// Matches adaptive quadrature to ~1e-14 relative (tests below).
 pub fn cmis_exact_mean(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> f64 {
-    let half = 0.5 * PI;
-    let zero_of_det = (-a_u).atan2(a_v).rem_euclid(PI);
-    let mut cuts = [
-        0.0,
-        half,
-        PI,
-        zero_of_det,
-        (h - q).atan2(w - p), // forward corner (w, h), cos > 0
-        q.atan2(p),           // backward corner (0, 0), cos > 0
-        (h - q).atan2(-p),    // forward corner (0, h), cos < 0
-        q.atan2(p - w),       // backward corner (w, 0), cos < 0
-    ];
-    for c in &mut cuts {
-        *c = c.clamp(0.0, PI);
+    if a_u == 0.0 && a_v == 0.0 {
+        return 0.0;
     }
-    cuts.sort_unstable_by(f64::total_cmp);
-
-    let x_term = |b: f64| a_u * b - a_v * b.cos().abs().ln();
-    let y_term = |b: f64| a_u * b.sin().abs().ln() + a_v * b;
+    let cross = |a: (f64, f64), b: (f64, f64)| a.0 * b.1 - a.1 * b.0;
+    let dot = |a: (f64, f64), b: (f64, f64)| a.0 * b.0 + a.1 * b.1;
+    let det = |b: (f64, f64)| a_u * b.0 + a_v * b.1;
+    // Corners counter-clockwise from (0, 0); edge e runs from corner e to corner e + 1.
+    let corners = [(-p, -q), (w - p, -q), (w - p, h - q), (-p, h - q)];
+    let edges = [((0.0, -1.0), q), ((1.0, 0.0), w - p), ((0.0, 1.0), h - q), ((-1.0, 0.0), p)];
+    let zero = (-a_v, a_u);
     let mut total = 0.0;
-    for piece in cuts.windows(2) {
-        let (lo, hi) = (piece[0], piece[1]);
-        if hi <= lo {
+    for (e, &(n, d)) in edges.iter().enumerate() {
+        if !(d > 0.0) {
             continue;
         }
-        let mid = 0.5 * (lo + hi);
-        let (s, c) = mid.sin_cos();
-        let det_sign = (c * a_u + s * a_v).signum();
-        let (fx, bx) = if c > 0.0 { (w - p, p) } else { (p, w - p) };
-        for (cx, cy) in [(fx, h - q), (bx, q)] {
-            // Which term of min(cx / |cos|, cy / sin) holds on this piece.
-            if cx * s <= cy * c.abs() {
-                if cx > 0.0 {
-                    total += cx * det_sign * c.signum() * (x_term(hi) - x_term(lo));
-                }
-            } else if cy > 0.0 {
-                total += cy * det_sign * (y_term(hi) - y_term(lo));
+        let (a_n, a_t) = (det(n), det((-n.1, n.0)));
+        let (start, end) = (corners[e], corners[(e + 1) % 4]);
+        // The integral over an arc on which det keeps one sign, from the turn angle and the
+        // change of ln cos(psi). On such an arc det(b0) and det(b1) share that sign or vanish,
+        // and cannot both vanish (the arc is shorter than pi), so their sum carries it.
+        let arc = |b0: (f64, f64), b1: (f64, f64), turn: f64, delta_ln_cos: f64| {
+            d * (a_n * turn - a_t * delta_ln_cos) * (det(b0) + det(b1)).signum()
+        };
+        let turn = cross(start, end).atan2(dot(start, end));
+        // ln cos(psi_end) - ln cos(psi_start) = ln |r_start| - ln |r_end|.
+        let delta = 0.5 * (dot(start, start) / dot(end, end)).ln();
+        // A zero of det strictly inside the sector (which spans less than pi) splits it.
+        match [zero, (-zero.0, -zero.1)].into_iter().find(|&z| cross(start, z) > 0.0 && cross(z, end) > 0.0) {
+            Some(z) => {
+                let first_turn = cross(start, z).atan2(dot(start, z));
+                // cos(psi) is d / |r_start| at the corner and n . z / |z| at the zero.
+                let first_delta = 0.5 * (dot(n, z).powi(2) * dot(start, start) / (dot(z, z) * d * d)).ln();
+                total += arc(start, z, first_turn, first_delta) + arc(z, end, turn - first_turn, delta - first_delta);
             }
+            None => total += arc(start, end, turn, delta),
         }
     }
     // The integral of a non-negative function; rounding can leave a hair below zero.
@@ -377,6 +387,7 @@ mod tests {
     #[test]
     fn cmis_exact_matches_quadrature_on_random_inputs() {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
+        let mut worst = 0.0f64;
         for i in 0..10_000 {
             let (w, h) = (rng.random_range(0.01..5.0), rng.random_range(0.01..5.0));
             let (p, q) = (rng.random::<f64>() * w, rng.random::<f64>() * h);
@@ -387,7 +398,9 @@ mod tests {
                 (closed - numeric).abs() <= 1e-9 * numeric,
                 "#{i} w={w} h={h} p={p} q={q} a=({a_u},{a_v}): {closed} vs {numeric}"
             );
+            worst = worst.max((closed - numeric).abs() / numeric);
         }
+        println!("largest relative difference: {worst:.2e}");
     }
 
     #[test]
