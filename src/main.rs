@@ -103,6 +103,9 @@ struct ReferenceArgs {
     /// Sample pixel centres (to compare with `render --pixel-center` and `table`).
     #[arg(long)]
     pixel_center: bool,
+    /// The same number of samples in every pixel (by default a pilot pass spreads them by need).
+    #[arg(long)]
+    uniform: bool,
     /// Output image (.exr or .png). Default: <scene name>_reference.exr here.
     #[arg(long, short, value_name = "OUT")]
     output: Option<PathBuf>,
@@ -142,6 +145,9 @@ struct TableArgs {
     /// Plane counts of the error-versus-time sweep, comma separated.
     #[arg(long, value_delimiter = ',', default_values_t = [5120u64, 10240, 20480, 40960, 81920, 163840])]
     sweep: Vec<u64>,
+    /// Skip the error-versus-time sweep (no plot).
+    #[arg(long)]
+    no_sweep: bool,
     /// Seeds per plane count in the sweep.
     #[arg(long, default_value_t = 3)]
     sweep_seeds: u32,
@@ -282,8 +288,9 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     if let Some(p) = &a.stderr_image {
         check_writable(p).map_err(input)?;
     }
-    let opts = ReferenceOptions { spp: a.spp, seed: a.seed, pixel_center: a.pixel_center };
-    let bar = progress_bar(a.common.quiet, scene.camera.height as u64, "reference");
+    let opts = ReferenceOptions { spp: a.spp, uniform: a.uniform, seed: a.seed, pixel_center: a.pixel_center };
+    let passes = if a.uniform { 1 } else { 2 };
+    let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
     let reference = render_reference(&scene, &opts, &|| bar.inc(1));
     bar.finish_and_clear();
     reference.mean.save(&output, a.exposure)?;
@@ -291,7 +298,7 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
         reference.stderr.save(p, a.exposure)?;
     }
     println!(
-        "reference: {} spp, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
+        "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
         a.spp,
         reference.seconds,
         reference.relative_stderr(),
@@ -349,7 +356,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
         planes: planes as usize,
         seed: a.seed.unwrap_or(scene.render.seed),
         pixel_center: !a.jitter,
-        sweep: a.sweep.iter().map(|&n| n as usize).collect(),
+        sweep: if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() },
         sweep_seeds: a.sweep_seeds,
         extra,
         out: a.out.clone(),

@@ -18,7 +18,10 @@ const REFERENCE_STREAM: u64 = 0x2EF_E2E;
 /// Settings of a reference render.
 #[derive(Clone, Debug)]
 pub struct ReferenceOptions {
+    /// Average samples per pixel.
     pub spp: u32,
+    /// Every pixel the same count, instead of counts by need.
+    pub uniform: bool,
     pub seed: u64,
     pub pixel_center: bool,
 }
@@ -79,13 +82,88 @@ pub fn scattering_sample(
     medium.sigma_s * PHASE * light.radiance * tr * weight
 }
 
-/// Renders the reference image: `spp` samples per pixel, each its own camera ray (jittered over
-/// the pixel, or through its centre) with direct emission and one scattering sample.
+/// Independent replicates per pixel: the standard error comes from their spread.
+pub const REPLICATES: u32 = 16;
+
+/// The additive-recurrence (Kronecker) low-discrepancy sequence of Roberts' generalised golden
+/// ratio in `D` dimensions: x_i = frac(shift + i alpha), alpha_j = phi_D^-(j+1), with phi_D the
+/// positive root of x^(D+1) = x + 1.
+pub struct Kronecker<const D: usize> {
+    alpha: [f64; D],
+}
+
+impl<const D: usize> Kronecker<D> {
+    pub fn new() -> Self {
+        let mut phi = 2.0f64;
+        for _ in 0..60 {
+            phi -= (phi.powi(D as i32 + 1) - phi - 1.0) / ((D as f64 + 1.0) * phi.powi(D as i32) - 1.0);
+        }
+        Kronecker { alpha: std::array::from_fn(|j| phi.powi(-(j as i32 + 1)).fract()) }
+    }
+
+    /// Point `i` of the sequence rotated by `shift` (Cranley-Patterson): uniform in [0, 1)^D
+    /// for a uniform shift, so each replicate is an unbiased estimate.
+    pub fn point(&self, i: u64, shift: &[f64; D]) -> [f64; D] {
+        std::array::from_fn(|j| (shift[j] + (i as f64 * self.alpha[j]).fract()).fract())
+    }
+}
+
+impl<const D: usize> Default for Kronecker<D> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Renders the reference image with an average of `spp` samples per pixel.
+///
+/// Its noise is concentrated in few pixels (those that see a light panel or pass close to one,
+/// where the equiangular estimate has a heavy tail), so samples are spread by need: a pilot
+/// pass with an eighth of the budget measures each pixel's standard deviation, and the rest is
+/// allocated in proportion to it (the allocation that minimises the summed variance), with at
+/// least a quarter of the average (so that dim pixels keep a small relative error, which SMAPE
+/// weighs) and at most 64 times the average. The image and its standard
+/// error come from the second pass alone, whose sample counts are fixed before it runs, so
+/// every pixel stays unbiased. `uniform` gives every pixel `spp` samples instead.
 pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn Fn() + Sync)) -> ReferenceImage {
     let start = std::time::Instant::now();
+    let pixels = scene.camera.width as usize * scene.camera.height as usize;
+    let (mean, stderr) = if opts.uniform {
+        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], progress)
+    } else {
+        let pilot_spp = (opts.spp / 8).max(REPLICATES);
+        let (_, pilot_se) = render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress);
+        // Standard deviation of one sample, the mean over channels.
+        let sigma: Vec<f64> =
+            pilot_se.pixels.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
+        let total_sigma: f64 = sigma.iter().sum();
+        let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
+        let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
+        // The floor is taken first; the rest goes by need.
+        let budget = (budget - floor * pixels as f64).max(0.0);
+        let counts: Vec<u32> = sigma
+            .iter()
+            .map(|&s| {
+                let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
+                (floor + share).min(cap).round() as u32
+            })
+            .collect();
+        render_pixels(scene, opts.seed, opts.pixel_center, &counts, progress)
+    };
+    ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() }
+}
+
+/// Seed offset of the pilot pass, so that it shares no samples with the final one.
+const PILOT_SEED: u64 = 0x9_11_07;
+
+/// Renders every pixel with its own sample count, in [`REPLICATES`] independent replicates of
+/// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
+/// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
+/// their mean and its standard error comes from their spread, an honest measure of the noise.
+fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], progress: &(dyn Fn() + Sync)) -> (Film, Film) {
     let cam = &scene.camera;
     let w = cam.width as usize;
     let lights = crate::photon_plane::light_distribution(scene);
+    let sequence = Kronecker::<6>::new();
     let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
         .into_par_iter()
         .map(|j| {
@@ -93,32 +171,38 @@ pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn 
             let mut errors = Vec::with_capacity(w);
             for i in 0..w {
                 let pixel = (j * w + i) as u64;
-                let mut rng = rng_for(opts.seed, REFERENCE_STREAM, pixel);
-                let mut next = || unit_f64(rng.next_u64());
+                let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
+                let replicates = REPLICATES.min(spp[pixel as usize]).max(1);
+                let per_replicate = spp[pixel as usize].div_ceil(replicates) as u64;
+                let centre_dir = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
+                let centre = scene.camera_segment(cam.position, centre_dir);
                 let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
-                let mut fixed = None;
-                for _ in 0..opts.spp {
-                    let (sx, sy) = if opts.pixel_center { (0.5, 0.5) } else { (next(), next()) };
-                    let we = cam.direction(i as f64 + sx, j as f64 + sy).normalize();
-                    let (segment, emission) = match (opts.pixel_center, fixed) {
-                        (true, Some(f)) => f,
-                        _ => scene.camera_segment(cam.position, we),
-                    };
-                    fixed = Some((segment, emission));
-                    let mut value = emission;
-                    if let Some((t0, t1)) = segment {
-                        let u = [next(), next(), next(), next()];
-                        value += scattering_sample(scene, &lights, cam.position, we, t0, t1, u);
+                for _ in 0..replicates {
+                    let shift: [f64; 6] = std::array::from_fn(|_| unit_f64(rng.next_u64()));
+                    let mut replicate = DVec3::ZERO;
+                    for k in 0..per_replicate {
+                        let u = sequence.point(k, &shift);
+                        let (we, (segment, emission)) = if pixel_center {
+                            (centre_dir, centre)
+                        } else {
+                            let we = cam.direction(i as f64 + u[0], j as f64 + u[1]).normalize();
+                            (we, scene.camera_segment(cam.position, we))
+                        };
+                        replicate += emission;
+                        if let Some((t0, t1)) = segment {
+                            let v = scattering_sample(scene, &lights, cam.position, we, t0, t1, [u[2], u[3], u[4], u[5]]);
+                            replicate += v;
+                        }
                     }
-                    sum += value;
-                    sum_sq += value * value;
+                    let replicate = replicate / per_replicate as f64;
+                    sum += replicate;
+                    sum_sq += replicate * replicate;
                 }
-                let n = opts.spp as f64;
-                let mean = sum / n;
-                let variance = ((sum_sq / n - mean * mean) * (n / (n - 1.0).max(1.0))).max(DVec3::ZERO);
+                let r = replicates as f64;
+                let mean = sum / r;
+                let variance_of_mean = ((sum_sq / r - mean * mean) / (r - 1.0).max(1.0)).max(DVec3::ZERO);
                 means.push(mean.as_vec3());
-                let se = variance / n;
-                errors.push(DVec3::new(se.x.sqrt(), se.y.sqrt(), se.z.sqrt()).as_vec3());
+                errors.push(DVec3::new(variance_of_mean.x.sqrt(), variance_of_mean.y.sqrt(), variance_of_mean.z.sqrt()).as_vec3());
             }
             progress();
             (means, errors)
@@ -130,5 +214,5 @@ pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn 
         mean.pixels[j * w..(j + 1) * w].copy_from_slice(&m);
         stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);
     }
-    ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() }
+    (mean, stderr)
 }

@@ -55,7 +55,7 @@ fn reference_samples_match_quadrature_at_pixel_centres() {
 #[test]
 fn reference_image_reports_a_standard_error_that_shrinks_with_samples() {
     let scene = six_lights().with_resolution(32, 18).unwrap();
-    let opts = |spp| ReferenceOptions { spp, seed: 3, pixel_center: true };
+    let opts = |spp| ReferenceOptions { spp, uniform: true, seed: 3, pixel_center: true };
     let (a, b) = (render_reference(&scene, &opts(64), &|| {}), render_reference(&scene, &opts(1024), &|| {}));
     assert!(a.mean.all_finite_non_negative() && b.mean.all_finite_non_negative());
     // The standard error falls as 1 / sqrt(spp): a factor 4 for 16x the samples, within 25%.
