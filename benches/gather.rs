@@ -25,8 +25,12 @@ fn planes_and_structure(c: &mut Criterion) {
     g.sample_size(10).measurement_time(Duration::from_secs(5));
     g.bench_function("sample 40960 planes", |b| b.iter(|| sample_planes(&s, 40_960, black_box(1))));
     let planes = sample_planes(&s, 40_960, 1);
-    g.bench_function("prepare 40960 plane views", |b| b.iter(|| GatherContext::new(&s, black_box(&planes), s.camera.position)));
-    g.bench_function("raster 40960 planes at 640x360", |b| b.iter(|| ScreenRaster::build(&s.camera, black_box(&planes), &s.medium)));
+    g.bench_function("prepare 40960 plane views", |b| {
+        b.iter(|| GatherContext::new(&s, black_box(&planes), s.camera.position))
+    });
+    g.bench_function("raster 40960 planes at 640x360", |b| {
+        b.iter(|| ScreenRaster::build(&s.camera, black_box(&planes), &s.medium))
+    });
     g.finish();
 }
 
@@ -35,7 +39,8 @@ fn gathering(c: &mut Criterion) {
     let prepared = PreparedPlanes::new(&s, 40_960, 1, Accelerator::Raster);
     let pass = camera_rays(&s, 1, 0, false);
     let mut sums = vec![Vec3::ZERO; pass.rays.len()];
-    let hits = prepared.gather(Weighting::new(Estimator::Unweighted, None).unwrap(), &pass.rays, &mut sums, &|| {}).hits;
+    let hits =
+        prepared.gather(Weighting::new(Estimator::Unweighted, None).unwrap(), &pass.rays, &mut sums, &|| {}).hits;
     let mut g = c.benchmark_group("gather 160x90, 40960 planes");
     g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
     let mut weightings: Vec<Weighting> = Estimator::ALL.iter().map(|&e| Weighting::new(e, None).unwrap()).collect();
@@ -68,7 +73,12 @@ fn sample_hits(n: usize) -> Vec<(PlaneFrame, HitLocal)> {
     out
 }
 
-fn per_hit<D: Denominator>(g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>, name: &str, d: D, hits: &[(PlaneFrame, HitLocal)]) {
+fn per_hit<D: Denominator>(
+    g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
+    name: &str,
+    d: D,
+    hits: &[(PlaneFrame, HitLocal)],
+) {
     g.bench_function(name, |b| {
         b.iter(|| {
             let mut acc = 0.0f32;

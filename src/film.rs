@@ -87,10 +87,23 @@ pub fn temporary_path(path: &Path) -> PathBuf {
     parent_dir(path).join(format!(".{name}.{}.tmp", std::process::id()))
 }
 
+/// Temporary files being written now, for [`remove_unfinished_files`].
+static UNFINISHED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// Removes every temporary file still being written (called on interruption): the
+/// destinations keep their old contents.
+pub fn remove_unfinished_files() {
+    let list = UNFINISHED.lock().unwrap_or_else(|e| e.into_inner());
+    for p in list.iter() {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
 /// Writes through `write` to a temporary file, then renames it to `path`; on any failure the
 /// temporary file is removed and `path` is untouched.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
     let tmp = temporary_path(path);
+    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).push(tmp.clone());
     let result = write(&tmp).and_then(|()| {
         std::fs::rename(&tmp, path)
             .with_context(|| format!("{}: cannot move the finished file into place", path.display()))
@@ -98,6 +111,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
+    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).retain(|p| p != &tmp);
     result
 }
 

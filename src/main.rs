@@ -10,6 +10,7 @@ use fogplanes::report::{TableOptions, run_table};
 use fogplanes::scene::{Scene, check_planes, check_spp};
 use fogplanes::weights::{Estimator, Weighting};
 use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -163,6 +164,13 @@ struct TableArgs {
     common: CommonArgs,
 }
 
+/// Prints a line to standard output; a closed pipe (`fogplanes ... | head`) is not an error.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
 /// An error with the exit code it deserves: 2 for bad input, 1 for everything else.
 struct Failure {
     code: u8,
@@ -181,6 +189,12 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Ctrl-C: remove any half-written output before leaving, so no truncated file remains.
+    let _ = ctrlc::set_handler(|| {
+        fogplanes::film::remove_unfinished_files();
+        let _ = writeln!(std::io::stderr(), "\ninterrupted: nothing was written");
+        std::process::exit(130);
+    });
     let result = match cli.command {
         Command::Render(a) => cmd_render(a),
         Command::Reference(a) => cmd_reference(a),
@@ -190,7 +204,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {
-            eprintln!("error: {:#}", f.error);
+            let _ = writeln!(std::io::stderr(), "error: {:#}", f.error);
             ExitCode::from(f.code)
         }
     }
@@ -268,15 +282,8 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let (film, stats) = render(&scene, &opts, &|| bar.inc(1));
     bar.finish_and_clear();
     film.save(&output, a.exposure)?;
-    println!("{}", stats.summary());
-    println!(
-        "wrote {} ({}x{}, mean {:.6}, max {:.4})",
-        output.display(),
-        film.width,
-        film.height,
-        film.mean(),
-        film.max()
-    );
+    say!("{}", stats.summary());
+    say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", output.display(), film.width, film.height, film.mean(), film.max());
     Ok(())
 }
 
@@ -297,7 +304,7 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     if let Some(p) = &a.stderr_image {
         reference.stderr.save(p, a.exposure)?;
     }
-    println!(
+    say!(
         "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
         a.spp,
         reference.seconds,
@@ -305,7 +312,7 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
         reference.noise_mse(),
         reference.noise_mse() * 1e4
     );
-    println!("wrote {}", output.display());
+    say!("wrote {}", output.display());
     Ok(())
 }
 
@@ -314,12 +321,12 @@ fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     let reference = Film::load_exr(&a.reference).map_err(input)?;
     let m = compare(&image, &reference).map_err(input)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
+        say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
     } else {
-        println!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
-        println!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
-        println!("relMSE       {:.6e}", m.rel_mse);
-        println!("max |error|  {:.6e}", m.max_abs_error);
+        say!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
+        say!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
+        say!("relMSE       {:.6e}", m.rel_mse);
+        say!("max |error|  {:.6e}", m.max_abs_error);
     }
     Ok(())
 }
@@ -365,6 +372,6 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
         reference_path: a.reference.clone(),
     };
     let table = run_table(&scene, &reference, &opts)?;
-    println!("{}", table);
+    say!("{}", table);
     Ok(())
 }

@@ -131,7 +131,8 @@ pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn 
         render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], progress)
     } else {
         let pilot_spp = (opts.spp / 8).max(REPLICATES);
-        let (_, pilot_se) = render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress);
+        let (_, pilot_se) =
+            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress);
         // Standard deviation of one sample, the mean over channels.
         let sigma: Vec<f64> =
             pilot_se.pixels.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
@@ -159,7 +160,13 @@ const PILOT_SEED: u64 = 0x9_11_07;
 /// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
 /// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
 /// their mean and its standard error comes from their spread, an honest measure of the noise.
-fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], progress: &(dyn Fn() + Sync)) -> (Film, Film) {
+fn render_pixels(
+    scene: &Scene,
+    seed: u64,
+    pixel_center: bool,
+    spp: &[u32],
+    progress: &(dyn Fn() + Sync),
+) -> (Film, Film) {
     let cam = &scene.camera;
     let w = cam.width as usize;
     let lights = crate::photon_plane::light_distribution(scene);
@@ -190,7 +197,8 @@ fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], prog
                         };
                         replicate += emission;
                         if let Some((t0, t1)) = segment {
-                            let v = scattering_sample(scene, &lights, cam.position, we, t0, t1, [u[2], u[3], u[4], u[5]]);
+                            let v =
+                                scattering_sample(scene, &lights, cam.position, we, t0, t1, [u[2], u[3], u[4], u[5]]);
                             replicate += v;
                         }
                     }
@@ -202,7 +210,10 @@ fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], prog
                 let mean = sum / r;
                 let variance_of_mean = ((sum_sq / r - mean * mean) / (r - 1.0).max(1.0)).max(DVec3::ZERO);
                 means.push(mean.as_vec3());
-                errors.push(DVec3::new(variance_of_mean.x.sqrt(), variance_of_mean.y.sqrt(), variance_of_mean.z.sqrt()).as_vec3());
+                errors.push(
+                    DVec3::new(variance_of_mean.x.sqrt(), variance_of_mean.y.sqrt(), variance_of_mean.z.sqrt())
+                        .as_vec3(),
+                );
             }
             progress();
             (means, errors)

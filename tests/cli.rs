@@ -96,3 +96,50 @@ fn every_broken_scene_gives_one_clear_error() {
     assert!(checked >= 10);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_huge_scene_file_is_refused_before_reading() {
+    let dir = scratch("huge");
+    let path = dir.join("huge.toml");
+    std::fs::File::create(&path).unwrap().set_len(100 << 20).unwrap();
+    let o = fogplanes(&["render", path.to_str().unwrap(), "--quiet", "-o", dir.join("o.exr").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("104857600 bytes") && err.lines().count() == 1, "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_closed_pipe_is_not_a_panic() {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+        .args(["compare", "--help"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
+}
+
+/// Ctrl-C during a render leaves neither the output nor a temporary file, and an existing
+/// output keeps its old contents.
+#[test]
+fn an_interrupted_render_leaves_no_file() {
+    let dir = scratch("sigint");
+    let out = dir.join("out.exr");
+    std::fs::write(&out, b"old contents").unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+        .args(["render", "media_scenes/six_lights.toml", "--planes", "200000", "--quiet", "-o", out.to_str().unwrap()])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130));
+    assert_eq!(files_in(&dir), ["out.exr"]);
+    assert_eq!(std::fs::read(&out).unwrap(), b"old contents");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
