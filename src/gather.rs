@@ -137,19 +137,45 @@ impl Extinction {
         Extinction { sigma_t: sigma_t.as_vec3(), grey: sigma_t.x == sigma_t.y && sigma_t.y == sigma_t.z }
     }
 
-    /// exp(-sigma_t length).
+    /// exp(-sigma_t length) / d: the attenuation of a hit over its denominator, one exponential
+    /// and one division when the medium is grey.
     #[inline(always)]
-    pub fn transmittance(&self, length: f32) -> Vec3 {
+    pub fn transmittance_over(&self, length: f32, d: f32) -> Vec3 {
         if self.grey {
-            Vec3::splat((-self.sigma_t.x * length).exp())
+            Vec3::splat(exp_f32(-self.sigma_t.x * length) / d)
         } else {
             Vec3::new(
-                (-self.sigma_t.x * length).exp(),
-                (-self.sigma_t.y * length).exp(),
-                (-self.sigma_t.z * length).exp(),
+                exp_f32(-self.sigma_t.x * length) / d,
+                exp_f32(-self.sigma_t.y * length) / d,
+                exp_f32(-self.sigma_t.z * length) / d,
             )
         }
     }
+}
+
+/// exp(x) for x <= 0 in f32, branch-free so that loops over pixels vectorise: x = k ln 2 + r
+/// with k = round(x / ln 2) (Cody-Waite, |r| <= ln 2 / 2), exp(r) by its Taylor series to r^7
+/// (truncation below 6e-9 relative), and 2^k written into the exponent bits. Below -87 (where
+/// 2^k would leave the normal range) the result is 0. Within 2e-7 relative of exp (tested).
+#[inline(always)]
+#[allow(clippy::manual_clamp)] // clamp has a panic path, which would stop vectorisation
+pub fn exp_f32(x: f32) -> f32 {
+    const LN2_HI: f32 = 0.693_145_75;
+    const LN2_LO: f32 = 1.428_606_8e-6;
+    // Adding and subtracting 1.5 * 2^23 rounds to the nearest integer without a call.
+    const ROUND: f32 = 12_582_912.0;
+    let xc = x.max(-87.0).min(0.0);
+    // xc log2(e) + 1.5 * 2^23 holds k in its low mantissa bits: the integer is read from there
+    // (no float-to-int conversion, which would not vectorise).
+    let shifted = xc * std::f32::consts::LOG2_E + ROUND;
+    let k = shifted - ROUND;
+    let r = (xc - k * LN2_HI) - k * LN2_LO;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+    let scale = f32::from_bits(shifted.to_bits().wrapping_sub(0x4B40_0000 - 127) << 23);
+    if x < -87.0 { 0.0 } else { p * scale }
 }
 
 /// All planes prepared for rays from one origin.
@@ -215,10 +241,10 @@ impl GatherContext {
             return Vec3::ZERO;
         }
         // Tr_cam(t) Tr(x, y') = exp(-sigma_t ((t - t0) + r)): both segments lie inside the box.
-        let c = view.scale * self.extinction.transmittance((hit.t - ray.t0) + hit.r) / d;
+        let c = view.scale * self.extinction.transmittance_over((hit.t - ray.t0) + hit.r, d);
         // D can underflow to a denormal only on a set of probability ~0; drop such a hit rather
         // than let an infinity through.
-        if c.is_finite() { c } else { Vec3::ZERO }
+        if c.x.is_finite() & c.y.is_finite() & c.z.is_finite() { c } else { Vec3::ZERO }
     }
 
     fn is_shadowed(&self, s: &ShadowedPlane, hit: &Hit) -> bool {
@@ -285,6 +311,20 @@ pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
 mod tests {
     use super::*;
     use crate::photon_plane::sample_planes;
+
+    #[test]
+    fn exp_f32_is_accurate_and_vanishes_far_out() {
+        let mut worst = 0.0f64;
+        for i in 0..=200_000 {
+            let x = -87.0 * i as f64 / 200_000.0;
+            let (got, want) = (exp_f32(x as f32) as f64, (x as f32 as f64).exp());
+            worst = worst.max((got - want).abs() / want);
+        }
+        assert!(worst < 2e-7, "largest relative error {worst:e}");
+        assert_eq!(exp_f32(0.0), 1.0);
+        assert_eq!(exp_f32(-100.0), 0.0);
+        assert_eq!(exp_f32(f32::NEG_INFINITY), 0.0);
+    }
 
     #[test]
     fn hit_solves_the_plane_equation() {

@@ -11,10 +11,10 @@
 //! bit-identical for a seed.
 
 use crate::camera::Camera;
-use crate::gather::{CameraRay, GatherContext};
+use crate::gather::{CameraRay, GatherContext, PlaneView, exp_f32};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
-use crate::weights::Denominator;
+use crate::weights::{Denominator, HitLocal};
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -187,6 +187,8 @@ impl ScreenRaster {
         let w = self.width as usize;
         let first_row = band as u32 * BAND_ROWS;
         let rows = (rays.len() / w) as u32;
+        let soa = BandRays::new(rays);
+        let mut acc = BandSums::new(rays.len());
         let mut stats = GatherStats::default();
         for &plane in &self.bands[band] {
             let view = &ctx.views[plane as usize];
@@ -195,16 +197,199 @@ impl ScreenRaster {
                     continue;
                 };
                 let base = (row - first_row) as usize * w;
-                stats.tests += (last - first + 1) as u64;
-                for col in first as usize..=last as usize {
-                    let ray = &rays[base + col];
-                    if let Some(hit) = view.hit(ray) {
-                        stats.hits += 1;
-                        sums[base + col] += ctx.contribution(weights, view, ray, &hit);
+                let span = base + first as usize..base + last as usize + 1;
+                stats.tests += span.len() as u64;
+                if view.shadow == u32::MAX {
+                    stats.hits += gather_span(ctx, weights, view, &soa, &mut acc, span);
+                } else {
+                    // Planes that another panel may shadow: the general per-hit path.
+                    for k in span {
+                        if let Some(hit) = view.hit(&rays[k]) {
+                            stats.hits += 1;
+                            acc.add(k, ctx.contribution(weights, view, &rays[k], &hit));
+                        }
                     }
                 }
             }
         }
+        for (k, s) in sums.iter_mut().enumerate() {
+            *s += Vec3::new(acc.r[k], acc.g[k], acc.b[k]);
+        }
         stats
     }
+}
+
+/// The camera rays of one band as a structure of arrays, so that a span vectorises.
+struct BandRays {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    t0: Vec<f32>,
+    t1: Vec<f32>,
+}
+
+impl BandRays {
+    fn new(rays: &[CameraRay]) -> Self {
+        BandRays {
+            x: rays.iter().map(|r| r.dir.x).collect(),
+            y: rays.iter().map(|r| r.dir.y).collect(),
+            z: rays.iter().map(|r| r.dir.z).collect(),
+            t0: rays.iter().map(|r| r.t0).collect(),
+            t1: rays.iter().map(|r| r.t1).collect(),
+        }
+    }
+}
+
+/// Per-pixel RGB sums of one band, a structure of arrays.
+struct BandSums {
+    r: Vec<f32>,
+    g: Vec<f32>,
+    b: Vec<f32>,
+}
+
+impl BandSums {
+    fn new(n: usize) -> Self {
+        BandSums { r: vec![0.0; n], g: vec![0.0; n], b: vec![0.0; n] }
+    }
+
+    fn add(&mut self, k: usize, c: Vec3) {
+        self.r[k] += c.x;
+        self.g[k] += c.y;
+        self.b[k] += c.z;
+    }
+}
+
+/// One unshadowed plane against a span of pixels: [`PlaneView::hit`] and
+/// [`GatherContext::contribution`] written without branches, operation for operation, so the
+/// loop vectorises and the sums are bit-identical to the per-hit path. Every plane constant is
+/// copied into a local first: the compiler then knows the stores to the sums cannot change
+/// them. Returns the hit count.
+#[inline(always)]
+fn gather_span<D: Denominator>(
+    ctx: &GatherContext,
+    weights: &D,
+    view: &PlaneView,
+    rays: &BandRays,
+    acc: &mut BandSums,
+    span: std::ops::Range<usize>,
+) -> u64 {
+    let ext = ctx.extinction;
+    let s = span;
+    let xyz = (&rays.x[s.clone()], &rays.y[s.clone()], &rays.z[s.clone()]);
+    let t = (&rays.t0[s.clone()], &rays.t1[s.clone()]);
+    let (sr, sg, sb) = (&mut acc.r[s.clone()], &mut acc.g[s.clone()], &mut acc.b[s]);
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        // SAFETY: the CPU supports AVX2 and FMA, checked at run time.
+        return unsafe {
+            if ext.grey {
+                span_kernel_avx2::<D, true>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+            } else {
+                span_kernel_avx2::<D, false>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+            }
+        };
+    }
+    if ext.grey {
+        span_kernel_slices::<D, true>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+    } else {
+        span_kernel_slices::<D, false>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+    }
+}
+
+/// Whether the 8-wide kernel can run (checked once; `FOGPLANES_NO_AVX2` set turns it off, to
+/// measure or test the portable kernel).
+#[cfg(target_arch = "x86_64")]
+fn has_avx2() -> bool {
+    static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *HAS.get_or_init(|| {
+        std::env::var_os("FOGPLANES_NO_AVX2").is_none()
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+    })
+}
+
+/// The kernel for CPUs with AVX2 and FMA (chosen at run time): the same code as
+/// [`span_kernel_slices`], compiled for 8-wide vectors. No operation is fused or reordered
+/// (Rust never contracts a * b + c), so the sums are bit-identical on every CPU.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn span_kernel_avx2<D: Denominator, const GREY: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    xyz: (&[f32], &[f32], &[f32]),
+    t: (&[f32], &[f32]),
+    sr: &mut [f32],
+    sg: &mut [f32],
+    sb: &mut [f32],
+) -> u64 {
+    span_kernel_body::<D, GREY>(weights, view, sigma_t, xyz, t, sr, sg, sb)
+}
+
+/// The kernel proper. Not inlined on purpose: as separate slice arguments the sums and the rays
+/// are known not to alias (Rust marks them `noalias`), so the loop vectorises without the
+/// run-time overlap checks that would otherwise exceed the vectoriser's budget.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn span_kernel_slices<D: Denominator, const GREY: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    xyz: (&[f32], &[f32], &[f32]),
+    t: (&[f32], &[f32]),
+    sr: &mut [f32],
+    sg: &mut [f32],
+    sb: &mut [f32],
+) -> u64 {
+    span_kernel_body::<D, GREY>(weights, view, sigma_t, xyz, t, sr, sg, sb)
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn span_kernel_body<D: Denominator, const GREY: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    (xs, ys, zs): (&[f32], &[f32], &[f32]),
+    (t0s, t1s): (&[f32], &[f32]),
+    sr: &mut [f32],
+    sg: &mut [f32],
+    sb: &mut [f32],
+) -> u64 {
+    let n = xs.len();
+    let (ys, zs, t0s, t1s) = (&ys[..n], &zs[..n], &t0s[..n], &t1s[..n]);
+    let (sr, sg, sb) = (&mut sr[..n], &mut sg[..n], &mut sb[..n]);
+    let PlaneView { normal: nrm, normal_perp: perp, a_axis, r_axis, t_det, frame, scale, .. } = *view;
+    let width = frame.width;
+    let mut hits = 0u32;
+    for k in 0..n {
+        let (x, y, z) = (xs[k], ys[k], zs[k]);
+        let det = x * nrm.x + y * nrm.y + z * nrm.z;
+        let inv = 1.0 / det;
+        let t = t_det * inv;
+        let a = (x * a_axis.x + y * a_axis.y + z * a_axis.z) * inv;
+        let r = (x * r_axis.x + y * r_axis.y + z * r_axis.z) * inv;
+        let hit = (det != 0.0) & (t >= t0s[k]) & (t <= t1s[k]) & (a >= 0.0) & (a <= width) & (r >= 0.0);
+        let det_perp = x * perp.x + y * perp.y + z * perp.z;
+        let d = weights.denominator(&frame, &HitLocal { det, det_perp, a });
+        let length = (t - t0s[k]) + r;
+        let (cr, cg, cb) = if GREY {
+            let q = exp_f32(-sigma_t.x * length) / d;
+            (scale.x * q, scale.y * q, scale.z * q)
+        } else {
+            (
+                scale.x * (exp_f32(-sigma_t.x * length) / d),
+                scale.y * (exp_f32(-sigma_t.y * length) / d),
+                scale.z * (exp_f32(-sigma_t.z * length) / d),
+            )
+        };
+        let keep = hit & (d > 0.0) & cr.is_finite() & cg.is_finite() & cb.is_finite();
+        sr[k] += if keep { cr } else { 0.0 };
+        sg[k] += if keep { cg } else { 0.0 };
+        sb[k] += if keep { cb } else { 0.0 };
+        hits += hit as u32;
+    }
+    hits as u64
 }

@@ -143,9 +143,11 @@ impl PlaneFrame {
 
     /// Light-local coordinates of the light vertex y' at chord parameter `a`, kept inside.
     #[inline(always)]
+    #[allow(clippy::manual_clamp)]
     pub fn vertex(&self, a: f32) -> (f32, f32) {
-        let p = (self.p0 + a * self.cos_a).clamp(0.0, self.light_w);
-        let q = (self.q0 + a * self.sin_a).clamp(0.0, self.light_h);
+        // max/min rather than clamp: no panic path, so loops over pixels vectorise.
+        let p = (self.p0 + a * self.cos_a).max(0.0).min(self.light_w);
+        let q = (self.q0 + a * self.sin_a).max(0.0).min(self.light_h);
         (p, q)
     }
 }
