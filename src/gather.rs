@@ -190,7 +190,13 @@ pub struct GatherContext {
 impl GatherContext {
     /// Prepares `planes` (a set of N = planes.len()) for rays from `origin`.
     pub fn new(scene: &Scene, planes: &[PhotonPlane], origin: DVec3) -> Self {
-        use rayon::prelude::*;
+        let mut ctx = GatherContext::empty(scene, origin);
+        ctx.push_planes(scene, planes, planes.len());
+        ctx
+    }
+
+    /// A context with no planes yet, for [`GatherContext::push_planes`].
+    pub fn empty(scene: &Scene, origin: DVec3) -> Self {
         let occluders = scene
             .lights
             .iter()
@@ -203,29 +209,35 @@ impl GatherContext {
                 height: l.height as f32,
             })
             .collect();
+        let extinction = Extinction::new(scene.medium.sigma_t());
+        GatherContext { origin, views: Vec::new(), shadowed: Vec::new(), occluders, extinction }
+    }
+
+    /// Prepares and appends the next planes of a set of `planes_total` planes.
+    pub fn push_planes(&mut self, scene: &Scene, planes: &[PhotonPlane], planes_total: usize) {
+        use rayon::prelude::*;
         let masks: Vec<u64> = planes.par_iter().map(|p| possible_occluders(scene, p)).collect();
-        let mut shadowed = Vec::new();
         let mut shadow_index = Vec::with_capacity(planes.len());
         for (p, &mask) in planes.iter().zip(&masks) {
             if mask == 0 {
                 shadow_index.push(u32::MAX);
             } else {
-                shadow_index.push(shadowed.len() as u32);
-                shadowed.push(ShadowedPlane {
-                    origin: (p.origin - origin).as_vec3(),
+                shadow_index.push(self.shadowed.len() as u32);
+                self.shadowed.push(ShadowedPlane {
+                    origin: (p.origin - self.origin).as_vec3(),
                     chord: p.chord.as_vec3(),
                     direction: p.direction.as_vec3(),
                     occluders: mask,
                 });
             }
         }
-        let n = planes.len();
-        let views = planes
-            .par_iter()
-            .zip(shadow_index.par_iter())
-            .map(|(p, &s)| PlaneView::new(p, scene, origin, n, s))
-            .collect();
-        GatherContext { origin, views, shadowed, occluders, extinction: Extinction::new(scene.medium.sigma_t()) }
+        let origin = self.origin;
+        self.views.par_extend(
+            planes
+                .par_iter()
+                .zip(shadow_index.par_iter())
+                .map(|(p, &s)| PlaneView::new(p, scene, origin, planes_total, s)),
+        );
     }
 
     /// The contribution C of a hit (SPEC section 2): power Tr_cam(t) Tr(x, y') V(x, y') / (N D),

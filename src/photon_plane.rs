@@ -76,8 +76,14 @@ pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 6]) -> PhotonPlan
 
 /// Samples `n` planes, plane `i` from its own generator: the set depends on the seed only.
 pub fn sample_planes(scene: &Scene, n: usize, seed: u64) -> Vec<PhotonPlane> {
+    sample_plane_range(scene, seed, 0..n)
+}
+
+/// Planes `range` of the set that [`sample_planes`] makes (so a large set can be made and
+/// consumed in pieces).
+pub fn sample_plane_range(scene: &Scene, seed: u64, range: std::ops::Range<usize>) -> Vec<PhotonPlane> {
     let lights = light_distribution(scene);
-    (0..n as u64)
+    (range.start as u64..range.end as u64)
         .into_par_iter()
         .map(|i| {
             let mut rng = rng_for(seed, PLANE_STREAM, i);

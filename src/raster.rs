@@ -79,29 +79,43 @@ pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> 
 
 impl ScreenRaster {
     pub fn build(camera: &Camera, planes: &[PhotonPlane], medium: &Medium) -> Self {
-        let polygons: Vec<Polygon<DVec2>> = planes.par_iter().map(|p| screen_polygon(camera, p, medium)).collect();
+        let mut raster = ScreenRaster::empty(camera);
+        raster.push_planes(camera, planes, medium);
+        raster
+    }
+
+    /// A raster with no planes yet, for [`ScreenRaster::push_planes`].
+    pub fn empty(camera: &Camera) -> Self {
         let band_count = camera.height.div_ceil(BAND_ROWS) as usize;
-        let mut bands = vec![Vec::new(); band_count];
-        let mut vertices = Vec::new();
-        let mut offsets = Vec::with_capacity(planes.len() + 1);
-        offsets.push(0u32);
-        for (i, poly) in polygons.iter().enumerate() {
+        ScreenRaster {
+            width: camera.width,
+            height: camera.height,
+            vertices: Vec::new(),
+            offsets: vec![0],
+            bands: vec![Vec::new(); band_count],
+        }
+    }
+
+    /// Projects, clips and bins the next planes of the set (their indices continue the count).
+    pub fn push_planes(&mut self, camera: &Camera, planes: &[PhotonPlane], medium: &Medium) {
+        let polygons: Vec<Polygon<DVec2>> = planes.par_iter().map(|p| screen_polygon(camera, p, medium)).collect();
+        let band_count = self.bands.len() as u32;
+        for poly in &polygons {
+            let index = (self.offsets.len() - 1) as u32;
             if poly.len >= 3 {
                 let (lo, hi) = poly
                     .points()
                     .iter()
                     .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v.y), hi.max(v.y)));
                 let first = ((lo - SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS) as usize;
-                let last =
-                    ((hi + SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS).min(band_count as u32 - 1) as usize;
-                for band in bands.iter_mut().take(last + 1).skip(first) {
-                    band.push(i as u32);
+                let last = ((hi + SPAN_MARGIN as f64).floor().max(0.0) as u32 / BAND_ROWS).min(band_count - 1) as usize;
+                for band in self.bands.iter_mut().take(last + 1).skip(first) {
+                    band.push(index);
                 }
-                vertices.extend(poly.points().iter().map(|v| v.as_vec2()));
+                self.vertices.extend(poly.points().iter().map(|v| v.as_vec2()));
             }
-            offsets.push(vertices.len() as u32);
+            self.offsets.push(self.vertices.len() as u32);
         }
-        ScreenRaster { width: camera.width, height: camera.height, vertices, offsets, bands }
     }
 
     /// Bytes held, for the memory report.

@@ -7,7 +7,7 @@
 use crate::bvh::PlaneBvh;
 use crate::film::Film;
 use crate::gather::{CameraRay, GatherContext};
-use crate::photon_plane::{PhotonPlane, sample_planes};
+use crate::photon_plane::sample_plane_range;
 use crate::raster::{GatherStats, ScreenRaster};
 use crate::sampling::pixel_jitter;
 use crate::scene::Scene;
@@ -81,9 +81,12 @@ pub fn camera_rays(scene: &Scene, seed: u64, pass: u32, pixel_center: bool) -> P
     PassRays { rays, emission }
 }
 
+/// Planes made in pieces of this many, so that the sampled planes never all exist at once:
+/// only their prepared views and screen polygons are kept.
+const PLANE_CHUNK: usize = 16_384;
+
 /// Planes sampled and prepared for gathering from the camera.
 pub struct PreparedPlanes {
-    pub planes: Vec<PhotonPlane>,
     pub context: GatherContext,
     pub raster: Option<ScreenRaster>,
     pub bvh: Option<PlaneBvh>,
@@ -95,17 +98,30 @@ pub struct PreparedPlanes {
 
 impl PreparedPlanes {
     pub fn new(scene: &Scene, planes: usize, seed: u64, accelerator: Accelerator) -> Self {
-        let start = Instant::now();
-        let planes = sample_planes(scene, planes, seed);
-        let seconds_sampling = start.elapsed().as_secs_f64();
-        let start = Instant::now();
-        let context = GatherContext::new(scene, &planes, scene.camera.position);
-        let raster =
-            (accelerator == Accelerator::Raster).then(|| ScreenRaster::build(&scene.camera, &planes, &scene.medium));
-        let bvh =
-            (accelerator == Accelerator::Bvh).then(|| PlaneBvh::build(&planes, &scene.medium, scene.camera.position));
-        let seconds_build = start.elapsed().as_secs_f64();
-        PreparedPlanes { planes, context, raster, bvh, accelerator, seconds_sampling, seconds_build }
+        let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
+        let origin = scene.camera.position;
+        let mut context = GatherContext::empty(scene, origin);
+        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
+        // The BVH is built over the whole set at once; it keeps the planes while it does.
+        let mut all = Vec::new();
+        for start in (0..planes).step_by(PLANE_CHUNK) {
+            let t = Instant::now();
+            let chunk = sample_plane_range(scene, seed, start..(start + PLANE_CHUNK).min(planes));
+            seconds_sampling += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            context.push_planes(scene, &chunk, planes);
+            if let Some(r) = &mut raster {
+                r.push_planes(&scene.camera, &chunk, &scene.medium);
+            }
+            seconds_build += t.elapsed().as_secs_f64();
+            if accelerator == Accelerator::Bvh {
+                all.extend(chunk);
+            }
+        }
+        let t = Instant::now();
+        let bvh = (accelerator == Accelerator::Bvh).then(|| PlaneBvh::build(&all, &scene.medium, origin));
+        seconds_build += t.elapsed().as_secs_f64();
+        PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build }
     }
 
     /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`.
