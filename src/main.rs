@@ -43,6 +43,29 @@ enum Command {
     ///
     /// Writes table.md, table.json, panel.png and error_vs_time.png (and .svg) to --out.
     Table(TableArgs),
+    /// Measure how render time grows with the number of ray-plane hits.
+    ///
+    /// Renders over a grid of plane counts and resolutions and writes scaling.md, scaling.json
+    /// and seconds_vs_hits.png (and .svg) to --out.
+    Scaling(ScalingArgs),
+}
+
+#[derive(Args)]
+struct ScalingArgs {
+    scene: PathBuf,
+    #[arg(long, short, default_value = "smis-exact")]
+    estimator: Estimator,
+    /// Plane counts, comma separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [10_000u64, 40_000, 160_000, 640_000])]
+    planes: Vec<u64>,
+    /// Resolutions WxH, comma separated.
+    #[arg(long, value_delimiter = ',', value_parser = parse_resolution, default_values = ["160x90", "320x180", "640x360", "1280x720"])]
+    resolutions: Vec<(u32, u32)>,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "scaling")]
+    out: PathBuf,
+    #[command(flatten)]
+    common: CommonArgs,
 }
 
 #[derive(Args)]
@@ -200,6 +223,7 @@ fn main() -> ExitCode {
         Command::Reference(a) => cmd_reference(a),
         Command::Compare(a) => cmd_compare(a),
         Command::Table(a) => cmd_table(a),
+        Command::Scaling(a) => cmd_scaling(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -373,5 +397,27 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     };
     let table = run_table(&scene, &reference, &opts)?;
     say!("{}", table);
+    Ok(())
+}
+
+fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
+    let scene = load_scene(&a.scene, &a.common)?;
+    for &n in &a.planes {
+        check_planes(n).map_err(|m| input(anyhow!("--planes: {m}")))?;
+    }
+    for &(w, h) in &a.resolutions {
+        fogplanes::scene::check_resolution([w, h]).map_err(|m| input(anyhow!("--resolutions: {m}")))?;
+        for &n in &a.planes {
+            fogplanes::render::check_memory(w, h, n).map_err(|m| input(anyhow!(m)))?;
+        }
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
+        .map_err(input)?;
+    check_writable(&a.out.join("seconds_vs_hits.png")).map_err(input)?;
+    let weighting = Weighting::new(a.estimator, None).map_err(|m| input(anyhow!(m)))?;
+    let planes: Vec<usize> = a.planes.iter().map(|&n| n as usize).collect();
+    let md = fogplanes::report::run_scaling(&scene, weighting, &planes, &a.resolutions, &a.out, a.common.quiet)?;
+    say!("{md}");
     Ok(())
 }

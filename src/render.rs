@@ -208,6 +208,11 @@ pub struct RenderStats {
     pub seconds_rays: f64,
     pub seconds_gather: f64,
     pub seconds_total: f64,
+    /// CPU seconds (all threads) of the whole render and of gathering, where the OS tells.
+    pub cpu_seconds_total: Option<f64>,
+    pub cpu_seconds_gather: Option<f64>,
+    /// Peak resident memory of the process so far, where the OS tells.
+    pub peak_memory_bytes: Option<u64>,
 }
 
 impl RenderStats {
@@ -221,8 +226,12 @@ impl RenderStats {
     pub fn gather_ns_per_hit(&self) -> f64 {
         1e9 * self.seconds_gather / self.hits.max(1) as f64
     }
+    /// Nanoseconds of CPU time (all threads) per hit, for the whole render.
+    pub fn cpu_ns_per_hit(&self) -> Option<f64> {
+        self.cpu_seconds_total.map(|c| 1e9 * c / self.hits.max(1) as f64)
+    }
     pub fn summary(&self) -> String {
-        format!(
+        let mut s = format!(
             "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit wall), total {:.3} s",
             self.estimator,
             self.planes,
@@ -233,7 +242,14 @@ impl RenderStats {
             self.seconds_gather,
             self.gather_ns_per_hit(),
             self.seconds_total
-        )
+        );
+        if let Some(ns) = self.cpu_ns_per_hit() {
+            s += &format!(", {ns:.2} ns/hit CPU all included");
+        }
+        if let Some(b) = self.peak_memory_bytes {
+            s += &format!(", peak memory {:.0} MB", b as f64 / 1e6);
+        }
+        s
     }
 }
 
@@ -252,7 +268,7 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
 /// Renders the scene: direct emission plus the photon-plane estimate of single scattering,
 /// averaged over `spp` passes.
 pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film, RenderStats) {
-    let start = Instant::now();
+    let (start, cpu_start) = (Instant::now(), cpu_seconds());
     let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.accelerator);
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let mut stats = RenderStats {
@@ -266,11 +282,14 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film,
         let t = Instant::now();
         let pass_rays = camera_rays(scene, opts.seed, pass, opts.pixel_center);
         stats.seconds_rays += t.elapsed().as_secs_f64();
-        let t = Instant::now();
+        let (t, cpu) = (Instant::now(), cpu_seconds());
         // Scattering first, emission after: every accelerator then sums in the same order.
         let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
         let s = prepared.gather(opts.weighting, &pass_rays.rays, &mut sums, progress);
         stats.seconds_gather += t.elapsed().as_secs_f64();
+        if let (Some(a), Some(b)) = (cpu, cpu_seconds()) {
+            *stats.cpu_seconds_gather.get_or_insert(0.0) += b - a;
+        }
         stats.hits += s.hits;
         stats.tests += s.tests;
         stats.rays += pass_rays.rays.len() as u64;
@@ -281,5 +300,25 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film,
     let inv = 1.0 / opts.spp as f32;
     film.pixels.iter_mut().for_each(|p| *p *= inv);
     stats.seconds_total = start.elapsed().as_secs_f64();
+    stats.cpu_seconds_total = cpu_start.zip(cpu_seconds()).map(|(a, b)| b - a);
+    stats.peak_memory_bytes = peak_memory_bytes();
     (film, stats)
+}
+
+/// CPU seconds used by this process so far (user + system, all threads), from /proc on Linux.
+pub fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are the 12th and 13th.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0) // USER_HZ is 100 on Linux
+}
+
+/// Peak resident memory of this process (VmHWM), from /proc on Linux.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
 }

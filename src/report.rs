@@ -410,3 +410,149 @@ fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, p
     root.present().map_err(plot_error)?;
     Ok(())
 }
+
+/// One render of the scaling study.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScalingPoint {
+    pub planes: usize,
+    pub width: u32,
+    pub height: u32,
+    pub hits: u64,
+    pub seconds_total: f64,
+    pub seconds_gather: f64,
+    pub cpu_ns_per_hit: Option<f64>,
+    pub peak_memory_bytes: Option<u64>,
+}
+
+/// Renders over a grid of plane counts and resolutions, and writes scaling.json, scaling.md and
+/// seconds_vs_hits.png/.svg (log-log, one line per resolution): whether time grows linearly
+/// with the number of hits.
+pub fn run_scaling(
+    scene: &Scene,
+    weighting: Weighting,
+    planes: &[usize],
+    resolutions: &[(u32, u32)],
+    out: &std::path::Path,
+    quiet: bool,
+) -> Result<String> {
+    use crate::render::{RenderOptions, render};
+    let mut points = Vec::new();
+    for &(w, h) in resolutions {
+        let s = scene.with_resolution(w, h).map_err(anyhow::Error::msg)?;
+        for &n in planes {
+            let opts = RenderOptions {
+                planes: n,
+                weighting,
+                seed: 1,
+                spp: 1,
+                pixel_center: false,
+                accelerator: Accelerator::Raster,
+            };
+            let (_, st) = render(&s, &opts, &|| {});
+            if !quiet {
+                eprintln!("{w}x{h}, {n} planes: {}", st.summary());
+            }
+            points.push(ScalingPoint {
+                planes: n,
+                width: w,
+                height: h,
+                hits: st.hits,
+                seconds_total: st.seconds_total,
+                seconds_gather: st.seconds_gather,
+                cpu_ns_per_hit: st.cpu_ns_per_hit(),
+                peak_memory_bytes: st.peak_memory_bytes,
+            });
+        }
+    }
+    let mut md = format!(
+        "{} with {}, jittered rays, seed 1, {} threads\n\n| resolution | planes | hits | total s | gather s | ns/hit wall | ns/hit CPU |\n|---|---:|---:|---:|---:|---:|---:|\n",
+        scene.name,
+        weighting,
+        rayon::current_num_threads()
+    );
+    for p in &points {
+        md += &format!(
+            "| {}x{} | {} | {} | {:.3} | {:.3} | {:.2} | {} |\n",
+            p.width,
+            p.height,
+            p.planes,
+            p.hits,
+            p.seconds_total,
+            p.seconds_gather,
+            1e9 * p.seconds_total / p.hits.max(1) as f64,
+            p.cpu_ns_per_hit.map_or("-".into(), |v| format!("{v:.2}"))
+        );
+    }
+    write_file_atomically(&out.join("scaling.md"), md.as_bytes())?;
+    let json = serde_json::to_string_pretty(&points).context("cannot format JSON")?;
+    write_file_atomically(&out.join("scaling.json"), json.as_bytes())?;
+    register_fonts();
+    let (w, h) = (900u32, 600u32);
+    let mut buffer = vec![255u8; (w * h * 3) as usize];
+    draw_scaling(&scene.name, &points, BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area())?;
+    let img = image::RgbImage::from_raw(w, h, buffer).context("plot buffer size")?;
+    save_rgb8_png(&img, &out.join("seconds_vs_hits.png"))?;
+    let mut svg = String::new();
+    draw_scaling(&scene.name, &points, SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area())?;
+    write_file_atomically(&out.join("seconds_vs_hits.svg"), svg.as_bytes())?;
+    Ok(md)
+}
+
+fn draw_scaling<DB: DrawingBackend>(
+    name: &str,
+    points: &[ScalingPoint],
+    root: DrawingArea<DB, plotters::coord::Shift>,
+) -> Result<()> {
+    root.fill(&WHITE).map_err(plot_error)?;
+    let hits = |p: &ScalingPoint| p.hits.max(1) as f64;
+    let (h0, h1) = points.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(hits(p)), b.max(hits(p))));
+    let (s0, s1) =
+        points.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.seconds_total), b.max(p.seconds_total)));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("{name}: render time against ray-plane hits"), ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((h0 / 1.5..h1 * 1.5).log_scale(), (s0 / 1.5..s1 * 1.5).log_scale())
+        .map_err(plot_error)?;
+    chart
+        .configure_mesh()
+        .x_desc("hits")
+        .y_desc("seconds (whole render)")
+        .x_label_formatter(&|v| format!("{v:.0e}"))
+        .y_label_formatter(&|v| format!("{v:.3}").trim_end_matches('0').trim_end_matches('.').to_string())
+        .draw()
+        .map_err(plot_error)?;
+    // Slope 1 through the largest render: where a linear cost would put every point.
+    if let Some(big) = points.iter().max_by_key(|p| p.hits) {
+        let per_hit = big.seconds_total / hits(big);
+        chart
+            .draw_series(LineSeries::new([(h0, h0 * per_hit), (h1, h1 * per_hit)], BLACK.mix(0.5).stroke_width(1)))
+            .map_err(plot_error)?
+            .label("time proportional to hits")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+    }
+    let mut resolutions: Vec<(u32, u32)> = points.iter().map(|p| (p.width, p.height)).collect();
+    resolutions.dedup();
+    for (k, &(w, h)) in resolutions.iter().enumerate() {
+        let colour = Palette99::pick(k).to_rgba();
+        let series: Vec<(f64, f64)> =
+            points.iter().filter(|p| (p.width, p.height) == (w, h)).map(|p| (hits(p), p.seconds_total)).collect();
+        chart
+            .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
+            .map_err(plot_error)?
+            .label(format!("{w}x{h}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 3, colour.filled()))).map_err(plot_error)?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()
+        .map_err(plot_error)?;
+    root.present().map_err(plot_error)?;
+    Ok(())
+}
