@@ -43,6 +43,8 @@ fn gathering(c: &mut Criterion) {
         prepared.gather(Weighting::new(Estimator::Unweighted, None).unwrap(), &pass.rays, &mut sums, &|| {}).hits;
     let mut g = c.benchmark_group("gather 160x90, 40960 planes");
     g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
+    let raster = prepared.raster.as_ref().unwrap();
+    g.bench_function("intersections only", |b| b.iter(|| raster.count_hits(&prepared.context, black_box(&pass.rays))));
     let mut weightings: Vec<Weighting> = Estimator::ALL.iter().map(|&e| Weighting::new(e, None).unwrap()).collect();
     weightings.push(Weighting::new(Estimator::SmisExact, Some(4)).unwrap());
     for w in weightings {

@@ -286,37 +286,83 @@ impl GatherContext {
     }
 }
 
-/// The other lights whose panel may cross the plane's polygon (a bit per light), so that the
-/// per-hit visibility test runs only where it can matter. Conservative: a light is kept unless
-/// its rectangle lies strictly on one side of the plane, or the polygon strictly on one side of
-/// the light.
+/// The other lights whose panel crosses the plane's polygon (a bit per light), so that the
+/// per-hit visibility test runs only where it can matter. The polygon meets the light's plane
+/// in a segment (if it straddles it at all); the light can block only if that segment crosses
+/// the rectangle, which is tested by clipping it to the rectangle grown by a small margin.
 pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
     let poly = plane.polygon_in_box(&scene.medium, 0.0);
     if poly.len < 3 {
         return 0;
     }
-    let normal = plane.normal();
     let eps = 1e-9 * scene.medium.diagonal();
+    let margin = 1e-6 * scene.medium.diagonal();
     let mut mask = 0u64;
     for (k, light) in scene.lights.iter().enumerate() {
-        if k == plane.light || k >= 64 {
+        if k == plane.light {
             continue;
         }
-        let sides = |values: &mut dyn Iterator<Item = f64>| {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for v in values {
-                lo = lo.min(v);
-                hi = hi.max(v);
+        let pts = poly.points();
+        let dist: Vec<f64> = pts.iter().map(|&v| (v - light.corner).dot(light.n)).collect();
+        if dist.iter().all(|&d| d > eps) || dist.iter().all(|&d| d < -eps) {
+            continue;
+        }
+        if dist.iter().all(|d| d.abs() <= eps) {
+            mask |= 1 << k; // in the light's own plane: leave it to the per-hit test
+            continue;
+        }
+        // Where the polygon's boundary meets the light's plane, in the light's local frame.
+        let mut crossing = Vec::with_capacity(4);
+        for a in 0..pts.len() {
+            let b = (a + 1) % pts.len();
+            let (da, db) = (dist[a], dist[b]);
+            if da.abs() <= eps {
+                crossing.push(light.local(pts[a]));
+            } else if (da < 0.0) != (db < 0.0) && db.abs() > eps {
+                crossing.push(light.local(pts[a] + (pts[b] - pts[a]) * (da / (da - db))));
             }
-            lo <= eps && hi >= -eps
-        };
-        let light_straddles_plane = sides(&mut light.corners().iter().map(|&c| (c - plane.origin).dot(normal)));
-        let plane_straddles_light = sides(&mut poly.points().iter().map(|&v| (v - light.corner).dot(light.n)));
-        if light_straddles_plane && plane_straddles_light {
+        }
+        if segment_meets_rectangle(&crossing, light.width, light.height, margin) {
             mask |= 1 << k;
         }
     }
     mask
+}
+
+/// Whether the segment spanned by collinear points meets [-m, w + m] x [-m, h + m]
+/// (Liang-Barsky clipping of the segment between its two extreme points).
+fn segment_meets_rectangle(points: &[(f64, f64)], w: f64, h: f64, m: f64) -> bool {
+    let Some(&first) = points.first() else {
+        return false;
+    };
+    // The extreme points along the line through the crossing points.
+    let far = points.iter().copied().max_by(|a, b| {
+        let da = (a.0 - first.0).hypot(a.1 - first.1);
+        da.total_cmp(&(b.0 - first.0).hypot(b.1 - first.1))
+    });
+    let a = far.unwrap_or(first);
+    let b = points
+        .iter()
+        .copied()
+        .max_by(|p, q| (p.0 - a.0).hypot(p.1 - a.1).total_cmp(&(q.0 - a.0).hypot(q.1 - a.1)))
+        .unwrap_or(a);
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [(-dx, a.0 + m), (dx, w + m - a.0), (-dy, a.1 + m), (dy, h + m - a.1)] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return false;
+            }
+        } else {
+            let r = q / p;
+            if p < 0.0 {
+                t0 = t0.max(r);
+            } else {
+                t1 = t1.min(r);
+            }
+        }
+    }
+    t0 <= t1
 }
 
 #[cfg(test)]
@@ -336,6 +382,50 @@ mod tests {
         assert_eq!(exp_f32(0.0), 1.0);
         assert_eq!(exp_f32(-100.0), 0.0);
         assert_eq!(exp_f32(f32::NEG_INFINITY), 0.0);
+    }
+
+    /// Culling occluders per plane never drops one that blocks: the same images as testing
+    /// every other light at every hit.
+    #[test]
+    fn occluder_culling_keeps_every_blocking_light() {
+        for file in ["media_scenes/six_lights.toml", "media_scenes/hard/facing_lights_close.toml"] {
+            let scene = Scene::load(std::path::Path::new(file)).unwrap();
+            let planes = sample_planes(&scene, 4000, 8);
+            let o = scene.camera.position;
+            let culled = GatherContext::new(&scene, &planes, o);
+            let mut all = GatherContext::new(&scene, &planes, o);
+            all.shadowed.clear();
+            for (p, v) in planes.iter().zip(all.views.iter_mut()) {
+                v.shadow = all.shadowed.len() as u32;
+                let every_other = ((1u64 << scene.lights.len()) - 1) & !(1 << p.light);
+                all.shadowed.push(ShadowedPlane {
+                    origin: (p.origin - o).as_vec3(),
+                    chord: p.chord.as_vec3(),
+                    direction: p.direction.as_vec3(),
+                    occluders: every_other,
+                });
+            }
+            if file.contains("six_lights") {
+                assert!(culled.shadowed.len() < planes.len() / 4, "{file}: culling should drop most planes");
+            }
+            let w = crate::weights::Unweighted;
+            for j in 0..40 {
+                for i in 0..40 {
+                    let (x, y) = (
+                        scene.camera.width as f64 * (i as f64 + 0.5) / 40.0,
+                        scene.camera.height as f64 * (j as f64 + 0.5) / 40.0,
+                    );
+                    let we = scene.camera.direction(x, y).normalize();
+                    let Some((t0, t1)) = scene.camera_segment(o, we).0 else { continue };
+                    let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
+                    assert_eq!(
+                        culled.gather_brute_force(&w, &ray),
+                        all.gather_brute_force(&w, &ray),
+                        "{file} pixel ({x}, {y})"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -174,13 +174,31 @@ impl ScreenRaster {
         out: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
     ) -> GatherStats {
+        self.gather_all::<D, true>(ctx, weights, rays, out, on_band)
+    }
+
+    /// Finds every hit without weighting it (the traversal and intersection work alone, for
+    /// measuring its share of the gathering time).
+    pub fn count_hits(&self, ctx: &GatherContext, rays: &[CameraRay]) -> GatherStats {
+        let mut out = vec![Vec3::ZERO; rays.len()];
+        self.gather_all::<crate::weights::Unweighted, false>(ctx, &crate::weights::Unweighted, rays, &mut out, &|| {})
+    }
+
+    fn gather_all<D: Denominator, const CONTRIBUTE: bool>(
+        &self,
+        ctx: &GatherContext,
+        weights: &D,
+        rays: &[CameraRay],
+        out: &mut [Vec3],
+        on_band: &(dyn Fn() + Sync),
+    ) -> GatherStats {
         let w = self.width as usize;
         let band_pixels = BAND_ROWS as usize * w;
         out.par_chunks_mut(band_pixels)
             .zip(rays.par_chunks(band_pixels))
             .enumerate()
             .map(|(band, (sums, rays))| {
-                let stats = self.gather_band(ctx, weights, band, rays, sums);
+                let stats = self.gather_band::<D, CONTRIBUTE>(ctx, weights, band, rays, sums);
                 on_band();
                 stats
             })
@@ -190,7 +208,7 @@ impl ScreenRaster {
             })
     }
 
-    fn gather_band<D: Denominator>(
+    fn gather_band<D: Denominator, const CONTRIBUTE: bool>(
         &self,
         ctx: &GatherContext,
         weights: &D,
@@ -214,13 +232,15 @@ impl ScreenRaster {
                 let span = base + first as usize..base + last as usize + 1;
                 stats.tests += span.len() as u64;
                 if view.shadow == u32::MAX {
-                    stats.hits += gather_span(ctx, weights, view, &soa, &mut acc, span);
+                    stats.hits += gather_span::<D, CONTRIBUTE>(ctx, weights, view, &soa, &mut acc, span);
                 } else {
                     // Planes that another panel may shadow: the general per-hit path.
                     for k in span {
                         if let Some(hit) = view.hit(&rays[k]) {
                             stats.hits += 1;
-                            acc.add(k, ctx.contribution(weights, view, &rays[k], &hit));
+                            if CONTRIBUTE {
+                                acc.add(k, ctx.contribution(weights, view, &rays[k], &hit));
+                            }
                         }
                     }
                 }
@@ -279,7 +299,7 @@ impl BandSums {
 /// copied into a local first: the compiler then knows the stores to the sums cannot change
 /// them. Returns the hit count.
 #[inline(always)]
-fn gather_span<D: Denominator>(
+fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
     ctx: &GatherContext,
     weights: &D,
     view: &PlaneView,
@@ -297,16 +317,16 @@ fn gather_span<D: Denominator>(
         // SAFETY: the CPU supports AVX2 and FMA, checked at run time.
         return unsafe {
             if ext.grey {
-                span_kernel_avx2::<D, true>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+                span_kernel_avx2::<D, true, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
             } else {
-                span_kernel_avx2::<D, false>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+                span_kernel_avx2::<D, false, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
             }
         };
     }
     if ext.grey {
-        span_kernel_slices::<D, true>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+        span_kernel_slices::<D, true, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
     } else {
-        span_kernel_slices::<D, false>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
+        span_kernel_slices::<D, false, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
     }
 }
 
@@ -329,7 +349,7 @@ fn has_avx2() -> bool {
 #[target_feature(enable = "avx2,fma")]
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
-fn span_kernel_avx2<D: Denominator, const GREY: bool>(
+fn span_kernel_avx2<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     weights: &D,
     view: &PlaneView,
     sigma_t: Vec3,
@@ -339,7 +359,7 @@ fn span_kernel_avx2<D: Denominator, const GREY: bool>(
     sg: &mut [f32],
     sb: &mut [f32],
 ) -> u64 {
-    span_kernel_body::<D, GREY>(weights, view, sigma_t, xyz, t, sr, sg, sb)
+    span_kernel_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, xyz, t, sr, sg, sb)
 }
 
 /// The kernel proper. Not inlined on purpose: as separate slice arguments the sums and the rays
@@ -347,7 +367,7 @@ fn span_kernel_avx2<D: Denominator, const GREY: bool>(
 /// run-time overlap checks that would otherwise exceed the vectoriser's budget.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
-fn span_kernel_slices<D: Denominator, const GREY: bool>(
+fn span_kernel_slices<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     weights: &D,
     view: &PlaneView,
     sigma_t: Vec3,
@@ -357,12 +377,12 @@ fn span_kernel_slices<D: Denominator, const GREY: bool>(
     sg: &mut [f32],
     sb: &mut [f32],
 ) -> u64 {
-    span_kernel_body::<D, GREY>(weights, view, sigma_t, xyz, t, sr, sg, sb)
+    span_kernel_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, xyz, t, sr, sg, sb)
 }
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn span_kernel_body<D: Denominator, const GREY: bool>(
+fn span_kernel_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     weights: &D,
     view: &PlaneView,
     sigma_t: Vec3,
@@ -386,6 +406,10 @@ fn span_kernel_body<D: Denominator, const GREY: bool>(
         let a = (x * a_axis.x + y * a_axis.y + z * a_axis.z) * inv;
         let r = (x * r_axis.x + y * r_axis.y + z * r_axis.z) * inv;
         let hit = (det != 0.0) & (t >= t0s[k]) & (t <= t1s[k]) & (a >= 0.0) & (a <= width) & (r >= 0.0);
+        hits += hit as u32;
+        if !CONTRIBUTE {
+            continue;
+        }
         let det_perp = x * perp.x + y * perp.y + z * perp.z;
         let d = weights.denominator(&frame, &HitLocal { det, det_perp, a });
         let length = (t - t0s[k]) + r;
@@ -403,7 +427,6 @@ fn span_kernel_body<D: Denominator, const GREY: bool>(
         sr[k] += if keep { cr } else { 0.0 };
         sg[k] += if keep { cg } else { 0.0 };
         sb[k] += if keep { cb } else { 0.0 };
-        hits += hit as u32;
     }
     hits as u64
 }

@@ -14,6 +14,8 @@ use std::path::Path;
 
 /// Scene files larger than this are refused before they are read.
 pub const MAX_SCENE_FILE_BYTES: u64 = 1 << 20;
+/// The most lights a scene may have (occluders are tracked as bits of a u64 per plane).
+pub const MAX_LIGHTS: usize = 64;
 /// The largest image side accepted.
 pub const MAX_RESOLUTION_SIDE: u32 = 1 << 15;
 
@@ -242,6 +244,12 @@ impl Scene {
         // Lights.
         if desc.lights.is_empty() {
             return Err(err("light".into(), "the scene needs at least one [[light]]".into()));
+        }
+        if desc.lights.len() > MAX_LIGHTS {
+            return Err(err(
+                "light".into(),
+                format!("at most {MAX_LIGHTS} lights are supported, got {}", desc.lights.len()),
+            ));
         }
         let mut lights = Vec::with_capacity(desc.lights.len());
         for (i, l) in desc.lights.iter().enumerate() {
