@@ -87,15 +87,21 @@ pub trait Real: Copy + PartialOrd + std::ops::Sub<Output = Self> + std::ops::Mul
     fn min_num(self, other: Self) -> Self;
 }
 
+/// The gathering path (f32) takes the cheaper compare-and-select, one vector instruction: it
+/// returns `other` when either is NaN. The NaN case (0 * inf, a vertex exactly on an edge with
+/// a chord exactly along an axis) has probability zero; [`chord_extent`] then clamps NaN to 0,
+/// so a width is never NaN.
 impl Real for f32 {
     const ZERO: f32 = 0.0;
+    #[inline(always)]
     fn min_num(self, other: f32) -> f32 {
-        self.min(other)
+        if self < other { self } else { other }
     }
 }
 
 impl Real for f64 {
     const ZERO: f64 = 0.0;
+    #[inline(always)]
     fn min_num(self, other: f64) -> f64 {
         self.min(other)
     }

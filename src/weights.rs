@@ -143,12 +143,13 @@ impl PlaneFrame {
 
     /// Light-local coordinates of the light vertex y' at chord parameter `a`, kept inside.
     #[inline(always)]
-    #[allow(clippy::manual_clamp)]
     pub fn vertex(&self, a: f32) -> (f32, f32) {
-        // max/min rather than clamp: no panic path, so loops over pixels vectorise.
-        let p = (self.p0 + a * self.cos_a).max(0.0).min(self.light_w);
-        let q = (self.q0 + a * self.sin_a).max(0.0).min(self.light_h);
-        (p, q)
+        // Compare-and-select rather than clamp: no panic or NaN path, so loops vectorise.
+        let inside = |x: f32, hi: f32| {
+            let x = if x > 0.0 { x } else { 0.0 };
+            if x < hi { x } else { hi }
+        };
+        (inside(self.p0 + a * self.cos_a, self.light_w), inside(self.q0 + a * self.sin_a, self.light_h))
     }
 }
 
