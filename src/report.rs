@@ -7,6 +7,7 @@
 
 use crate::film::{Film, save_rgb8_png, write_file_atomically};
 use crate::metrics::{ErrorMetrics, compare};
+use crate::raster::GatherStats;
 use crate::render::{Accelerator, PreparedPlanes, camera_rays};
 use crate::scene::Scene;
 use crate::weights::{Estimator, Weighting};
@@ -37,6 +38,9 @@ pub struct Row {
     pub estimator: String,
     pub planes: usize,
     pub hits: u64,
+    /// Ray-plane tests per hit, and wall nanoseconds of gathering per hit.
+    pub tests_per_hit: f64,
+    pub gather_ns_per_hit: f64,
     pub gather_seconds: f64,
     pub total_seconds: f64,
     pub metrics: ErrorMetrics,
@@ -96,7 +100,7 @@ fn measure(
     planes: usize,
     seed: u64,
     pixel_center: bool,
-) -> (Vec<(Weighting, Film, u64, f64)>, f64) {
+) -> (Vec<(Weighting, Film, GatherStats, f64)>, f64) {
     let start = Instant::now();
     let prepared = PreparedPlanes::new(scene, planes, seed, Accelerator::Raster);
     let pass = camera_rays(scene, seed, 0, pixel_center);
@@ -112,7 +116,7 @@ fn measure(
             for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass.emission) {
                 *f = *s + *e;
             }
-            (w, film, stats.hits, seconds)
+            (w, film, stats, seconds)
         })
         .collect();
     (out, shared)
@@ -129,13 +133,15 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
     log(format!("table: {} estimators, {} planes", weightings.len(), opts.planes));
     let (results, shared) = measure(scene, &weightings, opts.planes, opts.seed, opts.pixel_center);
     let mut rows = Vec::new();
-    for (w, film, hits, gather) in &results {
+    for (w, film, stats, gather) in &results {
         let m = compare(film, reference)?;
         let total = shared + gather;
         rows.push(Row {
             estimator: w.label(),
             planes: opts.planes,
-            hits: *hits,
+            hits: stats.hits,
+            tests_per_hit: stats.tests as f64 / stats.hits.max(1) as f64,
+            gather_ns_per_hit: 1e9 * gather / stats.hits.max(1) as f64,
             gather_seconds: *gather,
             total_seconds: total,
             metrics: m,
@@ -217,13 +223,15 @@ impl Table {
             self.reference,
             self.shared_seconds
         );
-        s += "| estimator | planes | gather s | total s | SMAPE x10^2 | MSE x10^4 | 1/(MSE s) gather | 1/(MSE s) total | MSE vs unweighted | gather time vs unweighted | efficiency vs unweighted (gather / total) |\n";
-        s += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        s += "| estimator | planes | hits | ns/hit | gather s | total s | SMAPE x10^2 | MSE x10^4 | 1/(MSE s) gather | 1/(MSE s) total | MSE vs unweighted | gather time vs unweighted | efficiency vs unweighted (gather / total) |\n";
+        s += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
         for r in &self.rows {
             s += &format!(
-                "| {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4e} | {:.4e} | {:.3} | {:.3} | {:.2} / {:.2} |\n",
+                "| {} | {} | {:.3e} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4e} | {:.4e} | {:.3} | {:.3} | {:.2} / {:.2} |\n",
                 r.estimator,
                 r.planes,
+                r.hits as f64,
+                r.gather_ns_per_hit,
                 r.gather_seconds,
                 r.total_seconds,
                 r.smape_e2,
