@@ -13,6 +13,7 @@ use crate::scene::Scene;
 use crate::weights::{Estimator, Weighting};
 use anyhow::{Context, Result};
 use glam::Vec3;
+use plotters::coord::ranged1d::Ranged;
 use plotters::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -348,15 +349,46 @@ fn plot_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 
 /// MSE against time, log-log, one line per estimator, as PNG and SVG.
 pub fn plot_error_vs_time(table: &Table, out: &std::path::Path) -> Result<()> {
+    save_plot(out, "error_vs_time", |a| draw_error_vs_time(table, a), |a| draw_error_vs_time(table, a))
+}
+
+/// A plot as `<stem>.png` and `<stem>.svg` in `out`, each written whole. The same drawing
+/// function is passed twice, once per backend.
+fn save_plot(
+    out: &std::path::Path,
+    stem: &str,
+    png: impl FnOnce(DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
+    svg: impl FnOnce(DrawingArea<SVGBackend, plotters::coord::Shift>) -> Result<()>,
+) -> Result<()> {
     register_fonts();
     let (w, h) = (900u32, 600u32);
     let mut buffer = vec![255u8; (w * h * 3) as usize];
-    draw_error_vs_time(table, BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area())?;
+    png(BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area())?;
     let img = image::RgbImage::from_raw(w, h, buffer).context("plot buffer size")?;
-    save_rgb8_png(&img, &out.join("error_vs_time.png"))?;
-    let mut svg = String::new();
-    draw_error_vs_time(table, SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area())?;
-    write_file_atomically(&out.join("error_vs_time.svg"), svg.as_bytes())
+    save_rgb8_png(&img, &out.join(format!("{stem}.png")))?;
+    let mut text = String::new();
+    svg(SVGBackend::with_string(&mut text, (w, h)).into_drawing_area())?;
+    write_file_atomically(&out.join(format!("{stem}.svg")), text.as_bytes())
+}
+
+/// One series as a line with a dot at each point, labelled in the legend.
+fn draw_series<DB: DrawingBackend, X, Y>(
+    chart: &mut ChartContext<DB, Cartesian2d<X, Y>>,
+    series: Vec<(f64, f64)>,
+    colour: RGBAColor,
+    label: String,
+) -> Result<()>
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    chart
+        .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
+        .map_err(plot_error)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+    chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 3, colour.filled()))).map_err(plot_error)?;
+    Ok(())
 }
 
 fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, plotters::coord::Shift>) -> Result<()> {
@@ -401,12 +433,7 @@ fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, p
         let colour = Palette99::pick(seen.len() - 1).to_rgba();
         let series: Vec<(f64, f64)> =
             points.iter().filter(|p| p.estimator == l).map(|p| (p.total_seconds, p.mse)).collect();
-        chart
-            .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
-            .map_err(plot_error)?
-            .label(l)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
-        chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 3, colour.filled()))).map_err(plot_error)?;
+        draw_series(&mut chart, series, colour, l.to_string())?;
     }
     chart
         .configure_series_labels()
@@ -494,15 +521,8 @@ pub fn run_scaling(
     write_file_atomically(&out.join("scaling.md"), md.as_bytes())?;
     let json = serde_json::to_string_pretty(&points).context("cannot format JSON")?;
     write_file_atomically(&out.join("scaling.json"), json.as_bytes())?;
-    register_fonts();
-    let (w, h) = (900u32, 600u32);
-    let mut buffer = vec![255u8; (w * h * 3) as usize];
-    draw_scaling(&scene.name, &points, BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area())?;
-    let img = image::RgbImage::from_raw(w, h, buffer).context("plot buffer size")?;
-    save_rgb8_png(&img, &out.join("seconds_vs_hits.png"))?;
-    let mut svg = String::new();
-    draw_scaling(&scene.name, &points, SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area())?;
-    write_file_atomically(&out.join("seconds_vs_hits.svg"), svg.as_bytes())?;
+    let name = &scene.name;
+    save_plot(out, "seconds_vs_hits", |a| draw_scaling(name, &points, a), |a| draw_scaling(name, &points, a))?;
     Ok(md)
 }
 
@@ -546,12 +566,7 @@ fn draw_scaling<DB: DrawingBackend>(
         let colour = Palette99::pick(k).to_rgba();
         let series: Vec<(f64, f64)> =
             points.iter().filter(|p| (p.width, p.height) == (w, h)).map(|p| (hits(p), p.seconds_total)).collect();
-        chart
-            .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
-            .map_err(plot_error)?
-            .label(format!("{w}x{h}"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
-        chart.draw_series(series.iter().map(|&(x, y)| Circle::new((x, y), 3, colour.filled()))).map_err(plot_error)?;
+        draw_series(&mut chart, series, colour, format!("{w}x{h}"))?;
     }
     chart
         .configure_series_labels()
