@@ -71,7 +71,8 @@ mod tests {
         for &(x, y) in &[(0.0, 0.0), (12.25, 300.5), (639.9, 1.0)] {
             let p = cam.position + 7.0 * cam.direction(x, y);
             let (px, py) = cam.project(cam.to_camera(p));
-            assert!((px - x).abs() < 1e-9 && (py - y).abs() < 1e-9);
+            approx::assert_abs_diff_eq!(px, x, epsilon = 1e-9);
+            approx::assert_abs_diff_eq!(py, y, epsilon = 1e-9);
         }
         // Row 0 is the top of the image, column 0 the left.
         assert!(cam.direction(0.0, 0.0).dot(cam.up) > 0.0);

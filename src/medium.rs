@@ -78,9 +78,11 @@ mod tests {
     fn clip_ray_from_outside_inside_and_parallel() {
         let m = unit_box();
         let (t0, t1) = m.clip_ray(DVec3::new(-1.0, 0.5, 0.5), DVec3::X).unwrap();
-        assert!((t0 - 1.0).abs() < 1e-12 && (t1 - 2.0).abs() < 1e-12);
+        approx::assert_relative_eq!(t0, 1.0, max_relative = 1e-12);
+        approx::assert_relative_eq!(t1, 2.0, max_relative = 1e-12);
         let (t0, t1) = m.clip_ray(DVec3::splat(0.5), DVec3::Y).unwrap();
-        assert!(t0 == 0.0 && (t1 - 0.5).abs() < 1e-12);
+        assert_eq!(t0, 0.0);
+        approx::assert_relative_eq!(t1, 0.5, max_relative = 1e-12);
         assert!(m.clip_ray(DVec3::new(-1.0, 2.0, 0.5), DVec3::X).is_none());
         assert!(m.clip_ray(DVec3::new(2.0, 0.5, 0.5), DVec3::X).is_none());
         // On the boundary, looking along it.
