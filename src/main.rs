@@ -245,6 +245,7 @@ fn load_scene(path: &Path, common: &CommonArgs) -> Result<Scene, Failure> {
     let mut scene = Scene::load(path).map_err(input)?;
     if let Some((w, h)) = common.resolution {
         scene = scene.with_resolution(w, h).map_err(|m| input(anyhow!("--resolution: {m}")))?;
+        fogplanes::render::check_memory(w, h, scene.render.planes).map_err(|m| input(anyhow!("--resolution: {m}")))?;
     }
     if let Some(t) = common.threads {
         if t == 0 || t > 1024 {

@@ -63,6 +63,8 @@ fn bad_arguments_exit_2() {
         vec!["render", "media_scenes/six_lights.toml", "--estimator", "magic"],
         vec!["render", "media_scenes/six_lights.toml", "--resolution", "0x10"],
         vec!["render", "media_scenes/six_lights.toml", "--resolution", "100000x100000"],
+        vec!["reference", "media_scenes/six_lights.toml", "--resolution", "32000x32000"],
+        vec!["table", "media_scenes/six_lights.toml", "--reference", "no.exr", "--resolution", "32000x32000"],
         vec!["render", "media_scenes/six_lights.toml", "--planes", "1000000000000"],
         vec!["render", "media_scenes/six_lights.toml", "-o", "x.jpg"],
         vec!["render", "media_scenes/six_lights.toml", "--estimator", "cmis-exact", "--orientations", "4"],
