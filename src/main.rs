@@ -52,7 +52,9 @@ enum Command {
 
 #[derive(Args)]
 struct ScalingArgs {
+    /// The scene file (TOML).
     scene: PathBuf,
+    /// The weighting to time.
     #[arg(long, short, default_value = "smis-exact")]
     estimator: Estimator,
     /// Plane counts, comma separated.
@@ -118,10 +120,12 @@ struct RenderArgs {
 
 #[derive(Args)]
 struct ReferenceArgs {
+    /// The scene file (TOML).
     scene: PathBuf,
-    /// Samples per pixel.
+    /// Samples per pixel, on average (see --uniform).
     #[arg(long, value_name = "N", default_value_t = 1024)]
     spp: u32,
+    /// Random seed.
     #[arg(long, short, value_name = "S", default_value_t = 1)]
     seed: u64,
     /// Sample pixel centres (to compare with `render --pixel-center` and `table`).
@@ -136,6 +140,7 @@ struct ReferenceArgs {
     /// Also write the per-pixel standard error as an image.
     #[arg(long, value_name = "PATH")]
     stderr_image: Option<PathBuf>,
+    /// Exposure in stops for PNG output.
     #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     #[command(flatten)]
@@ -155,12 +160,15 @@ struct CompareArgs {
 
 #[derive(Args)]
 struct TableArgs {
+    /// The scene file (TOML).
     scene: PathBuf,
     /// Reference image (EXR) rendered with --pixel-center at the same resolution.
     #[arg(long, value_name = "REF")]
     reference: PathBuf,
+    /// Number of photon planes of the table (default: the scene's).
     #[arg(long, short, value_name = "N")]
     planes: Option<u64>,
+    /// Random seed of the table's planes (the sweep uses seed + 1000 onwards).
     #[arg(long, short, value_name = "S")]
     seed: Option<u64>,
     /// Jittered rays instead of pixel centres (then the reference must be jittered too).
@@ -181,6 +189,7 @@ struct TableArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "report")]
     out: PathBuf,
+    /// Exposure in stops for the panel.
     #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     #[command(flatten)]
