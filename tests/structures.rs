@@ -55,3 +55,19 @@ fn images_do_not_depend_on_the_thread_count() {
     };
     assert!(render_with(1).pixels == render_with(3).pixels);
 }
+
+/// The raster's near-plane and image clipping, with the camera inside the box, on its boundary,
+/// in a light's plane and looking down a light's normal: still exactly the brute force's hits.
+#[test]
+fn raster_matches_brute_force_in_the_hard_camera_placements() {
+    for file in
+        ["camera_inside_box", "camera_on_boundary", "edge_on_light", "camera_along_normal", "facing_lights_close"]
+    {
+        let path = format!("media_scenes/hard/{file}.toml");
+        let s = Scene::load(std::path::Path::new(&path)).unwrap().with_resolution(48, 32).unwrap();
+        let (fast, fs) = render(&s, &options(Estimator::SmisExact, Accelerator::Raster, 2000), &|| {});
+        let (slow, ss) = render(&s, &options(Estimator::SmisExact, Accelerator::BruteForce, 2000), &|| {});
+        assert_eq!(fs.hits, ss.hits, "{file}: hit counts differ");
+        assert!(fast.pixels == slow.pixels, "{file}: images differ");
+    }
+}
