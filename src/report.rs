@@ -371,6 +371,28 @@ fn save_plot(
     write_file_atomically(&out.join(format!("{stem}.svg")), text.as_bytes())
 }
 
+/// Draws the legend at `position` and presents the plot.
+fn finish_plot<'a, DB: DrawingBackend + 'a, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    position: SeriesLabelPosition,
+) -> Result<()>
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()
+        .map_err(plot_error)?;
+    root.present().map_err(plot_error)?;
+    Ok(())
+}
+
 /// One series as a line with a dot at each point, labelled in the legend.
 fn draw_series<DB: DrawingBackend, X, Y>(
     chart: &mut ChartContext<DB, Cartesian2d<X, Y>>,
@@ -435,15 +457,7 @@ fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, p
             points.iter().filter(|p| p.estimator == l).map(|p| (p.total_seconds, p.mse)).collect();
         draw_series(&mut chart, series, colour, l.to_string())?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .draw()
-        .map_err(plot_error)?;
-    root.present().map_err(plot_error)?;
-    Ok(())
+    finish_plot(&mut chart, &root, SeriesLabelPosition::UpperRight)
 }
 
 /// One render of the scaling study.
@@ -568,14 +582,5 @@ fn draw_scaling<DB: DrawingBackend>(
             points.iter().filter(|p| (p.width, p.height) == (w, h)).map(|p| (hits(p), p.seconds_total)).collect();
         draw_series(&mut chart, series, colour, format!("{w}x{h}"))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .draw()
-        .map_err(plot_error)?;
-    root.present().map_err(plot_error)?;
-    Ok(())
+    finish_plot(&mut chart, &root, SeriesLabelPosition::UpperLeft)
 }
