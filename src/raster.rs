@@ -118,20 +118,6 @@ impl ScreenRaster {
         }
     }
 
-    /// Bytes held, for the memory report.
-    pub fn bytes(&self) -> usize {
-        self.vertices.len() * 8 + self.offsets.len() * 4 + self.bands.iter().map(|b| b.len() * 4 + 24).sum::<usize>()
-    }
-
-    /// Total (band, plane) pairs: how much binning work there is.
-    pub fn bin_entries(&self) -> usize {
-        self.bands.iter().map(Vec::len).sum()
-    }
-
-    pub fn band_count(&self) -> usize {
-        self.bands.len()
-    }
-
     /// The columns `[first, last]` whose pixel squares may meet polygon `i` in row `row`.
     fn span(&self, i: usize, row: u32) -> Option<(u32, u32)> {
         let poly = &self.vertices[self.offsets[i] as usize..self.offsets[i + 1] as usize];
