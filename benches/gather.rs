@@ -3,14 +3,12 @@
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use fogplanes::gather::GatherContext;
+use fogplanes::kernel::Kernel;
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::raster::ScreenRaster;
 use fogplanes::render::{Accelerator, PreparedPlanes, camera_rays};
 use fogplanes::scene::Scene;
-use fogplanes::weights::{
-    CmisCosine, CmisExact, Denominator, Estimator, HitLocal, PlaneFrame, SmisCosinePair, SmisExactPair, StratifiedK,
-    Unweighted, Weighting,
-};
+use fogplanes::weights::{Denominator, HitLocal, PlaneFrame, Weighting, WithDenominator};
 use glam::Vec3;
 use std::hint::black_box;
 use std::time::Duration;
@@ -39,17 +37,17 @@ fn gathering(c: &mut Criterion) {
     let prepared = PreparedPlanes::new(&s, 40_960, 1, Accelerator::Raster);
     let pass = camera_rays(&s, 1, 0, false);
     let mut sums = vec![Vec3::ZERO; pass.rays.len()];
-    let hits =
-        prepared.gather(Weighting::new(Estimator::Unweighted, None).unwrap(), &pass.rays, &mut sums, &|| {}).hits;
+    let kernel = Kernel::Auto.resolve().unwrap();
+    let hits = prepared.gather(Weighting::default(), kernel, &pass.rays, &mut sums, &|| {}).hits;
     let mut g = c.benchmark_group("gather 160x90, 40960 planes");
     g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
     let raster = prepared.raster.as_ref().unwrap();
-    g.bench_function("intersections only", |b| b.iter(|| raster.count_hits(&prepared.context, black_box(&pass.rays))));
-    let mut weightings: Vec<Weighting> = Estimator::ALL.iter().map(|&e| Weighting::new(e, None).unwrap()).collect();
-    weightings.push(Weighting::new(Estimator::SmisExact, Some(4)).unwrap());
-    for w in weightings {
+    g.bench_function("intersections only", |b| {
+        b.iter(|| raster.count_hits(&prepared.context, kernel, black_box(&pass.rays)))
+    });
+    for w in Weighting::all(&[4]) {
         g.bench_function(BenchmarkId::from_parameter(w.label()), |b| {
-            b.iter(|| prepared.gather(w, &pass.rays, black_box(&mut sums), &|| {}))
+            b.iter(|| prepared.gather(w, kernel, &pass.rays, black_box(&mut sums), &|| {}))
         });
     }
     g.finish();
@@ -64,7 +62,8 @@ fn sample_hits(n: usize) -> Vec<(PlaneFrame, HitLocal)> {
     let mut out = Vec::with_capacity(n);
     'rays: for ray in &pass.rays {
         for v in &ctx.views {
-            if let Some(h) = v.hit(ray) {
+            let h = v.crossing(ray.dir.to_array(), ray.t0, ray.t1);
+            if h.hit {
                 out.push((v.frame, HitLocal { det: h.det, det_perp: ray.dir.dot(v.normal_perp), a: h.a }));
                 if out.len() == n {
                     break 'rays;
@@ -75,34 +74,36 @@ fn sample_hits(n: usize) -> Vec<(PlaneFrame, HitLocal)> {
     out
 }
 
-fn per_hit<D: Denominator>(
-    g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
-    name: &str,
-    d: D,
-    hits: &[(PlaneFrame, HitLocal)],
-) {
-    g.bench_function(name, |b| {
-        b.iter(|| {
-            let mut acc = 0.0f32;
-            for (f, h) in hits {
-                acc += d.denominator(black_box(f), black_box(h));
-            }
-            acc
-        })
-    });
+/// Times one weighting's D over a list of real hits.
+struct PerHit<'a, 'g> {
+    group: &'a mut criterion::BenchmarkGroup<'g, criterion::measurement::WallTime>,
+    name: String,
+    hits: &'a [(PlaneFrame, HitLocal)],
+}
+
+impl WithDenominator for PerHit<'_, '_> {
+    type Output = ();
+    fn run<D: Denominator>(self, d: &D) {
+        let hits = self.hits;
+        self.group.bench_function(self.name, |b| {
+            b.iter(|| {
+                let mut acc = 0.0f32;
+                for (f, h) in hits {
+                    acc += d.denominator(black_box(f), black_box(h));
+                }
+                acc
+            })
+        });
+    }
 }
 
 fn weights(c: &mut Criterion) {
     let hits = sample_hits(4096);
     let mut g = c.benchmark_group("weight per hit");
     g.throughput(Throughput::Elements(hits.len() as u64)).measurement_time(Duration::from_secs(3));
-    per_hit(&mut g, "unweighted", Unweighted, &hits);
-    per_hit(&mut g, "cmis-cosine", CmisCosine, &hits);
-    per_hit(&mut g, "smis-cosine", SmisCosinePair, &hits);
-    per_hit(&mut g, "smis-exact", SmisExactPair, &hits);
-    per_hit(&mut g, "cmis-exact", CmisExact, &hits);
-    per_hit(&mut g, "smis-exact-k4", StratifiedK::new(true, 4), &hits);
-    per_hit(&mut g, "smis-exact-k8", StratifiedK::new(true, 8), &hits);
+    for w in Weighting::all(&[4, 8]) {
+        w.dispatch(PerHit { group: &mut g, name: w.label(), hits: &hits });
+    }
     g.finish();
 }
 

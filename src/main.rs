@@ -1,13 +1,22 @@
-//! The `fogplanes` command line: a thin layer over the library.
+//! The `fogplanes` command line: a thin layer over the core library (`crates/core`). It parses
+//! and checks arguments, shows progress, measures CPU time and memory, and runs the experiments
+//! of [`experiments`], which draw with [`pictures`].
+
+mod experiments;
+mod pictures;
+mod system;
 
 use anyhow::{Context, Result, anyhow};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
-use fogplanes::film::{Film, check_writable};
+use experiments::{TableOptions, run_table};
+use fogplanes::film::{Film, check_image_output};
+use fogplanes::kernel::Kernel;
+use fogplanes::limits::{check_planes, check_resolution, check_spp, check_threads};
 use fogplanes::metrics::compare;
 use fogplanes::reference::{ReferenceOptions, render_reference};
 use fogplanes::render::{Accelerator, RenderOptions, progress_units_per_pass, render};
-use fogplanes::report::{TableOptions, run_table};
-use fogplanes::scene::{Scene, check_planes, check_spp};
+use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::Write;
@@ -55,7 +64,7 @@ struct ScalingArgs {
     /// The scene file (TOML).
     scene: PathBuf,
     /// The weighting to time.
-    #[arg(long, short, default_value = "smis-exact")]
+    #[arg(long, short, default_value = Estimator::DEFAULT.name(), value_parser = estimator_parser())]
     estimator: Estimator,
     /// Plane counts, comma separated.
     #[arg(long, value_delimiter = ',', default_values_t = [10_000u64, 40_000, 160_000, 640_000])]
@@ -87,8 +96,8 @@ struct CommonArgs {
 struct RenderArgs {
     /// The scene file (TOML), e.g. media_scenes/six_lights.toml.
     scene: PathBuf,
-    /// Weighting: unweighted, cmis-cosine, smis-cosine, smis-exact or cmis-exact.
-    #[arg(long, short)]
+    /// Weighting (default: the scene's, else smis-exact).
+    #[arg(long, short, value_parser = estimator_parser())]
     estimator: Option<Estimator>,
     /// Stratified orientations K for smis-cosine and smis-exact (2 is the paper's pair).
     #[arg(long, value_name = "K")]
@@ -106,8 +115,12 @@ struct RenderArgs {
     #[arg(long)]
     pixel_center: bool,
     /// How rays find planes.
-    #[arg(long, value_enum, default_value_t = Accelerator::Raster)]
+    #[arg(long, default_value = "raster", value_parser = accelerator_parser())]
     accelerator: Accelerator,
+    /// The gathering kernel: the widest vector kernel the CPU has (auto), one of them by name,
+    /// or one hit at a time (per-hit); all give bit-identical images.
+    #[arg(long, default_value = "auto", value_parser = kernel_parser())]
+    kernel: Kernel,
     /// Output: .exr (linear float) or .png (tone-mapped sRGB). Default: <scene name>.exr here.
     #[arg(long, short, value_name = "OUT")]
     output: Option<PathBuf>,
@@ -213,10 +226,40 @@ fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
     Failure { code: 2, error: e.into() }
 }
 
-impl<E: Into<anyhow::Error>> From<E> for Failure {
-    fn from(e: E) -> Self {
-        Failure { code: 1, error: e.into() }
+impl From<fogplanes::Error> for Failure {
+    fn from(e: fogplanes::Error) -> Self {
+        Failure { code: if e.is_input() { 2 } else { 1 }, error: e.into() }
     }
+}
+
+impl From<anyhow::Error> for Failure {
+    fn from(e: anyhow::Error) -> Self {
+        // The library's errors keep their exit code through the experiments' anyhow chains.
+        let code = match e.downcast_ref::<fogplanes::Error>() {
+            Some(inner) if inner.is_input() => 2,
+            _ => 1,
+        };
+        Failure { code, error: e }
+    }
+}
+
+/// Parses a value from the closed list of names `names` (shown in `--help` and in errors).
+fn named<T: std::str::FromStr + Clone + Send + Sync + 'static>(
+    names: Vec<&'static str>,
+) -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(names).map(|s| s.parse::<T>().ok().expect("a listed name parses"))
+}
+
+fn estimator_parser() -> impl TypedValueParser<Value = Estimator> {
+    named(Estimator::names())
+}
+
+fn accelerator_parser() -> impl TypedValueParser<Value = Accelerator> {
+    named(Accelerator::ALL.iter().map(|a| a.name()).collect())
+}
+
+fn kernel_parser() -> impl TypedValueParser<Value = Kernel> {
+    named(Kernel::ALL.iter().map(|k| k.name()).collect())
 }
 
 fn main() -> ExitCode {
@@ -253,13 +296,10 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 fn load_scene(path: &Path, common: &CommonArgs) -> Result<Scene, Failure> {
     let mut scene = Scene::load(path).map_err(input)?;
     if let Some((w, h)) = common.resolution {
-        scene = scene.with_resolution(w, h).map_err(|m| input(anyhow!("--resolution: {m}")))?;
-        fogplanes::render::check_memory(w, h, scene.render.planes).map_err(|m| input(anyhow!("--resolution: {m}")))?;
+        scene = scene.with_resolution(w, h)?;
     }
     if let Some(t) = common.threads {
-        if t == 0 || t > 1024 {
-            return Err(input(anyhow!("--threads must be between 1 and 1024, got {t}")));
-        }
+        check_threads(t).map_err(|m| input(anyhow!("--threads: {m}")))?;
         rayon::ThreadPoolBuilder::new().num_threads(t).build_global().context("cannot start the worker threads")?;
     }
     Ok(scene)
@@ -285,38 +325,46 @@ fn default_output(scene: &Scene, suffix: &str) -> PathBuf {
 
 fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let scene = load_scene(&a.scene, &a.common)?;
-    let d = &scene.render;
-    let estimator = a.estimator.unwrap_or(d.weighting.estimator);
+    let defaults = RenderOptions::from_scene(&scene);
+    let estimator = a.estimator.unwrap_or(defaults.weighting.estimator);
     // The scene's K applies only when the scene's estimator is the one rendered.
-    let scene_k =
-        (estimator == d.weighting.estimator && estimator.has_orientations()).then_some(d.weighting.orientations);
-    let orientations = a.orientations.or(scene_k);
-    let weighting = Weighting::new(estimator, orientations).map_err(|m| input(anyhow!("--orientations: {m}")))?;
-    let planes = a.planes.unwrap_or(d.planes);
+    let scene_k = (estimator == defaults.weighting.estimator && estimator.has_orientations())
+        .then_some(defaults.weighting.orientations);
+    let weighting =
+        Weighting::new(estimator, a.orientations.or(scene_k)).map_err(|m| input(anyhow!("--orientations: {m}")))?;
+    let planes = a.planes.unwrap_or(defaults.planes as u64);
     check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
-    let spp = a.spp.unwrap_or(d.spp);
-    check_spp(spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
-    fogplanes::render::check_memory(scene.camera.width, scene.camera.height, planes).map_err(|m| input(anyhow!(m)))?;
-    let output = a.output.clone().unwrap_or_else(|| default_output(&scene, ""));
-    check_writable(&output).map_err(input)?;
-
     let opts = RenderOptions {
         planes: planes as usize,
         weighting,
-        seed: a.seed.unwrap_or(d.seed),
-        spp,
+        seed: a.seed.unwrap_or(defaults.seed),
+        spp: a.spp.unwrap_or(defaults.spp),
         pixel_center: a.pixel_center,
         accelerator: a.accelerator,
+        kernel: a.kernel,
     };
+    opts.validate(&scene)?;
+    let output = a.output.clone().unwrap_or_else(|| default_output(&scene, ""));
+    check_image_output(&output)?;
+
     let bar = progress_bar(
         a.common.quiet,
-        progress_units_per_pass(&scene, a.accelerator) * spp as u64,
+        progress_units_per_pass(&scene, a.accelerator) * opts.spp as u64,
         weighting.label().as_str(),
     );
-    let (film, stats) = render(&scene, &opts, &|| bar.inc(1));
+    let cpu = system::cpu_seconds();
+    let (film, stats) = render(&scene, &opts, &|| bar.inc(1))?;
+    let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
     film.save(&output, a.exposure)?;
-    say!("{}", stats.summary());
+    let mut summary = stats.summary();
+    if let Some(c) = cpu {
+        summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
+    }
+    if let Some(b) = system::peak_memory_bytes() {
+        summary += &format!(", peak memory {:.0} MB", b as f64 / 1e6);
+    }
+    say!("{summary}");
     say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", output.display(), film.width, film.height, film.mean(), film.max());
     Ok(())
 }
@@ -325,9 +373,9 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let scene = load_scene(&a.scene, &a.common)?;
     check_spp(a.spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
     let output = a.output.clone().unwrap_or_else(|| default_output(&scene, "_reference"));
-    check_writable(&output).map_err(input)?;
+    check_image_output(&output)?;
     if let Some(p) = &a.stderr_image {
-        check_writable(p).map_err(input)?;
+        check_image_output(p)?;
     }
     let opts = ReferenceOptions { spp: a.spp, uniform: a.uniform, seed: a.seed, pixel_center: a.pixel_center };
     let passes = if a.uniform { 1 } else { 2 };
@@ -353,7 +401,7 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
 fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     let image = Film::load_exr(&a.image).map_err(input)?;
     let reference = Film::load_exr(&a.reference).map_err(input)?;
-    let m = compare(&image, &reference).map_err(input)?;
+    let m = compare(&image, &reference)?;
     if a.json {
         say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
     } else {
@@ -383,23 +431,20 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     for &n in &a.sweep {
         check_planes(n).map_err(|m| input(anyhow!("--sweep: {m}")))?;
     }
-    let mut extra = Vec::new();
     for &k in &a.orientations {
-        for e in [Estimator::SmisCosine, Estimator::SmisExact] {
-            extra.push(Weighting::new(e, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?);
-        }
+        Weighting::new(Estimator::SmisExact, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?;
     }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
-    check_writable(&a.out.join("panel.png")).map_err(input)?;
+    check_image_output(&a.out.join("panel.png"))?;
     let opts = TableOptions {
         planes: planes as usize,
         seed: a.seed.unwrap_or(scene.render.seed),
         pixel_center: !a.jitter,
         sweep: if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() },
         sweep_seeds: a.sweep_seeds,
-        extra,
+        weightings: Weighting::all(&a.orientations),
         out: a.out.clone(),
         exposure: a.exposure,
         quiet: a.common.quiet,
@@ -416,18 +461,19 @@ fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
         check_planes(n).map_err(|m| input(anyhow!("--planes: {m}")))?;
     }
     for &(w, h) in &a.resolutions {
-        fogplanes::scene::check_resolution([w, h]).map_err(|m| input(anyhow!("--resolutions: {m}")))?;
+        check_resolution(w, h).map_err(|m| input(anyhow!("--resolutions: {m}")))?;
+        let s = scene.with_resolution(w, h)?;
         for &n in &a.planes {
-            fogplanes::render::check_memory(w, h, n).map_err(|m| input(anyhow!(m)))?;
+            RenderOptions { planes: n as usize, ..RenderOptions::default() }.validate(&s)?;
         }
     }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
-    check_writable(&a.out.join("seconds_vs_hits.png")).map_err(input)?;
+    check_image_output(&a.out.join("seconds_vs_hits.png"))?;
     let weighting = Weighting::new(a.estimator, None).map_err(|m| input(anyhow!(m)))?;
     let planes: Vec<usize> = a.planes.iter().map(|&n| n as usize).collect();
-    let md = fogplanes::report::run_scaling(&scene, weighting, &planes, &a.resolutions, &a.out, a.common.quiet)?;
+    let md = experiments::run_scaling(&scene, weighting, &planes, &a.resolutions, &a.out, a.common.quiet)?;
     say!("{md}");
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! that CI runs them in seconds; raise PROPTEST_CASES for a longer fuzzing run):
 //! no input panics, and every scene that loads renders only finite, non-negative pixels.
 
-use fogplanes::render::{Accelerator, RenderOptions, render};
+use fogplanes::render::{RenderOptions, render};
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use proptest::prelude::*;
@@ -120,7 +120,7 @@ proptest! {
         cam in prop::array::uniform6(coordinate()),
         lights in prop::collection::vec((prop::array::uniform9(-4.0..4.0f64), 0.0..100.0f64), 1..4),
         sigma in (prop_oneof![Just(1e-6), 0.0..2.0f64, Just(30.0)], prop_oneof![Just(0.0), 0.0..1.0f64]),
-        estimator in 0usize..5,
+        estimator in 0..Estimator::ALL.len(),
         seed in any::<u64>(),
     ) {
         let lights: Vec<([f64; 9], f64)> = lights.into_iter().map(|(mut g, le)| {
@@ -139,11 +139,9 @@ proptest! {
                 planes: 300,
                 weighting: Weighting::new(Estimator::ALL[estimator], None).unwrap(),
                 seed,
-                spp: 1,
-                pixel_center: false,
-                accelerator: Accelerator::Raster,
+                ..RenderOptions::default()
             };
-            let (film, _) = render(&scene, &opts, &|| {});
+            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
             prop_assert!(film.all_finite_non_negative(), "{}", text);
         }
     }

@@ -5,11 +5,15 @@
 //! The default run is sized for CI; `cargo test --release -- --ignored hard_scenes_in_depth`
 //! runs the heavy version (more planes, seeds and pixels) and prints the table for the notes.
 
+use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{Accelerator, RenderOptions, render};
+use fogplanes::render::{RenderOptions, render};
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use std::path::PathBuf;
+
+mod common;
+use common::MeanEstimate;
 
 fn hard_scenes() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir("media_scenes/hard")
@@ -48,29 +52,23 @@ fn check(size: &Size) {
             reference.stderr.pixels.iter().map(|s| (s.as_dvec3() * s.as_dvec3()).element_sum()).sum::<f64>().sqrt() / n;
         for estimator in Estimator::ALL {
             let weighting = Weighting::new(estimator, None).unwrap();
-            let (mut sum, mut sum_sq, mut largest) = (0.0, 0.0, 0.0f32);
+            let (mut image_mean, mut largest) = (MeanEstimate::default(), 0.0f32);
             for seed in 0..size.seeds {
                 let opts = RenderOptions {
                     planes: size.planes,
                     weighting,
                     seed: 100 + seed,
-                    spp: 1,
                     pixel_center: true,
-                    accelerator: Accelerator::Raster,
+                    ..RenderOptions::default()
                 };
-                let (film, _) = render(&scene, &opts, &|| {});
+                let (film, _) = render(&scene, &opts, &|| {}).unwrap();
                 if !film.all_finite_non_negative() {
                     failures.push(format!("{name} {estimator} seed {seed}: a pixel is negative, NaN or infinite"));
                 }
-                let m = film.mean();
-                sum += m;
-                sum_sq += m * m;
+                image_mean.add(film.mean());
                 largest = largest.max(film.max());
             }
-            let k = size.seeds as f64;
-            let mean = sum / k;
-            let se = ((sum_sq / k - mean * mean).max(0.0) / (k - 1.0)).sqrt();
-            let z = (mean - ref_mean) / (se * se + ref_se * ref_se).sqrt();
+            let (mean, se, z) = (image_mean.mean(), image_mean.stderr(), image_mean.z(ref_mean, ref_se));
             println!("| {name} | {estimator} | {mean:.6e} | {ref_mean:.6e} | {z:+.2} | {largest:.4e} |");
             if !(z.abs() <= 5.0) {
                 failures.push(format!("{name} {estimator}: mean {mean:.6e} +- {se:.2e}, reference {ref_mean:.6e} +- {ref_se:.2e}, z = {z:.2}"));
@@ -95,18 +93,61 @@ fn hard_scenes_in_depth() {
 #[test]
 fn scaled_scenes_render_the_same_image() {
     let load = |p: &str| Scene::load(std::path::Path::new(p)).unwrap().with_resolution(48, 27).unwrap();
-    let opts = RenderOptions {
-        planes: 3000,
-        weighting: Weighting::new(Estimator::SmisExact, None).unwrap(),
-        seed: 4,
-        spp: 1,
-        pixel_center: true,
-        accelerator: Accelerator::Raster,
-    };
-    let (base, _) = render(&load("media_scenes/six_lights.toml"), &opts, &|| {});
+    let opts = RenderOptions { planes: 3000, seed: 4, pixel_center: true, ..RenderOptions::default() };
+    let (base, _) = render(&load("media_scenes/six_lights.toml"), &opts, &|| {}).unwrap();
     for p in ["media_scenes/hard/scaled_1e-3.toml", "media_scenes/hard/scaled_1e4.toml"] {
-        let (img, _) = render(&load(p), &opts, &|| {});
+        let (img, _) = render(&load(p), &opts, &|| {}).unwrap();
         let m = fogplanes::metrics::compare(&img, &base).unwrap();
         assert!(m.smape < 1e-3, "{p}: SMAPE {} against the unscaled scene", m.smape);
     }
+}
+
+/// Camera rays lying in a light's plane (`ray_in_light_plane.toml`, pixel centres): along the
+/// middle row cos(theta_y) = 0 everywhere, so quadrature and every estimator give exactly zero
+/// (those rays meet the planes' chords on the light itself, at r = 0); the row above is lit,
+/// and there every estimator's mean over independent plane sets agrees with quadrature within
+/// 4 standard errors.
+#[test]
+fn rays_in_a_lights_plane_get_nothing() {
+    let scene = Scene::load(std::path::Path::new("media_scenes/hard/ray_in_light_plane.toml")).unwrap();
+    let cam = &scene.camera;
+    let middle = cam.height / 2;
+    let ray = |i: u32, j: u32| cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
+    for i in [3, 20, 32, 50] {
+        let we = ray(i, middle);
+        assert_eq!(we.y, 0.0, "the middle row must lie in the light's plane");
+        assert_eq!(single_scattering(&scene, cam.position, we, 1e-9), glam::DVec3::ZERO);
+    }
+    let (column, above) = (32, middle - 1);
+    let truth = single_scattering(&scene, cam.position, ray(column, above), 1e-9);
+    assert!(truth.min_element() > 1e-3, "the row above is lit: {truth}");
+    let mut failures = Vec::new();
+    for w in Weighting::all(&[4]) {
+        let mut estimate = [MeanEstimate::default(); 3];
+        for seed in 0..64 {
+            let opts =
+                RenderOptions { planes: 4000, weighting: w, seed, pixel_center: true, ..RenderOptions::default() };
+            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+            for i in 0..cam.width {
+                assert_eq!(film.get(i, middle), glam::Vec3::ZERO, "{w} seed {seed}: pixel ({i}, {middle}) is lit");
+            }
+            let v = film.get(column, above);
+            for (c, e) in estimate.iter_mut().enumerate() {
+                e.add(v[c] as f64);
+            }
+        }
+        for (c, e) in estimate.iter().enumerate() {
+            let z = e.z(truth[c], 0.0);
+            println!(
+                "{w} ch{c}: quadrature {:.5e}, estimate {:.5e} +- {:.1e}, z = {z:+.2}",
+                truth[c],
+                e.mean(),
+                e.stderr()
+            );
+            if !(z.abs() <= 4.0) {
+                failures.push(format!("{w} ch{c}: z = {z:.2}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

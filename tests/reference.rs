@@ -2,9 +2,9 @@
 //! centres within 4 of its own standard errors; and the table command writes all its files.
 
 use fogplanes::film::Film;
-use fogplanes::photon_plane::light_distribution;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference, scattering_sample};
+use fogplanes::sampling::light_distribution;
 use fogplanes::sampling::{rng_for, unit_f64};
 use fogplanes::scene::Scene;
 use rand::RngCore;
@@ -13,6 +13,9 @@ use std::path::Path;
 fn six_lights() -> Scene {
     Scene::load(Path::new("media_scenes/six_lights.toml")).unwrap()
 }
+
+mod common;
+use common::MeanEstimate;
 
 #[test]
 fn reference_samples_match_quadrature_at_pixel_centres() {
@@ -28,20 +31,19 @@ fn reference_samples_match_quadrature_at_pixel_centres() {
         let truth = single_scattering(&scene, cam.position, we, 1e-5);
         let n = 400_000u64;
         let mut rng = rng_for(99, 7, k as u64);
-        let (mut sum, mut sum_sq) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+        let mut estimate = [MeanEstimate::default(); 3];
         for _ in 0..n {
             let u = std::array::from_fn(|_| unit_f64(rng.next_u64()));
             let v = scattering_sample(&scene, &lights, cam.position, we, t0, t1, u);
-            sum += v;
-            sum_sq += v * v;
+            for c in 0..3 {
+                estimate[c].add(v[c]);
+            }
         }
-        let mean = sum / n as f64;
         for c in 0..3 {
-            let se = ((sum_sq[c] / n as f64 - mean[c] * mean[c]) / (n - 1) as f64).sqrt();
-            let z = (mean[c] - truth[c]) / se;
+            let (mean, se, z) = (estimate[c].mean(), estimate[c].stderr(), estimate[c].z(truth[c], 0.0));
             let line = format!(
-                "pixel ({i}, {j}) ch{c}: quadrature {:.6e}, reference {:.6e} +- {se:.2e}, z = {z:+.2}",
-                truth[c], mean[c]
+                "pixel ({i}, {j}) ch{c}: quadrature {:.6e}, reference {mean:.6e} +- {se:.2e}, z = {z:+.2}",
+                truth[c]
             );
             println!("{line}");
             if !(z.abs() <= 4.0) || !(se < 0.02 * truth[c]) {

@@ -1,42 +1,57 @@
-//! The intersection structures find exactly the hits that testing every plane finds, with the
-//! same weights; images do not depend on the thread count.
+//! The intersection structures and the gathering kernels find exactly the same hits with the
+//! same weights: every kernel this CPU has, the per-hit path and the brute-force loop give
+//! bit-identical images for every estimator and K; the BVH the same hits; images do not depend
+//! on the thread count.
 
+use fogplanes::kernel::Kernel;
 use fogplanes::render::{Accelerator, RenderOptions, render};
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 
-fn scene(w: u32, h: u32) -> Scene {
-    Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap().with_resolution(w, h).unwrap()
+fn scene(file: &str, w: u32, h: u32) -> Scene {
+    Scene::load(std::path::Path::new(file)).unwrap().with_resolution(w, h).unwrap()
 }
 
-fn options(estimator: Estimator, accelerator: Accelerator, planes: usize) -> RenderOptions {
-    RenderOptions {
-        planes,
-        weighting: Weighting::new(estimator, None).unwrap(),
-        seed: 5,
-        spp: 1,
-        pixel_center: false,
-        accelerator,
+fn options(weighting: Weighting, accelerator: Accelerator, kernel: Kernel, planes: usize) -> RenderOptions {
+    RenderOptions { planes, weighting, seed: 5, accelerator, kernel, ..RenderOptions::default() }
+}
+
+/// Every estimator and K through every kernel path: the six-light scene (grey, with planes that
+/// other panels shadow) and a scene with an RGB medium (three exponentials per hit).
+#[test]
+fn every_kernel_gives_bit_identical_images() {
+    let kernels = Kernel::available();
+    eprintln!("kernels this CPU runs: {kernels:?}");
+    assert!(kernels.len() >= 2);
+    for file in ["media_scenes/six_lights.toml", "media_scenes/hard/camera_inside_box.toml"] {
+        let s = scene(file, 64, 36);
+        for w in Weighting::all(&[1, 3, 4, 8]) {
+            let (reference, rs) = render(&s, &options(w, Accelerator::BruteForce, Kernel::Auto, 1500), &|| {}).unwrap();
+            assert!(rs.hits > 10_000, "{file} {w}: {} hits", rs.hits);
+            for &k in &kernels {
+                let (image, st) = render(&s, &options(w, Accelerator::Raster, k, 1500), &|| {}).unwrap();
+                assert_eq!(st.hits, rs.hits, "{file} {w} {k}: hit counts differ");
+                assert!(image.pixels == reference.pixels, "{file} {w} {k}: the image differs from brute force");
+            }
+        }
     }
 }
 
 #[test]
-fn raster_and_brute_force_agree_bit_for_bit() {
-    let s = scene(80, 45);
-    for e in [Estimator::Unweighted, Estimator::SmisExact, Estimator::CmisExact] {
-        let (fast, fs) = render(&s, &options(e, Accelerator::Raster, 3000), &|| {});
-        let (slow, ss) = render(&s, &options(e, Accelerator::BruteForce, 3000), &|| {});
-        assert_eq!(fs.hits, ss.hits, "{e}: hit counts differ");
-        assert!(fs.hits > 100_000);
-        assert!(fast.pixels == slow.pixels, "{e}: images differ");
+fn a_kernel_the_cpu_lacks_is_a_clear_error() {
+    let s = scene("media_scenes/six_lights.toml", 16, 9);
+    for k in Kernel::ALL.into_iter().filter(|k| !k.is_available()) {
+        let e = render(&s, &options(Weighting::default(), Accelerator::Raster, k, 100), &|| {}).unwrap_err();
+        assert!(e.to_string().contains("--kernel"), "{e}");
     }
 }
 
 #[test]
 fn bvh_finds_the_same_hits() {
-    let s = scene(64, 36);
-    let (bvh, bs) = render(&s, &options(Estimator::SmisExact, Accelerator::Bvh, 2000), &|| {});
-    let (slow, ss) = render(&s, &options(Estimator::SmisExact, Accelerator::BruteForce, 2000), &|| {});
+    let s = scene("media_scenes/six_lights.toml", 64, 36);
+    let w = Weighting::default();
+    let (bvh, bs) = render(&s, &options(w, Accelerator::Bvh, Kernel::Auto, 2000), &|| {}).unwrap();
+    let (slow, ss) = render(&s, &options(w, Accelerator::BruteForce, Kernel::Auto, 2000), &|| {}).unwrap();
     assert_eq!(bs.hits, ss.hits);
     assert!(bs.tests < ss.tests / 2, "the BVH should prune: {} tests against {}", bs.tests, ss.tests);
     // Same hits in another order: equal up to float summation order.
@@ -47,11 +62,11 @@ fn bvh_finds_the_same_hits() {
 
 #[test]
 fn images_do_not_depend_on_the_thread_count() {
-    let s = scene(96, 54);
-    let opts = options(Estimator::SmisExact, Accelerator::Raster, 4000);
+    let s = scene("media_scenes/six_lights.toml", 96, 54);
+    let opts = options(Weighting::default(), Accelerator::Raster, Kernel::Auto, 4000);
     let render_with = |threads| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| render(&s, &opts, &|| {}).0)
+        pool.install(|| render(&s, &opts, &|| {}).unwrap().0)
     };
     assert!(render_with(1).pixels == render_with(3).pixels);
 }
@@ -60,14 +75,21 @@ fn images_do_not_depend_on_the_thread_count() {
 /// in a light's plane and looking down a light's normal: still exactly the brute force's hits.
 #[test]
 fn raster_matches_brute_force_in_the_hard_camera_placements() {
-    for file in
-        ["camera_inside_box", "camera_on_boundary", "edge_on_light", "camera_along_normal", "facing_lights_close"]
-    {
-        let path = format!("media_scenes/hard/{file}.toml");
-        let s = Scene::load(std::path::Path::new(&path)).unwrap().with_resolution(48, 32).unwrap();
-        let (fast, fs) = render(&s, &options(Estimator::SmisExact, Accelerator::Raster, 2000), &|| {});
-        let (slow, ss) = render(&s, &options(Estimator::SmisExact, Accelerator::BruteForce, 2000), &|| {});
-        assert_eq!(fs.hits, ss.hits, "{file}: hit counts differ");
-        assert!(fast.pixels == slow.pixels, "{file}: images differ");
+    for file in [
+        "camera_inside_box",
+        "camera_on_boundary",
+        "edge_on_light",
+        "ray_in_light_plane",
+        "camera_along_normal",
+        "facing_lights_close",
+    ] {
+        let s = scene(&format!("media_scenes/hard/{file}.toml"), 48, 31);
+        for e in [Estimator::Unweighted, Estimator::SmisExact] {
+            let w = Weighting::new(e, None).unwrap();
+            let (fast, fs) = render(&s, &options(w, Accelerator::Raster, Kernel::Auto, 2000), &|| {}).unwrap();
+            let (slow, ss) = render(&s, &options(w, Accelerator::BruteForce, Kernel::Auto, 2000), &|| {}).unwrap();
+            assert_eq!(fs.hits, ss.hits, "{file} {e}: hit counts differ");
+            assert!(fast.pixels == slow.pixels, "{file} {e}: images differ");
+        }
     }
 }

@@ -169,7 +169,7 @@ fn render_pixels(
 ) -> (Film, Film) {
     let cam = &scene.camera;
     let w = cam.width as usize;
-    let lights = crate::photon_plane::light_distribution(scene);
+    let lights = crate::sampling::light_distribution(scene);
     let sequence = Kronecker::<6>::new();
     let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
         .into_par_iter()

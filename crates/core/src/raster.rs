@@ -4,17 +4,18 @@
 //! whose image point lies in the projection of the plane's polygon (clipped to the box). Each
 //! polygon is projected once, clipped to the image, and binned into horizontal bands of rows.
 //! A band walks its planes in index order; for every row it covers, the conservative span of
-//! pixels whose squares meet the polygon is tested exactly with [`PlaneView::hit`]. The exact
+//! pixels whose squares meet the polygon is tested exactly with [`PlaneView::crossing`]. The exact
 //! test decides; the span only has to contain every pixel that can hit, whatever the jitter.
 //!
 //! Each pixel's sum runs over planes in index order whatever the thread count, so images are
 //! bit-identical for a seed.
 
 use crate::camera::Camera;
-use crate::gather::{CameraRay, GatherContext, PlaneView, exp_f32};
+use crate::gather::{CameraRay, GatherContext, GatherStats, PlaneView};
+use crate::kernel::{Kernel, SpanRays, SpanSums, gather_span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
-use crate::weights::{Denominator, HitLocal};
+use crate::weights::{Denominator, Unweighted};
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -32,21 +33,6 @@ pub struct ScreenRaster {
     offsets: Vec<u32>,
     /// Plane indices per band, ascending.
     bands: Vec<Vec<u32>>,
-}
-
-/// Counters from one gathering pass.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct GatherStats {
-    /// Ray-plane tests made and hits found.
-    pub tests: u64,
-    pub hits: u64,
-}
-
-impl std::ops::AddAssign for GatherStats {
-    fn add_assign(&mut self, o: Self) {
-        self.tests += o.tests;
-        self.hits += o.hits;
-    }
 }
 
 /// The plane's polygon as seen from the camera, clipped to the image grown by one pixel, in
@@ -151,29 +137,32 @@ impl ScreenRaster {
     }
 
     /// Gathers every plane into `out` (one RGB sum per pixel, row-major), for the rays `rays`
-    /// (one per pixel), calling `on_band` after each band (for progress).
+    /// (one per pixel), with `kernel` (resolved) for planes no other panel can shadow, calling
+    /// `on_band` after each band (for progress).
     pub fn gather<D: Denominator>(
         &self,
         ctx: &GatherContext,
         weights: &D,
+        kernel: Kernel,
         rays: &[CameraRay],
         out: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
     ) -> GatherStats {
-        self.gather_all::<D, true>(ctx, weights, rays, out, on_band)
+        self.gather_all::<D, true>(ctx, weights, kernel, rays, out, on_band)
     }
 
     /// Finds every hit without weighting it (the traversal and intersection work alone, for
     /// measuring its share of the gathering time).
-    pub fn count_hits(&self, ctx: &GatherContext, rays: &[CameraRay]) -> GatherStats {
+    pub fn count_hits(&self, ctx: &GatherContext, kernel: Kernel, rays: &[CameraRay]) -> GatherStats {
         let mut out = vec![Vec3::ZERO; rays.len()];
-        self.gather_all::<crate::weights::Unweighted, false>(ctx, &crate::weights::Unweighted, rays, &mut out, &|| {})
+        self.gather_all::<Unweighted, false>(ctx, &Unweighted, kernel, rays, &mut out, &|| {})
     }
 
     fn gather_all<D: Denominator, const CONTRIBUTE: bool>(
         &self,
         ctx: &GatherContext,
         weights: &D,
+        kernel: Kernel,
         rays: &[CameraRay],
         out: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
@@ -184,7 +173,7 @@ impl ScreenRaster {
             .zip(rays.par_chunks(band_pixels))
             .enumerate()
             .map(|(band, (sums, rays))| {
-                let stats = self.gather_band::<D, CONTRIBUTE>(ctx, weights, band, rays, sums);
+                let stats = self.gather_band::<D, CONTRIBUTE>(ctx, weights, kernel, band, rays, sums);
                 on_band();
                 stats
             })
@@ -198,6 +187,7 @@ impl ScreenRaster {
         &self,
         ctx: &GatherContext,
         weights: &D,
+        kernel: Kernel,
         band: usize,
         rays: &[CameraRay],
         sums: &mut [Vec3],
@@ -208,25 +198,46 @@ impl ScreenRaster {
         let soa = BandRays::new(rays);
         let mut acc = BandSums::new(rays.len());
         let mut stats = GatherStats::default();
+        let ext = ctx.extinction;
         for &plane in &self.bands[band] {
             let view = &ctx.views[plane as usize];
+            let vector = kernel != Kernel::PerHit && view.shadow == PlaneView::UNSHADOWED;
             for row in first_row..first_row + rows {
                 let Some((first, last)) = self.span(plane as usize, row) else {
                     continue;
                 };
                 let base = (row - first_row) as usize * w;
-                let span = base + first as usize..base + last as usize + 1;
-                stats.tests += span.len() as u64;
-                if view.shadow == u32::MAX {
-                    stats.hits += gather_span::<D, CONTRIBUTE>(ctx, weights, view, &soa, &mut acc, span);
+                let s = base + first as usize..base + last as usize + 1;
+                stats.tests += s.len() as u64;
+                if vector {
+                    let span_rays = SpanRays {
+                        x: &soa.x[s.clone()],
+                        y: &soa.y[s.clone()],
+                        z: &soa.z[s.clone()],
+                        t0: &soa.t0[s.clone()],
+                        t1: &soa.t1[s.clone()],
+                    };
+                    let span_sums = SpanSums { r: &mut acc.r[s.clone()], g: &mut acc.g[s.clone()], b: &mut acc.b[s] };
+                    stats.hits += gather_span::<D, CONTRIBUTE>(
+                        kernel,
+                        weights,
+                        view,
+                        ext.sigma_t,
+                        ext.grey,
+                        span_rays,
+                        span_sums,
+                    );
                 } else {
-                    // Planes that another panel may shadow: the general per-hit path.
-                    for k in span {
-                        if let Some(hit) = view.hit(&rays[k]) {
-                            stats.hits += 1;
-                            if CONTRIBUTE {
-                                acc.add(k, ctx.contribution(weights, view, &rays[k], &hit));
+                    // Planes that another panel may shadow (or the per-hit kernel asked for).
+                    for k in s {
+                        if CONTRIBUTE {
+                            if let Some(c) = ctx.gather_one(weights, view, &rays[k]) {
+                                stats.hits += 1;
+                                acc.add(k, c);
                             }
+                        } else {
+                            let r = &rays[k];
+                            stats.hits += view.crossing(r.dir.to_array(), r.t0, r.t1).hit as u64;
                         }
                     }
                 }
@@ -277,142 +288,4 @@ impl BandSums {
         self.g[k] += c.y;
         self.b[k] += c.z;
     }
-}
-
-/// One unshadowed plane against a span of pixels: [`PlaneView::hit`] and
-/// [`GatherContext::contribution`] written without branches, operation for operation, so the
-/// loop vectorises and the sums are bit-identical to the per-hit path. Every plane constant is
-/// copied into a local first: the compiler then knows the stores to the sums cannot change
-/// them. Returns the hit count.
-#[inline(always)]
-fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
-    ctx: &GatherContext,
-    weights: &D,
-    view: &PlaneView,
-    rays: &BandRays,
-    acc: &mut BandSums,
-    span: std::ops::Range<usize>,
-) -> u64 {
-    let ext = ctx.extinction;
-    let s = span;
-    let xyz = (&rays.x[s.clone()], &rays.y[s.clone()], &rays.z[s.clone()]);
-    let t = (&rays.t0[s.clone()], &rays.t1[s.clone()]);
-    let (sr, sg, sb) = (&mut acc.r[s.clone()], &mut acc.g[s.clone()], &mut acc.b[s]);
-    #[cfg(target_arch = "x86_64")]
-    if has_avx2() {
-        // SAFETY: the CPU supports AVX2 and FMA, checked at run time.
-        return unsafe {
-            if ext.grey {
-                span_kernel_avx2::<D, true, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
-            } else {
-                span_kernel_avx2::<D, false, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
-            }
-        };
-    }
-    if ext.grey {
-        span_kernel_slices::<D, true, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
-    } else {
-        span_kernel_slices::<D, false, CONTRIBUTE>(weights, view, ext.sigma_t, xyz, t, sr, sg, sb)
-    }
-}
-
-/// Whether the 8-wide kernel can run (checked once; `FOGPLANES_NO_AVX2` set turns it off, to
-/// measure or test the portable kernel).
-#[cfg(target_arch = "x86_64")]
-fn has_avx2() -> bool {
-    static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *HAS.get_or_init(|| {
-        std::env::var_os("FOGPLANES_NO_AVX2").is_none()
-            && std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma")
-    })
-}
-
-/// The kernel for CPUs with AVX2 and FMA (chosen at run time): the same code as
-/// [`span_kernel_slices`], compiled for 8-wide vectors. No operation is fused or reordered
-/// (Rust never contracts a * b + c), so the sums are bit-identical on every CPU.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-#[allow(clippy::too_many_arguments)]
-fn span_kernel_avx2<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    view: &PlaneView,
-    sigma_t: Vec3,
-    xyz: (&[f32], &[f32], &[f32]),
-    t: (&[f32], &[f32]),
-    sr: &mut [f32],
-    sg: &mut [f32],
-    sb: &mut [f32],
-) -> u64 {
-    span_kernel_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, xyz, t, sr, sg, sb)
-}
-
-/// The kernel proper. Not inlined on purpose: as separate slice arguments the sums and the rays
-/// are known not to alias (Rust marks them `noalias`), so the loop vectorises without the
-/// run-time overlap checks that would otherwise exceed the vectoriser's budget.
-#[inline(never)]
-#[allow(clippy::too_many_arguments)]
-fn span_kernel_slices<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    view: &PlaneView,
-    sigma_t: Vec3,
-    xyz: (&[f32], &[f32], &[f32]),
-    t: (&[f32], &[f32]),
-    sr: &mut [f32],
-    sg: &mut [f32],
-    sb: &mut [f32],
-) -> u64 {
-    span_kernel_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, xyz, t, sr, sg, sb)
-}
-
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn span_kernel_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    view: &PlaneView,
-    sigma_t: Vec3,
-    (xs, ys, zs): (&[f32], &[f32], &[f32]),
-    (t0s, t1s): (&[f32], &[f32]),
-    sr: &mut [f32],
-    sg: &mut [f32],
-    sb: &mut [f32],
-) -> u64 {
-    let n = xs.len();
-    let (ys, zs, t0s, t1s) = (&ys[..n], &zs[..n], &t0s[..n], &t1s[..n]);
-    let (sr, sg, sb) = (&mut sr[..n], &mut sg[..n], &mut sb[..n]);
-    let PlaneView { normal: nrm, normal_perp: perp, a_axis, r_axis, t_det, frame, scale, .. } = *view;
-    let width = frame.width;
-    let mut hits = 0u32;
-    for k in 0..n {
-        let (x, y, z) = (xs[k], ys[k], zs[k]);
-        let det = x * nrm.x + y * nrm.y + z * nrm.z;
-        let inv = 1.0 / det;
-        let t = t_det * inv;
-        let a = (x * a_axis.x + y * a_axis.y + z * a_axis.z) * inv;
-        let r = (x * r_axis.x + y * r_axis.y + z * r_axis.z) * inv;
-        let hit = (det != 0.0) & (t >= t0s[k]) & (t <= t1s[k]) & (a >= 0.0) & (a <= width) & (r >= 0.0);
-        hits += hit as u32;
-        if !CONTRIBUTE {
-            continue;
-        }
-        let det_perp = x * perp.x + y * perp.y + z * perp.z;
-        let d = weights.denominator(&frame, &HitLocal { det, det_perp, a });
-        let length = (t - t0s[k]) + r;
-        let (cr, cg, cb) = if GREY {
-            let q = exp_f32(-sigma_t.x * length) / d;
-            (scale.x * q, scale.y * q, scale.z * q)
-        } else {
-            (
-                scale.x * (exp_f32(-sigma_t.x * length) / d),
-                scale.y * (exp_f32(-sigma_t.y * length) / d),
-                scale.z * (exp_f32(-sigma_t.z * length) / d),
-            )
-        };
-        let keep = hit & (d > 0.0) & cr.is_finite() & cg.is_finite() & cb.is_finite();
-        sr[k] += if keep { cr } else { 0.0 };
-        sg[k] += if keep { cg } else { 0.0 };
-        sb[k] += if keep { cb } else { 0.0 };
-    }
-    hits as u64
 }

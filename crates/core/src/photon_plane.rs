@@ -7,9 +7,9 @@
 //! chord through a uniform point is sampling its offset with density width / A, the paper's
 //! p(v | alpha) = |s| / A.
 
-use crate::light::{ChordDirection, RectLight, chord_extent};
+use crate::light::{ChordDirection, chord_extent};
 use crate::medium::{Medium, PHASE};
-use crate::sampling::{Discrete, cosine_hemisphere, rng_for, unit_f64};
+use crate::sampling::{Discrete, cosine_hemisphere, light_distribution, rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::DVec3;
 use rand::RngCore;
@@ -40,11 +40,6 @@ pub struct PhotonPlane {
     /// The factor of one plane's contribution that does not depend on the hit (RGB):
     /// sigma_s rho pi Le A / P_l. A hit adds `power * Tr / D / N` (SPEC section 2: K / (N P_l D)).
     pub power: DVec3,
-}
-
-/// Light choice by power, P_l proportional to A_l luminance(Le_l) (SPEC section 2, step 1).
-pub fn light_distribution(scene: &Scene) -> Discrete {
-    Discrete::new(&scene.lights.iter().map(RectLight::power).collect::<Vec<_>>())
 }
 
 /// Samples one plane from six uniform numbers in [0, 1).
@@ -160,7 +155,7 @@ mod tests {
     use super::*;
 
     fn scene() -> Scene {
-        let text = include_str!("../media_scenes/six_lights.toml");
+        let text = include_str!("../../../media_scenes/six_lights.toml");
         Scene::parse(text, "six_lights.toml", "six_lights").unwrap()
     }
 

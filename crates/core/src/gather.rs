@@ -1,18 +1,24 @@
 //! One camera ray against one photon plane: the hit test and the weighted contribution
-//! C = K / (N P_l D) of SPEC section 2. Everything here is f32 and relative to the ray origin,
-//! prepared once per plane so that a hit costs a few dot products and one exponential.
+//! `C = K / (N P_l D)` of docs/mathematics.md section 2. Everything here is f32 and relative to
+//! the ray origin, prepared once per plane so that a hit costs a few dot products and one
+//! exponential.
 //!
-//! Every intersection structure ([`crate::raster`], [`crate::bvh`], the brute-force loop
-//! [`GatherContext::gather_brute_force`]) finds candidate planes and calls [`PlaneView::hit`] and
-//! [`GatherContext::contribution`]; they differ only in which planes they try.
+//! The per-hit arithmetic is written once, here, branch-free: [`PlaneView::crossing`] (where
+//! the ray meets the plane and whether that is a hit) and [`PlaneView::contribution`] (D, the
+//! transmittance and the finite check). Every path that gathers calls these two and nothing
+//! else: the vector kernels of [`crate::kernel`], the per-hit path [`GatherContext::gather_one`]
+//! (which adds only the visibility test of planes another panel can shadow), the BVH and the
+//! brute-force loop. So images are bit-identical whichever path found a hit.
 
+use crate::light::Rectangle;
+use crate::numeric::exp_f32;
 use crate::photon_plane::PhotonPlane;
 use crate::scene::Scene;
 use crate::weights::{Denominator, HitLocal, PlaneFrame};
 use glam::{DVec3, Vec3};
 
 /// A camera ray: unit direction (f32, origin at the camera) and its segment `[t0, t1]` inside
-/// the medium before the first light panel.
+/// the medium before the first light panel (empty, `t0 > t1`, when there is none).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CameraRay {
     pub dir: Vec3,
@@ -23,7 +29,7 @@ pub struct CameraRay {
 /// A plane prepared for rays from one origin `o`.
 ///
 /// With b = y0 - o and the plane normal n_P = d x wl, the hit `o + t we = y0 + a d + r wl` solves
-/// by Cramer's rule with the common determinant det = we . n_P (SPEC's det(alpha)):
+/// by Cramer's rule with the common determinant det = we . n_P (det(alpha) of section 2):
 /// t det = b . n_P, a det = we . (wl x b), r det = we . (b x d).
 #[derive(Clone, Copy, Debug)]
 pub struct PlaneView {
@@ -36,21 +42,26 @@ pub struct PlaneView {
     pub frame: PlaneFrame,
     /// power / N: the hit-independent factor of C.
     pub scale: Vec3,
-    /// Index into [`GatherContext::shadowed`], or `u32::MAX` when no other light can shadow it.
+    /// Index into [`GatherContext::shadowed`], or [`PlaneView::UNSHADOWED`].
     pub shadow: u32,
 }
 
-/// A hit of a ray on a plane.
+/// Where a ray meets a plane, computed whether or not it hits (the values are then harmless
+/// and unused): camera distance t, chord parameter a, plane distance r (section 2) and
+/// det(alpha).
 #[derive(Clone, Copy, Debug)]
-pub struct Hit {
-    /// Camera distance, chord parameter, plane distance (SPEC section 2), and det(alpha).
+pub struct Crossing {
+    pub hit: bool,
+    pub det: f32,
     pub t: f32,
     pub a: f32,
     pub r: f32,
-    pub det: f32,
 }
 
 impl PlaneView {
+    /// No other light panel can shadow the plane.
+    pub const UNSHADOWED: u32 = u32::MAX;
+
     pub fn new(plane: &PhotonPlane, scene: &Scene, origin: DVec3, planes_total: usize, shadow: u32) -> Self {
         let light = &scene.lights[plane.light];
         let b = plane.origin - origin;
@@ -69,19 +80,57 @@ impl PlaneView {
         }
     }
 
-    /// Where the ray with unit direction `we` meets the plane within `[t0, t1]`, if it does.
+    /// Where the ray with unit direction `dir` meets the plane, and whether that is a hit: inside
+    /// `[t0, t1]`, on the chord (`0 <= a <= width`) and strictly in front of the light (r > 0).
+    ///
+    /// A hit at r = 0 lies on the light itself: only a camera ray lying in the light's own plane
+    /// meets planes there, and along such a ray cos(theta_y) = 0, so the integrand of section 1
+    /// vanishes; counting the hit would add light that is not there.
     #[inline(always)]
-    pub fn hit(&self, ray: &CameraRay) -> Option<Hit> {
-        let det = ray.dir.dot(self.normal);
-        if det == 0.0 {
-            return None;
-        }
+    pub fn crossing(&self, dir: [f32; 3], t0: f32, t1: f32) -> Crossing {
+        let [x, y, z] = dir;
+        let det = x * self.normal.x + y * self.normal.y + z * self.normal.z;
         let inv = 1.0 / det;
         let t = self.t_det * inv;
-        let a = ray.dir.dot(self.a_axis) * inv;
-        let r = ray.dir.dot(self.r_axis) * inv;
-        let inside = t >= ray.t0 && t <= ray.t1 && a >= 0.0 && a <= self.frame.width && r >= 0.0;
-        inside.then_some(Hit { t, a, r, det })
+        let a = (x * self.a_axis.x + y * self.a_axis.y + z * self.a_axis.z) * inv;
+        let r = (x * self.r_axis.x + y * self.r_axis.y + z * self.r_axis.z) * inv;
+        let hit = (det != 0.0) & (t >= t0) & (t <= t1) & (a >= 0.0) & (a <= self.frame.width) & (r > 0.0);
+        Crossing { hit, det, t, a, r }
+    }
+
+    /// The contribution C of a crossing (section 2): `power Tr_cam(t) Tr(x, y') / (N D)` with
+    /// `Tr_cam(t) Tr(x, y') = exp(-sigma_t ((t - t0) + r))` (both segments lie inside the box).
+    /// Zero unless the crossing is a hit with D > 0 and a finite value: D vanishes, or underflows
+    /// to a denormal, only on a set of probability ~0, and such a hit adds nothing rather than
+    /// an infinity. Visibility is the caller's (only planes another panel can shadow need it).
+    /// `GREY`: one exponential serves the three channels.
+    #[inline(always)]
+    pub fn contribution<D: Denominator, const GREY: bool>(
+        &self,
+        weights: &D,
+        sigma_t: Vec3,
+        dir: [f32; 3],
+        t0: f32,
+        c: &Crossing,
+    ) -> [f32; 3] {
+        let [x, y, z] = dir;
+        let perp = self.normal_perp;
+        let det_perp = x * perp.x + y * perp.y + z * perp.z;
+        let d = weights.denominator(&self.frame, &HitLocal { det: c.det, det_perp, a: c.a });
+        let length = (c.t - t0) + c.r;
+        let scale = self.scale;
+        let (cr, cg, cb) = if GREY {
+            let q = exp_f32(-sigma_t.x * length) / d;
+            (scale.x * q, scale.y * q, scale.z * q)
+        } else {
+            (
+                scale.x * (exp_f32(-sigma_t.x * length) / d),
+                scale.y * (exp_f32(-sigma_t.y * length) / d),
+                scale.z * (exp_f32(-sigma_t.z * length) / d),
+            )
+        };
+        let keep = c.hit & (d > 0.0) & cr.is_finite() & cg.is_finite() & cb.is_finite();
+        [if keep { cr } else { 0.0 }, if keep { cg } else { 0.0 }, if keep { cb } else { 0.0 }]
     }
 }
 
@@ -96,35 +145,6 @@ pub struct ShadowedPlane {
     pub occluders: u64,
 }
 
-/// A light panel as an occluder, relative to the origin.
-#[derive(Clone, Copy, Debug)]
-pub struct Occluder {
-    pub corner: Vec3,
-    pub u: Vec3,
-    pub v: Vec3,
-    pub n: Vec3,
-    pub width: f32,
-    pub height: f32,
-}
-
-impl Occluder {
-    /// Whether the segment `y + s wl`, `s` in `(0, r)`, crosses the panel.
-    #[inline]
-    pub fn blocks(&self, y: Vec3, wl: Vec3, r: f32) -> bool {
-        let denom = wl.dot(self.n);
-        if denom == 0.0 {
-            return false;
-        }
-        let s = (self.corner - y).dot(self.n) / denom;
-        if !(s > 1e-6 * r && s < r * (1.0 - 1e-6)) {
-            return false;
-        }
-        let rel = y + s * wl - self.corner;
-        let (p, q) = (rel.dot(self.u), rel.dot(self.v));
-        p >= 0.0 && p <= self.width && q >= 0.0 && q <= self.height
-    }
-}
-
 /// Extinction, with the common grey case (one exponential per hit) recognised.
 #[derive(Clone, Copy, Debug)]
 pub struct Extinction {
@@ -136,46 +156,21 @@ impl Extinction {
     pub fn new(sigma_t: DVec3) -> Self {
         Extinction { sigma_t: sigma_t.as_vec3(), grey: sigma_t.x == sigma_t.y && sigma_t.y == sigma_t.z }
     }
-
-    /// exp(-sigma_t length) / d: the attenuation of a hit over its denominator, one exponential
-    /// and one division when the medium is grey.
-    #[inline(always)]
-    pub fn transmittance_over(&self, length: f32, d: f32) -> Vec3 {
-        if self.grey {
-            Vec3::splat(exp_f32(-self.sigma_t.x * length) / d)
-        } else {
-            Vec3::new(
-                exp_f32(-self.sigma_t.x * length) / d,
-                exp_f32(-self.sigma_t.y * length) / d,
-                exp_f32(-self.sigma_t.z * length) / d,
-            )
-        }
-    }
 }
 
-/// exp(x) for x <= 0 in f32, branch-free so that loops over pixels vectorise: x = k ln 2 + r
-/// with k = round(x / ln 2) (Cody-Waite, |r| <= ln 2 / 2), exp(r) by its Taylor series to r^7
-/// (truncation below 6e-9 relative), and 2^k written into the exponent bits. Below -87 (where
-/// 2^k would leave the normal range) the result is 0. Within 2e-7 relative of exp (tested).
-#[inline(always)]
-#[allow(clippy::manual_clamp)] // clamp has a panic path, which would stop vectorisation
-pub fn exp_f32(x: f32) -> f32 {
-    const LN2_HI: f32 = 0.693_145_75;
-    const LN2_LO: f32 = 1.428_606_8e-6;
-    // Adding and subtracting 1.5 * 2^23 rounds to the nearest integer without a call.
-    const ROUND: f32 = 12_582_912.0;
-    let xc = x.max(-87.0).min(0.0);
-    // xc log2(e) + 1.5 * 2^23 holds k in its low mantissa bits: the integer is read from there
-    // (no float-to-int conversion, which would not vectorise).
-    let shifted = xc * std::f32::consts::LOG2_E + ROUND;
-    let k = shifted - ROUND;
-    let r = (xc - k * LN2_HI) - k * LN2_LO;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
-    let scale = f32::from_bits(shifted.to_bits().wrapping_sub(0x4B40_0000 - 127) << 23);
-    if x < -87.0 { 0.0 } else { p * scale }
+/// Counters from one gathering pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GatherStats {
+    /// Ray-plane tests made and hits found.
+    pub tests: u64,
+    pub hits: u64,
+}
+
+impl std::ops::AddAssign for GatherStats {
+    fn add_assign(&mut self, o: Self) {
+        self.tests += o.tests;
+        self.hits += o.hits;
+    }
 }
 
 /// All planes prepared for rays from one origin.
@@ -183,7 +178,8 @@ pub struct GatherContext {
     pub origin: DVec3,
     pub views: Vec<PlaneView>,
     pub shadowed: Vec<ShadowedPlane>,
-    pub occluders: Vec<Occluder>,
+    /// Every light panel as an occluder, relative to the origin.
+    pub occluders: Vec<Rectangle<f32>>,
     pub extinction: Extinction,
 }
 
@@ -200,11 +196,11 @@ impl GatherContext {
         let occluders = scene
             .lights
             .iter()
-            .map(|l| Occluder {
-                corner: (l.corner - origin).as_vec3(),
-                u: l.u.as_vec3(),
-                v: l.v.as_vec3(),
-                n: l.n.as_vec3(),
+            .map(|l| Rectangle {
+                corner: (l.corner - origin).as_vec3().to_array(),
+                u: l.u.as_vec3().to_array(),
+                v: l.v.as_vec3().to_array(),
+                n: l.n.as_vec3().to_array(),
                 width: l.width as f32,
                 height: l.height as f32,
             })
@@ -220,7 +216,7 @@ impl GatherContext {
         let mut shadow_index = Vec::with_capacity(planes.len());
         for (p, &mask) in planes.iter().zip(&masks) {
             if mask == 0 {
-                shadow_index.push(u32::MAX);
+                shadow_index.push(PlaneView::UNSHADOWED);
             } else {
                 shadow_index.push(self.shadowed.len() as u32);
                 self.shadowed.push(ShadowedPlane {
@@ -240,32 +236,37 @@ impl GatherContext {
         );
     }
 
-    /// The contribution C of a hit (SPEC section 2): power Tr_cam(t) Tr(x, y') V(x, y') / (N D),
-    /// zero when D is zero or the light path is blocked. Never NaN or infinite.
-    #[inline(always)]
-    pub fn contribution<D: Denominator>(&self, weights: &D, view: &PlaneView, ray: &CameraRay, hit: &Hit) -> Vec3 {
-        let local = HitLocal { det: hit.det, det_perp: ray.dir.dot(view.normal_perp), a: hit.a };
-        let d = weights.denominator(&view.frame, &local);
-        if !(d > 0.0) {
-            return Vec3::ZERO;
+    /// The per-hit path: one ray against one plane. `None` if it misses; otherwise its
+    /// contribution, zero when another panel blocks the light path. The same arithmetic as the
+    /// vector kernels, plus the visibility test.
+    #[inline]
+    pub fn gather_one<D: Denominator>(&self, weights: &D, view: &PlaneView, ray: &CameraRay) -> Option<Vec3> {
+        let dir = ray.dir.to_array();
+        let c = view.crossing(dir, ray.t0, ray.t1);
+        if !c.hit {
+            return None;
         }
-        if view.shadow != u32::MAX && self.is_shadowed(&self.shadowed[view.shadow as usize], hit) {
-            return Vec3::ZERO;
+        if view.shadow != PlaneView::UNSHADOWED && self.is_shadowed(&self.shadowed[view.shadow as usize], &c) {
+            return Some(Vec3::ZERO);
         }
-        // Tr_cam(t) Tr(x, y') = exp(-sigma_t ((t - t0) + r)): both segments lie inside the box.
-        let c = view.scale * self.extinction.transmittance_over((hit.t - ray.t0) + hit.r, d);
-        // D can underflow to a denormal only on a set of probability ~0; drop such a hit rather
-        // than let an infinity through.
-        if c.x.is_finite() & c.y.is_finite() & c.z.is_finite() { c } else { Vec3::ZERO }
+        let sigma_t = self.extinction.sigma_t;
+        let value = if self.extinction.grey {
+            view.contribution::<D, true>(weights, sigma_t, dir, ray.t0, &c)
+        } else {
+            view.contribution::<D, false>(weights, sigma_t, dir, ray.t0, &c)
+        };
+        Some(Vec3::from_array(value))
     }
 
-    fn is_shadowed(&self, s: &ShadowedPlane, hit: &Hit) -> bool {
-        let y = s.origin + hit.a * s.chord;
+    /// Whether another panel blocks the segment from the light vertex y' to the hit point.
+    fn is_shadowed(&self, s: &ShadowedPlane, c: &Crossing) -> bool {
+        let y = (s.origin + c.a * s.chord).to_array();
+        let wl = s.direction.to_array();
         let mut mask = s.occluders;
         while mask != 0 {
             let k = mask.trailing_zeros() as usize;
             mask &= mask - 1;
-            if self.occluders[k].blocks(y, s.direction, hit.r) {
+            if self.occluders[k].crossing(y, wl, 1e-6 * c.r, c.r * (1.0 - 1e-6)).is_some() {
                 return true;
             }
         }
@@ -277,9 +278,9 @@ impl GatherContext {
     pub fn gather_brute_force<D: Denominator>(&self, weights: &D, ray: &CameraRay) -> (Vec3, u64) {
         let (mut sum, mut hits) = (Vec3::ZERO, 0);
         for view in &self.views {
-            if let Some(hit) = view.hit(ray) {
+            if let Some(c) = self.gather_one(weights, view, ray) {
                 hits += 1;
-                sum += self.contribution(weights, view, ray, &hit);
+                sum += c;
             }
         }
         (sum, hits)
@@ -370,26 +371,13 @@ mod tests {
     use super::*;
     use crate::photon_plane::sample_planes;
 
-    #[test]
-    fn exp_f32_is_accurate_and_vanishes_far_out() {
-        let mut worst = 0.0f64;
-        for i in 0..=200_000 {
-            let x = -87.0 * i as f64 / 200_000.0;
-            let (got, want) = (exp_f32(x as f32) as f64, (x as f32 as f64).exp());
-            worst = worst.max((got - want).abs() / want);
-        }
-        assert!(worst < 2e-7, "largest relative error {worst:e}");
-        assert_eq!(exp_f32(0.0), 1.0);
-        assert_eq!(exp_f32(-100.0), 0.0);
-        assert_eq!(exp_f32(f32::NEG_INFINITY), 0.0);
-    }
-
     /// Culling occluders per plane never drops one that blocks: the same images as testing
     /// every other light at every hit.
     #[test]
     fn occluder_culling_keeps_every_blocking_light() {
         for file in ["media_scenes/six_lights.toml", "media_scenes/hard/facing_lights_close.toml"] {
-            let scene = Scene::load(std::path::Path::new(file)).unwrap();
+            let scene =
+                Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(file)).unwrap();
             let planes = sample_planes(&scene, 4000, 8);
             let o = scene.camera.position;
             let culled = GatherContext::new(&scene, &planes, o);
@@ -430,7 +418,7 @@ mod tests {
 
     #[test]
     fn hit_solves_the_plane_equation() {
-        let text = include_str!("../media_scenes/six_lights.toml");
+        let text = include_str!("../../../media_scenes/six_lights.toml");
         let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
         let planes = sample_planes(&scene, 300, 2);
         let o = scene.camera.position;
@@ -440,7 +428,8 @@ mod tests {
             for k in 0..50 {
                 let we = scene.camera.direction(12.8 * k as f64, 7.2 * k as f64).normalize();
                 let ray = CameraRay { dir: we.as_vec3(), t0: 0.0, t1: 1e9 };
-                if let Some(h) = v.hit(&ray) {
+                let h = v.crossing(ray.dir.to_array(), ray.t0, ray.t1);
+                if h.hit {
                     found += 1;
                     let x = o + h.t as f64 * we;
                     let on_plane = p.origin + h.a as f64 * p.chord + h.r as f64 * p.direction;

@@ -4,6 +4,7 @@
 //! emits constant radiance one-sided into the hemisphere of `n = normalize(U x V)`, and it is an
 //! opaque panel: both faces block rays, the back face is black.
 
+use crate::numeric::{Real, V3, dot};
 use glam::DVec3;
 
 /// A validated rectangular light.
@@ -44,7 +45,7 @@ impl RectLight {
 
     /// The power used to choose lights: A * luminance(Le) (SPEC section 2, step 1).
     pub fn power(&self) -> f64 {
-        self.area() * crate::luminance(self.radiance)
+        self.area() * luminance(self.radiance)
     }
 
     /// The world point at local coordinates (p, q).
@@ -66,44 +67,53 @@ impl RectLight {
 
     /// Where the ray `o + t d` crosses the panel with `t` in `(t_min, t_max)`, if it does.
     pub fn intersect(&self, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<f64> {
-        let denom = d.dot(self.n);
-        if denom == 0.0 {
+        let r = Rectangle {
+            corner: self.corner.to_array(),
+            u: self.u.to_array(),
+            v: self.v.to_array(),
+            n: self.n.to_array(),
+            width: self.width,
+            height: self.height,
+        };
+        r.crossing(o.to_array(), d.to_array(), t_min, t_max)
+    }
+}
+
+/// Luminance of a linear RGB triple (Rec. 709 weights), used to choose lights by power.
+pub fn luminance(rgb: DVec3) -> f64 {
+    0.2126 * rgb.x + 0.7152 * rgb.y + 0.0722 * rgb.z
+}
+
+/// A rectangle as a ray sees it, in f64 (scene queries) or f32 (light panels as occluders while
+/// gathering): `corner + p u + q v`, `p` in `[0, width]`, `q` in `[0, height]`, normal `n`.
+#[derive(Clone, Copy, Debug)]
+pub struct Rectangle<T> {
+    pub corner: V3<T>,
+    pub u: V3<T>,
+    pub v: V3<T>,
+    pub n: V3<T>,
+    pub width: T,
+    pub height: T,
+}
+
+impl<T: Real> Rectangle<T> {
+    /// Where the ray `o + t d` crosses the rectangle with `t` in the open interval
+    /// `(t_min, t_max)`, if it does; edges count as inside. A ray parallel to the rectangle's
+    /// plane never crosses it.
+    #[inline]
+    pub fn crossing(&self, o: V3<T>, d: V3<T>, t_min: T, t_max: T) -> Option<T> {
+        let denom = dot(d, self.n);
+        if denom == T::ZERO {
             return None;
         }
-        let t = (self.corner - o).dot(self.n) / denom;
+        let c = self.corner;
+        let t = dot([c[0] - o[0], c[1] - o[1], c[2] - o[2]], self.n) / denom;
         if !(t > t_min && t < t_max) {
             return None;
         }
-        let (p, q) = self.local(o + t * d);
-        (p >= 0.0 && p <= self.width && q >= 0.0 && q <= self.height).then_some(t)
-    }
-}
-
-/// The arithmetic the chord routines need, so that the same code serves the f64 sampling path
-/// and the f32 gathering path.
-pub trait Real: Copy + PartialOrd + std::ops::Sub<Output = Self> + std::ops::Mul<Output = Self> {
-    const ZERO: Self;
-    /// IEEE minNum: a NaN argument is ignored (used on purpose, see [`chord_extent`]).
-    fn min_num(self, other: Self) -> Self;
-}
-
-/// The gathering path (f32) takes the cheaper compare-and-select, one vector instruction: it
-/// returns `other` when either is NaN. The NaN case (0 * inf, a vertex exactly on an edge with
-/// a chord exactly along an axis) has probability zero; [`chord_extent`] then clamps NaN to 0,
-/// so a width is never NaN.
-impl Real for f32 {
-    const ZERO: f32 = 0.0;
-    #[inline(always)]
-    fn min_num(self, other: f32) -> f32 {
-        if self < other { self } else { other }
-    }
-}
-
-impl Real for f64 {
-    const ZERO: f64 = 0.0;
-    #[inline(always)]
-    fn min_num(self, other: f64) -> f64 {
-        self.min(other)
+        let rel = [(o[0] + t * d[0]) - c[0], (o[1] + t * d[1]) - c[1], (o[2] + t * d[2]) - c[2]];
+        let (p, q) = (dot(rel, self.u), dot(rel, self.v));
+        (p >= T::ZERO && p <= self.width && q >= T::ZERO && q <= self.height).then_some(t)
     }
 }
 

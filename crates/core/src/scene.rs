@@ -5,19 +5,13 @@
 
 use crate::camera::Camera;
 use crate::light::RectLight;
+use crate::limits::{MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_memory, check_planes, check_resolution, check_spp};
 use crate::medium::Medium;
 use crate::weights::{Estimator, Weighting};
 use glam::DVec3;
 use serde::Deserialize;
 use std::fmt;
 use std::path::Path;
-
-/// Scene files larger than this are refused before they are read.
-pub const MAX_SCENE_FILE_BYTES: u64 = 1 << 20;
-/// The most lights a scene may have (occluders are tracked as bits of a u64 per plane).
-pub const MAX_LIGHTS: usize = 64;
-/// The largest image side accepted.
-pub const MAX_RESOLUTION_SIDE: u32 = 1 << 15;
 
 /// A problem with a scene file or with the render settings derived from it.
 #[derive(Debug, Clone, PartialEq)]
@@ -238,7 +232,7 @@ impl Scene {
                 format!("must lie strictly between 0 and 180 degrees, got {}", c.vfov_deg),
             ));
         }
-        check_resolution(c.resolution).map_err(|m| err("camera.resolution".into(), m))?;
+        check_resolution(c.resolution[0], c.resolution[1]).map_err(|m| err("camera.resolution".into(), m))?;
         let camera = Camera::new(position, look_at, up, c.vfov_deg, c.resolution[0], c.resolution[1]);
 
         // Lights.
@@ -301,8 +295,7 @@ impl Scene {
         let spp = r.spp.unwrap_or(1);
         check_spp(spp).map_err(|m| err("render.spp".into(), m))?;
         let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp };
-        crate::render::check_memory(camera.width, camera.height, planes)
-            .map_err(|m| err("camera.resolution".into(), m))?;
+        check_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
 
         Ok(Scene { name: name.to_string(), camera, medium, lights, render })
     }
@@ -354,9 +347,12 @@ impl Scene {
             .any(|(k, l)| k != except && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
     }
 
-    /// The same scene seen at another resolution.
-    pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, String> {
-        check_resolution([width, height])?;
+    /// The same scene seen at another resolution (checked against the memory budget with the
+    /// scene's own plane count; a render checks its own).
+    pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, crate::Error> {
+        let invalid = |m| crate::Error::option("--resolution", m);
+        check_resolution(width, height).map_err(invalid)?;
+        check_memory(width, height, self.render.planes).map_err(invalid)?;
         let c = &self.camera;
         let mut s = self.clone();
         s.camera = Camera { width, height, ..c.clone() };
@@ -390,30 +386,6 @@ pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
             message: inner.message().trim().to_string(),
         }
     })
-}
-
-pub fn check_resolution(res: [u32; 2]) -> Result<(), String> {
-    if res[0] == 0 || res[1] == 0 || res[0] > MAX_RESOLUTION_SIDE || res[1] > MAX_RESOLUTION_SIDE {
-        return Err(format!("each side must be between 1 and {MAX_RESOLUTION_SIDE} pixels, got {}x{}", res[0], res[1]));
-    }
-    Ok(())
-}
-
-/// The largest plane count accepted (about 30 GB of planes would be needed beyond it).
-pub const MAX_PLANES: u64 = 1 << 27;
-
-pub fn check_planes(planes: u64) -> Result<(), String> {
-    if planes == 0 || planes > MAX_PLANES {
-        return Err(format!("the plane count must be between 1 and {MAX_PLANES}, got {planes}"));
-    }
-    Ok(())
-}
-
-pub fn check_spp(spp: u32) -> Result<(), String> {
-    if spp == 0 || spp > 1 << 16 {
-        return Err(format!("samples per pixel must be between 1 and 65536, got {spp}"));
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -66,6 +66,12 @@ impl Discrete {
     }
 }
 
+/// Light choice by power, P_l proportional to A_l luminance(Le_l) (docs/mathematics.md
+/// section 2, step 1): shared by the photon planes and the reference.
+pub fn light_distribution(scene: &crate::scene::Scene) -> Discrete {
+    Discrete::new(&scene.lights.iter().map(crate::light::RectLight::power).collect::<Vec<_>>())
+}
+
 /// A direction cosine-distributed about `n` (pdf cos(theta) / pi), from two uniforms, given an
 /// orthonormal frame (t, b, n). Malley's method: a uniform point on the disk, lifted.
 pub fn cosine_hemisphere(u1: f64, u2: f64, t: DVec3, b: DVec3, n: DVec3) -> DVec3 {

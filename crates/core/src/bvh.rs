@@ -5,10 +5,9 @@
 //! [`crate::raster`] is the fast path for camera images, this one the baseline it is measured
 //! against (and a second independent path for the hit-equality tests).
 
-use crate::gather::{CameraRay, GatherContext};
+use crate::gather::{CameraRay, GatherContext, GatherStats};
 use crate::medium::Medium;
 use crate::photon_plane::PhotonPlane;
-use crate::raster::GatherStats;
 use crate::weights::Denominator;
 use glam::{DVec3, Vec3};
 
@@ -76,9 +75,9 @@ impl PlaneBvh {
                 for &i in &self.order[node.first as usize..(node.first + node.count) as usize] {
                     let view = &ctx.views[i as usize];
                     stats.tests += 1;
-                    if let Some(hit) = view.hit(ray) {
+                    if let Some(c) = ctx.gather_one(weights, view, ray) {
                         stats.hits += 1;
-                        sum += ctx.contribution(weights, view, ray, &hit);
+                        sum += c;
                     }
                 }
             } else if top + 2 <= stack.len() {

@@ -3,7 +3,7 @@
 //! Every file is written to a temporary name beside its destination and renamed over it, so a
 //! destination holds either its old contents or the complete new image, never part of one.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Error, Result};
 use glam::Vec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -52,24 +52,31 @@ impl ImageFormat {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("exr") => Ok(ImageFormat::Exr),
             Some("png") => Ok(ImageFormat::Png),
-            _ => bail!("{}: the output must end in .exr (linear float) or .png (tone-mapped sRGB)", path.display()),
+            _ => Err(Error::bad_input(path, "the output must end in .exr (linear float) or .png (tone-mapped sRGB)")),
         }
     }
 }
 
-/// Checks before any work that `path` can be written: a known extension and an existing,
-/// writable directory (probed by creating and removing a temporary file).
-pub fn check_writable(path: &Path) -> Result<()> {
+/// Checks before any work that an image can be written to `path`: a known extension and a
+/// writable place ([`check_writable`]).
+pub fn check_image_output(path: &Path) -> Result<()> {
     ImageFormat::from_path(path)?;
+    check_writable(path)
+}
+
+/// Checks before any work that `path` can be written: an existing, writable directory (probed
+/// by creating and removing a temporary file), and not a directory itself.
+pub fn check_writable(path: &Path) -> Result<()> {
     let dir = parent_dir(path);
     if !dir.is_dir() {
-        bail!("{}: the output directory {} does not exist", path.display(), dir.display());
+        return Err(Error::bad_input(path, format!("the output directory {} does not exist", dir.display())));
     }
     if path.is_dir() {
-        bail!("{}: is a directory", path.display());
+        return Err(Error::bad_input(path, "is a directory"));
     }
     let probe = temporary_path(path);
-    std::fs::File::create(&probe).with_context(|| format!("{}: cannot write to {}", path.display(), dir.display()))?;
+    std::fs::File::create(&probe)
+        .map_err(|e| Error::bad_input(path, format!("cannot write to {}: {e}", dir.display())))?;
     let _ = std::fs::remove_file(&probe);
     Ok(())
 }
@@ -106,7 +113,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
     UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).push(tmp.clone());
     let result = write(&tmp).and_then(|()| {
         std::fs::rename(&tmp, path)
-            .with_context(|| format!("{}: cannot move the finished file into place", path.display()))
+            .map_err(|e| Error::write(path, format!("cannot move the finished file into place: {e}")))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -118,10 +125,10 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) ->
 /// Writes bytes whole or not at all.
 pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |tmp| {
-        let mut f = std::fs::File::create(tmp).with_context(|| format!("{}: cannot create", tmp.display()))?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        Ok(())
+        let fail = |e: std::io::Error| Error::write(path, format!("cannot write: {e}"));
+        let mut f = std::fs::File::create(tmp).map_err(fail)?;
+        f.write_all(bytes).map_err(fail)?;
+        f.sync_all().map_err(fail)
     })
 }
 
@@ -152,7 +159,7 @@ impl Film {
                 let p = self.pixels[y * w + x];
                 (p.x, p.y, p.z)
             })
-            .with_context(|| format!("{}: cannot write EXR", path.display()))
+            .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
         })
     }
 
@@ -170,8 +177,7 @@ impl Film {
 
     /// Reads the first RGB(A) layer of an EXR file.
     pub fn load_exr(path: &Path) -> Result<Film> {
-        use exr::prelude::*;
-        let image = read_first_rgba_layer_from_file(
+        let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |resolution, _| Film::new(resolution.width() as u32, resolution.height() as u32),
             |film: &mut Film, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
@@ -179,7 +185,7 @@ impl Film {
                 film.pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
             },
         )
-        .with_context(|| format!("{}: cannot read as an EXR image", path.display()))?;
+        .map_err(|e| Error::bad_input(path, format!("cannot read as an EXR image: {e}")))?;
         Ok(image.layer_data.channel_data.pixels)
     }
 }
@@ -188,7 +194,7 @@ impl Film {
 pub fn save_rgb8_png(img: &image::RgbImage, path: &Path) -> Result<()> {
     let mut bytes = Vec::new();
     img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .with_context(|| format!("{}: cannot encode PNG", path.display()))?;
+        .map_err(|e| Error::write(path, format!("cannot encode PNG: {e}")))?;
     write_file_atomically(path, &bytes)
 }
 
@@ -215,7 +221,7 @@ mod tests {
 
     #[test]
     fn unknown_extensions_and_missing_directories_are_refused() {
-        assert!(check_writable(Path::new("out.jpg")).is_err());
+        assert!(check_image_output(Path::new("out.jpg")).is_err());
         assert!(check_writable(Path::new("/no/such/dir/out.exr")).is_err());
     }
 

@@ -1,7 +1,7 @@
 //! Error metrics (SPEC section 4, as in the paper's Section 4.4 and Fig. 11).
 
+use crate::error::{Error, Result};
 use crate::film::Film;
-use anyhow::{Result, bail};
 
 /// The error of an image against a reference, over all pixels and channels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
@@ -29,13 +29,10 @@ impl ErrorMetrics {
 /// Compares `image` against `reference`; they must have the same size.
 pub fn compare(image: &Film, reference: &Film) -> Result<ErrorMetrics> {
     if (image.width, image.height) != (reference.width, reference.height) {
-        bail!(
-            "the images differ in size: {}x{} against a {}x{} reference",
-            image.width,
-            image.height,
-            reference.width,
-            reference.height
-        );
+        return Err(Error::SizeMismatch {
+            image: (image.width, image.height),
+            reference: (reference.width, reference.height),
+        });
     }
     let (mut smape, mut mse, mut rel, mut max) = (0.0, 0.0, 0.0, 0.0f64);
     for (e, r) in image.pixels.iter().zip(&reference.pixels) {

@@ -6,11 +6,15 @@
 //! factors shared by all orientations.
 
 use crate::light::{ChordDirection, chord_width};
+use crate::limits::MAX_ORIENTATIONS;
 use std::f64::consts::PI;
 use std::fmt;
 use std::str::FromStr;
 
-/// The weighting schemes, by their command-line names.
+/// The weighting schemes: the closed list of estimators. Everything that names or dispatches
+/// an estimator reads it from here ([`Estimator::ALL`], [`Estimator::info`],
+/// [`Weighting::dispatch`]), so a new weighting is a variant, its [`Denominator`] below, one
+/// arm in `info` and one in `dispatch`, and its unit tests: this file only.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Estimator {
     /// Paper eq. (22): `D = g(alpha)`.
@@ -25,7 +29,21 @@ pub enum Estimator {
     CmisExact,
 }
 
+/// What the documentation, the command line and the reports say about an estimator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EstimatorInfo {
+    /// The command-line name.
+    pub name: &'static str,
+    /// Where the weighting comes from in the paper (West et al. 2020).
+    pub source: &'static str,
+    /// The denominator D of a hit's contribution K / (N P_l D) (docs/mathematics.md section 2).
+    pub denominator: &'static str,
+    /// Whether `--orientations K` applies.
+    pub orientations: bool,
+}
+
 impl Estimator {
+    /// Every estimator, in the order of the paper (and of the tables).
     pub const ALL: [Estimator; 5] = [
         Estimator::Unweighted,
         Estimator::CmisCosine,
@@ -34,19 +52,44 @@ impl Estimator {
         Estimator::CmisExact,
     ];
 
-    pub fn name(self) -> &'static str {
-        match self {
-            Estimator::Unweighted => "unweighted",
-            Estimator::CmisCosine => "cmis-cosine",
-            Estimator::SmisCosine => "smis-cosine",
-            Estimator::SmisExact => "smis-exact",
-            Estimator::CmisExact => "cmis-exact",
-        }
+    /// The estimator the others are measured against in the tables.
+    pub const BASELINE: Estimator = Estimator::Unweighted;
+
+    /// The estimator rendered when none is named.
+    pub const DEFAULT: Estimator = Estimator::SmisExact;
+
+    pub const fn info(self) -> EstimatorInfo {
+        let (name, source, denominator, orientations) = match self {
+            Estimator::Unweighted => ("unweighted", "eq. 22", "g(alpha) = width(alpha, y') |det(alpha)|", false),
+            Estimator::CmisCosine => (
+                "cmis-cosine",
+                "eq. 26, Deng et al.'s analytic weight",
+                "width(alpha, y') (2/pi) sqrt(a_u^2 + a_v^2)",
+                false,
+            ),
+            Estimator::SmisCosine => {
+                ("smis-cosine", "eq. 27, cosine weight", "width(alpha, y') mean_k |det(alpha_k)|", true)
+            }
+            Estimator::SmisExact => ("smis-exact", "eq. 27, exact densities", "mean_k g(alpha_k)", true),
+            Estimator::CmisExact => {
+                ("cmis-exact", "eq. 24, not in the paper: closed form", "(1/pi) integral of g over [0, pi)", false)
+            }
+        };
+        EstimatorInfo { name, source, denominator, orientations }
+    }
+
+    pub const fn name(self) -> &'static str {
+        self.info().name
     }
 
     /// Whether `--orientations K` applies.
-    pub fn has_orientations(self) -> bool {
-        matches!(self, Estimator::SmisCosine | Estimator::SmisExact)
+    pub const fn has_orientations(self) -> bool {
+        self.info().orientations
+    }
+
+    /// The names, for help texts and error messages.
+    pub fn names() -> Vec<&'static str> {
+        Estimator::ALL.iter().map(|e| e.name()).collect()
     }
 }
 
@@ -59,15 +102,12 @@ impl fmt::Display for Estimator {
 impl FromStr for Estimator {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Estimator::ALL.into_iter().find(|e| e.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Estimator::ALL.iter().map(|e| e.name()).collect();
-            format!("unknown estimator {s:?}; expected one of {}", names.join(", "))
-        })
+        Estimator::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| format!("unknown estimator {s:?}; expected one of {}", Estimator::names().join(", ")))
     }
 }
-
-/// The largest number of stratified orientations accepted.
-pub const MAX_ORIENTATIONS: u32 = 64;
 
 /// An estimator with its number of stratified orientations K (2 for the paper's pair).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -76,18 +116,41 @@ pub struct Weighting {
     pub orientations: u32,
 }
 
+impl Default for Weighting {
+    fn default() -> Self {
+        Weighting { estimator: Estimator::DEFAULT, orientations: 2 }
+    }
+}
+
 impl Weighting {
     pub fn new(estimator: Estimator, orientations: Option<u32>) -> Result<Self, String> {
         match orientations {
             None => Ok(Weighting { estimator, orientations: 2 }),
             Some(k) if !estimator.has_orientations() && k != 2 => {
-                Err(format!("--orientations applies to smis-cosine and smis-exact only, not to {estimator}"))
+                let with: Vec<_> = Estimator::ALL.iter().filter(|e| e.has_orientations()).map(|e| e.name()).collect();
+                Err(format!("--orientations applies to {} only, not to {estimator}", with.join(" and ")))
             }
             Some(k) if k == 0 || k > MAX_ORIENTATIONS => {
                 Err(format!("the number of orientations must be between 1 and {MAX_ORIENTATIONS}, got {k}"))
             }
             Some(k) => Ok(Weighting { estimator, orientations: k }),
         }
+    }
+
+    /// Every estimator with its default K, then those with orientations at each K of `ks`
+    /// (besides 2): the list the tables, tests and benchmarks iterate over.
+    pub fn all(ks: &[u32]) -> Vec<Weighting> {
+        let mut all: Vec<Weighting> =
+            Estimator::ALL.iter().map(|&e| Weighting { estimator: e, orientations: 2 }).collect();
+        for &k in ks {
+            for e in Estimator::ALL.into_iter().filter(|e| e.has_orientations()) {
+                let w = Weighting { estimator: e, orientations: k };
+                if !all.contains(&w) {
+                    all.push(w);
+                }
+            }
+        }
+        all
     }
 
     /// A label such as `smis-exact` or `smis-exact-k4`.
@@ -98,6 +161,26 @@ impl Weighting {
             self.estimator.to_string()
         }
     }
+
+    /// Runs `f` with this weighting's denominator as a concrete type: the one dispatch from a
+    /// name to its monomorphised gathering loop.
+    pub fn dispatch<F: WithDenominator>(&self, f: F) -> F::Output {
+        match (self.estimator, self.orientations) {
+            (Estimator::Unweighted, _) => f.run(&Unweighted),
+            (Estimator::CmisCosine, _) => f.run(&CmisCosine),
+            (Estimator::CmisExact, _) => f.run(&CmisExact),
+            (Estimator::SmisCosine, 2) => f.run(&SmisCosinePair),
+            (Estimator::SmisExact, 2) => f.run(&SmisExactPair),
+            (Estimator::SmisCosine, k) => f.run(&StratifiedK::new(false, k)),
+            (Estimator::SmisExact, k) => f.run(&StratifiedK::new(true, k)),
+        }
+    }
+}
+
+/// Work generic over the denominator, for [`Weighting::dispatch`].
+pub trait WithDenominator {
+    type Output;
+    fn run<D: Denominator>(self, weights: &D) -> Self::Output;
 }
 
 impl fmt::Display for Weighting {

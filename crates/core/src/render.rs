@@ -5,43 +5,23 @@
 //! ([`camera_rays`]), and gather them with one weighting ([`PreparedPlanes::gather`]).
 
 use crate::bvh::PlaneBvh;
+use crate::error::{Error, Result};
 use crate::film::Film;
+use crate::gather::GatherStats;
 use crate::gather::{CameraRay, GatherContext};
+use crate::kernel::Kernel;
+use crate::limits::{check_memory, check_planes, check_spp};
 use crate::photon_plane::sample_plane_range;
-use crate::raster::{GatherStats, ScreenRaster};
+use crate::raster::ScreenRaster;
 use crate::sampling::pixel_jitter;
 use crate::scene::Scene;
-use crate::weights::{
-    CmisCosine, CmisExact, Denominator, Estimator, SmisCosinePair, SmisExactPair, StratifiedK, Unweighted, Weighting,
-};
+use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Memory refused up front: a render that would need more than this is an input error.
-pub const MEMORY_BUDGET_BYTES: u64 = 16 << 30;
-/// Bytes per plane held while rendering (sampled plane, prepared view, screen polygon, bins).
-pub const BYTES_PER_PLANE: u64 = 512;
-/// Bytes per pixel held while rendering (rays, sums, emission, film).
-pub const BYTES_PER_PIXEL: u64 = 96;
-
-/// Refuses, with the figure, a render that would exhaust memory.
-pub fn check_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
-    let bytes = planes
-        .saturating_mul(BYTES_PER_PLANE)
-        .saturating_add((width as u64 * height as u64).saturating_mul(BYTES_PER_PIXEL));
-    if bytes > MEMORY_BUDGET_BYTES {
-        return Err(format!(
-            "{width}x{height} pixels with {planes} planes would need about {:.1} GiB; the limit is {} GiB",
-            bytes as f64 / (1u64 << 30) as f64,
-            MEMORY_BUDGET_BYTES >> 30
-        ));
-    }
-    Ok(())
-}
-
 /// How camera rays find the planes they hit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub enum Accelerator {
     /// Planes rasterised in screen space (the fast path).
     #[default]
@@ -50,6 +30,34 @@ pub enum Accelerator {
     Bvh,
     /// Every ray tests every plane (for checking the others).
     BruteForce,
+}
+
+impl Accelerator {
+    pub const ALL: [Accelerator; 3] = [Accelerator::Raster, Accelerator::Bvh, Accelerator::BruteForce];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Accelerator::Raster => "raster",
+            Accelerator::Bvh => "bvh",
+            Accelerator::BruteForce => "brute-force",
+        }
+    }
+}
+
+impl std::fmt::Display for Accelerator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Accelerator {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Accelerator::ALL.into_iter().find(|a| a.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Accelerator::ALL.iter().map(|a| a.name()).collect();
+            format!("unknown accelerator {s:?}; expected one of {}", names.join(", "))
+        })
+    }
 }
 
 /// Camera rays of one pass with the emission seen directly along them.
@@ -124,36 +132,43 @@ impl PreparedPlanes {
         PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build }
     }
 
-    /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`.
+    /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`;
+    /// the raster uses `kernel` (resolved, see [`Kernel::resolve`]) for unshadowed planes.
     pub fn gather(
         &self,
         weighting: Weighting,
+        kernel: Kernel,
         rays: &[CameraRay],
         sums: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
     ) -> GatherStats {
-        let k = weighting.orientations;
-        match (weighting.estimator, k) {
-            (Estimator::Unweighted, _) => self.gather_with(&Unweighted, rays, sums, on_band),
-            (Estimator::CmisCosine, _) => self.gather_with(&CmisCosine, rays, sums, on_band),
-            (Estimator::CmisExact, _) => self.gather_with(&CmisExact, rays, sums, on_band),
-            (Estimator::SmisCosine, 2) => self.gather_with(&SmisCosinePair, rays, sums, on_band),
-            (Estimator::SmisExact, 2) => self.gather_with(&SmisExactPair, rays, sums, on_band),
-            (Estimator::SmisCosine, k) => self.gather_with(&StratifiedK::new(false, k), rays, sums, on_band),
-            (Estimator::SmisExact, k) => self.gather_with(&StratifiedK::new(true, k), rays, sums, on_band),
+        struct Gather<'a> {
+            planes: &'a PreparedPlanes,
+            kernel: Kernel,
+            rays: &'a [CameraRay],
+            sums: &'a mut [Vec3],
+            on_band: &'a (dyn Fn() + Sync),
         }
+        impl WithDenominator for Gather<'_> {
+            type Output = GatherStats;
+            fn run<D: Denominator>(self, weights: &D) -> GatherStats {
+                self.planes.gather_with(weights, self.kernel, self.rays, self.sums, self.on_band)
+            }
+        }
+        weighting.dispatch(Gather { planes: self, kernel, rays, sums, on_band })
     }
 
     fn gather_with<D: Denominator>(
         &self,
         weights: &D,
+        kernel: Kernel,
         rays: &[CameraRay],
         sums: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
     ) -> GatherStats {
         let ctx = &self.context;
         if let Some(raster) = &self.raster {
-            return raster.gather(ctx, weights, rays, sums, on_band);
+            return raster.gather(ctx, weights, kernel, rays, sums, on_band);
         }
         // Per-ray structures: chunks of rays in parallel, one progress unit per chunk.
         sums.par_chunks_mut(RAY_CHUNK)
@@ -184,8 +199,10 @@ impl PreparedPlanes {
 /// Rays per parallel work item for the per-ray accelerators.
 const RAY_CHUNK: usize = 4096;
 
-/// Settings of one render.
-#[derive(Clone, Debug)]
+/// Settings of one render. `RenderOptions::default()` is the paper's setting (40,960 planes,
+/// smis-exact with the perpendicular pair, one jittered sample per pixel);
+/// [`RenderOptions::from_scene`] takes the scene file's `[render]` table.
+#[derive(Clone, Debug, PartialEq)]
 pub struct RenderOptions {
     pub planes: usize,
     pub weighting: Weighting,
@@ -193,12 +210,56 @@ pub struct RenderOptions {
     pub spp: u32,
     pub pixel_center: bool,
     pub accelerator: Accelerator,
+    pub kernel: Kernel,
 }
 
-/// What a render measured.
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            planes: 40_960,
+            weighting: Weighting::default(),
+            seed: 1,
+            spp: 1,
+            pixel_center: false,
+            accelerator: Accelerator::Raster,
+            kernel: Kernel::Auto,
+        }
+    }
+}
+
+impl RenderOptions {
+    /// The scene file's defaults.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let d = &scene.render;
+        RenderOptions {
+            planes: d.planes as usize,
+            weighting: d.weighting,
+            seed: d.seed,
+            spp: d.spp,
+            ..RenderOptions::default()
+        }
+    }
+
+    /// Checks every setting against the scene (the memory budget at its resolution) and the
+    /// CPU (the kernel), naming the option at fault.
+    pub fn validate(&self, scene: &Scene) -> Result<()> {
+        check_planes(self.planes as u64).map_err(|m| Error::option("--planes", m))?;
+        check_spp(self.spp).map_err(|m| Error::option("--spp", m))?;
+        Weighting::new(self.weighting.estimator, Some(self.weighting.orientations))
+            .map_err(|m| Error::option("--orientations", m))?;
+        check_memory(scene.camera.width, scene.camera.height, self.planes as u64)
+            .map_err(|m| Error::option("--resolution", m))?;
+        self.kernel.resolve()?;
+        Ok(())
+    }
+}
+
+/// What a render measured (wall-clock seconds; CPU time and memory are the caller's to read).
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct RenderStats {
     pub estimator: String,
+    /// The kernel that ran (`auto` resolved).
+    pub kernel: String,
     pub planes: usize,
     pub rays: u64,
     pub hits: u64,
@@ -208,11 +269,6 @@ pub struct RenderStats {
     pub seconds_rays: f64,
     pub seconds_gather: f64,
     pub seconds_total: f64,
-    /// CPU seconds (all threads) of the whole render and of gathering, where the OS tells.
-    pub cpu_seconds_total: Option<f64>,
-    pub cpu_seconds_gather: Option<f64>,
-    /// Peak resident memory of the process so far, where the OS tells.
-    pub peak_memory_bytes: Option<u64>,
 }
 
 impl RenderStats {
@@ -226,13 +282,9 @@ impl RenderStats {
     pub fn gather_ns_per_hit(&self) -> f64 {
         1e9 * self.seconds_gather / self.hits.max(1) as f64
     }
-    /// Nanoseconds of CPU time (all threads) per hit, for the whole render.
-    pub fn cpu_ns_per_hit(&self) -> Option<f64> {
-        self.cpu_seconds_total.map(|c| 1e9 * c / self.hits.max(1) as f64)
-    }
     pub fn summary(&self) -> String {
-        let mut s = format!(
-            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit wall), total {:.3} s",
+        format!(
+            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit wall, {} kernel), total {:.3} s",
             self.estimator,
             self.planes,
             self.rays,
@@ -241,15 +293,9 @@ impl RenderStats {
             self.tests_per_hit(),
             self.seconds_gather,
             self.gather_ns_per_hit(),
+            self.kernel,
             self.seconds_total
-        );
-        if let Some(ns) = self.cpu_ns_per_hit() {
-            s += &format!(", {ns:.2} ns/hit CPU all included");
-        }
-        if let Some(b) = self.peak_memory_bytes {
-            s += &format!(", peak memory {:.0} MB", b as f64 / 1e6);
-        }
-        s
+        )
     }
 }
 
@@ -266,13 +312,16 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
 }
 
 /// Renders the scene: direct emission plus the photon-plane estimate of single scattering,
-/// averaged over `spp` passes.
-pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film, RenderStats) {
-    let (start, cpu_start) = (Instant::now(), cpu_seconds());
+/// averaged over `spp` passes. Checks the options first ([`RenderOptions::validate`]).
+pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result<(Film, RenderStats)> {
+    opts.validate(scene)?;
+    let kernel = opts.kernel.resolve()?;
+    let start = Instant::now();
     let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.accelerator);
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),
+        kernel: kernel.to_string(),
         planes: opts.planes,
         seconds_sampling: prepared.seconds_sampling,
         seconds_build: prepared.seconds_build,
@@ -282,14 +331,11 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film,
         let t = Instant::now();
         let pass_rays = camera_rays(scene, opts.seed, pass, opts.pixel_center);
         stats.seconds_rays += t.elapsed().as_secs_f64();
-        let (t, cpu) = (Instant::now(), cpu_seconds());
+        let t = Instant::now();
         // Scattering first, emission after: every accelerator then sums in the same order.
         let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather(opts.weighting, &pass_rays.rays, &mut sums, progress);
+        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
         stats.seconds_gather += t.elapsed().as_secs_f64();
-        if let (Some(a), Some(b)) = (cpu, cpu_seconds()) {
-            *stats.cpu_seconds_gather.get_or_insert(0.0) += b - a;
-        }
         stats.hits += s.hits;
         stats.tests += s.tests;
         stats.rays += pass_rays.rays.len() as u64;
@@ -300,25 +346,5 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> (Film,
     let inv = 1.0 / opts.spp as f32;
     film.pixels.iter_mut().for_each(|p| *p *= inv);
     stats.seconds_total = start.elapsed().as_secs_f64();
-    stats.cpu_seconds_total = cpu_start.zip(cpu_seconds()).map(|(a, b)| b - a);
-    stats.peak_memory_bytes = peak_memory_bytes();
-    (film, stats)
-}
-
-/// CPU seconds used by this process so far (user + system, all threads), from /proc on Linux.
-pub fn cpu_seconds() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the parenthesised command name; utime and stime are the 12th and 13th.
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0) // USER_HZ is 100 on Linux
-}
-
-/// Peak resident memory of this process (VmHWM), from /proc on Linux.
-pub fn peak_memory_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    Ok((film, stats))
 }

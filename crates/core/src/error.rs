@@ -1,0 +1,47 @@
+//! The library's errors: what went wrong, typed, so that a caller (the command line, Python)
+//! can tell bad input from a failure of the machine and word both its own way.
+
+use crate::scene::SceneError;
+use std::path::{Path, PathBuf};
+
+/// Everything the library can fail with. Nothing in the library panics on any input.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A scene file that cannot be read or does not describe a valid scene.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// A setting out of range, named as the command line spells it (`--planes`, ...).
+    #[error("{option}: {message}")]
+    InvalidOption { option: &'static str, message: String },
+    /// An input file (an image) that cannot be read or used.
+    #[error("{}: {message}", path.display())]
+    BadInput { path: PathBuf, message: String },
+    /// Two images that cannot be compared.
+    #[error("the images differ in size: {}x{} against a {}x{} reference", image.0, image.1, reference.0, reference.1)]
+    SizeMismatch { image: (u32, u32), reference: (u32, u32) },
+    /// An output that cannot be written (the destination keeps its old contents).
+    #[error("{}: {message}", path.display())]
+    Write { path: PathBuf, message: String },
+}
+
+impl Error {
+    /// Whether the error is the caller's input (exit code 2 on the command line) rather than a
+    /// failure while working.
+    pub fn is_input(&self) -> bool {
+        !matches!(self, Error::Write { .. })
+    }
+
+    pub(crate) fn option(option: &'static str, message: impl Into<String>) -> Self {
+        Error::InvalidOption { option, message: message.into() }
+    }
+
+    pub(crate) fn bad_input(path: &Path, message: impl Into<String>) -> Self {
+        Error::BadInput { path: path.to_path_buf(), message: message.into() }
+    }
+
+    pub(crate) fn write(path: &Path, message: impl std::fmt::Display) -> Self {
+        Error::Write { path: path.to_path_buf(), message: message.to_string() }
+    }
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

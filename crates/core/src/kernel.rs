@@ -1,0 +1,233 @@
+//! The span kernels: one unshadowed plane against a run of pixels of one row. The loop body is
+//! the per-hit arithmetic of [`crate::gather`] ([`PlaneView::crossing`] and
+//! [`PlaneView::contribution`]) and nothing else, written once in [`span_body`] and compiled for
+//! each vector width the CPU may have (AVX-512, AVX2 with FMA, the portable baseline), chosen
+//! at run time by [`Kernel`].
+//!
+//! No operation is fused or reordered between them (Rust never contracts `a * b + c`, and
+//! every operation used is exactly rounded), so every kernel gives bit-identical sums.
+
+use crate::error::{Error, Result};
+use crate::gather::PlaneView;
+use crate::weights::Denominator;
+use glam::Vec3;
+use std::fmt;
+use std::str::FromStr;
+
+/// How the gathering loop runs over the pixels of a span.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Kernel {
+    /// The widest vector kernel this CPU has.
+    #[default]
+    Auto,
+    /// 16 lanes (x86-64 with AVX-512 F/VL/DQ/BW).
+    Avx512,
+    /// 8 lanes (x86-64 with AVX2 and FMA).
+    Avx2,
+    /// What the compiler makes of the loop for the baseline target (4 lanes with SSE2).
+    Portable,
+    /// One hit at a time through [`crate::gather::GatherContext::gather_one`], the path of
+    /// planes another panel can shadow: for checking the vector kernels.
+    PerHit,
+}
+
+impl Kernel {
+    pub const ALL: [Kernel; 5] = [Kernel::Auto, Kernel::Avx512, Kernel::Avx2, Kernel::Portable, Kernel::PerHit];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Kernel::Auto => "auto",
+            Kernel::Avx512 => "avx512",
+            Kernel::Avx2 => "avx2",
+            Kernel::Portable => "portable",
+            Kernel::PerHit => "per-hit",
+        }
+    }
+
+    /// Whether this CPU can run the kernel.
+    pub fn is_available(self) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx512 => {
+                std::arch::is_x86_feature_detected!("avx512f")
+                    && std::arch::is_x86_feature_detected!("avx512vl")
+                    && std::arch::is_x86_feature_detected!("avx512dq")
+                    && std::arch::is_x86_feature_detected!("avx512bw")
+                    && Kernel::Avx2.is_available()
+            }
+            #[cfg(target_arch = "x86_64")]
+            Kernel::Avx2 => std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma"),
+            #[cfg(not(target_arch = "x86_64"))]
+            Kernel::Avx512 | Kernel::Avx2 => false,
+            Kernel::Auto | Kernel::Portable | Kernel::PerHit => true,
+        }
+    }
+
+    /// Every kernel this CPU can run, `auto` excepted.
+    pub fn available() -> Vec<Kernel> {
+        Kernel::ALL.into_iter().filter(|&k| k != Kernel::Auto && k.is_available()).collect()
+    }
+
+    /// The kernel that runs: `auto` becomes the widest available; one the CPU lacks is an error.
+    pub fn resolve(self) -> Result<Kernel> {
+        match self {
+            Kernel::Auto => {
+                Ok([Kernel::Avx512, Kernel::Avx2].into_iter().find(|k| k.is_available()).unwrap_or(Kernel::Portable))
+            }
+            k if k.is_available() => Ok(k),
+            k => Err(Error::option("--kernel", format!("this CPU cannot run the {k} kernel"))),
+        }
+    }
+}
+
+impl fmt::Display for Kernel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Kernel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Kernel::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Kernel::ALL.iter().map(|k| k.name()).collect();
+            format!("unknown kernel {s:?}; expected one of {}", names.join(", "))
+        })
+    }
+}
+
+/// The rays of a span as a structure of arrays (directions and segments), all of one length.
+pub struct SpanRays<'a> {
+    pub x: &'a [f32],
+    pub y: &'a [f32],
+    pub z: &'a [f32],
+    pub t0: &'a [f32],
+    pub t1: &'a [f32],
+}
+
+/// The RGB sums of a span, a structure of arrays of the same length as its rays.
+pub struct SpanSums<'a> {
+    pub r: &'a mut [f32],
+    pub g: &'a mut [f32],
+    pub b: &'a mut [f32],
+}
+
+/// One unshadowed plane against a span with a vector kernel (`kernel` resolved, not
+/// [`Kernel::PerHit`]); adds each pixel's contribution to `sums` unless `CONTRIBUTE` is off
+/// (then only hits are counted). Returns the hit count.
+#[inline(always)]
+pub fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
+    kernel: Kernel,
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    grey: bool,
+    rays: SpanRays,
+    sums: SpanSums,
+) -> u64 {
+    macro_rules! run {
+        ($f:ident) => {
+            if grey {
+                $f::<D, true, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+            } else {
+                $f::<D, false, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+            }
+        };
+    }
+    match kernel {
+        // SAFETY: `resolve` returned these kernels only after checking the CPU's features.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx512 => unsafe { run!(span_avx512) },
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx2 => unsafe { run!(span_avx2) },
+        _ => run!(span_portable),
+    }
+}
+
+/// [`span_body`] compiled for 16-wide vectors (chosen at run time).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+#[inline(never)]
+fn span_avx512<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    rays: SpanRays,
+    sums: SpanSums,
+) -> u64 {
+    span_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+}
+
+/// [`span_body`] compiled for 8-wide vectors (chosen at run time).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+fn span_avx2<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    rays: SpanRays,
+    sums: SpanSums,
+) -> u64 {
+    span_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+}
+
+/// [`span_body`] for the baseline target.
+#[inline(never)]
+fn span_portable<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    rays: SpanRays,
+    sums: SpanSums,
+) -> u64 {
+    span_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+}
+
+/// The kernel proper. Each wrapper above is `inline(never)` on purpose: as separate slice
+/// arguments the sums and the rays are known not to alias (Rust marks them `noalias`), so the
+/// loop vectorises without run-time overlap checks. The plane is copied into a local first, so
+/// the compiler knows the stores to the sums cannot change it.
+#[inline(always)]
+fn span_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+    weights: &D,
+    view: &PlaneView,
+    sigma_t: Vec3,
+    rays: SpanRays,
+    sums: SpanSums,
+) -> u64 {
+    let n = rays.x.len();
+    let (xs, ys, zs, t0s, t1s) = (&rays.x[..n], &rays.y[..n], &rays.z[..n], &rays.t0[..n], &rays.t1[..n]);
+    let (sr, sg, sb) = (&mut sums.r[..n], &mut sums.g[..n], &mut sums.b[..n]);
+    let view = *view;
+    let mut hits = 0u32;
+    for k in 0..n {
+        let dir = [xs[k], ys[k], zs[k]];
+        let c = view.crossing(dir, t0s[k], t1s[k]);
+        hits += c.hit as u32;
+        if CONTRIBUTE {
+            let [cr, cg, cb] = view.contribution::<D, GREY>(weights, sigma_t, dir, t0s[k], &c);
+            sr[k] += cr;
+            sg[k] += cg;
+            sb[k] += cb;
+        }
+    }
+    hits as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_auto_resolves_to_an_available_kernel() {
+        for k in Kernel::ALL {
+            assert_eq!(k.name().parse::<Kernel>().unwrap(), k);
+        }
+        assert!("sse9".parse::<Kernel>().is_err());
+        let auto = Kernel::Auto.resolve().unwrap();
+        assert!(auto != Kernel::Auto && auto.is_available());
+        assert!(Kernel::available().contains(&Kernel::Portable));
+        assert!(Kernel::available().contains(&Kernel::PerHit));
+    }
+}

@@ -1,0 +1,56 @@
+//! fogplanes: single scattering in a homogeneous fog box lit by rectangular lights, rendered
+//! with photon planes and weighted by continuous and stochastic multiple importance sampling
+//! (West et al., "Continuous Multiple Importance Sampling", TOG 2020, Section 6).
+//!
+//! This is the core library: no command line, no plots, no progress bars. The mathematics it
+//! follows is written out in [`mathematics`] (the file `docs/mathematics.md`); "section N" in
+//! the documentation below refers to it, "eq. (N)" to the paper.
+//!
+//! One module per concept:
+//!
+//! | module | concept |
+//! |---|---|
+//! | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] |
+//! | [`limits`] | every range a setting must lie in, checked in one place |
+//! | [`camera`] | the pinhole camera and its rays (section 7) |
+//! | [`medium`] | the homogeneous medium box: clipping and transmittance |
+//! | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
+//! | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
+//! | [`sampling`] | random streams, light choice by power and elementary warps |
+//! | [`photon_plane`] | photon-plane sampling (section 2) and the clipped plane polygon |
+//! | [`weights`] | the estimators: their registry and their denominators D (sections 2, 3) |
+//! | [`gather`] | one ray against one plane: hit test and weighted contribution, written once |
+//! | [`kernel`] | the span kernels (AVX-512, AVX2, portable) and the choice between them |
+//! | [`raster`] | the intersection structure: planes rasterised in screen space |
+//! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
+//! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
+//! | [`render`] | the photon-plane renderer and its options |
+//! | [`reference`] | the independent reference renderer (section 4) |
+//! | [`metrics`] | SMAPE, MSE and friends (section 5) |
+//! | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
+//! | [`error`] | the library's typed errors |
+
+pub mod bvh;
+pub mod camera;
+pub mod error;
+pub mod film;
+pub mod gather;
+pub mod kernel;
+pub mod light;
+pub mod limits;
+pub mod medium;
+pub mod metrics;
+pub mod numeric;
+pub mod photon_plane;
+pub mod quadrature;
+pub mod raster;
+pub mod reference;
+pub mod render;
+pub mod sampling;
+pub mod scene;
+pub mod weights;
+
+pub use error::{Error, Result};
+
+#[doc = include_str!("../../../docs/mathematics.md")]
+pub mod mathematics {}

@@ -1,0 +1,320 @@
+//! The experiments the command line runs: the estimator table with its error-versus-time sweep
+//! (docs/mathematics.md section 5) and the scaling study. Each gathers numbers and hands them to
+//! [`crate::pictures`] to draw.
+//!
+//! Every estimator gathers the same planes along the same camera rays (pixel centres by
+//! default), so the planes are the only source of difference between them, and each is timed on
+//! its own. Speed against error is reported as efficiency 1 / (MSE x seconds), with both the
+//! gathering time and the whole time (plane sampling, structure build, rays and gathering).
+
+use crate::pictures::{plot_error_vs_time, plot_scaling, save_panel};
+use crate::system::{cpu_seconds, peak_memory_bytes};
+use anyhow::{Context, Result};
+use fogplanes::film::{Film, write_file_atomically};
+use fogplanes::gather::GatherStats;
+use fogplanes::kernel::Kernel;
+use fogplanes::metrics::{ErrorMetrics, compare};
+use fogplanes::render::{Accelerator, PreparedPlanes, RenderOptions, camera_rays, render};
+use fogplanes::scene::Scene;
+use fogplanes::weights::{Estimator, Weighting};
+use glam::Vec3;
+use std::path::PathBuf;
+use std::time::Instant;
+
+pub struct TableOptions {
+    pub planes: usize,
+    pub seed: u64,
+    pub pixel_center: bool,
+    /// Plane counts of the error-versus-time sweep (empty: no sweep).
+    pub sweep: Vec<usize>,
+    pub sweep_seeds: u32,
+    /// The weightings of the table, the baseline ([`Estimator::BASELINE`]) among them.
+    pub weightings: Vec<Weighting>,
+    pub out: PathBuf,
+    pub exposure: f32,
+    pub quiet: bool,
+    pub reference_path: PathBuf,
+}
+
+/// One estimator's row.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Row {
+    pub estimator: String,
+    pub planes: usize,
+    pub hits: u64,
+    /// Ray-plane tests per hit, and wall nanoseconds of gathering per hit.
+    pub tests_per_hit: f64,
+    pub gather_ns_per_hit: f64,
+    pub gather_seconds: f64,
+    pub total_seconds: f64,
+    pub metrics: ErrorMetrics,
+    pub smape_e2: f64,
+    pub mse_e4: f64,
+    /// 1 / (MSE x gather seconds) and 1 / (MSE x total seconds).
+    pub efficiency_gather: f64,
+    pub efficiency_total: f64,
+    /// Ratios to `unweighted`: MSE, gather time, efficiency (gather), efficiency (total).
+    pub mse_vs_unweighted: f64,
+    pub gather_time_vs_unweighted: f64,
+    pub efficiency_gather_vs_unweighted: f64,
+    pub efficiency_total_vs_unweighted: f64,
+}
+
+/// One point of the sweep: mean over seeds at one plane count.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SweepPoint {
+    pub estimator: String,
+    pub planes: usize,
+    pub seeds: u32,
+    pub mse: f64,
+    pub smape: f64,
+    pub gather_seconds: f64,
+    pub total_seconds: f64,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Table {
+    pub scene: String,
+    pub reference: String,
+    pub resolution: [u32; 2],
+    pub pixel_center: bool,
+    pub seed: u64,
+    /// Shared by all estimators: plane sampling, structure build, camera rays.
+    pub shared_seconds: f64,
+    pub rows: Vec<Row>,
+    pub sweep: Vec<SweepPoint>,
+}
+
+/// One measurement: every weighting over one plane set. Returns (weighting, image, hits,
+/// gather seconds) and the shared seconds.
+fn measure(
+    scene: &Scene,
+    weightings: &[Weighting],
+    planes: usize,
+    seed: u64,
+    pixel_center: bool,
+) -> (Vec<(Weighting, Film, GatherStats, f64)>, f64) {
+    let start = Instant::now();
+    let prepared = PreparedPlanes::new(scene, planes, seed, Accelerator::Raster);
+    let kernel = Kernel::Auto.resolve().expect("auto always resolves");
+    let pass = camera_rays(scene, seed, 0, pixel_center);
+    let shared = start.elapsed().as_secs_f64();
+    let out = weightings
+        .iter()
+        .map(|&w| {
+            let t = Instant::now();
+            let mut sums = vec![Vec3::ZERO; pass.rays.len()];
+            let stats = prepared.gather(w, kernel, &pass.rays, &mut sums, &|| {});
+            let seconds = t.elapsed().as_secs_f64();
+            let mut film = Film::new(scene.camera.width, scene.camera.height);
+            for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass.emission) {
+                *f = *s + *e;
+            }
+            (w, film, stats, seconds)
+        })
+        .collect();
+    (out, shared)
+}
+
+/// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg.
+pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result<String> {
+    let weightings = &opts.weightings;
+    let log = |s: String| {
+        if !opts.quiet {
+            eprintln!("{s}");
+        }
+    };
+    log(format!("table: {} estimators, {} planes", weightings.len(), opts.planes));
+    let (results, shared) = measure(scene, weightings, opts.planes, opts.seed, opts.pixel_center);
+    let mut rows = Vec::new();
+    for (w, film, stats, gather) in &results {
+        let m = compare(film, reference)?;
+        let total = shared + gather;
+        rows.push(Row {
+            estimator: w.label(),
+            planes: opts.planes,
+            hits: stats.hits,
+            tests_per_hit: stats.tests as f64 / stats.hits.max(1) as f64,
+            gather_ns_per_hit: 1e9 * gather / stats.hits.max(1) as f64,
+            gather_seconds: *gather,
+            total_seconds: total,
+            metrics: m,
+            smape_e2: m.smape_e2(),
+            mse_e4: m.mse_e4(),
+            efficiency_gather: 1.0 / (m.mse * gather),
+            efficiency_total: 1.0 / (m.mse * total),
+            mse_vs_unweighted: 0.0,
+            gather_time_vs_unweighted: 0.0,
+            efficiency_gather_vs_unweighted: 0.0,
+            efficiency_total_vs_unweighted: 0.0,
+        });
+    }
+    let base = rows
+        .iter()
+        .find(|r| r.estimator == Estimator::BASELINE.name())
+        .context("the table needs its baseline estimator")?
+        .clone();
+    for r in &mut rows {
+        r.mse_vs_unweighted = r.metrics.mse / base.metrics.mse;
+        r.gather_time_vs_unweighted = r.gather_seconds / base.gather_seconds;
+        r.efficiency_gather_vs_unweighted = r.efficiency_gather / base.efficiency_gather;
+        r.efficiency_total_vs_unweighted = r.efficiency_total / base.efficiency_total;
+    }
+
+    let mut sweep = Vec::new();
+    for &n in &opts.sweep {
+        let mut acc: Vec<(f64, f64, f64, f64)> = vec![(0.0, 0.0, 0.0, 0.0); weightings.len()];
+        for s in 0..opts.sweep_seeds {
+            let seed = opts.seed.wrapping_add(1000).wrapping_add(s as u64);
+            let (results, shared) = measure(scene, weightings, n, seed, opts.pixel_center);
+            for (a, (_, film, _, gather)) in acc.iter_mut().zip(&results) {
+                let m = compare(film, reference)?;
+                *a = (a.0 + m.mse, a.1 + m.smape, a.2 + gather, a.3 + shared + gather);
+            }
+        }
+        let k = opts.sweep_seeds.max(1) as f64;
+        for (w, a) in weightings.iter().zip(&acc) {
+            sweep.push(SweepPoint {
+                estimator: w.label(),
+                planes: n,
+                seeds: opts.sweep_seeds,
+                mse: a.0 / k,
+                smape: a.1 / k,
+                gather_seconds: a.2 / k,
+                total_seconds: a.3 / k,
+            });
+        }
+        log(format!("sweep: {n} planes done"));
+    }
+
+    let table = Table {
+        scene: scene.name.clone(),
+        reference: opts.reference_path.display().to_string(),
+        resolution: [scene.camera.width, scene.camera.height],
+        pixel_center: opts.pixel_center,
+        seed: opts.seed,
+        shared_seconds: shared,
+        rows,
+        sweep,
+    };
+    let markdown = table.markdown();
+    write_file_atomically(&opts.out.join("table.md"), markdown.as_bytes())?;
+    let json = serde_json::to_string_pretty(&table).context("cannot format the table as JSON")?;
+    write_file_atomically(&opts.out.join("table.json"), json.as_bytes())?;
+    let images: Vec<(String, &Film)> = results.iter().map(|(w, f, _, _)| (w.label(), f)).collect();
+    save_panel(&images, reference, opts.exposure, &opts.out.join("panel.png"))?;
+    if !table.sweep.is_empty() {
+        plot_error_vs_time(&table, &opts.out)?;
+    }
+    Ok(markdown)
+}
+
+impl Table {
+    pub fn markdown(&self) -> String {
+        let mut s = format!(
+            "{} at {}x{}, {} rays, seed {}, against `{}`; {:.3} s shared (planes, structure, rays).\n\n",
+            self.scene,
+            self.resolution[0],
+            self.resolution[1],
+            if self.pixel_center { "pixel-centre" } else { "jittered" },
+            self.seed,
+            self.reference,
+            self.shared_seconds
+        );
+        s += "| estimator | planes | hits | ns/hit | gather s | total s | SMAPE x10^2 | MSE x10^4 | 1/(MSE s) gather | 1/(MSE s) total | MSE vs unweighted | gather time vs unweighted | efficiency vs unweighted (gather / total) |\n";
+        s += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        for r in &self.rows {
+            s += &format!(
+                "| {} | {} | {:.3e} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4e} | {:.4e} | {:.3} | {:.3} | {:.2} / {:.2} |\n",
+                r.estimator,
+                r.planes,
+                r.hits as f64,
+                r.gather_ns_per_hit,
+                r.gather_seconds,
+                r.total_seconds,
+                r.smape_e2,
+                r.mse_e4,
+                r.efficiency_gather,
+                r.efficiency_total,
+                r.mse_vs_unweighted,
+                r.gather_time_vs_unweighted,
+                r.efficiency_gather_vs_unweighted,
+                r.efficiency_total_vs_unweighted
+            );
+        }
+        s
+    }
+}
+
+/// One render of the scaling study.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScalingPoint {
+    pub planes: usize,
+    pub width: u32,
+    pub height: u32,
+    pub hits: u64,
+    pub seconds_total: f64,
+    pub seconds_gather: f64,
+    pub cpu_ns_per_hit: Option<f64>,
+    pub peak_memory_bytes: Option<u64>,
+}
+
+/// Renders over a grid of plane counts and resolutions, and writes scaling.json, scaling.md and
+/// seconds_vs_hits.png/.svg (log-log, one line per resolution): whether time grows linearly
+/// with the number of hits.
+pub fn run_scaling(
+    scene: &Scene,
+    weighting: Weighting,
+    planes: &[usize],
+    resolutions: &[(u32, u32)],
+    out: &std::path::Path,
+    quiet: bool,
+) -> Result<String> {
+    let mut points = Vec::new();
+    for &(w, h) in resolutions {
+        let s = scene.with_resolution(w, h)?;
+        for &n in planes {
+            let opts = RenderOptions { planes: n, weighting, ..RenderOptions::default() };
+            let cpu = cpu_seconds();
+            let (_, st) = render(&s, &opts, &|| {})?;
+            let cpu = cpu.zip(cpu_seconds()).map(|(a, b)| b - a);
+            if !quiet {
+                eprintln!("{w}x{h}, {n} planes: {}", st.summary());
+            }
+            points.push(ScalingPoint {
+                planes: n,
+                width: w,
+                height: h,
+                hits: st.hits,
+                seconds_total: st.seconds_total,
+                seconds_gather: st.seconds_gather,
+                cpu_ns_per_hit: cpu.map(|c| 1e9 * c / st.hits.max(1) as f64),
+                peak_memory_bytes: peak_memory_bytes(),
+            });
+        }
+    }
+    let mut md = format!(
+        "{} with {}, jittered rays, seed 1, {} threads\n\n| resolution | planes | hits | total s | gather s | ns/hit wall | ns/hit CPU |\n|---|---:|---:|---:|---:|---:|---:|\n",
+        scene.name,
+        weighting,
+        rayon::current_num_threads()
+    );
+    for p in &points {
+        md += &format!(
+            "| {}x{} | {} | {} | {:.3} | {:.3} | {:.2} | {} |\n",
+            p.width,
+            p.height,
+            p.planes,
+            p.hits,
+            p.seconds_total,
+            p.seconds_gather,
+            1e9 * p.seconds_total / p.hits.max(1) as f64,
+            p.cpu_ns_per_hit.map_or("-".into(), |v| format!("{v:.2}"))
+        );
+    }
+    write_file_atomically(&out.join("scaling.md"), md.as_bytes())?;
+    let json = serde_json::to_string_pretty(&points).context("cannot format JSON")?;
+    write_file_atomically(&out.join("scaling.json"), json.as_bytes())?;
+    plot_scaling(&scene.name, &points, out)?;
+    Ok(md)
+}

@@ -1,0 +1,63 @@
+//! Shared by the statistical tests: the mean of independent estimates, its standard error, and
+//! how many standard errors it lies from a truth.
+#![allow(dead_code)] // each test file uses its own part
+
+/// Running sums of independent estimates of one quantity.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MeanEstimate {
+    sum: f64,
+    sum_sq: f64,
+    n: f64,
+}
+
+impl MeanEstimate {
+    pub fn add(&mut self, x: f64) {
+        self.sum += x;
+        self.sum_sq += x * x;
+        self.n += 1.0;
+    }
+
+    pub fn count(&self) -> usize {
+        self.n as usize
+    }
+
+    pub fn mean(&self) -> f64 {
+        self.sum / self.n
+    }
+
+    /// The standard error of the mean: the sample standard deviation (n - 1) over sqrt(n).
+    pub fn stderr(&self) -> f64 {
+        let m = self.mean();
+        ((self.sum_sq / self.n - m * m).max(0.0) * self.n / (self.n - 1.0) / self.n).sqrt()
+    }
+
+    /// (mean - truth) in standard errors, with `truth_stderr` (the truth's own noise, 0 for an
+    /// exact value) combined in quadrature.
+    pub fn z(&self, truth: f64, truth_stderr: f64) -> f64 {
+        (self.mean() - truth) / self.stderr().hypot(truth_stderr)
+    }
+}
+
+/// One [`MeanEstimate`] per RGB channel.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MeanRgb(pub [MeanEstimate; 3]);
+
+impl MeanRgb {
+    pub fn add(&mut self, v: glam::Vec3) {
+        for c in 0..3 {
+            self.0[c].add(v[c] as f64);
+        }
+    }
+}
+
+#[test]
+fn the_standard_error_of_known_samples() {
+    let mut m = MeanEstimate::default();
+    for x in [1.0, 2.0, 3.0, 4.0] {
+        m.add(x);
+    }
+    // Sample variance 5/3, standard error sqrt(5/3 / 4).
+    assert!((m.mean() - 2.5).abs() < 1e-15);
+    assert!((m.stderr() - (5.0f64 / 12.0).sqrt()).abs() < 1e-15);
+    assert!((m.z(2.0, 0.0) - 0.5 / (5.0f64 / 12.0).sqrt()).abs() < 1e-12);
+}
