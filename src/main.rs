@@ -8,9 +8,9 @@ mod system;
 
 use anyhow::{Context, Result, anyhow};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use experiments::{TableOptions, run_table};
-use fogplanes::film::{Film, check_image_output};
+use fogplanes::film::{Film, check_image_output, check_writable, write_file_atomically};
 use fogplanes::kernel::Kernel;
 use fogplanes::limits::{check_planes, check_resolution, check_spp, check_threads};
 use fogplanes::metrics::compare;
@@ -57,6 +57,34 @@ enum Command {
     /// Renders over a grid of plane counts and resolutions and writes scaling.md, scaling.json
     /// and seconds_vs_hits.png (and .svg) to --out.
     Scaling(ScalingArgs),
+    /// Write the scene for another renderer, to check fogplanes against it.
+    ///
+    /// mitsuba: a Mitsuba 3 XML file rendering direct emission plus single scattering (volpath,
+    /// max_depth 2, no Russian roulette); resolution, samples and seed are its parameters resx,
+    /// resy, spp and seed. tests/mitsuba/check_export.py compares it with `reference`.
+    Export(ExportArgs),
+}
+
+/// The formats `export` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum ExportFormat {
+    /// Mitsuba 3 scene XML (scalar_rgb variant).
+    Mitsuba,
+}
+
+#[derive(Args)]
+struct ExportArgs {
+    /// The scene file (TOML).
+    scene: PathBuf,
+    /// The format to write.
+    #[arg(long, short, value_enum)]
+    format: ExportFormat,
+    /// Output file. Default: <scene name>.xml here.
+    #[arg(long, short, value_name = "OUT")]
+    output: Option<PathBuf>,
+    /// Image size WIDTHxHEIGHT written as the file's default, overriding the scene's camera.
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
+    resolution: Option<(u32, u32)>,
 }
 
 #[derive(Args)]
@@ -276,6 +304,7 @@ fn main() -> ExitCode {
         Command::Compare(a) => cmd_compare(a),
         Command::Table(a) => cmd_table(a),
         Command::Scaling(a) => cmd_scaling(a),
+        Command::Export(a) => cmd_export(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -475,5 +504,20 @@ fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
     let planes: Vec<usize> = a.planes.iter().map(|&n| n as usize).collect();
     let md = experiments::run_scaling(&scene, weighting, &planes, &a.resolutions, &a.out, a.common.quiet)?;
     say!("{md}");
+    Ok(())
+}
+
+fn cmd_export(a: ExportArgs) -> Result<(), Failure> {
+    let mut scene = Scene::load(&a.scene).map_err(input)?;
+    if let Some((w, h)) = a.resolution {
+        scene = scene.with_resolution(w, h)?;
+    }
+    let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.xml", scene.name)));
+    check_writable(&output)?;
+    let text = match a.format {
+        ExportFormat::Mitsuba => fogplanes::export::mitsuba_xml(&scene),
+    };
+    write_file_atomically(&output, text.as_bytes())?;
+    say!("wrote {} ({} lights, {}x{})", output.display(), scene.lights.len(), scene.camera.width, scene.camera.height);
     Ok(())
 }

@@ -100,6 +100,51 @@ fn every_broken_scene_gives_one_clear_error() {
 }
 
 #[test]
+fn export_writes_mitsuba_xml_and_refuses_bad_input() {
+    let dir = scratch("export");
+    let scene = std::fs::canonicalize("media_scenes/six_lights.toml").unwrap();
+    // The default name is <scene name>.xml in the working directory.
+    let o = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+        .args(["export", scene.to_str().unwrap(), "--format", "mitsuba"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("six_lights.xml"));
+    assert_eq!(files_in(&dir), ["six_lights.xml"]);
+    let text = std::fs::read_to_string(dir.join("six_lights.xml")).unwrap();
+    assert!(text.contains(r#"<integrator type="volpath">"#) && text.ends_with("</scene>\n"), "{text}");
+    assert_eq!(text.matches(r#"<shape type="rectangle""#).count(), 6);
+
+    let out = dir.join("small.xml");
+    let o = fogplanes(
+        &["export", "media_scenes/six_lights.toml", "-f", "mitsuba", "--resolution", "64x36", "-o"]
+            .into_iter()
+            .chain([out.to_str().unwrap()])
+            .collect::<Vec<_>>(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let small = std::fs::read_to_string(&out).unwrap();
+    assert!(small.contains(r#"<default name="resx" value="64"/>"#), "{small}");
+    assert_eq!(files_in(&dir), ["six_lights.xml", "small.xml"]);
+
+    for args in [
+        vec!["export", "media_scenes/six_lights.toml"],
+        vec!["export", "media_scenes/six_lights.toml", "--format", "pbrt"],
+        vec!["export", "media_scenes/six_lights.toml", "--format", "mitsuba", "-o", "/no/such/dir/x.xml"],
+        vec!["export", "media_scenes/six_lights.toml", "--format", "mitsuba", "--resolution", "0x10"],
+        vec!["export", "no_such_scene.toml", "--format", "mitsuba"],
+    ] {
+        let o = fogplanes(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+    assert_eq!(files_in(&dir), ["six_lights.xml", "small.xml"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn a_huge_scene_file_is_refused_before_reading() {
     let dir = scratch("huge");
     let path = dir.join("huge.toml");

@@ -1,4 +1,4 @@
-//! The reference renderer (SPEC section 3) agrees with deterministic quadrature on single pixel
+//! The reference renderer (docs/mathematics.md section 4) agrees with deterministic quadrature on single pixel
 //! centres within 4 of its own standard errors; and the table command writes all its files.
 
 use fogplanes::film::Film;

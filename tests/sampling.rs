@@ -1,4 +1,4 @@
-//! Plane sampling follows its densities (SPEC section 2): chi-square tests on light choice,
+//! Plane sampling follows its densities (docs/mathematics.md section 2): chi-square tests on light choice,
 //! orientation, point and direction, with fixed seeds. Each test fails when the statistic is
 //! beyond the 1e-4 upper tail of its chi-square distribution (Wilson-Hilferty approximation).
 

@@ -1,4 +1,4 @@
-//! The pinhole camera (SPEC section 6).
+//! The pinhole camera (docs/mathematics.md section 7).
 
 use glam::DVec3;
 

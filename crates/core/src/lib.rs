@@ -28,11 +28,13 @@
 //! | [`reference`] | the independent reference renderer (section 4) |
 //! | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
+//! | [`export`] | the scene as a Mitsuba 3 XML file, to check against an outside renderer |
 //! | [`error`] | the library's typed errors |
 
 pub mod bvh;
 pub mod camera;
 pub mod error;
+pub mod export;
 pub mod film;
 pub mod gather;
 pub mod kernel;

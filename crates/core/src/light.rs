@@ -1,4 +1,4 @@
-//! Rectangular lights (SPEC section 1) and their chords (SPEC section 2).
+//! Rectangular lights (docs/mathematics.md section 1) and their chords (docs/mathematics.md section 2).
 //!
 //! A light is the rectangle `corner + p U/|U| + q V/|V|`, `p` in `[0, W]`, `q` in `[0, H]`. It
 //! emits constant radiance one-sided into the hemisphere of `n = normalize(U x V)`, and it is an
@@ -43,7 +43,7 @@ impl RectLight {
         self.width * self.height
     }
 
-    /// The power used to choose lights: A * luminance(Le) (SPEC section 2, step 1).
+    /// The power used to choose lights: A * luminance(Le) (docs/mathematics.md section 2, step 1).
     pub fn power(&self) -> f64 {
         self.area() * luminance(self.radiance)
     }
@@ -147,7 +147,7 @@ impl ChordDirection<f32> {
 }
 
 /// The chord of the `w x h` rectangle through the local point `(p, q)` along `dir`: the lengths
-/// `(backward, forward)` from the point to the rectangle's boundary (SPEC section 2, closed form).
+/// `(backward, forward)` from the point to the rectangle's boundary (docs/mathematics.md section 2, closed form).
 ///
 /// forward = min(fx / |cos|, (h - q) / sin), backward = min(bx / |cos|, q / sin), with
 /// (fx, bx) = (w - p, p) when cos > 0 and (p, w - p) otherwise. On an axis one reciprocal is
@@ -163,7 +163,7 @@ pub fn chord_extent<T: Real>(w: T, h: T, p: T, q: T, dir: &ChordDirection<T>) ->
     (clamp(backward), clamp(forward))
 }
 
-/// The chord width `width(beta, (p, q))` of SPEC section 2.
+/// The chord width `width(beta, (p, q))` of docs/mathematics.md section 2.
 #[inline(always)]
 pub fn chord_width<T: Real + std::ops::Add<Output = T>>(w: T, h: T, p: T, q: T, dir: &ChordDirection<T>) -> T {
     let (b, f) = chord_extent(w, h, p, q, dir);

@@ -1,4 +1,4 @@
-//! The homogeneous medium (SPEC section 1): an axis-aligned box of fog, vacuum outside.
+//! The homogeneous medium (docs/mathematics.md section 1): an axis-aligned box of fog, vacuum outside.
 
 use glam::DVec3;
 

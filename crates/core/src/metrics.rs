@@ -1,4 +1,4 @@
-//! Error metrics (SPEC section 4, as in the paper's Section 4.4 and Fig. 11).
+//! Error metrics (docs/mathematics.md section 5, as in the paper's Section 4.4 and Fig. 11).
 
 use crate::error::{Error, Result};
 use crate::film::Film;

@@ -1,4 +1,4 @@
-//! Photon planes (SPEC section 2): sampling, and the plane's polygon inside the medium box.
+//! Photon planes (docs/mathematics.md section 2): sampling, and the plane's polygon inside the medium box.
 //!
 //! One plane is: a light chosen by power, an orientation alpha uniform in [0, pi), a point y
 //! uniform on the light, a direction wl cosine-distributed about the light's normal. The chord is
@@ -38,7 +38,7 @@ pub struct PhotonPlane {
     /// The sweep direction wl, unit, in the light's front hemisphere.
     pub direction: DVec3,
     /// The factor of one plane's contribution that does not depend on the hit (RGB):
-    /// sigma_s rho pi Le A / P_l. A hit adds `power * Tr / D / N` (SPEC section 2: K / (N P_l D)).
+    /// sigma_s rho pi Le A / P_l. A hit adds `power * Tr / D / N` (docs/mathematics.md section 2: K / (N P_l D)).
     pub power: DVec3,
 }
 

@@ -1,7 +1,7 @@
 //! Deterministic quadrature: the ground truth that the estimators are checked against.
 //!
 //! [`integrate`] is adaptive Gauss-Kronrod (7/15 points). [`single_scattering`] evaluates the
-//! scattering integral of SPEC section 1 for one camera ray by nested adaptive quadrature over
+//! scattering integral of docs/mathematics.md section 1 for one camera ray by nested adaptive quadrature over
 //! the camera distance and both light coordinates. It uses only the scene description (lights,
 //! medium); nothing of the photon planes, their weights or the reference renderer.
 
@@ -135,7 +135,7 @@ pub fn chord_width_by_clipping(w: f64, h: f64, p: f64, q: f64, beta: f64) -> f64
     (hi - lo).max(0.0)
 }
 
-/// The single-scattering radiance (SPEC section 1, the integral term) along the ray `o + t we`
+/// The single-scattering radiance (docs/mathematics.md section 1, the integral term) along the ray `o + t we`
 /// (unit `we`), by nested adaptive quadrature to about `rel_tol`.
 pub fn single_scattering(scene: &Scene, o: DVec3, we: DVec3, rel_tol: f64) -> DVec3 {
     let Some((t0, t1)) = scene.camera_segment(o, we).0 else {

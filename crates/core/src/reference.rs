@@ -1,8 +1,8 @@
-//! The independent reference renderer (SPEC section 3).
+//! The independent reference renderer (docs/mathematics.md section 4).
 //!
 //! Per pixel sample: a light chosen by power, a point uniform on it, a distance on the camera
 //! segment by equiangular sampling toward that point (Kulla and Fajardo 2012), and the
-//! integrand of SPEC section 1 evaluated with visibility. It shares the scene and medium code
+//! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares the scene and medium code
 //! with the photon planes and nothing else, and it measures its own per-pixel standard error.
 
 use crate::film::Film;

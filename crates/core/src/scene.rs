@@ -316,7 +316,7 @@ impl Scene {
 
     /// What a camera ray `o + t we` (unit `we`) meets: its segment inside the medium before the
     /// first light panel (None if empty), and the attenuated emission of that panel when its
-    /// front faces the ray (SPEC section 1, the direct term).
+    /// front faces the ray (docs/mathematics.md section 1, the direct term).
     pub fn camera_segment(&self, o: DVec3, we: DVec3) -> (Option<(f64, f64)>, DVec3) {
         let (t_surface, emission) = match self.first_light(o, we, f64::INFINITY) {
             Some((t, k)) if we.dot(self.lights[k].n) < 0.0 => {

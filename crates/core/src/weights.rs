@@ -1,7 +1,7 @@
-//! The estimators' weights: the denominator `D` of SPEC section 2, the only thing in which the
+//! The estimators' weights: the denominator `D` of docs/mathematics.md section 2, the only thing in which the
 //! estimators differ. A hit contributes `K / (N P_l D)`.
 //!
-//! Notation (SPEC section 2): `det(beta) = (d(beta) x wl) . we = cos(beta) a_u + sin(beta) a_v`,
+//! Notation (docs/mathematics.md section 2): `det(beta) = (d(beta) x wl) . we = cos(beta) a_u + sin(beta) a_v`,
 //! `g(beta) = width(beta, y') |det(beta)|`, the path density `p(x | beta)` of paper eq. (25) up to
 //! factors shared by all orientations.
 
@@ -352,7 +352,7 @@ impl Denominator for CmisExact {
 /// det(beta) = cos(beta) a_u + sin(beta) a_v, for the light vertex at local (p, q) of a `w x h`
 /// light: the marginal density of paper eq. (24) that the paper calls non-integrable.
 ///
-/// SPEC section 2 splits [0, pi) at pi/2, the corner directions and the zero of det. The same
+/// The mathematics (section 3) splits [0, pi) at pi/2, the corner directions and the zero of det. The same
 /// pieces are summed here over the full circle, which needs fewer transcendental calls:
 /// width(beta) = fwd(beta) + fwd(beta + pi), with fwd(phi) the distance from (p, q) to the
 /// boundary along direction phi, and |det| has period pi, so

@@ -1,0 +1,55 @@
+//! The Mitsuba export renders what fogplanes renders: `tests/mitsuba/check_export.py` exports
+//! the benchmark scene, renders it with Mitsuba 3 and compares it block by block with
+//! fogplanes' reference (within 5 standard errors per 8x8 block and channel, 4 for the image
+//! means). About 20 s on 2 cores.
+//!
+//! It needs `python3` with the `mitsuba` and `numpy` packages (`pip install mitsuba numpy`);
+//! without them it says SKIPPED on standard error and returns.
+
+use std::process::Command;
+
+fn python_imports(module: &str) -> bool {
+    Command::new("python3").args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success())
+}
+
+#[test]
+fn mitsuba_renders_the_exported_benchmark_scene_like_the_reference() {
+    if !python_imports("mitsuba") {
+        eprintln!();
+        eprintln!("==================================================================================");
+        eprintln!("SKIPPED: the mitsuba Python package is not installed (pip install mitsuba)");
+        eprintln!("         mitsuba_export checked nothing: python3 -c \"import mitsuba\" failed");
+        eprintln!("==================================================================================");
+        return;
+    }
+    if !python_imports("numpy") {
+        eprintln!();
+        eprintln!("SKIPPED: the numpy Python package is not installed (pip install numpy)");
+        return;
+    }
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/mitsuba/check_export.py");
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/media_scenes/six_lights.toml");
+    let o = Command::new("python3")
+        .args([
+            script,
+            scene,
+            env!("CARGO_BIN_EXE_fogplanes"),
+            "--resolution",
+            "64x36",
+            "--spp",
+            "2048",
+            "--passes",
+            "8",
+            "--ref-spp",
+            "4096",
+            "--seed",
+            "1",
+        ])
+        .output()
+        .expect("python3 runs");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    eprintln!("{stdout}{stderr}");
+    assert!(o.status.success(), "check_export.py exited {:?}:\n{stdout}\n{stderr}", o.status.code());
+    assert!(stdout.contains("agreement: OK"), "{stdout}");
+}
