@@ -7,6 +7,7 @@ use fogplanes::kernel::Kernel;
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::raster::ScreenRaster;
 use fogplanes::render::{Accelerator, PreparedPlanes, camera_rays};
+use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Denominator, HitLocal, PlaneFrame, Weighting, WithDenominator};
 use glam::Vec3;
@@ -21,8 +22,8 @@ fn planes_and_structure(c: &mut Criterion) {
     let s = scene();
     let mut g = c.benchmark_group("setup");
     g.sample_size(10).measurement_time(Duration::from_secs(5));
-    g.bench_function("sample 40960 planes", |b| b.iter(|| sample_planes(&s, 40_960, black_box(1))));
-    let planes = sample_planes(&s, 40_960, 1);
+    g.bench_function("sample 40960 planes", |b| b.iter(|| sample_planes(&s, Sampler::default(), 40_960, black_box(1))));
+    let planes = sample_planes(&s, Sampler::default(), 40_960, 1);
     g.bench_function("prepare 40960 plane views", |b| {
         b.iter(|| GatherContext::new(&s, black_box(&planes), s.camera.position))
     });
@@ -34,7 +35,7 @@ fn planes_and_structure(c: &mut Criterion) {
 
 fn gathering(c: &mut Criterion) {
     let s = scene().with_resolution(160, 90).unwrap();
-    let prepared = PreparedPlanes::new(&s, 40_960, 1, Accelerator::Raster);
+    let prepared = PreparedPlanes::new(&s, 40_960, 1, Sampler::default(), Accelerator::Raster);
     let pass = camera_rays(&s, 1, 0, false);
     let mut sums = vec![Vec3::ZERO; pass.rays.len()];
     let kernel = Kernel::Auto.resolve().unwrap();
@@ -56,7 +57,7 @@ fn gathering(c: &mut Criterion) {
 /// Real hits of the benchmark scene: (frame, hit) pairs from rays through the image.
 fn sample_hits(n: usize) -> Vec<(PlaneFrame, HitLocal)> {
     let s = scene().with_resolution(32, 18).unwrap();
-    let planes = sample_planes(&s, 40_960, 2);
+    let planes = sample_planes(&s, Sampler::default(), 40_960, 2);
     let ctx = GatherContext::new(&s, &planes, s.camera.position);
     let pass = camera_rays(&s, 2, 0, false);
     let mut out = Vec::with_capacity(n);

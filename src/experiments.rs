@@ -15,6 +15,7 @@ use fogplanes::gather::GatherStats;
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::{ErrorMetrics, compare};
 use fogplanes::render::{Accelerator, PreparedPlanes, RenderOptions, camera_rays, render};
+use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use glam::Vec3;
@@ -30,16 +31,39 @@ pub struct TableOptions {
     pub sweep_seeds: u32,
     /// The weightings of the table, the baseline ([`Estimator::BASELINE`]) among them.
     pub weightings: Vec<Weighting>,
+    /// The plane samplers; every weighting is measured with each.
+    pub samplers: Vec<Sampler>,
     pub out: PathBuf,
     pub exposure: f32,
     pub quiet: bool,
     pub reference_path: PathBuf,
 }
 
+/// One line of the table: a weighting gathering the planes of one sampler.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Entry {
+    pub weighting: Weighting,
+    pub sampler: Sampler,
+}
+
+impl Entry {
+    /// `smis-exact` for the default sampler, `smis-exact/independent` for another.
+    pub fn label(&self) -> String {
+        if self.sampler == Sampler::default() {
+            self.weighting.label()
+        } else {
+            format!("{}/{}", self.weighting.label(), self.sampler)
+        }
+    }
+}
+
 /// One estimator's row.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Row {
+    /// The label: the weighting, with `/independent` for independent planes.
     pub estimator: String,
+    pub weighting: String,
+    pub sampler: String,
     pub planes: usize,
     pub hits: u64,
     /// Ray-plane tests per hit, and wall nanoseconds of gathering per hit.
@@ -53,11 +77,14 @@ pub struct Row {
     /// 1 / (MSE x gather seconds) and 1 / (MSE x total seconds).
     pub efficiency_gather: f64,
     pub efficiency_total: f64,
-    /// Ratios to `unweighted`: MSE, gather time, efficiency (gather), efficiency (total).
+    /// Ratios to the baseline (`unweighted` with independent planes, the paper's, when
+    /// measured): MSE, gather time, efficiency (gather), efficiency (total).
     pub mse_vs_unweighted: f64,
     pub gather_time_vs_unweighted: f64,
     pub efficiency_gather_vs_unweighted: f64,
     pub efficiency_total_vs_unweighted: f64,
+    /// MSE over the same weighting's with independent planes (1 for those).
+    pub mse_vs_independent: Option<f64>,
 }
 
 /// One point of the sweep: mean over seeds at one plane count.
@@ -79,41 +106,52 @@ pub struct Table {
     pub resolution: [u32; 2],
     pub pixel_center: bool,
     pub seed: u64,
-    /// Shared by all estimators: plane sampling, structure build, camera rays.
+    /// Shared by all estimators of the first sampler: plane sampling, structure build, rays.
     pub shared_seconds: f64,
     pub rows: Vec<Row>,
     pub sweep: Vec<SweepPoint>,
 }
 
-/// One measurement: every weighting over one plane set. Returns (weighting, image, hits,
-/// gather seconds) and the shared seconds.
+/// What one entry measured over one plane set.
+pub struct Measured {
+    pub entry: Entry,
+    pub film: Film,
+    pub stats: GatherStats,
+    pub gather_seconds: f64,
+    /// Sampling the planes, building the structure and making the rays, shared by every
+    /// weighting of the same sampler.
+    pub shared_seconds: f64,
+}
+
+/// One measurement: every weighting over the plane set of each sampler.
 fn measure(
     scene: &Scene,
     weightings: &[Weighting],
+    samplers: &[Sampler],
     planes: usize,
     seed: u64,
     pixel_center: bool,
-) -> (Vec<(Weighting, Film, GatherStats, f64)>, f64) {
-    let start = Instant::now();
-    let prepared = PreparedPlanes::new(scene, planes, seed, Accelerator::Raster);
+) -> Vec<Measured> {
     let kernel = Kernel::Auto.resolve().expect("auto always resolves");
-    let pass = camera_rays(scene, seed, 0, pixel_center);
-    let shared = start.elapsed().as_secs_f64();
-    let out = weightings
-        .iter()
-        .map(|&w| {
+    let mut out = Vec::new();
+    for &sampler in samplers {
+        let start = Instant::now();
+        let prepared = PreparedPlanes::new(scene, planes, seed, sampler, Accelerator::Raster);
+        let pass = camera_rays(scene, seed, 0, pixel_center);
+        let shared_seconds = start.elapsed().as_secs_f64();
+        for &weighting in weightings {
             let t = Instant::now();
             let mut sums = vec![Vec3::ZERO; pass.rays.len()];
-            let stats = prepared.gather(w, kernel, &pass.rays, &mut sums, &|| {});
-            let seconds = t.elapsed().as_secs_f64();
+            let stats = prepared.gather(weighting, kernel, &pass.rays, &mut sums, &|| {});
+            let gather_seconds = t.elapsed().as_secs_f64();
             let mut film = Film::new(scene.camera.width, scene.camera.height);
             for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass.emission) {
                 *f = *s + *e;
             }
-            (w, film, stats, seconds)
-        })
-        .collect();
-    (out, shared)
+            out.push(Measured { entry: Entry { weighting, sampler }, film, stats, gather_seconds, shared_seconds });
+        }
+    }
+    out
 }
 
 /// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg.
@@ -124,19 +162,21 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
             eprintln!("{s}");
         }
     };
-    log(format!("table: {} estimators, {} planes", weightings.len(), opts.planes));
-    let (results, shared) = measure(scene, weightings, opts.planes, opts.seed, opts.pixel_center);
+    log(format!("table: {} estimators x {} samplers, {} planes", weightings.len(), opts.samplers.len(), opts.planes));
+    let results = measure(scene, weightings, &opts.samplers, opts.planes, opts.seed, opts.pixel_center);
     let mut rows = Vec::new();
-    for (w, film, stats, gather) in &results {
-        let m = compare(film, reference)?;
-        let total = shared + gather;
+    for r in &results {
+        let (m, stats, gather) = (compare(&r.film, reference)?, r.stats, r.gather_seconds);
+        let total = r.shared_seconds + gather;
         rows.push(Row {
-            estimator: w.label(),
+            estimator: r.entry.label(),
+            weighting: r.entry.weighting.label(),
+            sampler: r.entry.sampler.to_string(),
             planes: opts.planes,
             hits: stats.hits,
             tests_per_hit: stats.tests as f64 / stats.hits.max(1) as f64,
             gather_ns_per_hit: 1e9 * gather / stats.hits.max(1) as f64,
-            gather_seconds: *gather,
+            gather_seconds: gather,
             total_seconds: total,
             metrics: m,
             smape_e2: m.smape_e2(),
@@ -147,35 +187,39 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
             gather_time_vs_unweighted: 0.0,
             efficiency_gather_vs_unweighted: 0.0,
             efficiency_total_vs_unweighted: 0.0,
+            mse_vs_independent: None,
         });
     }
-    let base = rows
-        .iter()
-        .find(|r| r.estimator == Estimator::BASELINE.name())
-        .context("the table needs its baseline estimator")?
-        .clone();
-    for r in &mut rows {
+    let find = |weighting: &str, sampler: Sampler| {
+        rows.iter().find(|r| r.weighting == weighting && r.sampler == sampler.name()).cloned()
+    };
+    let base = find(Estimator::BASELINE.name(), Sampler::Independent)
+        .or_else(|| find(Estimator::BASELINE.name(), opts.samplers[0]))
+        .context("the table needs its baseline estimator")?;
+    let independent: Vec<Option<Row>> = rows.iter().map(|r| find(&r.weighting, Sampler::Independent)).collect();
+    for (r, ind) in rows.iter_mut().zip(independent) {
         r.mse_vs_unweighted = r.metrics.mse / base.metrics.mse;
         r.gather_time_vs_unweighted = r.gather_seconds / base.gather_seconds;
         r.efficiency_gather_vs_unweighted = r.efficiency_gather / base.efficiency_gather;
         r.efficiency_total_vs_unweighted = r.efficiency_total / base.efficiency_total;
+        r.mse_vs_independent = ind.map(|i| r.metrics.mse / i.metrics.mse);
     }
 
     let mut sweep = Vec::new();
     for &n in &opts.sweep {
-        let mut acc: Vec<(f64, f64, f64, f64)> = vec![(0.0, 0.0, 0.0, 0.0); weightings.len()];
+        let mut acc: Vec<(f64, f64, f64, f64)> = vec![(0.0, 0.0, 0.0, 0.0); results.len()];
         for s in 0..opts.sweep_seeds {
             let seed = opts.seed.wrapping_add(1000).wrapping_add(s as u64);
-            let (results, shared) = measure(scene, weightings, n, seed, opts.pixel_center);
-            for (a, (_, film, _, gather)) in acc.iter_mut().zip(&results) {
-                let m = compare(film, reference)?;
-                *a = (a.0 + m.mse, a.1 + m.smape, a.2 + gather, a.3 + shared + gather);
+            for (a, r) in acc.iter_mut().zip(measure(scene, weightings, &opts.samplers, n, seed, opts.pixel_center)) {
+                let m = compare(&r.film, reference)?;
+                let g = r.gather_seconds;
+                *a = (a.0 + m.mse, a.1 + m.smape, a.2 + g, a.3 + r.shared_seconds + g);
             }
         }
         let k = opts.sweep_seeds.max(1) as f64;
-        for (w, a) in weightings.iter().zip(&acc) {
+        for (r, a) in results.iter().zip(&acc) {
             sweep.push(SweepPoint {
-                estimator: w.label(),
+                estimator: r.entry.label(),
                 planes: n,
                 seeds: opts.sweep_seeds,
                 mse: a.0 / k,
@@ -193,7 +237,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         resolution: [scene.camera.width, scene.camera.height],
         pixel_center: opts.pixel_center,
         seed: opts.seed,
-        shared_seconds: shared,
+        shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
         sweep,
     };
@@ -201,7 +245,12 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
     write_file_atomically(&opts.out.join("table.md"), markdown.as_bytes())?;
     let json = serde_json::to_string_pretty(&table).context("cannot format the table as JSON")?;
     write_file_atomically(&opts.out.join("table.json"), json.as_bytes())?;
-    let images: Vec<(String, &Film)> = results.iter().map(|(w, f, _, _)| (w.label(), f)).collect();
+    // The panel shows the default sampler's images (the other's look alike at this size).
+    let images: Vec<(String, &Film)> = results
+        .iter()
+        .filter(|r| r.entry.sampler == opts.samplers[0])
+        .map(|r| (r.entry.weighting.label(), &r.film))
+        .collect();
     save_panel(&images, reference, opts.exposure, &opts.out.join("panel.png"))?;
     if !table.sweep.is_empty() {
         plot_error_vs_time(&table, &opts.out)?;
@@ -221,12 +270,13 @@ impl Table {
             self.reference,
             self.shared_seconds
         );
-        s += "| estimator | planes | hits | ns/hit | gather s | total s | SMAPE x10^2 | MSE x10^4 | 1/(MSE s) gather | 1/(MSE s) total | MSE vs unweighted | gather time vs unweighted | efficiency vs unweighted (gather / total) |\n";
-        s += "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        s += "| estimator | sampler | planes | hits | ns/hit | gather s | total s | SMAPE x10^2 | MSE x10^4 | 1/(MSE s) gather | 1/(MSE s) total | MSE vs unweighted | gather time vs unweighted | efficiency vs unweighted (gather / total) | MSE vs independent |\n";
+        s += "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
         for r in &self.rows {
             s += &format!(
-                "| {} | {} | {:.3e} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4e} | {:.4e} | {:.3} | {:.3} | {:.2} / {:.2} |\n",
-                r.estimator,
+                "| {} | {} | {} | {:.3e} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4e} | {:.4e} | {:.3} | {:.3} | {:.2} / {:.2} | {} |\n",
+                r.weighting,
+                r.sampler,
                 r.planes,
                 r.hits as f64,
                 r.gather_ns_per_hit,
@@ -239,7 +289,8 @@ impl Table {
                 r.mse_vs_unweighted,
                 r.gather_time_vs_unweighted,
                 r.efficiency_gather_vs_unweighted,
-                r.efficiency_total_vs_unweighted
+                r.efficiency_total_vs_unweighted,
+                r.mse_vs_independent.map_or("-".to_string(), |v| format!("{v:.3}"))
             );
         }
         s
@@ -265,6 +316,7 @@ pub struct ScalingPoint {
 pub fn run_scaling(
     scene: &Scene,
     weighting: Weighting,
+    sampler: Sampler,
     planes: &[usize],
     resolutions: &[(u32, u32)],
     out: &std::path::Path,
@@ -274,7 +326,7 @@ pub fn run_scaling(
     for &(w, h) in resolutions {
         let s = scene.with_resolution(w, h)?;
         for &n in planes {
-            let opts = RenderOptions { planes: n, weighting, ..RenderOptions::default() };
+            let opts = RenderOptions { planes: n, weighting, sampler, ..RenderOptions::default() };
             let cpu = cpu_seconds();
             let (_, st) = render(&s, &opts, &|| {})?;
             let cpu = cpu.zip(cpu_seconds()).map(|(a, b)| b - a);
@@ -294,7 +346,7 @@ pub fn run_scaling(
         }
     }
     let mut md = format!(
-        "{} with {}, jittered rays, seed 1, {} threads\n\n| resolution | planes | hits | total s | gather s | ns/hit wall | ns/hit CPU |\n|---|---:|---:|---:|---:|---:|---:|\n",
+        "{} with {}, {sampler} planes, jittered rays, seed 1, {} threads\n\n| resolution | planes | hits | total s | gather s | ns/hit wall | ns/hit CPU |\n|---|---:|---:|---:|---:|---:|---:|\n",
         scene.name,
         weighting,
         rayon::current_num_threads()

@@ -16,6 +16,7 @@ use fogplanes::limits::{check_planes, check_resolution, check_spp, check_threads
 use fogplanes::metrics::compare;
 use fogplanes::reference::{ReferenceOptions, render_reference};
 use fogplanes::render::{Accelerator, RenderOptions, progress_units_per_pass, render};
+use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -103,6 +104,9 @@ struct ScalingArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "scaling")]
     out: PathBuf,
+    /// Where the planes' random numbers come from.
+    #[arg(long, default_value = "sobol", value_parser = sampler_parser())]
+    sampler: Sampler,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -136,6 +140,10 @@ struct RenderArgs {
     /// Random seed: the image depends on it alone, not on the thread count.
     #[arg(long, short, value_name = "S")]
     seed: Option<u64>,
+    /// Where the planes' random numbers come from: sobol (randomised quasi-Monte Carlo, the
+    /// default) or independent (the paper's planes). Default: the scene's, else sobol.
+    #[arg(long, value_parser = sampler_parser())]
+    sampler: Option<Sampler>,
     /// Camera samples per pixel, each a full pass over the same planes.
     #[arg(long, value_name = "K")]
     spp: Option<u32>,
@@ -224,6 +232,9 @@ struct TableArgs {
     /// Seeds per plane count in the sweep.
     #[arg(long, default_value_t = 3)]
     sweep_seeds: u32,
+    /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
+    #[arg(long, value_delimiter = ',', default_values = ["sobol", "independent"], value_parser = sampler_parser())]
+    samplers: Vec<Sampler>,
     /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
     #[arg(long, value_delimiter = ',', value_name = "K")]
     orientations: Vec<u32>,
@@ -284,6 +295,10 @@ fn estimator_parser() -> impl TypedValueParser<Value = Estimator> {
 
 fn accelerator_parser() -> impl TypedValueParser<Value = Accelerator> {
     named(Accelerator::ALL.iter().map(|a| a.name()).collect())
+}
+
+fn sampler_parser() -> impl TypedValueParser<Value = Sampler> {
+    named(Sampler::ALL.iter().map(|s| s.name()).collect())
 }
 
 fn kernel_parser() -> impl TypedValueParser<Value = Kernel> {
@@ -367,6 +382,7 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         planes: planes as usize,
         weighting,
         seed: a.seed.unwrap_or(defaults.seed),
+        sampler: a.sampler.unwrap_or(defaults.sampler),
         spp: a.spp.unwrap_or(defaults.spp),
         pixel_center: a.pixel_center,
         accelerator: a.accelerator,
@@ -474,6 +490,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
         sweep: if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() },
         sweep_seeds: a.sweep_seeds,
         weightings: Weighting::all(&a.orientations),
+        samplers: a.samplers.clone(),
         out: a.out.clone(),
         exposure: a.exposure,
         quiet: a.common.quiet,
@@ -502,7 +519,7 @@ fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
     check_image_output(&a.out.join("seconds_vs_hits.png"))?;
     let weighting = Weighting::new(a.estimator, None).map_err(|m| input(anyhow!(m)))?;
     let planes: Vec<usize> = a.planes.iter().map(|&n| n as usize).collect();
-    let md = experiments::run_scaling(&scene, weighting, &planes, &a.resolutions, &a.out, a.common.quiet)?;
+    let md = experiments::run_scaling(&scene, weighting, a.sampler, &planes, &a.resolutions, &a.out, a.common.quiet)?;
     say!("{md}");
     Ok(())
 }

@@ -68,7 +68,12 @@ fn check(size: &Size) {
                 image_mean.add(film.mean());
                 largest = largest.max(film.max());
             }
-            let (mean, se, z) = (image_mean.mean(), image_mean.stderr(), image_mean.z(ref_mean, ref_se));
+            // Pixels are f32 and the two renderers sum in different orders: their means can
+            // agree no closer than about 1e-6 relative, which matters where the plane sets'
+            // error all but vanishes (near vacuum: direct emission only, exact in both).
+            let rounding = 1e-6 * ref_mean;
+            let (mean, se, z) =
+                (image_mean.mean(), image_mean.stderr(), image_mean.z(ref_mean, ref_se.hypot(rounding)));
             println!("| {name} | {estimator} | {mean:.6e} | {ref_mean:.6e} | {z:+.2} | {largest:.4e} |");
             if !(z.abs() <= 5.0) {
                 failures.push(format!("{name} {estimator}: mean {mean:.6e} +- {se:.2e}, reference {ref_mean:.6e} +- {ref_se:.2e}, z = {z:.2}"));

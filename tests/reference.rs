@@ -129,13 +129,20 @@ fn table_writes_every_file_and_the_json_parses() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
     let rows = json["rows"].as_array().unwrap();
+    // Every weighting with each sampler: the Sobol planes first, then the independent ones.
+    let weightings =
+        ["unweighted", "cmis-cosine", "smis-cosine", "smis-exact", "cmis-exact", "smis-cosine-k3", "smis-exact-k3"];
     let names: Vec<&str> = rows.iter().map(|r| r["estimator"].as_str().unwrap()).collect();
-    assert_eq!(
-        names,
-        ["unweighted", "cmis-cosine", "smis-cosine", "smis-exact", "cmis-exact", "smis-cosine-k3", "smis-exact-k3"]
-    );
+    let expected: Vec<String> =
+        weightings.iter().map(|w| w.to_string()).chain(weightings.iter().map(|w| format!("{w}/independent"))).collect();
+    assert_eq!(names, expected);
     assert!(rows.iter().all(|r| r["metrics"]["mse"].as_f64().unwrap() > 0.0 && r["hits"].as_u64().unwrap() > 0));
-    assert_eq!(json["sweep"].as_array().unwrap().len(), 2 * 7);
+    assert!(rows.iter().all(|r| r["mse_vs_independent"].as_f64().unwrap() > 0.0));
+    assert_eq!(
+        rows[0]["mse_vs_unweighted"].as_f64().unwrap(),
+        rows[0]["metrics"]["mse"].as_f64().unwrap() / rows[7]["metrics"]["mse"].as_f64().unwrap()
+    );
+    assert_eq!(json["sweep"].as_array().unwrap().len(), 2 * 14);
     let img = Film::load_exr(&reference).unwrap();
     assert_eq!((img.width, img.height), (48, 27));
     std::fs::remove_dir_all(&dir).unwrap();

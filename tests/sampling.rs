@@ -2,7 +2,8 @@
 //! orientation, point and direction, with fixed seeds. Each test fails when the statistic is
 //! beyond the 1e-4 upper tail of its chi-square distribution (Wilson-Hilferty approximation).
 
-use fogplanes::photon_plane::sample_planes;
+use fogplanes::photon_plane::{PhotonPlane, sample_planes};
+use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 
 fn scene() -> Scene {
@@ -39,45 +40,77 @@ const N: usize = 400_000;
 #[test]
 fn lights_are_chosen_by_power() {
     let s = scene();
-    let planes = sample_planes(&s, N, 21);
-    let powers: Vec<f64> = s.lights.iter().map(|l| l.power()).collect();
-    let total: f64 = powers.iter().sum();
-    let mut counts = vec![0u64; s.lights.len()];
-    for p in &planes {
-        counts[p.light] += 1;
+    for sampler in Sampler::ALL {
+        let planes = sample_planes(&s, sampler, N, 21);
+        let powers: Vec<f64> = s.lights.iter().map(|l| l.power()).collect();
+        let total: f64 = powers.iter().sum();
+        let mut counts = vec![0u64; s.lights.len()];
+        for p in &planes {
+            counts[p.light] += 1;
+        }
+        let stat = chi_square(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
+        assert!(stat < chi_square_critical(s.lights.len() - 1), "{sampler}: chi2 = {stat}, counts {counts:?}");
     }
-    let stat = chi_square(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
-    assert!(stat < chi_square_critical(s.lights.len() - 1), "chi2 = {stat}, counts {counts:?}");
 }
 
+/// Each sampled quantity follows its density, for both samplers; the orientation also within
+/// each light (it is the light choice's remainder), and pairs of quantities jointly (2D cells),
+/// which a mapping that correlated dimensions would fail.
 #[test]
 fn orientation_point_and_direction_follow_their_densities() {
     let s = scene();
-    let planes = sample_planes(&s, N, 22);
-    assert_uniform("alpha / pi", planes.iter().map(|p| p.alpha / std::f64::consts::PI), 64);
-    // The point is uniform on its light: p / W and q / H uniform and independent (2D bins).
-    let local = |p: &fogplanes::photon_plane::PhotonPlane| {
-        let l = &s.lights[p.light];
-        let (x, y) = l.local(p.point);
-        ((x / l.width).clamp(0.0, 0.999_999), (y / l.height).clamp(0.0, 0.999_999))
-    };
-    assert_uniform("p / W", planes.iter().map(|p| local(p).0), 64);
-    assert_uniform("q / H", planes.iter().map(|p| local(p).1), 64);
-    assert_uniform(
-        "2D cell of (p, q)",
-        planes.iter().map(|p| {
-            let (x, y) = local(p);
-            ((x * 8.0).floor() * 8.0 + (y * 8.0).floor()) / 64.0
-        }),
-        64,
-    );
-    // pdf cos(theta) / pi: cos^2(theta) is uniform, and so is the azimuth.
-    let frame = |p: &fogplanes::photon_plane::PhotonPlane| {
-        let l = &s.lights[p.light];
-        (p.direction.dot(l.n), p.direction.dot(l.v).atan2(p.direction.dot(l.u)))
-    };
-    assert_uniform("cos^2 theta", planes.iter().map(|p| frame(p).0.powi(2).min(0.999_999)), 64);
-    assert_uniform("azimuth", planes.iter().map(|p| (frame(p).1 / std::f64::consts::TAU).rem_euclid(1.0)), 64);
+    for sampler in Sampler::ALL {
+        let planes = sample_planes(&s, sampler, N, 22);
+        let name = |q: &str| format!("{sampler}: {q}");
+        let alpha = |p: &PhotonPlane| p.alpha / std::f64::consts::PI;
+        assert_uniform(&name("alpha / pi"), planes.iter().map(alpha), 64);
+        for l in 0..s.lights.len() {
+            assert_uniform(
+                &name(&format!("alpha / pi on light {l}")),
+                planes.iter().filter(|p| p.light == l).map(alpha),
+                16,
+            );
+        }
+        // The point is uniform on its light: p / W and q / H uniform and independent (2D bins).
+        let local = |p: &PhotonPlane| {
+            let l = &s.lights[p.light];
+            let (x, y) = l.local(p.point);
+            ((x / l.width).clamp(0.0, 0.999_999), (y / l.height).clamp(0.0, 0.999_999))
+        };
+        let cell = |x: f64, y: f64| ((x * 8.0).floor() * 8.0 + (y * 8.0).floor()) / 64.0;
+        assert_uniform(&name("p / W"), planes.iter().map(|p| local(p).0), 64);
+        assert_uniform(&name("q / H"), planes.iter().map(|p| local(p).1), 64);
+        assert_uniform(&name("2D cell of (p, q)"), planes.iter().map(|p| cell(local(p).0, local(p).1)), 64);
+        // pdf cos(theta) / pi: cos^2(theta) is uniform, and so is the azimuth.
+        let frame = |p: &PhotonPlane| {
+            let l = &s.lights[p.light];
+            let cos2 = p.direction.dot(l.n).powi(2).min(0.999_999);
+            (cos2, (p.direction.dot(l.v).atan2(p.direction.dot(l.u)) / std::f64::consts::TAU).rem_euclid(1.0))
+        };
+        assert_uniform(&name("cos^2 theta"), planes.iter().map(|p| frame(p).0), 64);
+        assert_uniform(&name("azimuth"), planes.iter().map(|p| frame(p).1), 64);
+        assert_uniform(&name("2D cell of (cos^2, azimuth)"), planes.iter().map(|p| cell(frame(p).0, frame(p).1)), 64);
+        assert_uniform(&name("2D cell of (alpha, p)"), planes.iter().map(|p| cell(alpha(p), local(p).0)), 64);
+        assert_uniform(&name("2D cell of (alpha, cos^2)"), planes.iter().map(|p| cell(alpha(p), frame(p).0)), 64);
+        assert_uniform(&name("2D cell of (q, azimuth)"), planes.iter().map(|p| cell(local(p).1, frame(p).1)), 64);
+    }
+}
+
+/// Over independent scramble seeds, a plane's numbers are uniform: the first plane of 4096
+/// seeds (each alone a single uniform point) follows the densities too.
+#[test]
+fn the_first_plane_over_scramble_seeds_is_uniform() {
+    let s = scene();
+    let firsts: Vec<PhotonPlane> = (0..20_000).flat_map(|seed| sample_planes(&s, Sampler::Sobol, 1, seed)).collect();
+    assert_uniform("first plane: alpha / pi", firsts.iter().map(|p| p.alpha / std::f64::consts::PI), 32);
+    let powers: Vec<f64> = s.lights.iter().map(|l| l.power()).collect();
+    let total: f64 = powers.iter().sum();
+    let mut counts = vec![0u64; s.lights.len()];
+    for p in &firsts {
+        counts[p.light] += 1;
+    }
+    let stat = chi_square(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
+    assert!(stat < chi_square_critical(s.lights.len() - 1), "first plane: chi2 = {stat}, counts {counts:?}");
 }
 
 #[test]

@@ -8,6 +8,7 @@
 use fogplanes::gather::{CameraRay, GatherContext};
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::quadrature::single_scattering;
+use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Denominator, Weighting, WithDenominator};
 use glam::{DVec3, Vec3};
@@ -80,7 +81,7 @@ impl WithDenominator for Estimate<'_> {
     }
 }
 
-fn run(weightings: &[Weighting], batches: u64, batch_size: usize) {
+fn run(sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usize) {
     let scene = Scene::parse(SCENE, "unbiasedness.toml", "unbiasedness").unwrap();
     let mut failures = Vec::new();
     for case in cases() {
@@ -90,7 +91,7 @@ fn run(weightings: &[Weighting], batches: u64, batch_size: usize) {
         let truth = single_scattering(&scene, case.origin, we, 1e-7);
         let mut tallies = vec![MeanRgb::default(); weightings.len()];
         for batch in 0..batches {
-            let planes = sample_planes(&scene, batch_size, 1000 + batch);
+            let planes = sample_planes(&scene, sampler, batch_size, 1000 + batch);
             let ctx = GatherContext::new(&scene, &planes, case.origin);
             for (tally, w) in tallies.iter_mut().zip(weightings) {
                 tally.add(w.dispatch(Estimate { ctx: &ctx, ray: &ray }));
@@ -101,7 +102,7 @@ fn run(weightings: &[Weighting], batches: u64, batch_size: usize) {
                 let (estimate, want) = (tally.0[c], truth[c]);
                 let (mean, se, z) = (estimate.mean(), estimate.stderr(), estimate.z(want, 0.0));
                 let line = format!(
-                    "{:>16} {:>18} ch{c}: quadrature {want:.6e}, estimate {mean:.6e} +- {se:.2e} ({:.2}%), z = {z:+.2}",
+                    "{sampler:>11} {:>16} {:>18} ch{c}: quadrature {want:.6e}, estimate {mean:.6e} +- {se:.2e} ({:.2}%), z = {z:+.2}",
                     case.name,
                     w.label(),
                     100.0 * se / want
@@ -116,14 +117,17 @@ fn run(weightings: &[Weighting], batches: u64, batch_size: usize) {
     assert!(failures.is_empty(), "outside 4 standard errors, or standard error above 1%:\n{}", failures.join("\n"));
 }
 
+/// Over independent scramble seeds (randomised quasi-Monte Carlo) and over independent planes.
 #[test]
 fn every_estimator_matches_quadrature() {
-    run(&Weighting::all(&[]), 400, 10_000);
+    for sampler in Sampler::ALL {
+        run(sampler, &Weighting::all(&[]), 400, 10_000);
+    }
 }
 
 #[test]
 fn k_orientations_match_quadrature() {
     let extra: Vec<Weighting> = Weighting::all(&[3, 4, 8]).into_iter().filter(|w| w.orientations != 2).collect();
     assert_eq!(extra.len(), 6);
-    run(&extra, 400, 10_000);
+    run(Sampler::default(), &extra, 400, 10_000);
 }

@@ -370,6 +370,7 @@ fn segment_meets_rectangle(points: &[(f64, f64)], w: f64, h: f64, m: f64) -> boo
 mod tests {
     use super::*;
     use crate::photon_plane::sample_planes;
+    use crate::sampling::Sampler;
 
     /// Culling occluders per plane never drops one that blocks: the same images as testing
     /// every other light at every hit.
@@ -378,7 +379,7 @@ mod tests {
         for file in ["media_scenes/six_lights.toml", "media_scenes/hard/facing_lights_close.toml"] {
             let scene =
                 Scene::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(file)).unwrap();
-            let planes = sample_planes(&scene, 4000, 8);
+            let planes = sample_planes(&scene, Sampler::Independent, 4000, 8);
             let o = scene.camera.position;
             let culled = GatherContext::new(&scene, &planes, o);
             let mut all = GatherContext::new(&scene, &planes, o);
@@ -420,7 +421,7 @@ mod tests {
     fn hit_solves_the_plane_equation() {
         let text = include_str!("../../../media_scenes/six_lights.toml");
         let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
-        let planes = sample_planes(&scene, 300, 2);
+        let planes = sample_planes(&scene, Sampler::default(), 300, 2);
         let o = scene.camera.position;
         let ctx = GatherContext::new(&scene, &planes, o);
         let mut found = 0;

@@ -16,7 +16,8 @@
 //! | [`medium`] | the homogeneous medium box: clipping and transmittance |
 //! | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
 //! | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
-//! | [`sampling`] | random streams, light choice by power and elementary warps |
+//! | [`sampling`] | the plane samplers, random streams, light choice by power, warps |
+//! | [`sobol`] | the Owen-scrambled Sobol sequence (randomised quasi-Monte Carlo) |
 //! | [`photon_plane`] | photon-plane sampling (section 2) and the clipped plane polygon |
 //! | [`weights`] | the estimators: their registry and their denominators D (sections 2, 3) |
 //! | [`gather`] | one ray against one plane: hit test and weighted contribution, written once |
@@ -50,6 +51,7 @@ pub mod reference;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod sobol;
 pub mod weights;
 
 pub use error::{Error, Result};

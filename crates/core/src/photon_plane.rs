@@ -9,15 +9,11 @@
 
 use crate::light::{ChordDirection, chord_extent};
 use crate::medium::{Medium, PHASE};
-use crate::sampling::{Discrete, cosine_hemisphere, light_distribution, rng_for, unit_f64};
+use crate::sampling::{Discrete, Sampler, cosine_hemisphere, light_distribution};
 use crate::scene::Scene;
 use glam::DVec3;
-use rand::RngCore;
 use rayon::prelude::*;
 use std::f64::consts::PI;
-
-/// The random stream that planes draw from (see [`crate::sampling::rng_for`]).
-const PLANE_STREAM: u64 = 0x9_1A4E;
 
 /// One sampled photon plane.
 #[derive(Clone, Debug)]
@@ -42,14 +38,18 @@ pub struct PhotonPlane {
     pub power: DVec3,
 }
 
-/// Samples one plane from six uniform numbers in [0, 1).
-pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 6]) -> PhotonPlane {
+/// Samples one plane from five uniform numbers in [0, 1) (docs/mathematics.md section 2.1):
+/// `u[0]` chooses the light by inverting the CDF of the light powers, and where it fell within
+/// that light's share, rescaled, is the orientation `alpha / pi` (uniform and independent of the
+/// choice, and stratified within each light when `u[0]` is); `u[1], u[2]` give the direction
+/// and `u[3], u[4]` the point.
+pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 5]) -> PhotonPlane {
     let index = lights.sample(u[0]);
     let light = &scene.lights[index];
-    let alpha = PI * u[1];
-    let (p, q) = (u[2] * light.width, u[3] * light.height);
+    let alpha = PI * lights.remainder(u[0], index);
+    let direction = cosine_hemisphere(u[1], u[2], light.u, light.v, light.n);
+    let (p, q) = (u[3] * light.width, u[4] * light.height);
     let point = light.point(p, q);
-    let direction = cosine_hemisphere(u[4], u[5], light.u, light.v, light.n);
     let (sin_a, cos_a) = alpha.sin_cos();
     let (back, forward) =
         chord_extent(light.width, light.height, p, q, &ChordDirection::<f64>::from_cos_sin(cos_a, sin_a));
@@ -69,22 +69,24 @@ pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 6]) -> PhotonPlan
     }
 }
 
-/// Samples `n` planes, plane `i` from its own generator: the set depends on the seed only.
-pub fn sample_planes(scene: &Scene, n: usize, seed: u64) -> Vec<PhotonPlane> {
-    sample_plane_range(scene, seed, 0..n)
+/// Samples `n` planes, plane `i` from point `i` of the sampler: the set depends on the seed
+/// only.
+pub fn sample_planes(scene: &Scene, sampler: Sampler, n: usize, seed: u64) -> Vec<PhotonPlane> {
+    sample_plane_range(scene, sampler, seed, 0..n)
 }
 
 /// Planes `range` of the set that [`sample_planes`] makes (so a large set can be made and
 /// consumed in pieces).
-pub fn sample_plane_range(scene: &Scene, seed: u64, range: std::ops::Range<usize>) -> Vec<PhotonPlane> {
+pub fn sample_plane_range(
+    scene: &Scene,
+    sampler: Sampler,
+    seed: u64,
+    range: std::ops::Range<usize>,
+) -> Vec<PhotonPlane> {
     let lights = light_distribution(scene);
     (range.start as u64..range.end as u64)
         .into_par_iter()
-        .map(|i| {
-            let mut rng = rng_for(seed, PLANE_STREAM, i);
-            let u = std::array::from_fn(|_| unit_f64(rng.next_u64()));
-            sample_plane(scene, &lights, u)
-        })
+        .map(|i| sample_plane(scene, &lights, sampler.plane_numbers(seed, i)))
         .collect()
 }
 
@@ -162,7 +164,7 @@ mod tests {
     #[test]
     fn chord_contains_the_sampled_point_and_stays_on_the_light() {
         let s = scene();
-        for p in sample_planes(&s, 2000, 3) {
+        for p in sample_planes(&s, Sampler::default(), 2000, 3) {
             let l = &s.lights[p.light];
             let (pp, qq) = l.local(p.point);
             assert!(p.width >= 0.0 && p.width <= (l.width.hypot(l.height)) * (1.0 + 1e-12));
@@ -183,16 +185,16 @@ mod tests {
     #[test]
     fn same_seed_same_planes() {
         let s = scene();
-        let (a, b) = (sample_planes(&s, 100, 9), sample_planes(&s, 100, 9));
+        let (a, b) = (sample_planes(&s, Sampler::default(), 100, 9), sample_planes(&s, Sampler::default(), 100, 9));
         assert!(a.iter().zip(&b).all(|(x, y)| x.origin == y.origin && x.direction == y.direction));
-        let c = sample_planes(&s, 100, 10);
+        let c = sample_planes(&s, Sampler::default(), 100, 10);
         assert!(a.iter().zip(&c).any(|(x, y)| x.origin != y.origin));
     }
 
     #[test]
     fn polygon_lies_in_the_box_and_on_the_plane() {
         let s = scene();
-        for p in sample_planes(&s, 500, 4) {
+        for p in sample_planes(&s, Sampler::default(), 500, 4) {
             let poly = p.polygon_in_box(&s.medium, 0.0);
             assert!(poly.len >= 3 || p.width == 0.0);
             let n = p.normal();

@@ -13,7 +13,7 @@ use crate::kernel::Kernel;
 use crate::limits::{check_memory, check_planes, check_spp};
 use crate::photon_plane::sample_plane_range;
 use crate::raster::ScreenRaster;
-use crate::sampling::pixel_jitter;
+use crate::sampling::{Sampler, pixel_jitter};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -105,7 +105,7 @@ pub struct PreparedPlanes {
 }
 
 impl PreparedPlanes {
-    pub fn new(scene: &Scene, planes: usize, seed: u64, accelerator: Accelerator) -> Self {
+    pub fn new(scene: &Scene, planes: usize, seed: u64, sampler: Sampler, accelerator: Accelerator) -> Self {
         let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
@@ -114,7 +114,7 @@ impl PreparedPlanes {
         let mut all = Vec::new();
         for start in (0..planes).step_by(PLANE_CHUNK) {
             let t = Instant::now();
-            let chunk = sample_plane_range(scene, seed, start..(start + PLANE_CHUNK).min(planes));
+            let chunk = sample_plane_range(scene, sampler, seed, start..(start + PLANE_CHUNK).min(planes));
             seconds_sampling += t.elapsed().as_secs_f64();
             let t = Instant::now();
             context.push_planes(scene, &chunk, planes);
@@ -207,6 +207,8 @@ pub struct RenderOptions {
     pub planes: usize,
     pub weighting: Weighting,
     pub seed: u64,
+    /// Where the planes' random numbers come from.
+    pub sampler: Sampler,
     pub spp: u32,
     pub pixel_center: bool,
     pub accelerator: Accelerator,
@@ -219,6 +221,7 @@ impl Default for RenderOptions {
             planes: 40_960,
             weighting: Weighting::default(),
             seed: 1,
+            sampler: Sampler::default(),
             spp: 1,
             pixel_center: false,
             accelerator: Accelerator::Raster,
@@ -235,6 +238,7 @@ impl RenderOptions {
             planes: d.planes as usize,
             weighting: d.weighting,
             seed: d.seed,
+            sampler: d.sampler,
             spp: d.spp,
             ..RenderOptions::default()
         }
@@ -317,7 +321,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result
     opts.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
     let start = Instant::now();
-    let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.accelerator);
+    let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.sampler, opts.accelerator);
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),

@@ -1,11 +1,86 @@
 //! Random numbers and elementary sampling routines.
 //!
 //! Every random decision is a pure function of (seed, index), so that images do not depend on
-//! the number of threads: plane `i` draws from its own generator, pixel sample `(pass, pixel)`
-//! from a hash.
+//! the number of threads: plane `i` takes point `i` of its [`Sampler`], pixel sample
+//! `(pass, pixel)` draws from a hash.
 
+use crate::sobol::SobolSampler;
 use glam::DVec3;
-use rand::SeedableRng;
+use rand::{RngCore, SeedableRng};
+use std::fmt;
+use std::str::FromStr;
+
+/// The random stream that planes draw from (see [`rng_for`]).
+const PLANE_STREAM: u64 = 0x9_1A4E;
+
+/// Where the six uniform numbers of a photon plane come from (docs/mathematics.md section 2.1:
+/// light, orientation, the point's p and q, the direction's two).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Sampler {
+    /// Randomised quasi-Monte Carlo: plane i is point i of a 6D Owen-scrambled Sobol sequence,
+    /// an independent scrambling per seed ([`crate::sobol`]). Unbiased for every seed, and the
+    /// planes cover the six dimensions far more evenly than independent ones.
+    #[default]
+    Sobol,
+    /// Six independent uniform numbers per plane, as in the paper.
+    Independent,
+}
+
+impl Sampler {
+    pub const ALL: [Sampler; 2] = [Sampler::Sobol, Sampler::Independent];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampler::Sobol => "sobol",
+            Sampler::Independent => "independent",
+        }
+    }
+
+    /// The five uniform numbers in [0, 1) of plane `index` of the set made with `seed`, in the
+    /// order [`crate::photon_plane::sample_plane`] reads them: light and orientation (one
+    /// number, see there), the direction's two, the point's p and q.
+    #[inline]
+    pub fn plane_numbers(self, seed: u64, index: u64) -> [f64; 5] {
+        match self {
+            Sampler::Independent => {
+                let mut rng = rng_for(seed, PLANE_STREAM, index);
+                std::array::from_fn(|_| unit_f64(rng.next_u64()))
+            }
+            Sampler::Sobol => {
+                // Plane counts stay far below 2^32 (limits::MAX_PLANES).
+                let stream = mix64(seed ^ PLANE_STREAM);
+                let point: [f64; 5] = SobolSampler::new(stream).point(index as u32);
+                // The digits below the sequence's 32 bits, uniform and independent, as an Owen
+                // scrambling of unlimited depth would make them: the light's share of dimension
+                // 0 is stretched into the orientation, and must not come out on a grid.
+                let low = mix64(stream ^ mix64(index));
+                std::array::from_fn(|d| {
+                    let fine = unit_f64(mix64(low ^ d as u64)) * (1.0 / 4_294_967_296.0);
+                    (point[d] + fine).min(ONE_BELOW)
+                })
+            }
+        }
+    }
+}
+
+/// The largest f64 below 1.
+const ONE_BELOW: f64 = 1.0 - f64::EPSILON / 2.0;
+
+impl fmt::Display for Sampler {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Sampler {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Sampler::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Sampler::ALL.iter().map(|k| k.name()).collect();
+            format!("unknown sampler {s:?}; expected one of {}", names.join(", "))
+        })
+    }
+}
 
 /// SplitMix64's finaliser: a bijective 64-bit hash with good avalanche.
 pub fn mix64(mut z: u64) -> u64 {
@@ -58,6 +133,13 @@ impl Discrete {
         self.probabilities[i]
     }
 
+    /// Where `u` lies within index `i`'s interval of the CDF, rescaled to [0, 1): given the
+    /// choice of `i`, a uniform number again, and stratified wherever `u` was.
+    pub fn remainder(&self, u: f64, i: usize) -> f64 {
+        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        ((u - lo) / self.probabilities[i]).clamp(0.0, ONE_BELOW)
+    }
+
     /// The index for a uniform `u` in [0, 1); never one of probability zero.
     pub fn sample(&self, u: f64) -> usize {
         let i = self.cdf.partition_point(|&c| c <= u).min(self.cdf.len() - 1);
@@ -73,13 +155,25 @@ pub fn light_distribution(scene: &crate::scene::Scene) -> Discrete {
 }
 
 /// A direction cosine-distributed about `n` (pdf cos(theta) / pi), from two uniforms, given an
-/// orthonormal frame (t, b, n). Malley's method: a uniform point on the disk, lifted.
+/// orthonormal frame (t, b, n). Malley's method: a uniform point on the disk (by the concentric
+/// map, which keeps strata of the square compact), lifted.
 pub fn cosine_hemisphere(u1: f64, u2: f64, t: DVec3, b: DVec3, n: DVec3) -> DVec3 {
-    let r = u1.sqrt();
-    let phi = 2.0 * std::f64::consts::PI * u2;
+    let (x, y) = concentric_disk(u1, u2);
+    let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+    (x * t + y * b + z * n).normalize()
+}
+
+/// Shirley and Chiu's concentric map from the unit square to the unit disk: area-preserving and
+/// of low distortion, so strata of the square stay compact on the disk.
+pub fn concentric_disk(u1: f64, u2: f64) -> (f64, f64) {
+    let (a, b) = (2.0 * u1 - 1.0, 2.0 * u2 - 1.0);
+    if a == 0.0 && b == 0.0 {
+        return (0.0, 0.0);
+    }
+    let quarter = std::f64::consts::FRAC_PI_4;
+    let (r, phi) = if a.abs() > b.abs() { (a, quarter * (b / a)) } else { (b, 2.0 * quarter - quarter * (a / b)) };
     let (s, c) = phi.sin_cos();
-    let z = (1.0 - u1).max(0.0).sqrt();
-    (r * c * t + r * s * b + z * n).normalize()
+    (r * c, r * s)
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@ use crate::camera::Camera;
 use crate::light::RectLight;
 use crate::limits::{MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_memory, check_planes, check_resolution, check_spp};
 use crate::medium::Medium;
+use crate::sampling::Sampler;
 use crate::weights::{Estimator, Weighting};
 use glam::DVec3;
 use serde::Deserialize;
@@ -125,6 +126,8 @@ pub struct RenderDesc {
     pub orientations: Option<u32>,
     pub seed: Option<u64>,
     pub spp: Option<u32>,
+    /// `sobol` (the default) or `independent`.
+    pub sampler: Option<String>,
 }
 
 /// Render settings after defaults, validated.
@@ -134,6 +137,7 @@ pub struct RenderDefaults {
     pub weighting: Weighting,
     pub seed: u64,
     pub spp: u32,
+    pub sampler: Sampler,
 }
 
 /// A validated scene.
@@ -294,7 +298,11 @@ impl Scene {
         let weighting = Weighting::new(estimator, r.orientations).map_err(|m| err("render.orientations".into(), m))?;
         let spp = r.spp.unwrap_or(1);
         check_spp(spp).map_err(|m| err("render.spp".into(), m))?;
-        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp };
+        let sampler = match &r.sampler {
+            Some(name) => name.parse::<Sampler>().map_err(|m| err("render.sampler".into(), m))?,
+            None => Sampler::default(),
+        };
+        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp, sampler };
         check_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
 
         Ok(Scene { name: name.to_string(), camera, medium, lights, render })
