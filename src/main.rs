@@ -15,7 +15,7 @@ use fogplanes::kernel::Kernel;
 use fogplanes::limits::{check_planes, check_resolution, check_spp, check_threads};
 use fogplanes::metrics::compare;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{Accelerator, RenderOptions, progress_units_per_pass, render};
+use fogplanes::render::{Accelerator, RenderOptions, progress_units_per_pass, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
@@ -147,6 +147,10 @@ struct RenderArgs {
     /// Camera samples per pixel, each a full pass over the same planes.
     #[arg(long, value_name = "K")]
     spp: Option<u32>,
+    /// Render for this many seconds of wall time (the whole command) instead of a fixed plane
+    /// count: planes in passes, each extending the set, until the budget is spent.
+    #[arg(long, value_name = "SECONDS", conflicts_with = "planes")]
+    time_budget: Option<f64>,
     /// Trace pixel centres instead of jittered samples.
     #[arg(long)]
     pixel_center: bool,
@@ -305,7 +309,15 @@ fn kernel_parser() -> impl TypedValueParser<Value = Kernel> {
     named(Kernel::ALL.iter().map(|k| k.name()).collect())
 }
 
+/// When the command started (for `--time-budget`, which covers the whole command).
+static STARTED: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+
+fn film_pixels(scene: &Scene) -> f64 {
+    scene.camera.width as f64 * scene.camera.height as f64
+}
+
 fn main() -> ExitCode {
+    STARTED.get_or_init(std::time::Instant::now);
     let cli = Cli::parse();
     // Ctrl-C: remove any half-written output before leaving, so no truncated file remains.
     let _ = ctrlc::set_handler(|| {
@@ -389,6 +401,11 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         kernel: a.kernel,
     };
     opts.validate(&scene)?;
+    if let Some(t) = a.time_budget {
+        if !(t > 0.0 && t <= 1e6) {
+            return Err(input(anyhow!("--time-budget: must be a positive number of seconds up to 1e6, got {t}")));
+        }
+    }
     let output = a.output.clone().unwrap_or_else(|| default_output(&scene, ""));
     check_image_output(&output)?;
 
@@ -398,11 +415,23 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         weighting.label().as_str(),
     );
     let cpu = system::cpu_seconds();
-    let (film, stats) = render(&scene, &opts, &|| bar.inc(1))?;
+    let (film, stats) = match a.time_budget {
+        None => render(&scene, &opts, &|| bar.inc(1))?,
+        Some(seconds) => {
+            bar.set_length(u64::MAX);
+            // What the command spent before rendering, and what writing the file will take.
+            let reserve = 0.02 + 5e-8 * film_pixels(&scene);
+            let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
+            render_for(&scene, &opts, std::time::Duration::from_secs_f64(left.max(0.0)), &|| bar.inc(1))?
+        }
+    };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
     film.save(&output, a.exposure)?;
     let mut summary = stats.summary();
+    if a.time_budget.is_some() {
+        summary += &format!(", {} plane passes", stats.plane_passes);
+    }
     if let Some(c) = cpu {
         summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
     }

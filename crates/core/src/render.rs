@@ -105,19 +105,33 @@ pub struct PreparedPlanes {
 }
 
 impl PreparedPlanes {
+    /// The first `planes` planes of the set made with `seed` and `sampler`.
     pub fn new(scene: &Scene, planes: usize, seed: u64, sampler: Sampler, accelerator: Accelerator) -> Self {
+        PreparedPlanes::range(scene, 0..planes, planes, seed, sampler, accelerator)
+    }
+
+    /// Planes `range` of the set, each weighted as one of `planes_total` (1 leaves the
+    /// division by N to the caller, as passes that extend a set do).
+    pub fn range(
+        scene: &Scene,
+        range: std::ops::Range<usize>,
+        planes_total: usize,
+        seed: u64,
+        sampler: Sampler,
+        accelerator: Accelerator,
+    ) -> Self {
         let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
         let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
-        for start in (0..planes).step_by(PLANE_CHUNK) {
+        for start in range.clone().step_by(PLANE_CHUNK) {
             let t = Instant::now();
-            let chunk = sample_plane_range(scene, sampler, seed, start..(start + PLANE_CHUNK).min(planes));
+            let chunk = sample_plane_range(scene, sampler, seed, start..(start + PLANE_CHUNK).min(range.end));
             seconds_sampling += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            context.push_planes(scene, &chunk, planes);
+            context.push_planes(scene, &chunk, planes_total);
             if let Some(r) = &mut raster {
                 r.push_planes(&scene.camera, &chunk, &scene.medium);
             }
@@ -265,6 +279,8 @@ pub struct RenderStats {
     /// The kernel that ran (`auto` resolved).
     pub kernel: String,
     pub planes: usize,
+    /// Plane passes: 1, or more for a render on a time budget ([`render_for`]).
+    pub plane_passes: u32,
     pub rays: u64,
     pub hits: u64,
     pub tests: u64,
@@ -327,6 +343,7 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result
         estimator: opts.weighting.label(),
         kernel: kernel.to_string(),
         planes: opts.planes,
+        plane_passes: 1,
         seconds_sampling: prepared.seconds_sampling,
         seconds_build: prepared.seconds_build,
         ..Default::default()
@@ -349,6 +366,77 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result
     }
     let inv = 1.0 / opts.spp as f32;
     film.pixels.iter_mut().for_each(|p| *p *= inv);
+    stats.seconds_total = start.elapsed().as_secs_f64();
+    Ok((film, stats))
+}
+
+/// The first pass of a render on a time budget; each further pass doubles the plane count (so
+/// the Sobol sampler's counts stay powers of two) until the budget runs short.
+const FIRST_PASS_PLANES: usize = 4096;
+
+/// Renders the scene within `budget` of wall time: planes in passes, each extending the plane
+/// set by the next points of the sampler (for Sobol, further points of the same sequence), until
+/// the next pass would not fit; the last pass is sized from the measured time per plane to use
+/// what remains. The image is the estimate of the N planes gathered, N = the total over passes:
+/// the same set, and so the same unbiased estimate, as a render of N planes (up to f32
+/// summation order). `opts.planes` is ignored; `opts.spp` must be 1. Returns as soon as
+/// `budget` would be exceeded by more work; the caller's own time (loading, writing) is not in
+/// it.
+pub fn render_for(
+    scene: &Scene,
+    opts: &RenderOptions,
+    budget: std::time::Duration,
+    progress: Progress,
+) -> Result<(Film, RenderStats)> {
+    if opts.spp != 1 {
+        return Err(Error::option("--spp", "a render on a time budget takes one sample per pixel"));
+    }
+    let first = RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() };
+    first.validate(scene)?;
+    let kernel = opts.kernel.resolve()?;
+    let start = Instant::now();
+    let deadline = budget.as_secs_f64();
+    let t = Instant::now();
+    let pass_rays = camera_rays(scene, opts.seed, 0, opts.pixel_center);
+    let mut stats = RenderStats {
+        estimator: opts.weighting.label(),
+        kernel: kernel.to_string(),
+        rays: pass_rays.rays.len() as u64,
+        seconds_rays: t.elapsed().as_secs_f64(),
+        ..Default::default()
+    };
+    let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
+    let (mut done, mut next) = (0usize, FIRST_PASS_PLANES);
+    // Seconds per plane of the last pass (sampling, building and gathering), the largest so far.
+    let mut per_plane: f64;
+    loop {
+        let pass_start = Instant::now();
+        let prepared = PreparedPlanes::range(scene, done..done + next, 1, opts.seed, opts.sampler, opts.accelerator);
+        let t = Instant::now();
+        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
+        stats.seconds_gather += t.elapsed().as_secs_f64();
+        stats.seconds_sampling += prepared.seconds_sampling;
+        stats.seconds_build += prepared.seconds_build;
+        stats.hits += s.hits;
+        stats.tests += s.tests;
+        stats.plane_passes += 1;
+        done += next;
+        per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
+        let remaining = deadline - start.elapsed().as_secs_f64();
+        // A pass's cost is close to proportional to its planes; keep a tenth in hand.
+        let affordable = (0.9 * remaining / per_plane.max(1e-12)).floor();
+        let doubled = done.min(crate::limits::MAX_PLANES as usize - done);
+        next = (affordable.min(doubled as f64).max(0.0)) as usize;
+        if next < FIRST_PASS_PLANES / 4 {
+            break;
+        }
+    }
+    let mut film = Film::new(scene.camera.width, scene.camera.height);
+    let inv = 1.0 / done as f32;
+    for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
+        *f = *s * inv + *e;
+    }
+    stats.planes = done;
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((film, stats))
 }
