@@ -3,6 +3,7 @@
 //! of [`experiments`], which draw with [`pictures`].
 
 mod experiments;
+mod page;
 mod pictures;
 mod system;
 
@@ -50,7 +51,8 @@ enum Command {
     Compare(CompareArgs),
     /// Render every estimator from the same planes and rays, and write the table, panel and plot.
     ///
-    /// Writes table.md, table.json, panel.png and error_vs_time.png (and .svg) to --out.
+    /// Writes table.md, table.json, panel.png, error_vs_time.png (and .svg) and index.html (an
+    /// offline comparison page: the images, their per-pixel errors, the table and the plot) to --out.
     Table(TableArgs),
     /// Measure how render time grows with the number of ray-plane hits.
     ///
