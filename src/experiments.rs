@@ -7,6 +7,7 @@
 //! its own. Speed against error is reported as efficiency 1 / (MSE x seconds), with both the
 //! gathering time and the whole time (plane sampling, structure build, rays and gathering).
 
+use crate::page::{PageImage, PageInput, comparison_page, html_table};
 use crate::pictures::{plot_error_vs_time, plot_scaling, save_panel};
 use crate::system::{cpu_seconds, peak_memory_bytes};
 use anyhow::{Context, Result};
@@ -154,7 +155,8 @@ fn measure(
     out
 }
 
-/// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg.
+/// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg and
+/// index.html (the comparison page, [`crate::page`]).
 pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result<String> {
     let weightings = &opts.weightings;
     let log = |s: String| {
@@ -252,16 +254,114 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         .map(|r| (r.entry.weighting.label(), &r.film))
         .collect();
     save_panel(&images, reference, opts.exposure, &opts.out.join("panel.png"))?;
-    if !table.sweep.is_empty() {
-        plot_error_vs_time(&table, &opts.out)?;
-    }
+    let svg = if table.sweep.is_empty() { None } else { Some(plot_error_vs_time(&table, &opts.out)?) };
+
+    // The comparison page: the reference and every entry's image, the table, the plot.
+    let pixels = |film: &Film| film.pixels.iter().map(|p| p.to_array()).collect::<Vec<[f32; 3]>>();
+    let (width, height) = (reference.width, reference.height);
+    let reference_pixels = pixels(reference);
+    // The images of the first sampler's planes, as in the panel (a page of every sampler's
+    // would be twice the size for pictures that look alike); the table has every row.
+    let shown: Vec<&Measured> = results.iter().filter(|r| r.entry.sampler == opts.samplers[0]).collect();
+    let labels: Vec<String> = shown.iter().map(|r| r.entry.label()).collect();
+    let estimator_pixels: Vec<Vec<[f32; 3]>> = shown.iter().map(|r| pixels(&r.film)).collect();
+    let (title, table_html, notes) =
+        (format!("fogplanes: {} estimators", table.scene), table.html(), table.notes(opts.planes));
+    let page = comparison_page(&PageInput {
+        title: &title,
+        reference: PageImage { label: "reference", width, height, pixels: &reference_pixels },
+        images: labels
+            .iter()
+            .zip(&estimator_pixels)
+            .map(|(label, p)| PageImage { label, width, height, pixels: p })
+            .collect(),
+        table_html: &table_html,
+        plot_svg: svg.as_deref(),
+        notes: &notes,
+    })
+    .context("cannot make the comparison page")?;
+    write_file_atomically(&opts.out.join("index.html"), page.as_bytes())?;
     Ok(markdown)
 }
 
+/// The table's columns, in the Markdown table and the page's HTML table alike.
+const COLUMNS: [&str; 15] = [
+    "estimator",
+    "sampler",
+    "planes",
+    "hits",
+    "ns/hit",
+    "gather s",
+    "total s",
+    "SMAPE x10^2",
+    "MSE x10^4",
+    "1/(MSE s) gather",
+    "1/(MSE s) total",
+    "MSE vs unweighted",
+    "gather time vs unweighted",
+    "efficiency vs unweighted (gather / total)",
+    "MSE vs independent",
+];
+
+impl Row {
+    /// The cells after the row's label, as both tables print them.
+    fn cells(&self) -> Vec<String> {
+        vec![
+            self.sampler.clone(),
+            self.planes.to_string(),
+            format!("{:.3e}", self.hits as f64),
+            format!("{:.2}", self.gather_ns_per_hit),
+            format!("{:.3}", self.gather_seconds),
+            format!("{:.3}", self.total_seconds),
+            format!("{:.4}", self.smape_e2),
+            format!("{:.4}", self.mse_e4),
+            format!("{:.4e}", self.efficiency_gather),
+            format!("{:.4e}", self.efficiency_total),
+            format!("{:.3}", self.mse_vs_unweighted),
+            format!("{:.3}", self.gather_time_vs_unweighted),
+            format!("{:.2} / {:.2}", self.efficiency_gather_vs_unweighted, self.efficiency_total_vs_unweighted),
+            self.mse_vs_independent.map_or("-".to_string(), |v| format!("{v:.3}")),
+        ]
+    }
+}
+
 impl Table {
+    /// The line above the table: scene, resolution, rays, seed, reference, shared time.
+    fn summary(&self) -> String {
+        format!(
+            "{} at {}x{}, {} rays, seed {}, against `{}`; {:.3} s shared (planes, structure, rays).",
+            self.scene,
+            self.resolution[0],
+            self.resolution[1],
+            if self.pixel_center { "pixel-centre" } else { "jittered" },
+            self.seed,
+            self.reference,
+            self.shared_seconds
+        )
+    }
+
     pub fn markdown(&self) -> String {
+        let mut s = format!("{}\n\n| {} |\n", self.summary(), COLUMNS.join(" | "));
+        s += "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+        for r in &self.rows {
+            s += &format!("| {} | {} |\n", r.weighting, r.cells().join(" | "));
+        }
+        s
+    }
+
+    /// The same table as HTML, for the comparison page (rows named by the page's labels, so
+    /// that clicking a row shows its image).
+    fn html(&self) -> String {
+        let rows: Vec<(&str, Vec<String>)> = self.rows.iter().map(|r| (r.estimator.as_str(), r.cells())).collect();
+        html_table(&COLUMNS, &rows)
+    }
+
+    /// The page's notes: what was measured, against what.
+    fn notes(&self, planes: usize) -> String {
         let mut s = format!(
-            "{} at {}x{}, {} rays, seed {}, against `{}`; {:.3} s shared (planes, structure, rays).\n\n",
+            "{} at {}x{}, {planes} photon planes, {} rays, seed {}, every estimator gathering the same planes \
+             along the same rays (one plane set per sampler).\nReference: {}.\nShared by the estimators of one \
+             sampler: {:.3} s (planes, structure, rays).",
             self.scene,
             self.resolution[0],
             self.resolution[1],
@@ -270,27 +370,13 @@ impl Table {
             self.reference,
             self.shared_seconds
         );
-        s += "| estimator | sampler | planes | hits | ns/hit | gather s | total s | SMAPE x10^2 | MSE x10^4 | 1/(MSE s) gather | 1/(MSE s) total | MSE vs unweighted | gather time vs unweighted | efficiency vs unweighted (gather / total) | MSE vs independent |\n";
-        s += "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
-        for r in &self.rows {
+        if let (Some(first), Some(last)) = (self.sweep.first(), self.sweep.last()) {
             s += &format!(
-                "| {} | {} | {} | {:.3e} | {:.2} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4e} | {:.4e} | {:.3} | {:.3} | {:.2} / {:.2} | {} |\n",
-                r.weighting,
-                r.sampler,
-                r.planes,
-                r.hits as f64,
-                r.gather_ns_per_hit,
-                r.gather_seconds,
-                r.total_seconds,
-                r.smape_e2,
-                r.mse_e4,
-                r.efficiency_gather,
-                r.efficiency_total,
-                r.mse_vs_unweighted,
-                r.gather_time_vs_unweighted,
-                r.efficiency_gather_vs_unweighted,
-                r.efficiency_total_vs_unweighted,
-                r.mse_vs_independent.map_or("-".to_string(), |v| format!("{v:.3}"))
+                "\nError versus time: {} to {} planes, {} seed{} each (seed + 1000 onwards).",
+                first.planes,
+                last.planes,
+                first.seeds,
+                if first.seeds == 1 { "" } else { "s" }
             );
         }
         s

@@ -3,6 +3,7 @@
 //! of [`experiments`], which draw with [`pictures`].
 
 mod experiments;
+mod page;
 mod pictures;
 mod system;
 
@@ -51,7 +52,8 @@ enum Command {
     Compare(CompareArgs),
     /// Render every estimator from the same planes and rays, and write the table, panel and plot.
     ///
-    /// Writes table.md, table.json, panel.png and error_vs_time.png (and .svg) to --out.
+    /// Writes table.md, table.json, panel.png, error_vs_time.png (and .svg) and index.html (an
+    /// offline comparison page: the images, their per-pixel errors, the table and the plot) to --out.
     Table(TableArgs),
     /// Measure how render time grows with the number of ray-plane hits.
     ///
@@ -401,10 +403,10 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         kernel: a.kernel,
     };
     opts.validate(&scene)?;
-    if let Some(t) = a.time_budget {
-        if !(t > 0.0 && t <= 1e6) {
-            return Err(input(anyhow!("--time-budget: must be a positive number of seconds up to 1e6, got {t}")));
-        }
+    if let Some(t) = a.time_budget
+        && !(t > 0.0 && t <= 1e6)
+    {
+        return Err(input(anyhow!("--time-budget: must be a positive number of seconds up to 1e6, got {t}")));
     }
     let output = a.output.clone().unwrap_or_else(|| default_output(&scene, ""));
     check_image_output(&output)?;

@@ -105,19 +105,19 @@ fn plot_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow::anyhow!("drawing failed: {e:?}")
 }
 
-/// MSE against time, log-log, one line per estimator, as PNG and SVG.
-pub fn plot_error_vs_time(table: &Table, out: &std::path::Path) -> Result<()> {
+/// MSE against time, log-log, one line per estimator, as PNG and SVG. Returns the SVG text.
+pub fn plot_error_vs_time(table: &Table, out: &std::path::Path) -> Result<String> {
     save_plot(out, "error_vs_time", |a| draw_error_vs_time(table, a), |a| draw_error_vs_time(table, a))
 }
 
-/// A plot as `<stem>.png` and `<stem>.svg` in `out`, each written whole. The same drawing
-/// function is passed twice, once per backend.
+/// A plot as `<stem>.png` and `<stem>.svg` in `out`, each written whole; returns the SVG text.
+/// The same drawing function is passed twice, once per backend.
 fn save_plot(
     out: &std::path::Path,
     stem: &str,
     png: impl FnOnce(DrawingArea<BitMapBackend, plotters::coord::Shift>) -> Result<()>,
     svg: impl FnOnce(DrawingArea<SVGBackend, plotters::coord::Shift>) -> Result<()>,
-) -> Result<()> {
+) -> Result<String> {
     register_fonts();
     let (w, h) = (900u32, 600u32);
     let mut buffer = vec![255u8; (w * h * 3) as usize];
@@ -126,7 +126,8 @@ fn save_plot(
     save_rgb8_png(&img, &out.join(format!("{stem}.png")))?;
     let mut text = String::new();
     svg(SVGBackend::with_string(&mut text, (w, h)).into_drawing_area())?;
-    Ok(write_file_atomically(&out.join(format!("{stem}.svg")), text.as_bytes())?)
+    write_file_atomically(&out.join(format!("{stem}.svg")), text.as_bytes())?;
+    Ok(text)
 }
 
 /// Draws the legend at `position` and presents the plot.
@@ -220,7 +221,8 @@ fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, p
 
 /// Seconds against hits, log-log, one line per resolution, as PNG and SVG.
 pub fn plot_scaling(name: &str, points: &[ScalingPoint], out: &std::path::Path) -> Result<()> {
-    save_plot(out, "seconds_vs_hits", |a| draw_scaling(name, points, a), |a| draw_scaling(name, points, a))
+    save_plot(out, "seconds_vs_hits", |a| draw_scaling(name, points, a), |a| draw_scaling(name, points, a))?;
+    Ok(())
 }
 
 fn draw_scaling<DB: DrawingBackend>(

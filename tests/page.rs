@@ -1,0 +1,185 @@
+//! `fogplanes table` writes `index.html`: one self-contained page that shows the reference and
+//! every estimator of the table, holds the table and the plot, and refers to nothing outside
+//! itself. (The page's own unit tests are in `src/page.rs`; `tests/browser/check.sh` opens it
+//! in headless Chromium, outside `cargo test`.)
+
+use std::process::Command;
+
+/// Everything in `html` that could make a browser load from outside the page: any absolute URL
+/// (`scheme://`), a `src`, `href`, `srcset`, `poster`, `action`, `formaction` or `background`
+/// attribute or CSS `url(...)` whose value is not `data:` or `#...`, `@import`, elements that
+/// embed other documents, and the script calls that reach the network.
+fn outside_references(html: &str) -> Vec<String> {
+    let lower = html.to_ascii_lowercase();
+    let mut found = Vec::new();
+    let around = |i: usize| lower[i.saturating_sub(20)..(i + 60).min(lower.len())].replace('\n', " ");
+    let local = |value: &str| {
+        let v = value.trim_start().trim_start_matches(['"', '\'']).trim_start();
+        v.starts_with("data:") || v.starts_with('#')
+    };
+    for (i, _) in lower.match_indices("://") {
+        found.push(around(i));
+    }
+    for name in ["src", "href", "srcset", "poster", "action", "formaction", "background"] {
+        for (i, _) in lower.match_indices(name) {
+            let before = lower[..i].chars().next_back();
+            if before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+                continue; // part of a longer name: "default-src", "srcCanvas"
+            }
+            let rest = lower[i + name.len()..].trim_start();
+            if let Some(value) = rest.strip_prefix('=').filter(|v| !v.starts_with('='))
+                && !local(value)
+            {
+                found.push(around(i));
+            }
+        }
+    }
+    for (i, _) in lower.match_indices("url(") {
+        if !local(&lower[i + 4..]) {
+            found.push(around(i));
+        }
+    }
+    for pattern in [
+        "@import",
+        "<link",
+        "<iframe",
+        "<object",
+        "<embed",
+        "<base",
+        "<img",
+        "fetch(",
+        "xmlhttprequest",
+        "websocket",
+        "eventsource",
+        "sendbeacon",
+        "importscripts",
+        "new worker",
+    ] {
+        for (i, _) in lower.match_indices(pattern) {
+            found.push(around(i));
+        }
+    }
+    found
+}
+
+#[test]
+fn the_checker_finds_outside_references() {
+    for bad in [
+        "<img src=\"a.png\">",
+        "<script src='//cdn.test/x.js'></script>",
+        "<svg xmlns=\"http://www.w3.org/2000/svg\"></svg>",
+        "<a href = \"page.html\">",
+        "<div style=\"background: url(a.png)\">",
+        "<style>@import 'a.css';</style>",
+        "<script>fetch(u)</script>",
+        "<script>x.src = name</script>",
+        "<link rel=stylesheet href=a.css>",
+    ] {
+        assert!(!outside_references(bad).is_empty(), "missed {bad}");
+    }
+    for good in [
+        "<meta content=\"default-src 'none'; img-src data: blob:\">",
+        "<a href=\"#results\">",
+        "<script>if (a.src === b) {} const srcCanvas = 1;</script>",
+        "<div style=\"background:url('data:image/png;base64,AA')\">",
+    ] {
+        assert_eq!(outside_references(good), Vec::<String>::new(), "flagged {good}");
+    }
+}
+
+#[test]
+fn table_writes_a_self_contained_comparison_page() {
+    let dir = std::env::temp_dir().join(format!("fogplanes-page-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let reference = dir.join("ref.exr");
+    let out = dir.join("report");
+    let run = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    let scene = "media_scenes/six_lights.toml";
+    let r = reference.to_str().unwrap();
+    run(&["reference", scene, "--resolution", "32x18", "--pixel-center", "--spp", "16", "--quiet", "-o", r]);
+    run(&[
+        "table",
+        scene,
+        "--resolution",
+        "32x18",
+        "--reference",
+        r,
+        "--planes",
+        "500",
+        "--sweep",
+        "250,500",
+        "--sweep-seeds",
+        "1",
+        "--orientations",
+        "3",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let html = std::fs::read_to_string(out.join("index.html")).expect("index.html is written");
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"));
+
+    // The reference and every estimator of the table: a button, a table row, an image.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
+    // The page shows the default (Sobol) sampler's images; the table has both samplers' rows.
+    let rows: Vec<&str> = json["rows"].as_array().unwrap().iter().map(|r| r["estimator"].as_str().unwrap()).collect();
+    assert_eq!(rows.len(), 14, "{rows:?}");
+    for label in &rows {
+        assert!(html.contains(&format!("<th scope=\"row\">{label}</th>")), "no table row for {label}");
+    }
+    let labels: Vec<&str> = rows.into_iter().filter(|l| !l.ends_with("/independent")).collect();
+    assert_eq!(labels.len(), 7, "{labels:?}");
+    assert!(html.contains("<kbd>1</kbd><span>reference</span>"));
+    assert!(html.contains("{\"label\":\"reference\",\"png\":\""));
+    for (k, label) in labels.iter().enumerate() {
+        assert!(html.contains(&format!("<kbd>{}</kbd><span>{label}</span>", k + 2)), "no button for {label}");
+        assert!(html.contains(&format!("<th scope=\"row\">{label}</th>")), "no table row for {label}");
+        assert!(html.contains(&format!("{{\"label\":\"{label}\",\"png\":\"")), "no image of {label}");
+    }
+    assert_eq!(html.matches("\"png\":\"").count(), 1 + labels.len());
+    // The table's columns, the inlined plot and the notes.
+    for column in ["SMAPE x10^2", "MSE x10^4", "ns/hit", "gather time vs unweighted"] {
+        assert!(html.contains(&format!("<th scope=\"col\">{column}</th>")), "no column {column}");
+    }
+    assert!(html.contains("<svg") && html.contains("MSE against time"), "no plot");
+    assert!(html.contains("six_lights at 32x18, 500 photon planes") && html.contains("ref.exr"));
+
+    // Nothing from outside, and a policy that forbids it anyway.
+    assert_eq!(outside_references(&html), Vec::<String>::new());
+    assert!(html.contains("Content-Security-Policy\" content=\"default-src 'none';"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_page_has_no_plot_without_a_sweep() {
+    let dir = std::env::temp_dir().join(format!("fogplanes-page-nosweep-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let reference = dir.join("ref.exr");
+    let out = dir.join("report");
+    let bin = env!("CARGO_BIN_EXE_fogplanes");
+    let scene = "media_scenes/six_lights.toml";
+    let r = reference.to_str().unwrap();
+    for args in [
+        vec!["reference", scene, "--resolution", "16x9", "--pixel-center", "--spp", "4", "--quiet", "-o", r],
+        vec!["table", scene, "--resolution", "16x9", "--reference", r, "--planes", "200", "--no-sweep", "--quiet"],
+    ] {
+        let mut c = Command::new(bin);
+        c.args(&args);
+        if args[0] == "table" {
+            c.arg("--out").arg(&out);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(!html.contains("<svg") && !out.join("error_vs_time.svg").exists());
+    assert!(html.contains("<th scope=\"row\">unweighted</th>"));
+    assert_eq!(outside_references(&html), Vec::<String>::new());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
