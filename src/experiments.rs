@@ -15,7 +15,7 @@ use fogplanes::film::{Film, write_file_atomically};
 use fogplanes::gather::GatherStats;
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::{ErrorMetrics, compare};
-use fogplanes::render::{Accelerator, PreparedPlanes, RenderOptions, camera_rays, render};
+use fogplanes::render::{Accelerator, PreparedPlanes, RenderOptions, camera_rays, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
@@ -34,6 +34,8 @@ pub struct TableOptions {
     pub weightings: Vec<Weighting>,
     /// The plane samplers; every weighting is measured with each.
     pub samplers: Vec<Sampler>,
+    /// Seconds of each render at equal time (none: no equal-time comparison).
+    pub equal_time: Option<f64>,
     pub out: PathBuf,
     pub exposure: f32,
     pub quiet: bool,
@@ -111,6 +113,71 @@ pub struct Table {
     pub shared_seconds: f64,
     pub rows: Vec<Row>,
     pub sweep: Vec<SweepPoint>,
+    /// Every entry rendered for the same wall time ([`fogplanes::render::render_for`]).
+    pub equal_time: Vec<EqualTimeRow>,
+}
+
+/// One entry rendered within a time budget: as many planes as it can gather in that time.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct EqualTimeRow {
+    pub estimator: String,
+    pub weighting: String,
+    pub sampler: String,
+    pub budget_seconds: f64,
+    pub seconds: f64,
+    pub planes: usize,
+    pub plane_passes: u32,
+    pub metrics: ErrorMetrics,
+    /// MSE over the baseline's at the same time.
+    pub mse_vs_unweighted: f64,
+}
+
+/// Renders every entry for `budget` seconds (pixel centres as the table, the table's seed) and
+/// measures each against the reference.
+fn equal_time(
+    scene: &Scene,
+    reference: &Film,
+    opts: &TableOptions,
+    budget: f64,
+    log: &dyn Fn(String),
+) -> Result<Vec<EqualTimeRow>> {
+    let mut rows = Vec::new();
+    for &sampler in &opts.samplers {
+        for &weighting in &opts.weightings {
+            let entry = Entry { weighting, sampler };
+            let options = RenderOptions {
+                weighting,
+                sampler,
+                seed: opts.seed,
+                pixel_center: opts.pixel_center,
+                ..RenderOptions::default()
+            };
+            let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), &|| {})?;
+            let metrics = compare(&film, reference)?;
+            log(format!("equal time: {} {} planes in {:.2} s", entry.label(), st.planes, st.seconds_total));
+            rows.push(EqualTimeRow {
+                estimator: entry.label(),
+                weighting: weighting.label(),
+                sampler: sampler.to_string(),
+                budget_seconds: budget,
+                seconds: st.seconds_total,
+                planes: st.planes,
+                plane_passes: st.plane_passes,
+                metrics,
+                mse_vs_unweighted: 0.0,
+            });
+        }
+    }
+    let base = rows
+        .iter()
+        .find(|r| r.weighting == Estimator::BASELINE.name() && r.sampler == Sampler::Independent.name())
+        .or_else(|| rows.iter().find(|r| r.weighting == Estimator::BASELINE.name()))
+        .map(|r| r.metrics.mse)
+        .context("the equal-time table needs its baseline estimator")?;
+    for r in &mut rows {
+        r.mse_vs_unweighted = r.metrics.mse / base;
+    }
+    Ok(rows)
 }
 
 /// What one entry measured over one plane set.
@@ -233,6 +300,11 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         log(format!("sweep: {n} planes done"));
     }
 
+    let equal_time = match opts.equal_time {
+        Some(budget) => equal_time(scene, reference, opts, budget, &log)?,
+        None => Vec::new(),
+    };
+
     let table = Table {
         scene: scene.name.clone(),
         reference: opts.reference_path.display().to_string(),
@@ -242,6 +314,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
         sweep,
+        equal_time,
     };
     let markdown = table.markdown();
     write_file_atomically(&opts.out.join("table.md"), markdown.as_bytes())?;
@@ -303,6 +376,24 @@ const COLUMNS: [&str; 15] = [
     "MSE vs independent",
 ];
 
+/// The columns of the equal-time table.
+const EQUAL_TIME_COLUMNS: [&str; 8] =
+    ["estimator", "sampler", "seconds", "planes", "plane passes", "SMAPE x10^2", "MSE x10^4", "MSE vs unweighted"];
+
+impl EqualTimeRow {
+    fn cells(&self) -> Vec<String> {
+        vec![
+            self.sampler.clone(),
+            format!("{:.2}", self.seconds),
+            self.planes.to_string(),
+            self.plane_passes.to_string(),
+            format!("{:.4}", self.metrics.smape_e2()),
+            format!("{:.4}", self.metrics.mse_e4()),
+            format!("{:.3}", self.mse_vs_unweighted),
+        ]
+    }
+}
+
 impl Row {
     /// The cells after the row's label, as both tables print them.
     fn cells(&self) -> Vec<String> {
@@ -346,6 +437,16 @@ impl Table {
         for r in &self.rows {
             s += &format!("| {} | {} |\n", r.weighting, r.cells().join(" | "));
         }
+        if let Some(first) = self.equal_time.first() {
+            s += &format!(
+                "\nAt equal time: {:.2} s of wall time for each (a render on a time budget, planes in passes).\n\n| {} |\n|---|---|---:|---:|---:|---:|---:|---:|\n",
+                first.budget_seconds,
+                EQUAL_TIME_COLUMNS.join(" | ")
+            );
+            for r in &self.equal_time {
+                s += &format!("| {} | {} |\n", r.weighting, r.cells().join(" | "));
+            }
+        }
         s
     }
 
@@ -353,7 +454,13 @@ impl Table {
     /// that clicking a row shows its image).
     fn html(&self) -> String {
         let rows: Vec<(&str, Vec<String>)> = self.rows.iter().map(|r| (r.estimator.as_str(), r.cells())).collect();
-        html_table(&COLUMNS, &rows)
+        let mut html = html_table(&COLUMNS, &rows);
+        if !self.equal_time.is_empty() {
+            let rows: Vec<(&str, Vec<String>)> =
+                self.equal_time.iter().map(|r| (r.estimator.as_str(), r.cells())).collect();
+            html += &html_table(&EQUAL_TIME_COLUMNS, &rows);
+        }
+        html
     }
 
     /// The page's notes: what was measured, against what.

@@ -238,6 +238,9 @@ struct TableArgs {
     /// Seeds per plane count in the sweep.
     #[arg(long, default_value_t = 3)]
     sweep_seeds: u32,
+    /// Also render every estimator for this many seconds each and compare at equal time.
+    #[arg(long, value_name = "SECONDS")]
+    equal_time: Option<f64>,
     /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
     #[arg(long, value_delimiter = ',', default_values = ["sobol", "independent"], value_parser = sampler_parser())]
     samplers: Vec<Sampler>,
@@ -510,6 +513,11 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     for &k in &a.orientations {
         Weighting::new(Estimator::SmisExact, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?;
     }
+    if let Some(t) = a.equal_time
+        && !(t > 0.0 && t <= 1e5)
+    {
+        return Err(input(anyhow!("--equal-time: must be a positive number of seconds up to 1e5, got {t}")));
+    }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
@@ -522,6 +530,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
         sweep_seeds: a.sweep_seeds,
         weightings: Weighting::all(&a.orientations),
         samplers: a.samplers.clone(),
+        equal_time: a.equal_time,
         out: a.out.clone(),
         exposure: a.exposure,
         quiet: a.common.quiet,

@@ -170,23 +170,55 @@ fn a_closed_pipe_is_not_a_panic() {
     assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
 }
 
-/// Ctrl-C during a render leaves neither the output nor a temporary file, and an existing
-/// output keeps its old contents.
+/// Ctrl-C during a render, with a plane count or on a time budget, leaves neither the output
+/// nor a temporary file, and an existing output keeps its old contents.
 #[test]
 fn an_interrupted_render_leaves_no_file() {
-    let dir = scratch("sigint");
+    for how in [["--planes", "200000"], ["--time-budget", "30"]] {
+        let dir = scratch("sigint");
+        let out = dir.join("out.exr");
+        std::fs::write(&out, b"old contents").unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+            .args(["render", "media_scenes/six_lights.toml", "--quiet", "-o", out.to_str().unwrap()])
+            .args(how)
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(700));
+        let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+        assert!(killed.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(130), "{how:?}");
+        assert_eq!(files_in(&dir), ["out.exr"], "{how:?}");
+        assert_eq!(std::fs::read(&out).unwrap(), b"old contents", "{how:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+/// A render on a time budget writes its image and says how many planes and passes it took;
+/// the budget must be a positive number and excludes a plane count.
+#[test]
+fn a_render_on_a_time_budget_reports_its_planes_and_passes() {
+    let dir = scratch("budget");
     let out = dir.join("out.exr");
-    std::fs::write(&out, b"old contents").unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
-        .args(["render", "media_scenes/six_lights.toml", "--planes", "200000", "--quiet", "-o", out.to_str().unwrap()])
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(700));
-    let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
-    assert!(killed.success());
-    let o = child.wait_with_output().unwrap();
-    assert_eq!(o.status.code(), Some(130));
+    let o = fogplanes(&[
+        "render",
+        "media_scenes/six_lights.toml",
+        "--resolution",
+        "64x36",
+        "--time-budget",
+        "0.5",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("plane passes") && stdout.contains("planes"), "{stdout}");
     assert_eq!(files_in(&dir), ["out.exr"]);
-    assert_eq!(std::fs::read(&out).unwrap(), b"old contents");
+    for bad in [vec!["--time-budget", "0"], vec!["--time-budget", "-1"], vec!["--time-budget", "1", "--planes", "100"]]
+    {
+        let o = fogplanes(&[&["render", "media_scenes/six_lights.toml", "--quiet"][..], &bad].concat());
+        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -4,7 +4,7 @@
 //! on the thread count.
 
 use fogplanes::kernel::Kernel;
-use fogplanes::render::{Accelerator, RenderOptions, render};
+use fogplanes::render::{Accelerator, RenderOptions, render, render_for};
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 
@@ -91,5 +91,20 @@ fn raster_matches_brute_force_in_the_hard_camera_placements() {
             assert_eq!(fs.hits, ss.hits, "{file} {e}: hit counts differ");
             assert!(fast.pixels == slow.pixels, "{file} {e}: images differ");
         }
+    }
+}
+
+/// A render on a time budget gathers the first N planes of the set in passes: the image is a
+/// render of those N planes, up to f32 summation order.
+#[test]
+fn a_budgeted_render_is_the_render_of_its_planes() {
+    let s = scene("media_scenes/six_lights.toml", 64, 36);
+    let opts = RenderOptions { seed: 3, ..RenderOptions::default() };
+    let (budgeted, bs) = render_for(&s, &opts, std::time::Duration::from_millis(300), &|| {}).unwrap();
+    assert!(bs.plane_passes >= 2, "{} passes", bs.plane_passes);
+    let (fixed, fs) = render(&s, &RenderOptions { planes: bs.planes, ..opts }, &|| {}).unwrap();
+    assert_eq!(bs.hits, fs.hits);
+    for (a, b) in budgeted.pixels.iter().zip(&fixed.pixels) {
+        assert!((*a - *b).abs().max_element() <= 1e-5 * b.max_element() + 1e-9, "{a} vs {b}");
     }
 }
