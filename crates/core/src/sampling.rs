@@ -13,11 +13,11 @@ use std::str::FromStr;
 /// The random stream that planes draw from (see [`rng_for`]).
 const PLANE_STREAM: u64 = 0x9_1A4E;
 
-/// Where the six uniform numbers of a photon plane come from (docs/mathematics.md section 2.1:
-/// light, orientation, the point's p and q, the direction's two).
+/// Where the five uniform numbers of a photon plane come from (docs/mathematics.md section 2.1:
+/// light and orientation, the direction's two, the point's p and q).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub enum Sampler {
-    /// Randomised quasi-Monte Carlo: plane i is point i of a 6D Owen-scrambled Sobol sequence,
+    /// Randomised quasi-Monte Carlo: plane i is point i of a 5D Owen-scrambled Sobol sequence,
     /// an independent scrambling per seed ([`crate::sobol`]). Unbiased for every seed, and the
     /// planes cover the six dimensions far more evenly than independent ones.
     #[default]

@@ -434,6 +434,9 @@ radiance = 4
         assert_eq!(s.lights[0].radiance, DVec3::splat(4.0));
         assert_eq!(s.render.planes, 40_960);
         assert_eq!(s.render.weighting.estimator, Estimator::SmisExact);
+        assert_eq!(s.render.sampler, Sampler::Sobol);
+        let independent = parse(&format!("{MINIMAL}\n[render]\nsampler = \"independent\"\n")).unwrap();
+        assert_eq!(independent.render.sampler, Sampler::Independent);
     }
 
     fn expect_error(text: &str, field: &str, words: &str) {
@@ -475,6 +478,7 @@ radiance = 4
         );
         expect_error(&format!("{MINIMAL}\n[render]\nplanes = 0\n"), "render.planes", "between 1");
         expect_error(&format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"), "render.estimator", "unknown estimator");
+        expect_error(&format!("{MINIMAL}\n[render]\nsampler = \"halton\"\n"), "render.sampler", "unknown sampler");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = [1, 2]"), "light[0].radiance", "three numbers");
     }
 
