@@ -22,13 +22,16 @@ pub enum Error {
     /// An output that cannot be written (the destination keeps its old contents).
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
+    /// The caller stopped the work (through the flag of [`crate::render::render_cancellable`]).
+    #[error("cancelled")]
+    Cancelled,
 }
 
 impl Error {
     /// Whether the error is the caller's input (exit code 2 on the command line) rather than a
     /// failure while working.
     pub fn is_input(&self) -> bool {
-        !matches!(self, Error::Write { .. })
+        !matches!(self, Error::Write { .. } | Error::Cancelled)
     }
 
     pub(crate) fn option(option: &'static str, message: impl Into<String>) -> Self {

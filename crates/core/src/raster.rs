@@ -18,6 +18,7 @@ use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Rows per band: a band's rays and sums stay in cache while its planes stream by.
 pub const BAND_ROWS: u32 = 8;
@@ -138,7 +139,9 @@ impl ScreenRaster {
 
     /// Gathers every plane into `out` (one RGB sum per pixel, row-major), for the rays `rays`
     /// (one per pixel), with `kernel` (resolved) for planes no other panel can shadow, calling
-    /// `on_band` after each band (for progress).
+    /// `on_band` after each band (for progress). Bands not started when `cancel` is set are
+    /// skipped (`out` is then incomplete).
+    #[allow(clippy::too_many_arguments)]
     pub fn gather<D: Denominator>(
         &self,
         ctx: &GatherContext,
@@ -147,17 +150,19 @@ impl ScreenRaster {
         rays: &[CameraRay],
         out: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
+        cancel: &AtomicBool,
     ) -> GatherStats {
-        self.gather_all::<D, true>(ctx, weights, kernel, rays, out, on_band)
+        self.gather_all::<D, true>(ctx, weights, kernel, rays, out, on_band, cancel)
     }
 
     /// Finds every hit without weighting it (the traversal and intersection work alone, for
     /// measuring its share of the gathering time).
     pub fn count_hits(&self, ctx: &GatherContext, kernel: Kernel, rays: &[CameraRay]) -> GatherStats {
         let mut out = vec![Vec3::ZERO; rays.len()];
-        self.gather_all::<Unweighted, false>(ctx, &Unweighted, kernel, rays, &mut out, &|| {})
+        self.gather_all::<Unweighted, false>(ctx, &Unweighted, kernel, rays, &mut out, &|| {}, &AtomicBool::new(false))
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn gather_all<D: Denominator, const CONTRIBUTE: bool>(
         &self,
         ctx: &GatherContext,
@@ -166,6 +171,7 @@ impl ScreenRaster {
         rays: &[CameraRay],
         out: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
+        cancel: &AtomicBool,
     ) -> GatherStats {
         let w = self.width as usize;
         let band_pixels = BAND_ROWS as usize * w;
@@ -173,6 +179,9 @@ impl ScreenRaster {
             .zip(rays.par_chunks(band_pixels))
             .enumerate()
             .map(|(band, (sums, rays))| {
+                if cancel.load(Ordering::Relaxed) {
+                    return GatherStats::default();
+                }
                 let stats = self.gather_band::<D, CONTRIBUTE>(ctx, weights, kernel, band, rays, sums);
                 on_band();
                 stats

@@ -5,6 +5,7 @@
 //! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares the scene and medium code
 //! with the photon planes and nothing else, and it measures its own per-pixel standard error.
 
+use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::medium::PHASE;
 use crate::sampling::{Discrete, rng_for, unit_f64};
@@ -12,6 +13,7 @@ use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rand::RngCore;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 const REFERENCE_STREAM: u64 = 0x2EF_E2E;
 
@@ -125,14 +127,36 @@ impl<const D: usize> Default for Kronecker<D> {
 /// error come from the second pass alone, whose sample counts are fixed before it runs, so
 /// every pixel stays unbiased. `uniform` gives every pixel `spp` samples instead.
 pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn Fn() + Sync)) -> ReferenceImage {
+    reference_until(scene, opts, progress, &AtomicBool::new(false))
+}
+
+/// [`render_reference`] that another thread can stop by setting `cancel`: the rows under way
+/// finish, the others are skipped, and the result is [`Error::Cancelled`].
+pub fn render_reference_cancellable(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    progress: &(dyn Fn() + Sync),
+    cancel: &AtomicBool,
+) -> Result<ReferenceImage> {
+    let image = reference_until(scene, opts, progress, cancel);
+    if cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(image) }
+}
+
+/// The reference, with the rows not started once `cancel` is set left black.
+fn reference_until(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    progress: &(dyn Fn() + Sync),
+    cancel: &AtomicBool,
+) -> ReferenceImage {
     let start = std::time::Instant::now();
     let pixels = scene.camera.width as usize * scene.camera.height as usize;
     let (mean, stderr) = if opts.uniform {
-        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], progress)
+        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], progress, cancel)
     } else {
         let pilot_spp = (opts.spp / 8).max(REPLICATES);
         let (_, pilot_se) =
-            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress);
+            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress, cancel);
         // Standard deviation of one sample, the mean over channels.
         let sigma: Vec<f64> =
             pilot_se.pixels.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
@@ -148,7 +172,7 @@ pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn 
                 (floor + share).min(cap).round() as u32
             })
             .collect();
-        render_pixels(scene, opts.seed, opts.pixel_center, &counts, progress)
+        render_pixels(scene, opts.seed, opts.pixel_center, &counts, progress, cancel)
     };
     ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() }
 }
@@ -166,6 +190,7 @@ fn render_pixels(
     pixel_center: bool,
     spp: &[u32],
     progress: &(dyn Fn() + Sync),
+    cancel: &AtomicBool,
 ) -> (Film, Film) {
     let cam = &scene.camera;
     let w = cam.width as usize;
@@ -174,6 +199,9 @@ fn render_pixels(
     let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
         .into_par_iter()
         .map(|j| {
+            if cancel.load(Ordering::Relaxed) {
+                return (vec![Vec3::ZERO; w], vec![Vec3::ZERO; w]);
+            }
             let mut means = Vec::with_capacity(w);
             let mut errors = Vec::with_capacity(w);
             for i in 0..w {
@@ -226,4 +254,49 @@ fn render_pixels(
         stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);
     }
     (mean, stderr)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicUsize;
+
+    const SCENE: &str = r#"
+[camera]
+position = [0.0, 1.0, 5.0]
+look_at = [0.0, 1.0, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 40.0
+resolution = [24, 16]
+
+[medium]
+min = [-2.0, 0.0, -2.0]
+max = [2.0, 2.0, 2.0]
+sigma_s = 0.2
+sigma_a = 0.05
+
+[[light]]
+corner = [-0.5, 1.9, -0.5]
+edge_u = [1.0, 0.0, 0.0]
+edge_v = [0.0, 0.0, 1.0]
+radiance = 4
+"#;
+
+    #[test]
+    fn cancelling_stops_the_reference_after_the_rows_under_way() {
+        let scene = Scene::parse(SCENE, "test.toml", "test").unwrap();
+        let opts = ReferenceOptions { spp: 32, uniform: false, seed: 1, pixel_center: false };
+        let a = render_reference(&scene, &opts, &|| {});
+        let b = render_reference_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();
+        assert_eq!((a.mean, a.stderr), (b.mean, b.stderr));
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let (cancel, rows) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let progress = || {
+            rows.fetch_add(1, Ordering::Relaxed);
+            cancel.store(true, Ordering::Relaxed);
+        };
+        let e = pool.install(|| render_reference_cancellable(&scene, &opts, &progress, &cancel)).err().unwrap();
+        assert!(matches!(e, Error::Cancelled) && !e.is_input());
+        assert!(rows.into_inner() <= 2);
+    }
 }

@@ -18,6 +18,7 @@ use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// How camera rays find the planes they hit.
@@ -156,20 +157,35 @@ impl PreparedPlanes {
         sums: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
     ) -> GatherStats {
+        self.gather_cancellable(weighting, kernel, rays, sums, on_band, &AtomicBool::new(false))
+    }
+
+    /// [`PreparedPlanes::gather`] that stops early once `cancel` is set: the bands (or chunks
+    /// of rays) not yet started are skipped, so `sums` is incomplete if `cancel` is set after.
+    pub fn gather_cancellable(
+        &self,
+        weighting: Weighting,
+        kernel: Kernel,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        on_band: &(dyn Fn() + Sync),
+        cancel: &AtomicBool,
+    ) -> GatherStats {
         struct Gather<'a> {
             planes: &'a PreparedPlanes,
             kernel: Kernel,
             rays: &'a [CameraRay],
             sums: &'a mut [Vec3],
             on_band: &'a (dyn Fn() + Sync),
+            cancel: &'a AtomicBool,
         }
         impl WithDenominator for Gather<'_> {
             type Output = GatherStats;
             fn run<D: Denominator>(self, weights: &D) -> GatherStats {
-                self.planes.gather_with(weights, self.kernel, self.rays, self.sums, self.on_band)
+                self.planes.gather_with(weights, self.kernel, self.rays, self.sums, self.on_band, self.cancel)
             }
         }
-        weighting.dispatch(Gather { planes: self, kernel, rays, sums, on_band })
+        weighting.dispatch(Gather { planes: self, kernel, rays, sums, on_band, cancel })
     }
 
     fn gather_with<D: Denominator>(
@@ -179,16 +195,20 @@ impl PreparedPlanes {
         rays: &[CameraRay],
         sums: &mut [Vec3],
         on_band: &(dyn Fn() + Sync),
+        cancel: &AtomicBool,
     ) -> GatherStats {
         let ctx = &self.context;
         if let Some(raster) = &self.raster {
-            return raster.gather(ctx, weights, kernel, rays, sums, on_band);
+            return raster.gather(ctx, weights, kernel, rays, sums, on_band, cancel);
         }
         // Per-ray structures: chunks of rays in parallel, one progress unit per chunk.
         sums.par_chunks_mut(RAY_CHUNK)
             .zip(rays.par_chunks(RAY_CHUNK))
             .map(|(sums, rays)| {
                 let mut stats = GatherStats::default();
+                if cancel.load(Ordering::Relaxed) {
+                    return stats;
+                }
                 for (sum, ray) in sums.iter_mut().zip(rays) {
                     let (value, s) = match &self.bvh {
                         Some(bvh) => bvh.gather(ctx, weights, ray),
@@ -334,10 +354,25 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
 /// Renders the scene: direct emission plus the photon-plane estimate of single scattering,
 /// averaged over `spp` passes. Checks the options first ([`RenderOptions::validate`]).
 pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result<(Film, RenderStats)> {
+    render_cancellable(scene, opts, progress, &AtomicBool::new(false))
+}
+
+/// [`render`] that another thread can stop by setting `cancel`: the work then ends after the
+/// bands of rows (or chunks of rays) under way, and the result is [`Error::Cancelled`].
+/// Unless `cancel` is set, the same image and statistics as [`render`].
+pub fn render_cancellable(
+    scene: &Scene,
+    opts: &RenderOptions,
+    progress: Progress,
+    cancel: &AtomicBool,
+) -> Result<(Film, RenderStats)> {
+    let cancelled = || if cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(()) };
     opts.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
+    cancelled()?;
     let start = Instant::now();
     let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.sampler, opts.accelerator);
+    cancelled()?;
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),
@@ -355,7 +390,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result
         let t = Instant::now();
         // Scattering first, emission after: every accelerator then sums in the same order.
         let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
+        let s = prepared.gather_cancellable(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress, cancel);
+        cancelled()?;
         stats.seconds_gather += t.elapsed().as_secs_f64();
         stats.hits += s.hits;
         stats.tests += s.tests;
@@ -439,4 +475,63 @@ pub fn render_for(
     stats.planes = done;
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicUsize;
+
+    const SCENE: &str = r#"
+[camera]
+position = [0.0, 1.0, 5.0]
+look_at = [0.0, 1.0, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 40.0
+resolution = [128, 96]
+
+[medium]
+min = [-2.0, 0.0, -2.0]
+max = [2.0, 2.0, 2.0]
+sigma_s = 0.2
+sigma_a = 0.05
+
+[[light]]
+corner = [-0.5, 1.9, -0.5]
+edge_u = [1.0, 0.0, 0.0]
+edge_v = [0.0, 0.0, 1.0]
+radiance = 4
+"#;
+
+    #[test]
+    fn cancelling_stops_a_render_after_the_work_under_way() {
+        let scene = Scene::parse(SCENE, "test.toml", "test").unwrap();
+        let opts = RenderOptions { planes: 3000, spp: 3, ..RenderOptions::default() };
+        // Never set: the same image as `render`.
+        let (a, _) = render(&scene, &opts, &|| {}).unwrap();
+        let (b, _) = render_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();
+        assert_eq!(a, b);
+        // Set before: nothing runs.
+        let e = render_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(true)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled) && !e.is_input(), "{e}");
+        // Set when the first band (or chunk of rays) ends: at most one more per thread finishes.
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        for accelerator in Accelerator::ALL {
+            let opts = RenderOptions { accelerator, ..opts.clone() };
+            let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+            let progress = || {
+                units.fetch_add(1, Ordering::Relaxed);
+                cancel.store(true, Ordering::Relaxed);
+            };
+            let e = pool.install(|| render_cancellable(&scene, &opts, &progress, &cancel)).unwrap_err();
+            assert!(matches!(e, Error::Cancelled));
+            let per_pass = progress_units_per_pass(&scene, accelerator) as usize;
+            assert!(per_pass >= 3, "{accelerator}: {per_pass} units a pass");
+            assert!(
+                units.load(Ordering::Relaxed) <= 2,
+                "{accelerator}: {} of {per_pass} units ran",
+                units.into_inner()
+            );
+        }
+    }
 }

@@ -1,0 +1,53 @@
+"""fogplanes: single scattering in fog lit by rectangular lights, rendered with photon planes
+weighted by continuous and stochastic multiple importance sampling (West et al. 2020), and
+measured against an independent reference.
+
+Images are numpy arrays of shape (height, width, 3), float32, linear RGB.
+
+    >>> import fogplanes
+    >>> scene = fogplanes.load_scene("media_scenes/six_lights.toml")
+    >>> image = fogplanes.render(scene, "smis-exact", planes=10240, resolution=(160, 90))
+    >>> ref, err = fogplanes.reference(scene, spp=256, resolution=(160, 90))
+    >>> fogplanes.compare(image, ref)["mse"]  # doctest: +SKIP
+
+Bad input raises ValueError with the command line's message; a file that cannot be opened
+raises OSError (FileNotFoundError, ...). Ctrl-C stops a render with KeyboardInterrupt.
+"""
+
+from ._fogplanes import (
+    ACCELERATORS,
+    ESTIMATORS,
+    KERNELS,
+    SAMPLERS,
+    Camera,
+    Light,
+    Medium,
+    RenderDefaults,
+    Scene,
+    __version__,
+    compare,
+    load_image,
+    load_scene,
+    reference,
+    render,
+    save_image,
+)
+
+__all__ = [
+    "ACCELERATORS",
+    "ESTIMATORS",
+    "KERNELS",
+    "SAMPLERS",
+    "Camera",
+    "Light",
+    "Medium",
+    "RenderDefaults",
+    "Scene",
+    "__version__",
+    "compare",
+    "load_image",
+    "load_scene",
+    "reference",
+    "render",
+    "save_image",
+]

@@ -1,0 +1,247 @@
+"""Type stubs of the native module fogplanes._fogplanes (crates/python/src/lib.rs)."""
+
+import os
+from typing import Final, Literal, TypeAlias, TypedDict, overload
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: Final[str]
+#: Every estimator name, in the order of the paper (`fogplanes.weights::Estimator::names()`).
+ESTIMATORS: Final[tuple[str, ...]]
+#: The gathering kernels: auto, avx512, avx2, portable, per-hit (all give identical images).
+KERNELS: Final[tuple[str, ...]]
+SAMPLERS: Final[tuple[str, ...]]
+#: How rays find planes: raster, bvh, brute-force.
+ACCELERATORS: Final[tuple[str, ...]]
+
+Vec3: TypeAlias = tuple[float, float, float]
+Image: TypeAlias = npt.NDArray[np.float32]
+"""An image: shape (height, width, 3), float32, linear RGB."""
+PathLike: TypeAlias = str | os.PathLike[str]
+
+class Camera:
+    """The pinhole camera of a scene."""
+
+    @property
+    def position(self) -> Vec3: ...
+    @property
+    def forward(self) -> Vec3:
+        """Unit view direction."""
+    @property
+    def right(self) -> Vec3: ...
+    @property
+    def up(self) -> Vec3:
+        """Unit up vector of the image plane (orthogonal to forward)."""
+    @property
+    def vfov_deg(self) -> float:
+        """Vertical field of view in degrees."""
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+
+class Medium:
+    """The homogeneous fog: an axis-aligned box, vacuum outside."""
+
+    @property
+    def min(self) -> Vec3: ...
+    @property
+    def max(self) -> Vec3: ...
+    @property
+    def sigma_s(self) -> Vec3:
+        """Scattering coefficient, RGB, per unit length."""
+    @property
+    def sigma_a(self) -> Vec3:
+        """Absorption coefficient, RGB, per unit length."""
+    @property
+    def sigma_t(self) -> Vec3:
+        """Extinction sigma_s + sigma_a."""
+
+class Light:
+    """A one-sided rectangular light: corner + p edge_u/|edge_u| + q edge_v/|edge_v|."""
+
+    @property
+    def name(self) -> str:
+        """The light's name (light<i> when the file gives none)."""
+    @property
+    def corner(self) -> Vec3: ...
+    @property
+    def edge_u(self) -> Vec3:
+        """First edge (|edge_u| times its unit direction, as stored after validation)."""
+    @property
+    def edge_v(self) -> Vec3:
+        """Second edge, orthogonal to the first."""
+    @property
+    def normal(self) -> Vec3:
+        """Unit normal normalize(edge_u x edge_v): the side the light emits to."""
+    @property
+    def radiance(self) -> Vec3: ...
+    @property
+    def area(self) -> float: ...
+
+class RenderDefaults:
+    """The scene file's [render] table, defaults filled in."""
+
+    @property
+    def planes(self) -> int: ...
+    @property
+    def estimator(self) -> str: ...
+    @property
+    def orientations(self) -> int: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def spp(self) -> int: ...
+
+class Scene:
+    """A validated scene: camera, fog box, rectangular lights and render defaults. Read-only.
+
+    Made by `load_scene(path)` or `Scene.from_toml(text)`.
+    """
+
+    @staticmethod
+    def from_toml(text: str, name: str = "scene", file: str = "<string>") -> Scene:
+        """Parses and validates scene text (TOML, the schema of media_scenes/*.toml).
+
+        `name` is the scene's name; `file` names the text in error messages. Raises ValueError
+        with the file, line, field and problem for anything invalid.
+        """
+    def with_resolution(self, width: int, height: int) -> Scene:
+        """The same scene at another resolution."""
+    @property
+    def name(self) -> str:
+        """The file stem (or the name given to from_toml)."""
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+    @property
+    def camera(self) -> Camera: ...
+    @property
+    def medium(self) -> Medium: ...
+    @property
+    def lights(self) -> list[Light]:
+        """The lights, in file order."""
+    @property
+    def render(self) -> RenderDefaults:
+        """The [render] defaults: planes, estimator, orientations, seed, spp."""
+
+class RenderStats(TypedDict):
+    """What a render measured (wall-clock seconds), as `fogplanes render` prints it."""
+
+    estimator: str
+    kernel: str
+    planes: int
+    rays: int
+    hits: int
+    tests: int
+    seconds_sampling: float
+    seconds_build: float
+    seconds_rays: float
+    seconds_gather: float
+    seconds_total: float
+    hits_per_ray: float
+    gather_ns_per_hit: float
+    summary: str
+
+Metrics = TypedDict(
+    "Metrics",
+    {"smape": float, "mse": float, "rel_mse": float, "relmse": float, "max_abs": float},
+)
+
+def load_scene(path: PathLike) -> Scene:
+    """Reads and validates a scene file (TOML).
+
+    Raises FileNotFoundError (an OSError) if the file cannot be opened, ValueError naming the
+    file, line and field if its content is invalid.
+    """
+
+@overload
+def render(
+    scene: Scene | PathLike,
+    estimator: str | None = None,
+    planes: int | None = None,
+    seed: int | None = None,
+    spp: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    orientations: int | None = None,
+    threads: int | None = None,
+    accelerator: str = "raster",
+    kernel: str = "auto",
+    return_stats: Literal[False] = False,
+    sampler: str | None = None,
+) -> Image: ...
+@overload
+def render(
+    scene: Scene | PathLike,
+    estimator: str | None = None,
+    planes: int | None = None,
+    seed: int | None = None,
+    spp: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    orientations: int | None = None,
+    threads: int | None = None,
+    accelerator: str = "raster",
+    kernel: str = "auto",
+    *,
+    return_stats: Literal[True],
+    sampler: str | None = None,
+) -> tuple[Image, RenderStats]: ...
+def render(
+    scene: Scene | PathLike,
+    estimator: str | None = None,
+    planes: int | None = None,
+    seed: int | None = None,
+    spp: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    orientations: int | None = None,
+    threads: int | None = None,
+    accelerator: str = "raster",
+    kernel: str = "auto",
+    return_stats: bool = False,
+) -> Image | tuple[Image, RenderStats]:
+    """Renders a scene with photon planes: the image, shape (height, width, 3), float32.
+
+    The arguments are those of `fogplanes render`, and None takes the scene's [render]
+    default exactly as the command line does: `estimator` (the scene's, else smis-exact),
+    `planes`, `seed`, `spp`, and `orientations` (the scene's K applies only when the scene's
+    estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
+    in a pool of that many threads (None: all cores); the image depends on the seed alone.
+    The image is bit-identical to the EXR that `fogplanes render` writes for the same
+    arguments. With `return_stats=True`, returns (image, stats).
+
+    Raises ValueError for bad input (the command line's message), OSError for a scene file
+    that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+    """
+
+def reference(
+    scene: Scene | PathLike,
+    spp: int = 1024,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    seed: int = 1,
+    uniform: bool = False,
+    threads: int | None = None,
+) -> tuple[Image, Image]:
+    """Renders the independent reference: (image, per-pixel standard error), both float32.
+
+    As `fogplanes reference` with its -o and --stderr-image files: `spp` samples per pixel on
+    average, spread by need unless `uniform`; `pixel_center` to compare with
+    `render(..., pixel_center=True)`.
+    """
+
+def compare(image: npt.ArrayLike, reference: npt.ArrayLike) -> Metrics:
+    """Error metrics of an image against a reference, as `fogplanes compare` prints them.
+
+    Both are arrays of shape (height, width, 3) of any real dtype, converted to float32 (as
+    the EXR files hold them). Returns smape, mse, rel_mse (also under "relmse") and max_abs.
+    """
+
+def load_image(path: PathLike) -> Image:
+    """Reads the first RGB(A) layer of an EXR file: shape (height, width, 3), float32."""
+
+def save_image(path: PathLike, image: npt.ArrayLike, exposure: float = 0.0) -> None:
+    """Writes an image (height, width, 3) as .exr (linear float32) or .png (sRGB, tone-mapped
+    by `exposure` stops), whole or not at all."""

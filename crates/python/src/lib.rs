@@ -1,0 +1,669 @@
+//! The native part of the Python package `fogplanes`: scenes, the photon-plane renderer, the
+//! reference and the metrics of the core library, with images as numpy arrays of shape
+//! (height, width, 3) and float32.
+//!
+//! Everything a call can fail with is a Python exception: `ValueError` for bad input, with the
+//! command line's own one-line message (the `Display` of `fogplanes::Error`); `OSError` (or
+//! its subclass `FileNotFoundError`, ...) for a file that cannot be read. Renders run on a worker
+//! thread with the GIL released, while the calling thread watches for signals: Ctrl-C sets the
+//! core's cancel flag and raises `KeyboardInterrupt` once the work under way has stopped.
+
+use fogplanes::Error;
+use fogplanes::film::Film;
+use fogplanes::kernel::Kernel;
+use fogplanes::limits::{check_planes, check_spp, check_threads};
+use fogplanes::metrics::compare as compare_films;
+use fogplanes::reference::{ReferenceOptions, render_reference_cancellable};
+use fogplanes::render::{Accelerator, RenderOptions, RenderStats, render_cancellable};
+use fogplanes::sampling::Sampler;
+use fogplanes::scene::Scene;
+use fogplanes::weights::{Estimator, Weighting};
+use numpy::ndarray::Array3;
+use numpy::{AllowTypeChange, PyArray3, PyArrayLike3};
+use pyo3::exceptions::{
+    PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyOverflowError, PyPermissionError, PyRuntimeError,
+    PyTypeError, PyValueError,
+};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+use std::io::ErrorKind;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Duration;
+
+type Vec3 = (f64, f64, f64);
+
+/// An image for Python: shape (height, width, 3), float32.
+type Image<'py> = Bound<'py, PyArray3<f32>>;
+
+fn triple(v: glam::DVec3) -> Vec3 {
+    (v.x, v.y, v.z)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Errors
+
+/// The exception for a library error: `ValueError` for the caller's input, `OSError` otherwise.
+fn py_error(e: Error) -> PyErr {
+    match e {
+        Error::Write { .. } => PyOSError::new_err(e.to_string()),
+        Error::Cancelled => PyRuntimeError::new_err("the work was cancelled"),
+        e => PyValueError::new_err(e.to_string()),
+    }
+}
+
+/// `ValueError("{option}: {message}")`, as the command line words a bad option.
+fn invalid(option: &str, message: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(format!("{option}: {message}"))
+}
+
+/// The `OSError` subclass Python raises for an I/O error of this kind.
+fn os_error(kind: ErrorKind, message: String) -> PyErr {
+    match kind {
+        ErrorKind::NotFound => PyFileNotFoundError::new_err(message),
+        ErrorKind::PermissionDenied => PyPermissionError::new_err(message),
+        ErrorKind::IsADirectory => PyIsADirectoryError::new_err(message),
+        _ => PyOSError::new_err(message),
+    }
+}
+
+/// The exception for a file that `read` failed on with `message`: an `OSError` if the file
+/// itself cannot be opened (missing, a directory, unreadable), else `ValueError` (its content).
+fn file_error(path: &Path, message: String) -> PyErr {
+    match std::fs::metadata(path) {
+        Err(e) => os_error(e.kind(), message),
+        Ok(m) if m.is_dir() => PyIsADirectoryError::new_err(message),
+        Ok(_) => match std::fs::File::open(path) {
+            Err(e) => os_error(e.kind(), message),
+            Ok(_) => PyValueError::new_err(message),
+        },
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Arguments
+
+/// A non-negative integer argument; a Python int out of range is a `ValueError` naming the
+/// option, anything but an int a `TypeError`.
+fn uint(value: Option<&Bound<'_, PyAny>>, option: &str) -> PyResult<Option<u64>> {
+    let Some(v) = value else { return Ok(None) };
+    match v.extract::<u64>() {
+        Ok(n) => Ok(Some(n)),
+        Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => Err(invalid(option, format!("{v} is out of range"))),
+        Err(e) => Err(PyTypeError::new_err(format!("{option}: expected an integer ({e})"))),
+    }
+}
+
+/// A `u32` argument (out of range as in [`uint`]).
+fn uint32(value: Option<&Bound<'_, PyAny>>, option: &str) -> PyResult<Option<u32>> {
+    uint(value, option)?
+        .map(|n| u32::try_from(n).map_err(|_| invalid(option, format!("{n} is out of range"))))
+        .transpose()
+}
+
+/// `(width, height)` of the `resolution` argument.
+fn resolution_arg(value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
+    let Some(v) = value else { return Ok(None) };
+    let (w, h): (Bound<PyAny>, Bound<PyAny>) =
+        v.extract().map_err(|_| PyTypeError::new_err(format!("--resolution: expected (width, height), got {v}")))?;
+    Ok(Some((
+        uint32(Some(&w), "--resolution")?.unwrap_or_default(),
+        uint32(Some(&h), "--resolution")?.unwrap_or_default(),
+    )))
+}
+
+fn load(path: &Path) -> PyResult<Scene> {
+    Scene::load(path).map_err(|e| file_error(path, e.to_string()))
+}
+
+/// The scene of a `scene` argument: a `Scene`, or the path of a scene file (str or
+/// os.PathLike), with `resolution` applied.
+fn scene_arg(scene: &Bound<'_, PyAny>, resolution: Option<&Bound<'_, PyAny>>) -> PyResult<Scene> {
+    let scene = if let Ok(s) = scene.cast::<PyScene>() {
+        s.get().inner.clone()
+    } else if let Ok(path) = scene.extract::<PathBuf>() {
+        load(&path)?
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "scene: expected a fogplanes.Scene or the path of a scene file, got {}",
+            scene.get_type().name()?
+        )));
+    };
+    match resolution_arg(resolution)? {
+        Some((w, h)) => scene.with_resolution(w, h).map_err(py_error),
+        None => Ok(scene),
+    }
+}
+
+/// The worker pool of the `threads` argument (None: rayon's global pool).
+fn pool_arg(threads: Option<&Bound<'_, PyAny>>) -> PyResult<Option<rayon::ThreadPool>> {
+    let Some(t) = uint(threads, "--threads")? else { return Ok(None) };
+    let t = usize::try_from(t).map_err(|_| invalid("--threads", format!("{t} is out of range")))?;
+    check_threads(t).map_err(|m| invalid("--threads", m))?;
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(t)
+        .thread_name(|i| format!("fogplanes-{i}"))
+        .build()
+        .map(Some)
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the worker threads: {e}")))
+}
+
+fn named<T: std::str::FromStr<Err = String>>(value: &str, option: &str) -> PyResult<T> {
+    value.parse().map_err(|m| invalid(option, m))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Running work interruptibly
+
+/// Runs `work` on a worker thread (inside `pool` if given) with the GIL released, checking for
+/// signals on this thread every 50 ms. A signal's exception (KeyboardInterrupt for Ctrl-C) sets
+/// the cancel flag, waits for the worker to stop and is raised. A panic becomes RuntimeError.
+fn run_interruptible<T: Send>(
+    py: Python<'_>,
+    pool: Option<rayon::ThreadPool>,
+    work: impl FnOnce(&AtomicBool) -> fogplanes::Result<T> + Send,
+) -> PyResult<T> {
+    let cancel = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel();
+    std::thread::scope(|s| {
+        let cancel = &cancel;
+        std::thread::Builder::new()
+            .name("fogplanes-render".into())
+            .spawn_scoped(s, move || {
+                let run = || work(cancel);
+                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match &pool {
+                    Some(p) => p.install(run),
+                    None => run(),
+                }));
+                let _ = tx.send(result);
+            })
+            .map_err(|e| PyRuntimeError::new_err(format!("cannot start the render thread: {e}")))?;
+        let mut rx = rx;
+        loop {
+            // The receiver is not Sync: it moves into the closure that runs without the GIL.
+            let (received, back) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
+            rx = back;
+            match received {
+                Ok(Ok(result)) => return result.map_err(py_error),
+                Ok(Err(panic)) => {
+                    let what = panic
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| panic.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "unknown".into());
+                    return Err(PyRuntimeError::new_err(format!("fogplanes: internal error: {what}")));
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    if let Err(signal) = py.check_signals() {
+                        cancel.store(true, Ordering::Relaxed);
+                        py.detach(move || {
+                            let _ = rx.recv();
+                        });
+                        return Err(signal);
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err("fogplanes: the render thread ended without a result"));
+                }
+            }
+        }
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Images
+
+fn film_to_array<'py>(py: Python<'py>, film: &Film) -> Image<'py> {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let flat: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
+    let array = Array3::from_shape_vec((h, w, 3), flat).unwrap_or_else(|_| Array3::zeros((h, w, 3)));
+    PyArray3::from_owned_array(py, array)
+}
+
+fn array_to_film(array: &PyArrayLike3<'_, f32, AllowTypeChange>, what: &str) -> PyResult<Film> {
+    let view = array.as_array();
+    let (h, w, c) = view.dim();
+    let too_large = || PyValueError::new_err(format!("{what}: {h}x{w} pixels is too large"));
+    if c != 3 {
+        return Err(PyValueError::new_err(format!(
+            "{what}: expected an array of shape (height, width, 3), got ({h}, {w}, {c})"
+        )));
+    }
+    let mut film = Film::new(u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
+    for ((y, x), p) in (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).zip(film.pixels.iter_mut()) {
+        *p = glam::Vec3::new(view[[y, x, 0]], view[[y, x, 1]], view[[y, x, 2]]);
+    }
+    Ok(film)
+}
+
+fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("estimator", &s.estimator)?;
+    d.set_item("kernel", &s.kernel)?;
+    d.set_item("planes", s.planes)?;
+    d.set_item("rays", s.rays)?;
+    d.set_item("hits", s.hits)?;
+    d.set_item("tests", s.tests)?;
+    d.set_item("seconds_sampling", s.seconds_sampling)?;
+    d.set_item("seconds_build", s.seconds_build)?;
+    d.set_item("seconds_rays", s.seconds_rays)?;
+    d.set_item("seconds_gather", s.seconds_gather)?;
+    d.set_item("seconds_total", s.seconds_total)?;
+    d.set_item("hits_per_ray", s.hits_per_ray())?;
+    d.set_item("gather_ns_per_hit", s.gather_ns_per_hit())?;
+    d.set_item("summary", s.summary())?;
+    Ok(d)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scenes
+
+/// A validated scene: camera, fog box, rectangular lights and render defaults. Read-only.
+///
+/// Made by `fogplanes.load_scene(path)` or `Scene.from_toml(text)`.
+#[pyclass(frozen, module = "fogplanes", name = "Scene")]
+struct PyScene {
+    inner: Scene,
+}
+
+/// The pinhole camera of a scene.
+#[pyclass(frozen, get_all, module = "fogplanes", name = "Camera")]
+struct PyCamera {
+    /// Position of the pinhole.
+    position: Vec3,
+    /// Unit view direction.
+    forward: Vec3,
+    /// Unit right vector of the image plane.
+    right: Vec3,
+    /// Unit up vector of the image plane (orthogonal to forward).
+    up: Vec3,
+    /// Vertical field of view in degrees.
+    vfov_deg: f64,
+    /// (width, height) in pixels.
+    resolution: (u32, u32),
+}
+
+/// The homogeneous fog: an axis-aligned box, vacuum outside.
+#[pyclass(frozen, get_all, module = "fogplanes", name = "Medium")]
+struct PyMedium {
+    /// Lower corner of the box.
+    min: Vec3,
+    /// Upper corner of the box.
+    max: Vec3,
+    /// Scattering coefficient, RGB, per unit length.
+    sigma_s: Vec3,
+    /// Absorption coefficient, RGB, per unit length.
+    sigma_a: Vec3,
+    /// Extinction sigma_s + sigma_a.
+    sigma_t: Vec3,
+}
+
+/// A one-sided rectangular light: corner + p edge_u/|edge_u| + q edge_v/|edge_v|.
+#[pyclass(frozen, get_all, module = "fogplanes", name = "Light")]
+struct PyLight {
+    /// The light's name (`light<i>` when the file gives none).
+    name: String,
+    corner: Vec3,
+    /// First edge (|edge_u| times its unit direction, as stored after validation).
+    edge_u: Vec3,
+    /// Second edge, orthogonal to the first.
+    edge_v: Vec3,
+    /// Unit normal normalize(edge_u x edge_v): the side it emits to.
+    normal: Vec3,
+    /// Emitted radiance, RGB.
+    radiance: Vec3,
+    /// Area |edge_u| |edge_v|.
+    area: f64,
+}
+
+/// The scene file's `[render]` defaults (after defaults were filled in).
+#[pyclass(frozen, get_all, module = "fogplanes", name = "RenderDefaults")]
+struct PyRenderDefaults {
+    planes: u64,
+    estimator: String,
+    orientations: u32,
+    seed: u64,
+    spp: u32,
+}
+
+/// A string as Python's repr writes it (for names without quotes or escapes, which is all of them
+/// in practice; others are shown Rust's way).
+fn py_str(s: &str) -> String {
+    if s.chars().all(|c| c != '\'' && c != '\\' && !c.is_control()) { format!("'{s}'") } else { format!("{s:?}") }
+}
+
+fn fmt3(v: Vec3) -> String {
+    format!("({}, {}, {})", v.0, v.1, v.2)
+}
+
+#[pymethods]
+impl PyCamera {
+    fn __repr__(&self) -> String {
+        format!(
+            "Camera(position={}, vfov_deg={}, resolution={:?})",
+            fmt3(self.position),
+            self.vfov_deg,
+            self.resolution
+        )
+    }
+}
+
+#[pymethods]
+impl PyMedium {
+    fn __repr__(&self) -> String {
+        format!(
+            "Medium(min={}, max={}, sigma_s={}, sigma_a={})",
+            fmt3(self.min),
+            fmt3(self.max),
+            fmt3(self.sigma_s),
+            fmt3(self.sigma_a)
+        )
+    }
+}
+
+#[pymethods]
+impl PyLight {
+    fn __repr__(&self) -> String {
+        format!(
+            "Light(name={}, corner={}, edge_u={}, edge_v={}, radiance={})",
+            py_str(&self.name),
+            fmt3(self.corner),
+            fmt3(self.edge_u),
+            fmt3(self.edge_v),
+            fmt3(self.radiance)
+        )
+    }
+}
+
+#[pymethods]
+impl PyRenderDefaults {
+    fn __repr__(&self) -> String {
+        format!(
+            "RenderDefaults(planes={}, estimator={}, orientations={}, seed={}, spp={})",
+            self.planes,
+            py_str(&self.estimator),
+            self.orientations,
+            self.seed,
+            self.spp
+        )
+    }
+}
+
+#[pymethods]
+impl PyScene {
+    /// Parses and validates scene text (TOML, the schema of media_scenes/*.toml).
+    ///
+    /// `name` is the scene's name; `file` names the text in error messages. Raises ValueError
+    /// with the file, line, field and problem for anything invalid.
+    #[staticmethod]
+    #[pyo3(signature = (text, name = "scene", file = "<string>"))]
+    fn from_toml(text: &str, name: &str, file: &str) -> PyResult<Self> {
+        Scene::parse(text, file, name).map(|inner| PyScene { inner }).map_err(|e| PyValueError::new_err(e.to_string()))
+    }
+
+    /// The same scene at another resolution.
+    fn with_resolution(&self, width: &Bound<'_, PyAny>, height: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let w = uint32(Some(width), "--resolution")?.unwrap_or_default();
+        let h = uint32(Some(height), "--resolution")?.unwrap_or_default();
+        self.inner.with_resolution(w, h).map(|inner| PyScene { inner }).map_err(py_error)
+    }
+
+    /// The file stem (or the name given to from_toml).
+    #[getter]
+    fn name(&self) -> &str {
+        &self.inner.name
+    }
+
+    /// (width, height) in pixels.
+    #[getter]
+    fn resolution(&self) -> (u32, u32) {
+        (self.inner.camera.width, self.inner.camera.height)
+    }
+
+    #[getter]
+    fn camera(&self) -> PyCamera {
+        let c = &self.inner.camera;
+        PyCamera {
+            position: triple(c.position),
+            forward: triple(c.forward),
+            right: triple(c.right),
+            up: triple(c.up),
+            vfov_deg: (2.0 * c.tan_half_fov.atan()).to_degrees(),
+            resolution: (c.width, c.height),
+        }
+    }
+
+    #[getter]
+    fn medium(&self) -> PyMedium {
+        let m = &self.inner.medium;
+        PyMedium {
+            min: triple(m.min),
+            max: triple(m.max),
+            sigma_s: triple(m.sigma_s),
+            sigma_a: triple(m.sigma_a),
+            sigma_t: triple(m.sigma_t()),
+        }
+    }
+
+    /// The lights, in file order.
+    #[getter]
+    fn lights(&self) -> Vec<PyLight> {
+        self.inner
+            .lights
+            .iter()
+            .map(|l| PyLight {
+                name: l.name.clone(),
+                corner: triple(l.corner),
+                edge_u: triple(l.u * l.width),
+                edge_v: triple(l.v * l.height),
+                normal: triple(l.n),
+                radiance: triple(l.radiance),
+                area: l.area(),
+            })
+            .collect()
+    }
+
+    /// The `[render]` defaults: planes, estimator, orientations, seed, spp.
+    #[getter]
+    fn render(&self) -> PyRenderDefaults {
+        let r = &self.inner.render;
+        PyRenderDefaults {
+            planes: r.planes,
+            estimator: r.weighting.estimator.name().to_string(),
+            orientations: r.weighting.orientations,
+            seed: r.seed,
+            spp: r.spp,
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        let s = &self.inner;
+        format!(
+            "Scene(name={}, resolution={}x{}, lights={})",
+            py_str(&s.name),
+            s.camera.width,
+            s.camera.height,
+            s.lights.len()
+        )
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Functions
+
+/// Reads and validates a scene file (TOML).
+///
+/// Raises FileNotFoundError (an OSError) if the file cannot be opened, ValueError naming the
+/// file, line and field if its content is invalid.
+#[pyfunction]
+fn load_scene(path: PathBuf) -> PyResult<PyScene> {
+    load(&path).map(|inner| PyScene { inner })
+}
+
+/// Renders a scene with photon planes: the image, shape (height, width, 3), float32.
+///
+/// The arguments are those of `fogplanes render`, and None takes the scene's [render]
+/// default exactly as the command line does: `estimator` (the scene's, else smis-exact),
+/// `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent"; the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
+/// estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
+/// in a pool of that many threads (None: all cores); the image depends on the seed alone.
+/// The image is bit-identical to the EXR that `fogplanes render` writes for the same
+/// arguments. With `return_stats=True`, returns (image, stats).
+///
+/// Raises ValueError for bad input (the command line's message), OSError for a scene file
+/// that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+#[pyfunction]
+#[pyo3(signature = (
+    scene, estimator = None, planes = None, seed = None, spp = None, pixel_center = false,
+    resolution = None, orientations = None, threads = None, accelerator = "raster",
+    kernel = "auto", return_stats = false, sampler = None
+))]
+#[allow(clippy::too_many_arguments)]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    estimator: Option<&str>,
+    planes: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    spp: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    resolution: Option<&Bound<'py, PyAny>>,
+    orientations: Option<&Bound<'py, PyAny>>,
+    threads: Option<&Bound<'py, PyAny>>,
+    accelerator: &str,
+    kernel: &str,
+    return_stats: bool,
+    sampler: Option<&str>,
+) -> PyResult<Bound<'py, PyAny>> {
+    // The order of src/main.rs `cmd_render`: scene and its overrides, then the options.
+    let scene = scene_arg(scene, resolution)?;
+    let pool = pool_arg(threads)?;
+    let estimator = estimator.map(|e| named::<Estimator>(e, "--estimator")).transpose()?;
+    let accelerator = named::<Accelerator>(accelerator, "--accelerator")?;
+    let kernel = named::<Kernel>(kernel, "--kernel")?;
+    let sampler = sampler.map(|s| named::<Sampler>(s, "--sampler")).transpose()?;
+    let orientations = uint32(orientations, "--orientations")?;
+    let planes = uint(planes, "--planes")?;
+    let seed = uint(seed, "--seed")?;
+    let spp = uint32(spp, "--spp")?;
+
+    let defaults = RenderOptions::from_scene(&scene);
+    let estimator = estimator.unwrap_or(defaults.weighting.estimator);
+    // The scene's K applies only when the scene's estimator is the one rendered.
+    let scene_k = (estimator == defaults.weighting.estimator && estimator.has_orientations())
+        .then_some(defaults.weighting.orientations);
+    let weighting = Weighting::new(estimator, orientations.or(scene_k)).map_err(|m| invalid("--orientations", m))?;
+    let planes = planes.unwrap_or(defaults.planes as u64);
+    check_planes(planes).map_err(|m| invalid("--planes", m))?;
+    let planes = usize::try_from(planes).map_err(|_| invalid("--planes", format!("{planes} is out of range")))?;
+    let opts = RenderOptions {
+        planes,
+        weighting,
+        seed: seed.unwrap_or(defaults.seed),
+        sampler: sampler.unwrap_or(defaults.sampler),
+        spp: spp.unwrap_or(defaults.spp),
+        pixel_center,
+        accelerator,
+        kernel,
+    };
+    opts.validate(&scene).map_err(py_error)?;
+
+    let (film, stats) = run_interruptible(py, pool, |cancel| render_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let image = film_to_array(py, &film).into_any();
+    if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
+}
+
+/// Renders the independent reference: (image, per-pixel standard error), both float32.
+///
+/// As `fogplanes reference` with its -o and --stderr-image files: `spp` samples per pixel on
+/// average, spread by need unless `uniform`; `pixel_center` to compare with
+/// `render(..., pixel_center=True)`. Ctrl-C stops it with KeyboardInterrupt.
+#[pyfunction]
+#[pyo3(signature = (scene, spp = None, pixel_center = false, resolution = None, seed = None, uniform = false, threads = None))]
+#[pyo3(text_signature = "(scene, spp=1024, pixel_center=False, resolution=None, seed=1, uniform=False, threads=None)")]
+#[allow(clippy::too_many_arguments)]
+fn reference<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    spp: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    resolution: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    uniform: bool,
+    threads: Option<&Bound<'py, PyAny>>,
+) -> PyResult<(Image<'py>, Image<'py>)> {
+    let scene = scene_arg(scene, resolution)?;
+    let pool = pool_arg(threads)?;
+    let spp = uint32(spp, "--spp")?.unwrap_or(1024);
+    check_spp(spp).map_err(|m| invalid("--spp", m))?;
+    let seed = uint(seed, "--seed")?.unwrap_or(1);
+    let opts = ReferenceOptions { spp, uniform, seed, pixel_center };
+    let image = run_interruptible(py, pool, |cancel| render_reference_cancellable(&scene, &opts, &|| {}, cancel))?;
+    Ok((film_to_array(py, &image.mean), film_to_array(py, &image.stderr)))
+}
+
+/// Error metrics of an image against a reference, as `fogplanes compare` prints them.
+///
+/// Both are arrays of shape (height, width, 3) (any real dtype, converted to float32 as the
+/// EXR files hold them). Returns a dict: smape, mse, rel_mse (also under "relmse"), max_abs.
+#[pyfunction]
+fn compare<'py>(
+    py: Python<'py>,
+    image: PyArrayLike3<'py, f32, AllowTypeChange>,
+    reference: PyArrayLike3<'py, f32, AllowTypeChange>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let image = array_to_film(&image, "image")?;
+    let reference = array_to_film(&reference, "reference")?;
+    let m = compare_films(&image, &reference).map_err(py_error)?;
+    let d = PyDict::new(py);
+    d.set_item("smape", m.smape)?;
+    d.set_item("mse", m.mse)?;
+    d.set_item("rel_mse", m.rel_mse)?;
+    d.set_item("relmse", m.rel_mse)?;
+    d.set_item("max_abs", m.max_abs_error)?;
+    Ok(d)
+}
+
+/// Reads the first RGB(A) layer of an EXR file as an array (height, width, 3), float32.
+#[pyfunction]
+fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<'py>> {
+    let film = Film::load_exr(&path).map_err(|e| file_error(&path, e.to_string()))?;
+    Ok(film_to_array(py, &film))
+}
+
+/// Writes an array (height, width, 3) as .exr (linear float32) or .png (tone-mapped sRGB by
+/// `exposure` stops), whole or not at all, as the command line writes its images.
+#[pyfunction]
+#[pyo3(signature = (path, image, exposure = 0.0))]
+fn save_image(
+    py: Python<'_>,
+    path: PathBuf,
+    image: PyArrayLike3<'_, f32, AllowTypeChange>,
+    exposure: f32,
+) -> PyResult<()> {
+    let film = array_to_film(&image, "image")?;
+    fogplanes::film::check_image_output(&path).map_err(py_error)?;
+    py.detach(|| film.save(&path, exposure)).map_err(py_error)
+}
+
+#[pymodule]
+fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScene>()?;
+    m.add_class::<PyCamera>()?;
+    m.add_class::<PyMedium>()?;
+    m.add_class::<PyLight>()?;
+    m.add_class::<PyRenderDefaults>()?;
+    m.add_function(wrap_pyfunction!(load_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(reference, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(load_image, m)?)?;
+    m.add_function(wrap_pyfunction!(save_image, m)?)?;
+    m.add("ESTIMATORS", PyTuple::new(m.py(), Estimator::names())?)?;
+    m.add("KERNELS", PyTuple::new(m.py(), Kernel::ALL.iter().map(|k| k.name()))?)?;
+    m.add("SAMPLERS", PyTuple::new(m.py(), Sampler::ALL.iter().map(|s| s.name()))?)?;
+    m.add("ACCELERATORS", PyTuple::new(m.py(), Accelerator::ALL.iter().map(|a| a.name()))?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,394 @@
+"""Tests of the Python module `fogplanes` (crates/python), installed by `pip install .`.
+
+The bit-identity tests run the command line built by `cargo test --release` / `cargo build
+--release` (target/release/fogplanes; FOGPLANES_CLI overrides the path) and compare its EXR
+files with the arrays of the module, bit for bit.
+"""
+
+import importlib.resources
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fogplanes
+
+ROOT = Path(__file__).resolve().parents[2]
+SIX_LIGHTS = ROOT / "media_scenes" / "six_lights.toml"
+BAD_SCENES = sorted((ROOT / "tests" / "bad_scenes").glob("*.toml"))
+SMALL = dict(resolution=(96, 54), planes=2048)
+
+
+def cli() -> Path:
+    path = Path(os.environ.get("FOGPLANES_CLI", ROOT / "target" / "release" / "fogplanes"))
+    if not path.is_file():
+        pytest.fail(f"{path} is missing: build the command line with `cargo build --release` first")
+    return path
+
+
+def run_cli(*args, check=True) -> subprocess.CompletedProcess:
+    result = subprocess.run([str(cli()), *map(str, args)], capture_output=True, text=True, timeout=300)
+    if check and result.returncode != 0:
+        raise AssertionError(f"fogplanes {' '.join(map(str, args))} failed: {result.stderr}")
+    return result
+
+
+def bits(a: np.ndarray) -> np.ndarray:
+    """The float32 bit patterns, so that equality is exact (-0.0 differs from 0.0, NaN == NaN)."""
+    assert a.dtype == np.float32
+    return np.ascontiguousarray(a).view(np.uint32)
+
+
+def assert_bit_identical(a: np.ndarray, b: np.ndarray) -> None:
+    assert a.shape == b.shape and a.dtype == b.dtype == np.float32
+    assert np.array_equal(bits(a), bits(b)), f"{np.count_nonzero(bits(a) != bits(b))} values differ"
+
+
+def write_scene(tmp_path: Path, render_table: str, name: str = "scene") -> Path:
+    """six_lights.toml with its [render] table replaced."""
+    text = SIX_LIGHTS.read_text().split("[render]")[0] + "[render]\n" + textwrap.dedent(render_table)
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+# -- Bit identity with the command line ---------------------------------------------------------
+
+CASES = [
+    ({}, []),
+    ({"estimator": "unweighted", "seed": 7, "spp": 2, "pixel_center": True},
+     ["--estimator", "unweighted", "--seed", "7", "--spp", "2", "--pixel-center"]),
+    ({"estimator": "smis-exact", "orientations": 3, "accelerator": "bvh", "threads": 1},
+     ["--estimator", "smis-exact", "--orientations", "3", "--accelerator", "bvh", "--threads", "1"]),
+    ({"estimator": "cmis-cosine", "kernel": "portable", "planes": 1000},
+     ["--estimator", "cmis-cosine", "--kernel", "portable", "--planes", "1000"]),
+    ({"estimator": "smis-cosine", "kernel": "per-hit", "accelerator": "brute-force", "planes": 300},
+     ["--estimator", "smis-cosine", "--kernel", "per-hit", "--accelerator", "brute-force", "--planes", "300"]),
+    ({"sampler": "independent", "planes": 2000, "seed": 3},
+     ["--sampler", "independent", "--planes", "2000", "--seed", "3"]),
+]
+
+
+@pytest.mark.parametrize("kwargs,args", CASES, ids=[str(i) for i in range(len(CASES))])
+def test_render_is_bit_identical_to_the_cli(tmp_path, kwargs, args):
+    options = {**SMALL, **kwargs}
+    image = fogplanes.render(SIX_LIGHTS, **options)
+    out = tmp_path / "cli.exr"
+    cli_args = ["--resolution", "96x54", "-q", "-o", out, *args]
+    if "planes" not in kwargs:
+        cli_args += ["--planes", SMALL["planes"]]
+    run_cli("render", SIX_LIGHTS, *cli_args)
+    assert image.shape == (54, 96, 3) and image.dtype == np.float32
+    assert_bit_identical(image, fogplanes.load_image(out))
+
+
+def test_scene_defaults_apply_as_on_the_command_line(tmp_path):
+    # The scene's K applies only when the scene's estimator is the one rendered.
+    path = write_scene(tmp_path, 'estimator = "smis-cosine"\norientations = 4\nplanes = 1500\nseed = 3\nspp = 2\n')
+    scene = fogplanes.load_scene(path)
+    for kwargs, args in [({}, []), ({"estimator": "smis-exact"}, ["-e", "smis-exact"]),
+                         ({"estimator": "smis-cosine"}, ["-e", "smis-cosine"])]:
+        out = tmp_path / "cli.exr"
+        run_cli("render", path, "--resolution", "64x36", "-q", "-o", out, *args)
+        image, stats = fogplanes.render(scene, resolution=(64, 36), return_stats=True, **kwargs)
+        assert_bit_identical(image, fogplanes.load_image(out))
+        expected = {(): "smis-cosine-k4", ("smis-exact",): "smis-exact", ("smis-cosine",): "smis-cosine-k4"}
+        assert stats["estimator"] == expected[tuple(kwargs.values())]
+        assert stats["planes"] == 1500 and stats["rays"] == 2 * 64 * 36
+    # A path renders as the scene it names.
+    assert_bit_identical(fogplanes.render(str(path), resolution=(64, 36)), fogplanes.render(scene, resolution=(64, 36)))
+
+
+def test_reference_is_bit_identical_to_the_cli(tmp_path):
+    image, stderr = fogplanes.reference(SIX_LIGHTS, spp=32, resolution=(48, 27), seed=5)
+    out, err = tmp_path / "ref.exr", tmp_path / "err.exr"
+    run_cli("reference", SIX_LIGHTS, "--spp", 32, "--resolution", "48x27", "--seed", 5, "-q", "-o", out,
+            "--stderr-image", err)
+    assert_bit_identical(image, fogplanes.load_image(out))
+    assert_bit_identical(stderr, fogplanes.load_image(err))
+    assert np.all(stderr >= 0) and np.all(np.isfinite(image))
+    uniform, _ = fogplanes.reference(SIX_LIGHTS, spp=16, resolution=(48, 27), uniform=True, pixel_center=True)
+    run_cli("reference", SIX_LIGHTS, "--spp", 16, "--resolution", "48x27", "--uniform", "--pixel-center", "-q",
+            "-o", out)
+    assert_bit_identical(uniform, fogplanes.load_image(out))
+
+
+def test_compare_matches_the_cli(tmp_path):
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    run_cli("render", SIX_LIGHTS, "--resolution", "64x36", "--planes", 500, "-q", "-o", a)
+    run_cli("render", SIX_LIGHTS, "--resolution", "64x36", "--planes", 500, "--seed", 2, "-q", "-o", b)
+    import json
+
+    expected = json.loads(run_cli("compare", a, b, "--json").stdout)
+    got = fogplanes.compare(fogplanes.load_image(a), fogplanes.load_image(b))
+    assert got["smape"] == expected["smape"] and got["mse"] == expected["mse"]
+    assert got["rel_mse"] == got["relmse"] == expected["rel_mse"]
+    assert got["max_abs"] == expected["max_abs_error"]
+
+
+def test_images_round_trip_and_read_as_other_readers_do(tmp_path):
+    rng = np.random.default_rng(1)
+    image = rng.random((5, 7, 3), dtype=np.float32) * 10
+    fogplanes.save_image(tmp_path / "x.exr", image)
+    assert_bit_identical(fogplanes.load_image(tmp_path / "x.exr"), image)
+    fogplanes.save_image(tmp_path / "x.png", image, exposure=-2.0)
+    assert (tmp_path / "x.png").stat().st_size > 0
+    try:
+        import mitsuba
+    except ImportError:
+        return  # the CI venv has it; elsewhere the round trip above suffices
+    mitsuba.set_variant("scalar_rgb")
+    other = np.array(mitsuba.Bitmap(str(tmp_path / "x.exr")), dtype=np.float32)
+    assert_bit_identical(other[..., :3], image)
+
+
+# -- Every estimator, every option ---------------------------------------------------------------
+
+@pytest.mark.parametrize("estimator", fogplanes.ESTIMATORS)
+def test_every_estimator_renders_finite_non_negative_images(estimator):
+    image = fogplanes.render(SIX_LIGHTS, estimator, planes=512, resolution=(64, 36), seed=4)
+    assert image.shape == (36, 64, 3) and image.dtype == np.float32
+    assert np.all(np.isfinite(image)) and np.all(image >= 0) and image.mean() > 0
+
+
+def test_threads_do_not_change_the_image():
+    images = [fogplanes.render(SIX_LIGHTS, resolution=(80, 45), planes=3000, threads=t) for t in (None, 1, 2, 3)]
+    for other in images[1:]:
+        assert_bit_identical(images[0], other)
+
+
+def test_stats():
+    _, stats = fogplanes.render(SIX_LIGHTS, planes=1000, resolution=(64, 36), return_stats=True)
+    assert stats["estimator"] == "smis-exact" and stats["planes"] == 1000 and stats["rays"] == 64 * 36
+    assert stats["hits"] > 0 and stats["kernel"] in fogplanes.KERNELS and stats["kernel"] != "auto"
+    assert stats["seconds_total"] >= stats["seconds_gather"] >= 0
+    assert stats["summary"].startswith("smis-exact: 1000 planes")
+
+
+def test_names_and_version():
+    assert fogplanes.ESTIMATORS == ("unweighted", "cmis-cosine", "smis-cosine", "smis-exact", "cmis-exact")
+    assert fogplanes.KERNELS == ("auto", "avx512", "avx2", "portable", "per-hit")
+    assert fogplanes.ACCELERATORS == ("raster", "bvh", "brute-force")
+    cargo = tomllib.loads((ROOT / "Cargo.toml").read_text())
+    assert fogplanes.__version__ == cargo["workspace"]["package"]["version"]
+    package = importlib.resources.files("fogplanes")
+    assert (package / "py.typed").is_file() and (package / "_fogplanes.pyi").is_file()
+    assert "bit-identical" in fogplanes.render.__doc__
+
+
+# -- Scenes --------------------------------------------------------------------------------------
+
+def test_scene_fields_are_those_of_the_file():
+    scene = fogplanes.load_scene(SIX_LIGHTS)
+    desc = tomllib.loads(SIX_LIGHTS.read_text())
+    assert scene.name == "six_lights"
+    assert scene.resolution == tuple(desc["camera"]["resolution"]) == scene.camera.resolution
+    assert scene.camera.position == tuple(desc["camera"]["position"])
+    assert scene.camera.vfov_deg == pytest.approx(desc["camera"]["vfov_deg"])
+    forward = np.subtract(desc["camera"]["look_at"], desc["camera"]["position"])
+    assert np.allclose(scene.camera.forward, forward / np.linalg.norm(forward))
+    assert scene.medium.min == tuple(desc["medium"]["min"]) and scene.medium.max == tuple(desc["medium"]["max"])
+    rgb = lambda v: tuple(v) if isinstance(v, list) else (float(v),) * 3  # noqa: E731
+    assert scene.medium.sigma_s == rgb(desc["medium"]["sigma_s"])
+    assert scene.medium.sigma_a == rgb(desc["medium"]["sigma_a"])
+    assert len(scene.lights) == len(desc["light"]) == 6
+    for light, d in zip(scene.lights, desc["light"]):
+        assert light.name == d["name"] and light.corner == tuple(d["corner"])
+        assert np.allclose(light.edge_u, d["edge_u"], rtol=1e-12, atol=1e-12)
+        assert np.allclose(light.edge_v, d["edge_v"], rtol=1e-12, atol=1e-12)
+        assert light.radiance == rgb(d["radiance"])
+        assert light.area == pytest.approx(np.linalg.norm(d["edge_u"]) * np.linalg.norm(d["edge_v"]))
+        assert np.allclose(light.normal, np.cross(d["edge_u"], d["edge_v"]) / light.area)
+    r = scene.render
+    assert (r.planes, r.estimator, r.orientations, r.seed, r.spp) == (desc["render"]["planes"], "smis-exact", 2, 1, 1)
+    assert "six_lights" in repr(scene) and "ceiling" in repr(scene.lights[0])
+    smaller = scene.with_resolution(32, 18)
+    assert smaller.resolution == (32, 18) and scene.resolution == (640, 360)
+    with pytest.raises(AttributeError):
+        scene.name = "other"
+
+
+def test_scene_from_toml_equals_the_file():
+    scene = fogplanes.Scene.from_toml(SIX_LIGHTS.read_text(), name="six_lights")
+    assert scene.name == "six_lights" and len(scene.lights) == 6
+    assert_bit_identical(fogplanes.render(scene, planes=500, resolution=(40, 24)),
+                         fogplanes.render(SIX_LIGHTS, planes=500, resolution=(40, 24)))
+
+
+# -- Errors --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("path", BAD_SCENES, ids=[p.stem for p in BAD_SCENES])
+def test_bad_scenes_raise_value_error_with_the_cli_message(tmp_path, path):
+    with pytest.raises(ValueError) as caught:
+        fogplanes.load_scene(path)
+    result = run_cli("render", path, "-o", tmp_path / "x.exr", check=False)
+    assert result.returncode == 2
+    assert result.stderr == f"error: {caught.value}\n"
+    assert str(path) in str(caught.value)
+    with pytest.raises(ValueError):
+        fogplanes.render(path)
+
+
+def test_bad_scene_text_names_the_file_and_field():
+    text = SIX_LIGHTS.read_text().replace("sigma_a = 0.02", "sigma_a = -1.0")
+    assert text != SIX_LIGHTS.read_text()
+    with pytest.raises(ValueError, match=r"^fog\.toml: medium\.sigma_a: must be finite and non-negative"):
+        fogplanes.Scene.from_toml(text, file="fog.toml")
+    with pytest.raises(ValueError, match=r"^<string>:1:\d+: TOML syntax"):
+        fogplanes.Scene.from_toml("[camera")
+    with pytest.raises(ValueError, match="light"):
+        fogplanes.Scene.from_toml(SIX_LIGHTS.read_text().split("[[light]]")[0])
+
+
+def test_files_that_cannot_be_opened_raise_os_errors(tmp_path):
+    missing = tmp_path / "missing.toml"
+    for call in (fogplanes.load_scene, fogplanes.render, fogplanes.reference, fogplanes.load_image):
+        with pytest.raises(FileNotFoundError, match="missing.toml"):
+            call(missing)
+    with pytest.raises(IsADirectoryError):
+        fogplanes.load_scene(tmp_path)
+    with pytest.raises(ValueError, match="cannot read as an EXR image"):
+        fogplanes.load_image(SIX_LIGHTS)
+    with pytest.raises(ValueError, match="does not exist"):
+        fogplanes.save_image(tmp_path / "no" / "x.exr", np.zeros((2, 2, 3)))
+    with pytest.raises(ValueError, match=r"\.exr .* or \.png"):
+        fogplanes.save_image(tmp_path / "x.jpg", np.zeros((2, 2, 3)))
+
+
+def test_bad_options_raise_value_error_with_the_cli_message(tmp_path):
+    cases = [
+        ({"planes": 0}, ["--planes", "0"]),
+        ({"spp": 0}, ["--spp", "0"]),
+        ({"threads": 0}, ["--threads", "0"]),
+        ({"resolution": (0, 10)}, ["--resolution", "0x10"]),
+        ({"estimator": "unweighted", "orientations": 3}, ["-e", "unweighted", "--orientations", "3"]),
+        ({"orientations": 0}, ["--orientations", "0"]),
+        ({"planes": 2**27 + 1}, ["--planes", str(2**27 + 1)]),
+        ({"resolution": (30000, 30000)}, ["--resolution", "30000x30000"]),
+    ]
+    for kwargs, args in cases:
+        with pytest.raises(ValueError) as caught:
+            fogplanes.render(SIX_LIGHTS, **kwargs)
+        result = run_cli("render", SIX_LIGHTS, "-q", "-o", tmp_path / "x.exr", *args, check=False)
+        assert result.returncode == 2, (kwargs, result.stderr)
+        assert result.stderr == f"error: {caught.value}\n", kwargs
+
+
+def test_other_bad_arguments():
+    with pytest.raises(ValueError, match=r"^--estimator: unknown estimator \"nope\"; expected one of unweighted"):
+        fogplanes.render(SIX_LIGHTS, "nope")
+    with pytest.raises(ValueError, match="^--accelerator: unknown accelerator"):
+        fogplanes.render(SIX_LIGHTS, accelerator="octree")
+    with pytest.raises(ValueError, match="^--kernel: unknown kernel"):
+        fogplanes.render(SIX_LIGHTS, kernel="gpu")
+    for name, value in [("planes", -5), ("seed", -1), ("spp", 2**40), ("threads", 2**70), ("orientations", -2)]:
+        with pytest.raises(ValueError, match=f"^--{name}: .* is out of range"):
+            fogplanes.render(SIX_LIGHTS, **{name: value})
+    with pytest.raises(ValueError, match="^--spp"):
+        fogplanes.reference(SIX_LIGHTS, spp=0)
+    with pytest.raises(TypeError):
+        fogplanes.render(SIX_LIGHTS, planes=1.5)
+    with pytest.raises(TypeError):
+        fogplanes.render(SIX_LIGHTS, resolution=(1, 2, 3))
+    with pytest.raises(TypeError, match="fogplanes.Scene or the path"):
+        fogplanes.render(42)
+    with pytest.raises(ValueError, match="differ in size"):
+        fogplanes.compare(np.zeros((2, 3, 3)), np.zeros((3, 2, 3)))
+    with pytest.raises(ValueError, match=r"shape \(height, width, 3\)"):
+        fogplanes.compare(np.zeros((2, 3, 4)), np.zeros((2, 3, 4)))
+    with pytest.raises((TypeError, ValueError)):
+        fogplanes.compare(np.zeros((2, 3)), np.zeros((2, 3)))
+
+
+# -- compare -------------------------------------------------------------------------------------
+
+def test_compare_known_answers_and_dtypes():
+    reference = np.array([[[1.0, 0.0, 2.0], [0.5, 0.5, 0.5]]])
+    image = np.array([[[3.0, 0.0, 2.0], [0.5, 1.5, 0.5]]])
+    m = fogplanes.compare(image, reference)
+    assert set(m) == {"smape", "mse", "rel_mse", "relmse", "max_abs"}
+    assert m["smape"] == pytest.approx(1 / 6, rel=1e-12)  # 2/4, 0 (both zero), 0, 0, 1/2, 0
+    assert m["mse"] == pytest.approx(5 / 6, rel=1e-12)  # 4, 0, 0, 0, 1, 0
+    assert m["rel_mse"] == m["relmse"] == pytest.approx((4 / 1.01 + 1 / 0.26) / 6, rel=1e-9)
+    assert m["max_abs"] == 2.0
+    for dtype in (np.float16, np.float32, np.float64):
+        assert fogplanes.compare(image.astype(dtype), reference.astype(dtype)) == m
+    whole = np.array([[[3, 0, 2]]])  # integers are read as floats
+    assert fogplanes.compare(whole, whole.astype(np.float32) + 1)["max_abs"] == 1.0
+    assert fogplanes.compare(image.tolist(), reference) == m
+    # Non-contiguous views are read as they look.
+    wide = np.zeros((1, 4, 3))
+    wide[:, ::2] = image
+    assert fogplanes.compare(wide[:, ::2], reference) == m
+
+
+def test_compare_of_an_image_with_itself_is_zero():
+    image = fogplanes.render(SIX_LIGHTS, planes=300, resolution=(32, 18))
+    assert fogplanes.compare(image, image) == dict.fromkeys(["smape", "mse", "rel_mse", "relmse", "max_abs"], 0.0)
+    assert fogplanes.compare(np.zeros((0, 0, 3)), np.zeros((0, 0, 3)))["mse"] == 0.0
+
+
+# -- Threads and interruption --------------------------------------------------------------------
+
+def test_the_gil_is_released_while_rendering():
+    scene = fogplanes.load_scene(SIX_LIGHTS)
+    started, done = threading.Event(), threading.Event()
+    timing = {}
+
+    def work():
+        started.set()
+        start = time.perf_counter()
+        fogplanes.render(scene, planes=20480, resolution=(160, 90), spp=4)
+        timing["render"] = time.perf_counter() - start
+        done.set()
+
+    worker = threading.Thread(target=work)
+    worker.start()
+    started.wait()
+    last, largest_gap, ticks = time.perf_counter(), 0.0, 0
+    while not done.is_set():
+        now = time.perf_counter()
+        largest_gap, last, ticks = max(largest_gap, now - last), now, ticks + 1
+        time.sleep(0.001)
+    worker.join()
+    # Held by the render, the GIL would stop this loop for the whole render.
+    assert ticks > 10 and largest_gap < max(0.1, timing["render"] / 2), (ticks, largest_gap, timing)
+
+
+INTERRUPTED = """
+import sys, time, fogplanes
+scene = fogplanes.load_scene(sys.argv[1])
+print("rendering", flush=True)
+start = time.perf_counter()
+try:
+    fogplanes.render(scene, "smis-exact", spp=10000)  # an hour of work
+except KeyboardInterrupt:
+    print(f"KeyboardInterrupt after {time.perf_counter() - start:.2f} s", flush=True)
+image = fogplanes.render(scene, planes=100, resolution=(16, 9))
+print("rendered again", image.shape, flush=True)
+"""
+
+
+def test_ctrl_c_stops_a_render_with_keyboard_interrupt():
+    process = subprocess.Popen([sys.executable, "-c", INTERRUPTED, str(SIX_LIGHTS)], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stdout.readline().strip() == "rendering"
+        time.sleep(0.5)
+        sent = time.perf_counter()
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=20)
+        stopped = time.perf_counter() - sent
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    assert "KeyboardInterrupt after" in out and "rendered again (9, 16, 3)" in out, (out, err)
+    assert stopped < 3.0, f"took {stopped:.2f} s to stop"
