@@ -89,10 +89,7 @@ impl fmt::Display for Kernel {
 impl FromStr for Kernel {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Kernel::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Kernel::ALL.iter().map(|k| k.name()).collect();
-            format!("unknown kernel {s:?}; expected one of {}", names.join(", "))
-        })
+        crate::parse_name("kernel", s, &Kernel::ALL, Kernel::name)
     }
 }
 

@@ -56,5 +56,19 @@ pub mod weights;
 
 pub use error::{Error, Result};
 
+/// Parses `s` as the member of the closed list `all` whose name it is, or says which names
+/// there are: the `FromStr` of every named choice (estimator, sampler, kernel, accelerator).
+pub(crate) fn parse_name<T: Copy>(
+    what: &str,
+    s: &str,
+    all: &[T],
+    name: fn(T) -> &'static str,
+) -> std::result::Result<T, String> {
+    all.iter().copied().find(|&x| name(x) == s).ok_or_else(|| {
+        let names: Vec<_> = all.iter().map(|&x| name(x)).collect();
+        format!("unknown {what} {s:?}; expected one of {}", names.join(", "))
+    })
+}
+
 #[doc = include_str!("../../../docs/mathematics.md")]
 pub mod mathematics {}

@@ -261,30 +261,10 @@ mod tests {
     use super::*;
     use std::sync::atomic::AtomicUsize;
 
-    const SCENE: &str = r#"
-[camera]
-position = [0.0, 1.0, 5.0]
-look_at = [0.0, 1.0, 0.0]
-up = [0.0, 1.0, 0.0]
-vfov_deg = 40.0
-resolution = [24, 16]
-
-[medium]
-min = [-2.0, 0.0, -2.0]
-max = [2.0, 2.0, 2.0]
-sigma_s = 0.2
-sigma_a = 0.05
-
-[[light]]
-corner = [-0.5, 1.9, -0.5]
-edge_u = [1.0, 0.0, 0.0]
-edge_v = [0.0, 0.0, 1.0]
-radiance = 4
-"#;
-
     #[test]
     fn cancelling_stops_the_reference_after_the_rows_under_way() {
-        let scene = Scene::parse(SCENE, "test.toml", "test").unwrap();
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(24, 16).unwrap();
         let opts = ReferenceOptions { spp: 32, uniform: false, seed: 1, pixel_center: false };
         let a = render_reference(&scene, &opts, &|| {});
         let b = render_reference_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();

@@ -54,10 +54,7 @@ impl std::fmt::Display for Accelerator {
 impl std::str::FromStr for Accelerator {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Accelerator::ALL.into_iter().find(|a| a.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Accelerator::ALL.iter().map(|a| a.name()).collect();
-            format!("unknown accelerator {s:?}; expected one of {}", names.join(", "))
-        })
+        crate::parse_name("accelerator", s, &Accelerator::ALL, Accelerator::name)
     }
 }
 
@@ -482,30 +479,10 @@ mod tests {
     use super::*;
     use std::sync::atomic::AtomicUsize;
 
-    const SCENE: &str = r#"
-[camera]
-position = [0.0, 1.0, 5.0]
-look_at = [0.0, 1.0, 0.0]
-up = [0.0, 1.0, 0.0]
-vfov_deg = 40.0
-resolution = [128, 96]
-
-[medium]
-min = [-2.0, 0.0, -2.0]
-max = [2.0, 2.0, 2.0]
-sigma_s = 0.2
-sigma_a = 0.05
-
-[[light]]
-corner = [-0.5, 1.9, -0.5]
-edge_u = [1.0, 0.0, 0.0]
-edge_v = [0.0, 0.0, 1.0]
-radiance = 4
-"#;
-
     #[test]
     fn cancelling_stops_a_render_after_the_work_under_way() {
-        let scene = Scene::parse(SCENE, "test.toml", "test").unwrap();
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap();
         let opts = RenderOptions { planes: 3000, spp: 3, ..RenderOptions::default() };
         // Never set: the same image as `render`.
         let (a, _) = render(&scene, &opts, &|| {}).unwrap();

@@ -75,10 +75,7 @@ impl fmt::Display for Sampler {
 impl FromStr for Sampler {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Sampler::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| {
-            let names: Vec<_> = Sampler::ALL.iter().map(|k| k.name()).collect();
-            format!("unknown sampler {s:?}; expected one of {}", names.join(", "))
-        })
+        crate::parse_name("sampler", s, &Sampler::ALL, Sampler::name)
     }
 }
 

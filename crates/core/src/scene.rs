@@ -397,9 +397,10 @@ pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
+    /// A small valid scene for the unit tests of every module.
     pub const MINIMAL: &str = r#"
 [camera]
 position = [0.0, 1.0, 5.0]

@@ -102,10 +102,7 @@ impl fmt::Display for Estimator {
 impl FromStr for Estimator {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Estimator::ALL
-            .into_iter()
-            .find(|e| e.name() == s)
-            .ok_or_else(|| format!("unknown estimator {s:?}; expected one of {}", Estimator::names().join(", ")))
+        crate::parse_name("estimator", s, &Estimator::ALL, Estimator::name)
     }
 }
 
