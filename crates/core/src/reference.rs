@@ -2,8 +2,10 @@
 //!
 //! Per pixel sample: a light chosen by power, a point uniform on it, a distance on the camera
 //! segment by equiangular sampling toward that point (Kulla and Fajardo 2012), and the
-//! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares the scene and medium code
-//! with the photon planes and nothing else, and it measures its own per-pixel standard error.
+//! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares with the
+//! photon planes only the scene, the medium and the elementary routines of [`crate::sampling`]
+//! (light choice by power, random streams): no plane, chord, weight or gathering code. It
+//! measures its own per-pixel standard error.
 
 use crate::error::{Error, Result};
 use crate::film::Film;
