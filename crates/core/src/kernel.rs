@@ -1,6 +1,6 @@
 //! The span kernels: one unshadowed plane against a run of pixels of one row. The loop body is
 //! the per-hit arithmetic of [`crate::gather`] ([`PlaneView::crossing`] and
-//! [`PlaneView::contribution`]) and nothing else, written once in [`span_body`] and compiled for
+//! [`PlaneView::contribution`]) and nothing else, written once in `span_body` and compiled for
 //! each vector width the CPU may have (AVX-512, AVX2 with FMA, the portable baseline), chosen
 //! at run time by [`Kernel`].
 //!

@@ -26,7 +26,7 @@
 //! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
 //! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
 //! | [`render`] | the photon-plane renderer and its options |
-//! | [`reference`] | the independent reference renderer (section 4) |
+//! | [`reference`](mod@reference) | the independent reference renderer (section 4) |
 //! | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
 //! | [`export`] | the scene as a Mitsuba 3 XML file, to check against an outside renderer |
