@@ -423,29 +423,57 @@ pub fn render_for(
     budget: std::time::Duration,
     progress: Progress,
 ) -> Result<(Film, RenderStats)> {
-    if opts.spp != 1 {
-        return Err(Error::option("--spp", "a render on a time budget takes one sample per pixel"));
-    }
-    let first = RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() };
-    first.validate(scene)?;
-    let kernel = opts.kernel.resolve()?;
     let start = Instant::now();
     let deadline = budget.as_secs_f64();
-    let t = Instant::now();
+    render_in_passes(scene, opts, progress, &mut |done, seconds_per_plane| {
+        if done == 0 {
+            return FIRST_PASS_PLANES;
+        }
+        // A pass's cost is close to proportional to its planes; keep a tenth in hand.
+        let remaining = deadline - start.elapsed().as_secs_f64();
+        let affordable = (0.9 * remaining / seconds_per_plane.max(1e-12)).floor().max(0.0) as usize;
+        let next = affordable.min(done).min(MAX_PASS_PLANES);
+        if next < FIRST_PASS_PLANES / 4 { 0 } else { next }
+    })
+}
+
+/// The largest pass of a render on a time budget (a pass's planes are held at once; this keeps
+/// them near 0.5 GB whatever the budget).
+const MAX_PASS_PLANES: usize = 1 << 20;
+
+/// Renders planes in passes, each extending the set by the next planes of the sampler:
+/// `next_pass(planes so far, seconds per plane of the last pass)` sizes the next pass, 0 ends
+/// the render. The image is the estimate of all the planes gathered, the same set as a render
+/// of that many planes. `opts.planes` is ignored; `opts.spp` must be 1.
+pub fn render_in_passes(
+    scene: &Scene,
+    opts: &RenderOptions,
+    progress: Progress,
+    next_pass: &mut dyn FnMut(usize, f64) -> usize,
+) -> Result<(Film, RenderStats)> {
+    if opts.spp != 1 {
+        return Err(Error::option("--spp", "a render in plane passes takes one sample per pixel"));
+    }
+    RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() }.validate(scene)?;
+    let kernel = opts.kernel.resolve()?;
+    let start = Instant::now();
     let pass_rays = camera_rays(scene, opts.seed, 0, opts.pixel_center);
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),
         kernel: kernel.to_string(),
         rays: pass_rays.rays.len() as u64,
-        seconds_rays: t.elapsed().as_secs_f64(),
+        seconds_rays: start.elapsed().as_secs_f64(),
         ..Default::default()
     };
     let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-    let (mut done, mut next) = (0usize, FIRST_PASS_PLANES);
-    // Seconds per plane of the last pass (sampling, building and gathering), the largest so far.
-    let mut per_plane: f64;
+    let (mut done, mut per_plane) = (0usize, 0.0);
     loop {
+        let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
+        if next == 0 {
+            break;
+        }
         let pass_start = Instant::now();
+        // Planes weighted as one of 1: the division by the final count comes at the end.
         let prepared = PreparedPlanes::range(scene, done..done + next, 1, opts.seed, opts.sampler, opts.accelerator);
         let t = Instant::now();
         let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
@@ -457,17 +485,9 @@ pub fn render_for(
         stats.plane_passes += 1;
         done += next;
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
-        let remaining = deadline - start.elapsed().as_secs_f64();
-        // A pass's cost is close to proportional to its planes; keep a tenth in hand.
-        let affordable = (0.9 * remaining / per_plane.max(1e-12)).floor();
-        let doubled = done.min(crate::limits::MAX_PLANES as usize - done);
-        next = (affordable.min(doubled as f64).max(0.0)) as usize;
-        if next < FIRST_PASS_PLANES / 4 {
-            break;
-        }
     }
     let mut film = Film::new(scene.camera.width, scene.camera.height);
-    let inv = 1.0 / done as f32;
+    let inv = 1.0 / done.max(1) as f32;
     for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
         *f = *s * inv + *e;
     }
