@@ -96,7 +96,7 @@ fn orientation_point_and_direction_follow_their_densities() {
     }
 }
 
-/// Over independent scramble seeds, a plane's numbers are uniform: the first plane of 4096
+/// Over independent scramble seeds, a plane's numbers are uniform: the first plane of 20,000
 /// seeds (each alone a single uniform point) follows the densities too.
 #[test]
 fn the_first_plane_over_scramble_seeds_is_uniform() {
