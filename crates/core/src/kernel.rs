@@ -1,14 +1,13 @@
-//! The span kernels: one unshadowed plane against a run of pixels of one row. The loop body is
-//! the per-hit arithmetic of [`crate::gather`] ([`PlaneView::crossing`] and
-//! [`PlaneView::contribution`]) and nothing else, written once in `span_body` and compiled for
-//! each vector width the CPU may have (AVX-512, AVX2 with FMA, the portable baseline), chosen
-//! at run time by [`Kernel`].
+//! The span kernels: one plane against a run of pixels of one row, in blocks of [`LANES`]. The
+//! loop body is the per-hit arithmetic of [`crate::gather`] ([`PlaneView::gather_lanes`]) and
+//! nothing else, written once in `span_body` and compiled for each vector width the CPU may
+//! have (AVX-512, AVX2 with FMA, the portable baseline), chosen at run time by [`Kernel`].
 //!
 //! No operation is fused or reordered between them (Rust never contracts `a * b + c`, and
 //! every operation used is exactly rounded), so every kernel gives bit-identical sums.
 
 use crate::error::{Error, Result};
-use crate::gather::PlaneView;
+use crate::gather::{Occluder, PlaneView, RayLanes};
 use crate::weights::Denominator;
 use glam::Vec3;
 use std::fmt;
@@ -26,8 +25,8 @@ pub enum Kernel {
     Avx2,
     /// What the compiler makes of the loop for the baseline target (4 lanes with SSE2).
     Portable,
-    /// One hit at a time through [`crate::gather::GatherContext::gather_one`], the path of
-    /// planes another panel can shadow: for checking the vector kernels.
+    /// One pixel at a time ([`PlaneView::gather_lanes`] with one lane): for checking the vector
+    /// kernels.
     PerHit,
 }
 
@@ -93,7 +92,13 @@ impl FromStr for Kernel {
     }
 }
 
-/// The rays of a span as a structure of arrays (directions and segments), all of one length.
+/// Pixels per block: the vector kernels take the rays of a span 16 at a time, as one AVX-512
+/// vector, two AVX2 vectors or four SSE2 vectors. Spans are whole blocks (the raster pads its
+/// rows), so no kernel has a scalar remainder loop.
+pub const LANES: usize = 16;
+
+/// The rays of a span as a structure of arrays (directions and segments), all of one length, a
+/// multiple of [`LANES`].
 pub struct SpanRays<'a> {
     pub x: &'a [f32],
     pub y: &'a [f32],
@@ -109,14 +114,17 @@ pub struct SpanSums<'a> {
     pub b: &'a mut [f32],
 }
 
-/// One unshadowed plane against a span with a vector kernel (`kernel` resolved, not
-/// [`Kernel::PerHit`]); adds each pixel's contribution to `sums` unless `CONTRIBUTE` is off
-/// (then only hits are counted). Returns the hit count.
+/// One plane against a span with a vector kernel (`kernel` resolved, not [`Kernel::PerHit`]):
+/// [`PlaneView::gather_lanes`] on each block of [`LANES`] pixels. Adds each pixel's contribution
+/// to `sums` unless `CONTRIBUTE` is off (then only hits are counted). Returns the hit count.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
     kernel: Kernel,
     weights: &D,
+    plane: &D::Plane,
     view: &PlaneView,
+    occluders: &[Occluder],
     sigma_t: Vec3,
     grey: bool,
     rays: SpanRays,
@@ -125,9 +133,9 @@ pub fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
     macro_rules! run {
         ($f:ident) => {
             if grey {
-                $f::<D, true, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+                $f::<D, true, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, rays, sums)
             } else {
-                $f::<D, false, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+                $f::<D, false, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, rays, sums)
             }
         };
     }
@@ -141,75 +149,76 @@ pub fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
     }
 }
 
-/// [`span_body`] compiled for 16-wide vectors (chosen at run time).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
-#[inline(never)]
-fn span_avx512<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    view: &PlaneView,
-    sigma_t: Vec3,
-    rays: SpanRays,
-    sums: SpanSums,
-) -> u64 {
-    span_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
+/// The compiled copies of [`span_body`]: one per vector width, chosen at run time.
+macro_rules! span_kernel {
+    ($(#[$attr:meta])* $name:ident) => {
+        $(#[$attr])*
+        #[inline(never)]
+        fn $name<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+            weights: &D,
+            plane: &D::Plane,
+            view: &PlaneView,
+            occluders: &[Occluder],
+            sigma_t: Vec3,
+            rays: SpanRays,
+            sums: SpanSums,
+        ) -> u64 {
+            span_body::<D, GREY, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, rays, sums)
+        }
+    };
 }
 
-/// [`span_body`] compiled for 8-wide vectors (chosen at run time).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline(never)]
-fn span_avx2<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    view: &PlaneView,
-    sigma_t: Vec3,
-    rays: SpanRays,
-    sums: SpanSums,
-) -> u64 {
-    span_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
-}
+span_kernel!(
+    /// [`span_body`] compiled for 16-wide vectors.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+    span_avx512
+);
+span_kernel!(
+    /// [`span_body`] compiled for 8-wide vectors.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    span_avx2
+);
+span_kernel!(
+    /// [`span_body`] for the baseline target.
+    span_portable
+);
 
-/// [`span_body`] for the baseline target.
-#[inline(never)]
-fn span_portable<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    view: &PlaneView,
-    sigma_t: Vec3,
-    rays: SpanRays,
-    sums: SpanSums,
-) -> u64 {
-    span_body::<D, GREY, CONTRIBUTE>(weights, view, sigma_t, rays, sums)
-}
-
-/// The kernel proper. Each wrapper above is `inline(never)` on purpose: as separate slice
-/// arguments the sums and the rays are known not to alias (Rust marks them `noalias`), so the
-/// loop vectorises without run-time overlap checks. The plane is copied into a local first, so
-/// the compiler knows the stores to the sums cannot change it.
+/// The kernel proper: the span block by block. Each wrapper above is `inline(never)` on
+/// purpose: as separate slice arguments the sums and the rays are known not to alias (Rust
+/// marks them `noalias`). The plane is copied into a local first, so the compiler knows the
+/// stores to the sums cannot change it.
 #[inline(always)]
 fn span_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     weights: &D,
+    plane: &D::Plane,
     view: &PlaneView,
+    occluders: &[Occluder],
     sigma_t: Vec3,
     rays: SpanRays,
     sums: SpanSums,
 ) -> u64 {
-    let n = rays.x.len();
-    let (xs, ys, zs, t0s, t1s) = (&rays.x[..n], &rays.y[..n], &rays.z[..n], &rays.t0[..n], &rays.t1[..n]);
-    let (sr, sg, sb) = (&mut sums.r[..n], &mut sums.g[..n], &mut sums.b[..n]);
     let view = *view;
-    let mut hits = 0u32;
-    for k in 0..n {
-        let dir = [xs[k], ys[k], zs[k]];
-        let c = view.crossing(dir, t0s[k], t1s[k]);
-        hits += c.hit as u32;
-        if CONTRIBUTE {
-            let [cr, cg, cb] = view.contribution::<D, GREY>(weights, sigma_t, dir, t0s[k], &c);
-            sr[k] += cr;
-            sg[k] += cg;
-            sb[k] += cb;
-        }
+    let lanes = |s: &[f32], i: usize| -> [f32; LANES] { s[i..i + LANES].try_into().unwrap() };
+    let mut hits = 0u64;
+    for i in (0..rays.x.len() / LANES * LANES).step_by(LANES) {
+        let block = RayLanes {
+            x: lanes(rays.x, i),
+            y: lanes(rays.y, i),
+            z: lanes(rays.z, i),
+            t0: lanes(rays.t0, i),
+            t1: lanes(rays.t1, i),
+        };
+        let sums: [&mut [f32; LANES]; 3] = [
+            (&mut sums.r[i..i + LANES]).try_into().unwrap(),
+            (&mut sums.g[i..i + LANES]).try_into().unwrap(),
+            (&mut sums.b[i..i + LANES]).try_into().unwrap(),
+        ];
+        hits += view.gather_lanes::<D, LANES, GREY, CONTRIBUTE>(weights, plane, occluders, sigma_t, &block, sums)
+            as u64;
     }
-    hits as u64
+    hits
 }
 
 #[cfg(test)]

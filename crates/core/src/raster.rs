@@ -11,8 +11,8 @@
 //! bit-identical for a seed.
 
 use crate::camera::Camera;
-use crate::gather::{CameraRay, GatherContext, GatherStats, PlaneView};
-use crate::kernel::{Kernel, SpanRays, SpanSums, gather_span};
+use crate::gather::{CameraRay, GatherContext, GatherStats, RayLanes};
+use crate::kernel::{Kernel, LANES, SpanRays, SpanSums, gather_span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
@@ -138,7 +138,7 @@ impl ScreenRaster {
     }
 
     /// Gathers every plane into `out` (one RGB sum per pixel, row-major), for the rays `rays`
-    /// (one per pixel), with `kernel` (resolved) for planes no other panel can shadow, calling
+    /// (one per pixel), with `kernel` (resolved), calling
     /// `on_band` after each band (for progress). Bands not started when `cancel` is set are
     /// skipped (`out` is then incomplete).
     #[allow(clippy::too_many_arguments)]
@@ -204,21 +204,37 @@ impl ScreenRaster {
         let w = self.width as usize;
         let first_row = band as u32 * BAND_ROWS;
         let rows = (rays.len() / w) as u32;
-        let soa = BandRays::new(rays);
-        let mut acc = BandSums::new(rays.len());
+        let soa = BandRays::new(rays, w);
+        let stride = soa.stride;
+        let mut acc = BandSums::new(soa.x.len());
         let mut stats = GatherStats::default();
         let ext = ctx.extinction;
         for &plane in &self.bands[band] {
             let view = &ctx.views[plane as usize];
-            let vector = kernel != Kernel::PerHit && view.shadow == PlaneView::UNSHADOWED;
+            let occluders = ctx.occluders_of(view);
+            let prepared = weights.prepare(&view.frame);
             for row in first_row..first_row + rows {
                 let Some((first, last)) = self.span(plane as usize, row) else {
                     continue;
                 };
-                let base = (row - first_row) as usize * w;
-                let s = base + first as usize..base + last as usize + 1;
+                // Whole blocks: the span grown to a multiple of LANES, into the row's padding
+                // if need be (padding rays never hit). Every kernel tests the same pixels.
+                let len = (last - first + 1) as usize;
+                let base = (row - first_row) as usize * stride + first as usize;
+                let s = base..base + len.next_multiple_of(LANES);
                 stats.tests += s.len() as u64;
-                if vector {
+                if kernel == Kernel::PerHit {
+                    for k in s {
+                        let one = RayLanes { x: [soa.x[k]], y: [soa.y[k]], z: [soa.z[k]], t0: [soa.t0[k]], t1: [soa.t1[k]] };
+                        let (r, g, b) = (&mut acc.r[k], &mut acc.g[k], &mut acc.b[k]);
+                        let sums = [std::array::from_mut(r), std::array::from_mut(g), std::array::from_mut(b)];
+                        stats.hits += if ext.grey {
+                            view.gather_lanes::<D, 1, true, CONTRIBUTE>(weights, &prepared, occluders, ext.sigma_t, &one, sums)
+                        } else {
+                            view.gather_lanes::<D, 1, false, CONTRIBUTE>(weights, &prepared, occluders, ext.sigma_t, &one, sums)
+                        } as u64;
+                    }
+                } else {
                     let span_rays = SpanRays {
                         x: &soa.x[s.clone()],
                         y: &soa.y[s.clone()],
@@ -230,37 +246,30 @@ impl ScreenRaster {
                     stats.hits += gather_span::<D, CONTRIBUTE>(
                         kernel,
                         weights,
+                        &prepared,
                         view,
+                        occluders,
                         ext.sigma_t,
                         ext.grey,
                         span_rays,
                         span_sums,
                     );
-                } else {
-                    // Planes that another panel may shadow (or the per-hit kernel asked for).
-                    for k in s {
-                        if CONTRIBUTE {
-                            if let Some(c) = ctx.gather_one(weights, view, &rays[k]) {
-                                stats.hits += 1;
-                                acc.add(k, c);
-                            }
-                        } else {
-                            let r = &rays[k];
-                            stats.hits += view.crossing(r.dir.to_array(), r.t0, r.t1).hit as u64;
-                        }
-                    }
                 }
             }
         }
         for (k, s) in sums.iter_mut().enumerate() {
-            *s += Vec3::new(acc.r[k], acc.g[k], acc.b[k]);
+            let i = (k / w) * stride + k % w;
+            *s += Vec3::new(acc.r[i], acc.g[i], acc.b[i]);
         }
         stats
     }
 }
 
-/// The camera rays of one band as a structure of arrays, so that a span vectorises.
+/// The camera rays of one band as a structure of arrays, so that a span vectorises. Each row is
+/// followed by at least LANES - 1 padding rays that never hit anything (zero direction, empty
+/// segment), so that a span grown to whole blocks stays in its row.
 struct BandRays {
+    stride: usize,
     x: Vec<f32>,
     y: Vec<f32>,
     z: Vec<f32>,
@@ -269,18 +278,26 @@ struct BandRays {
 }
 
 impl BandRays {
-    fn new(rays: &[CameraRay]) -> Self {
-        BandRays {
-            x: rays.iter().map(|r| r.dir.x).collect(),
-            y: rays.iter().map(|r| r.dir.y).collect(),
-            z: rays.iter().map(|r| r.dir.z).collect(),
-            t0: rays.iter().map(|r| r.t0).collect(),
-            t1: rays.iter().map(|r| r.t1).collect(),
+    fn new(rays: &[CameraRay], width: usize) -> Self {
+        let stride = (width + LANES - 1).next_multiple_of(LANES);
+        let n = rays.len() / width * stride;
+        let mut soa = BandRays {
+            stride,
+            x: vec![0.0; n],
+            y: vec![0.0; n],
+            z: vec![0.0; n],
+            t0: vec![1.0; n],
+            t1: vec![0.0; n],
+        };
+        for (k, r) in rays.iter().enumerate() {
+            let i = (k / width) * stride + k % width;
+            (soa.x[i], soa.y[i], soa.z[i], soa.t0[i], soa.t1[i]) = (r.dir.x, r.dir.y, r.dir.z, r.t0, r.t1);
         }
+        soa
     }
 }
 
-/// Per-pixel RGB sums of one band, a structure of arrays.
+/// Per-pixel RGB sums of one band (rows padded like [`BandRays`]), a structure of arrays.
 struct BandSums {
     r: Vec<f32>,
     g: Vec<f32>,
@@ -290,11 +307,5 @@ struct BandSums {
 impl BandSums {
     fn new(n: usize) -> Self {
         BandSums { r: vec![0.0; n], g: vec![0.0; n], b: vec![0.0; n] }
-    }
-
-    fn add(&mut self, k: usize, c: Vec3) {
-        self.r[k] += c.x;
-        self.g[k] += c.y;
-        self.b[k] += c.z;
     }
 }

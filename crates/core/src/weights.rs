@@ -243,26 +243,58 @@ pub struct HitLocal {
     pub a: f32,
 }
 
-impl HitLocal {
-    /// (a_u, a_v), undoing the rotation det(alpha) = cos a_u + sin a_v,
-    /// det(alpha_perp) = -sin a_u + cos a_v.
-    #[inline(always)]
-    pub fn a_uv(&self, f: &PlaneFrame) -> (f32, f32) {
-        (f.cos_a * self.det - f.sin_a * self.det_perp, f.sin_a * self.det + f.cos_a * self.det_perp)
-    }
+/// L hits on one plane, lane by lane (L = 1 on the per-hit path, [`crate::kernel::LANES`] in the
+/// vector kernels).
+#[derive(Clone, Copy, Debug)]
+pub struct HitLanes<const L: usize> {
+    pub det: [f32; L],
+    pub det_perp: [f32; L],
+    pub a: [f32; L],
+}
+
+/// (a_u, a_v), undoing the rotation det(alpha) = cos a_u + sin a_v,
+/// det(alpha_perp) = -sin a_u + cos a_v.
+#[inline(always)]
+fn a_uv(f: &PlaneFrame, det: f32, det_perp: f32) -> (f32, f32) {
+    (f.cos_a * det - f.sin_a * det_perp, f.sin_a * det + f.cos_a * det_perp)
 }
 
 /// A denominator D, specialised per estimator so that the gathering loop is monomorphised.
+///
+/// D is computed for L hits of one plane at a time, each lane with the same operations in the
+/// same order whatever L, so that the per-hit path (L = 1) and the vector kernels
+/// (L = [`crate::kernel::LANES`]) give bit-identical values: one implementation for every width,
+/// written as loops over lanes that the compiler turns into vector instructions.
 pub trait Denominator: Sync + Send {
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32;
+    /// What D needs of a plane beyond its [`PlaneFrame`], made once per plane before its hits
+    /// are gathered (for K orientations: the K - 1 rotated chord directions).
+    type Plane: Clone + Send + Sync;
+
+    fn prepare(&self, f: &PlaneFrame) -> Self::Plane;
+
+    /// D of each of `L` hits on the plane `p` was prepared for.
+    fn denominators<const L: usize>(&self, p: &Self::Plane, h: &HitLanes<L>, out: &mut [f32; L]);
+
+    /// D of one hit (preparing the plane for it): for tests and benchmarks.
+    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
+        let mut out = [0.0];
+        self.denominators(&self.prepare(f), &HitLanes { det: [h.det], det_perp: [h.det_perp], a: [h.a] }, &mut out);
+        out[0]
+    }
 }
 
 /// `unweighted`: D = g(alpha), paper eq. (22).
 pub struct Unweighted;
 impl Denominator for Unweighted {
+    type Plane = PlaneFrame;
+    fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+        *f
+    }
     #[inline(always)]
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
-        f.width * h.det.abs()
+    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+        for l in 0..L {
+            out[l] = f.width * h.det[l].abs();
+        }
     }
 }
 
@@ -270,9 +302,16 @@ impl Denominator for Unweighted {
 /// a_u^2 + a_v^2 = det(alpha)^2 + det(alpha_perp)^2, a rotation of the same pair.
 pub struct CmisCosine;
 impl Denominator for CmisCosine {
+    type Plane = PlaneFrame;
+    fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+        *f
+    }
     #[inline(always)]
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
-        f.width * std::f32::consts::FRAC_2_PI * (h.det * h.det + h.det_perp * h.det_perp).sqrt()
+    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+        for l in 0..L {
+            let (det, det_perp) = (h.det[l], h.det_perp[l]);
+            out[l] = f.width * std::f32::consts::FRAC_2_PI * (det * det + det_perp * det_perp).sqrt();
+        }
     }
 }
 
@@ -280,9 +319,15 @@ impl Denominator for CmisCosine {
 /// |det(alpha_perp)|) / 2.
 pub struct SmisCosinePair;
 impl Denominator for SmisCosinePair {
+    type Plane = PlaneFrame;
+    fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+        *f
+    }
     #[inline(always)]
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
-        f.width * 0.5 * (h.det.abs() + h.det_perp.abs())
+    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+        for l in 0..L {
+            out[l] = f.width * 0.5 * (h.det[l].abs() + h.det_perp[l].abs());
+        }
     }
 }
 
@@ -290,11 +335,17 @@ impl Denominator for SmisCosinePair {
 /// perpendicular chord measured through the hit's light vertex y'.
 pub struct SmisExactPair;
 impl Denominator for SmisExactPair {
+    type Plane = PlaneFrame;
+    fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+        *f
+    }
     #[inline(always)]
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
-        let (p, q) = f.vertex(h.a);
-        let width_perp = chord_width(f.light_w, f.light_h, p, q, &f.perp);
-        0.5 * (f.width * h.det.abs() + width_perp * h.det_perp.abs())
+    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+        for l in 0..L {
+            let (p, q) = f.vertex(h.a[l]);
+            let width_perp = chord_width(f.light_w, f.light_h, p, q, &f.perp);
+            out[l] = 0.5 * (f.width * h.det[l].abs() + width_perp * h.det_perp[l].abs());
+        }
     }
 }
 
@@ -312,36 +363,81 @@ impl StratifiedK {
     }
 }
 
+/// One of the K - 1 further orientations beta_k = alpha + k pi / K of a plane, reduced to
+/// [0, pi): its (cos, sin) and its chord direction.
+#[derive(Clone, Copy, Debug)]
+pub struct Orientation {
+    pub cos: f32,
+    pub sin: f32,
+    pub chord: ChordDirection<f32>,
+}
+
+/// A plane prepared for K orientations: the rotations and their reciprocals (two divisions
+/// each) are made once per plane, so that an orientation costs a hit a few multiplies.
+#[derive(Clone, Debug)]
+pub struct PlaneOrientations {
+    pub frame: PlaneFrame,
+    pub others: Vec<Orientation>,
+}
+
 impl Denominator for StratifiedK {
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
-        let (a_u, a_v) = h.a_uv(f);
-        let (p, q) = f.vertex(h.a);
-        let mut sum = if self.exact { f.width * h.det.abs() } else { h.det.abs() };
-        for &(ck, sk) in &self.rotations {
-            // beta = alpha + k pi / K, reduced to [0, pi) so that sin(beta) >= 0.
-            let (mut c, mut s) = (f.cos_a * ck - f.sin_a * sk, f.sin_a * ck + f.cos_a * sk);
-            if s < 0.0 {
-                (c, s) = (-c, -s);
-            }
-            let det = (c * a_u + s * a_v).abs();
-            sum += if self.exact {
-                chord_width(f.light_w, f.light_h, p, q, &ChordDirection::<f32>::from_cos_sin(c, s)) * det
-            } else {
-                det
-            };
+    type Plane = PlaneOrientations;
+
+    fn prepare(&self, f: &PlaneFrame) -> PlaneOrientations {
+        let others = self
+            .rotations
+            .iter()
+            .map(|&(ck, sk)| {
+                // beta = alpha + k pi / K, reduced to [0, pi) so that sin(beta) >= 0.
+                let (mut c, mut s) = (f.cos_a * ck - f.sin_a * sk, f.sin_a * ck + f.cos_a * sk);
+                if s < 0.0 {
+                    (c, s) = (-c, -s);
+                }
+                Orientation { cos: c, sin: s, chord: ChordDirection::<f32>::from_cos_sin(c, s) }
+            })
+            .collect();
+        PlaneOrientations { frame: *f, others }
+    }
+
+    /// The orientations run in the outer loop and the lanes in the inner one, so that any K
+    /// vectorises; each lane still sums its orientations in the order k = 0, 1, .., K - 1.
+    #[inline(always)]
+    fn denominators<const L: usize>(&self, plane: &PlaneOrientations, h: &HitLanes<L>, out: &mut [f32; L]) {
+        let f = &plane.frame;
+        let (mut a_u, mut a_v, mut p, mut q) = ([0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
+        for l in 0..L {
+            (a_u[l], a_v[l]) = a_uv(f, h.det[l], h.det_perp[l]);
+            (p[l], q[l]) = f.vertex(h.a[l]);
+            out[l] = if self.exact { f.width * h.det[l].abs() } else { h.det[l].abs() };
         }
-        let mean = sum / (self.rotations.len() + 1) as f32;
-        if self.exact { mean } else { f.width * mean }
+        for o in &plane.others {
+            for l in 0..L {
+                let det = (o.cos * a_u[l] + o.sin * a_v[l]).abs();
+                out[l] += if self.exact { chord_width(f.light_w, f.light_h, p[l], q[l], &o.chord) * det } else { det };
+            }
+        }
+        let inv_k = 1.0 / (plane.others.len() + 1) as f32;
+        for l in 0..L {
+            let mean = out[l] * inv_k;
+            out[l] = if self.exact { mean } else { f.width * mean };
+        }
     }
 }
 
 /// `cmis-exact`: D = (1/pi) int_0^pi g(beta) d beta, closed form (f64).
 pub struct CmisExact;
 impl Denominator for CmisExact {
-    fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
-        let (a_u, a_v) = h.a_uv(f);
-        let (p, q) = f.vertex(h.a);
-        cmis_exact_mean(f.light_w as f64, f.light_h as f64, p as f64, q as f64, a_u as f64, a_v as f64) as f32
+    type Plane = PlaneFrame;
+    fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+        *f
+    }
+    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+        for l in 0..L {
+            let (a_u, a_v) = a_uv(f, h.det[l], h.det_perp[l]);
+            let (p, q) = f.vertex(h.a[l]);
+            out[l] = cmis_exact_mean(f.light_w as f64, f.light_h as f64, p as f64, q as f64, a_u as f64, a_v as f64)
+                as f32;
+        }
     }
 }
 
