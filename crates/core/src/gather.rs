@@ -108,7 +108,7 @@ impl PlaneView {
 
     /// L rays against the plane: the per-hit arithmetic, once for every path that gathers.
     /// Adds each lane's contribution (zero where a panel blocks the light path) to `sums`
-    /// unless `CONTRIBUTE` is off (then only hits are counted); returns the number of hits.
+    /// unless `CONTRIBUTE` is off, and counts each lane's hits in `hits`.
     /// `plane` is `weights.prepare(&self.frame)`, `occluders` the plane's shadowing panels.
     /// `GREY`: one exponential serves the three channels.
     #[allow(clippy::too_many_arguments)]
@@ -121,16 +121,17 @@ impl PlaneView {
         sigma_t: Vec3,
         rays: &RayLanes<L>,
         sums: [&mut [f32; L]; 3],
-    ) -> u32 {
+        hits: &mut [u32; L],
+    ) {
         let (mut hit, mut det, mut t, mut a, mut r) = ([false; L], [0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
         for l in 0..L {
             let c = self.crossing([rays.x[l], rays.y[l], rays.z[l]], rays.t0[l], rays.t1[l]);
             (hit[l], det[l], t[l], a[l], r[l]) = (c.hit, c.det, c.t, c.a, c.r);
+            hits[l] += c.hit as u32;
         }
-        let hits = hit.iter().map(|&h| h as u32).sum();
         // A block without a hit adds nothing (adding +0.0 would not change a sum either).
-        if !CONTRIBUTE || hits == 0 {
-            return hits;
+        if !CONTRIBUTE || !hit.iter().fold(false, |any, &h| any | h) {
+            return;
         }
         let mut lit = hit;
         for o in occluders {
@@ -152,7 +153,6 @@ impl PlaneView {
             sg[l] += cg;
             sb[l] += cb;
         }
-        hits
     }
 
     /// Where the ray with unit direction `dir` meets the plane, and whether that is a hit: inside
@@ -358,13 +358,13 @@ impl GatherContext {
         }
         let plane = weights.prepare(&view.frame);
         let occluders = self.occluders_of(view);
-        let (mut r, mut g, mut b) = ([0.0f32], [0.0f32], [0.0f32]);
+        let (mut r, mut g, mut b, mut hits) = ([0.0f32], [0.0f32], [0.0f32], [0u32]);
         let sums = [&mut r, &mut g, &mut b];
         let ext = self.extinction;
         if ext.grey {
-            view.gather_lanes::<D, 1, true, true>(weights, &plane, occluders, ext.sigma_t, &rays, sums);
+            view.gather_lanes::<D, 1, true, true>(weights, &plane, occluders, ext.sigma_t, &rays, sums, &mut hits);
         } else {
-            view.gather_lanes::<D, 1, false, true>(weights, &plane, occluders, ext.sigma_t, &rays, sums);
+            view.gather_lanes::<D, 1, false, true>(weights, &plane, occluders, ext.sigma_t, &rays, sums, &mut hits);
         }
         Some(Vec3::new(r[0], g[0], b[0]))
     }

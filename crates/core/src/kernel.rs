@@ -1,6 +1,6 @@
-//! The span kernels: one plane against a run of pixels of one row, in blocks of [`LANES`]. The
-//! loop body is the per-hit arithmetic of [`crate::gather`] ([`PlaneView::gather_lanes`]) and
-//! nothing else, written once in `span_body` and compiled for each vector width the CPU may
+//! The vector kernels: one plane against its runs of pixels in a band of rows, in blocks of
+//! [`LANES`]. The loop body is the per-hit arithmetic of [`crate::gather`]
+//! ([`PlaneView::gather_lanes`]) and nothing else, written once in `plane_body` and compiled for each vector width the CPU may
 //! have (AVX-512, AVX2 with FMA, the portable baseline), chosen at run time by [`Kernel`].
 //!
 //! No operation is fused or reordered between them (Rust never contracts `a * b + c`, and
@@ -97,9 +97,8 @@ impl FromStr for Kernel {
 /// rows), so no kernel has a scalar remainder loop.
 pub const LANES: usize = 16;
 
-/// The rays of a span as a structure of arrays (directions and segments), all of one length, a
-/// multiple of [`LANES`].
-pub struct SpanRays<'a> {
+/// The rays of a band of rows as a structure of arrays (directions and segments).
+pub struct BandRays<'a> {
     pub x: &'a [f32],
     pub y: &'a [f32],
     pub z: &'a [f32],
@@ -107,19 +106,28 @@ pub struct SpanRays<'a> {
     pub t1: &'a [f32],
 }
 
-/// The RGB sums of a span, a structure of arrays of the same length as its rays.
-pub struct SpanSums<'a> {
+/// The RGB sums of a band, a structure of arrays laid out like its rays.
+pub struct BandSums<'a> {
     pub r: &'a mut [f32],
     pub g: &'a mut [f32],
     pub b: &'a mut [f32],
 }
 
-/// One plane against a span with a vector kernel (`kernel` resolved, not [`Kernel::PerHit`]):
-/// [`PlaneView::gather_lanes`] on each block of [`LANES`] pixels. Adds each pixel's contribution
-/// to `sums` unless `CONTRIBUTE` is off (then only hits are counted). Returns the hit count.
+/// A run of pixels of one row to test against a plane: `start` and `len` index the band's
+/// arrays, `len` a multiple of [`LANES`].
+#[derive(Clone, Copy, Debug)]
+pub struct Span {
+    pub start: u32,
+    pub len: u32,
+}
+
+/// One plane against its spans in a band with a vector kernel (`kernel` resolved, not
+/// [`Kernel::PerHit`]): [`PlaneView::gather_lanes`] on each block of [`LANES`] pixels. Adds each
+/// pixel's contribution to `sums` unless `CONTRIBUTE` is off (then only hits are counted).
+/// Returns the hit count.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
+pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     kernel: Kernel,
     weights: &D,
     plane: &D::Plane,
@@ -127,32 +135,34 @@ pub fn gather_span<D: Denominator, const CONTRIBUTE: bool>(
     occluders: &[Occluder],
     sigma_t: Vec3,
     grey: bool,
-    rays: SpanRays,
-    sums: SpanSums,
+    spans: &[Span],
+    rays: &BandRays,
+    sums: &mut BandSums,
 ) -> u64 {
     macro_rules! run {
         ($f:ident) => {
             if grey {
-                $f::<D, true, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, rays, sums)
+                $f::<D, true, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, spans, rays, sums)
             } else {
-                $f::<D, false, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, rays, sums)
+                $f::<D, false, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, spans, rays, sums)
             }
         };
     }
     match kernel {
         // SAFETY: `resolve` returned these kernels only after checking the CPU's features.
         #[cfg(target_arch = "x86_64")]
-        Kernel::Avx512 => unsafe { run!(span_avx512) },
+        Kernel::Avx512 => unsafe { run!(plane_avx512) },
         #[cfg(target_arch = "x86_64")]
-        Kernel::Avx2 => unsafe { run!(span_avx2) },
-        _ => run!(span_portable),
+        Kernel::Avx2 => unsafe { run!(plane_avx2) },
+        _ => run!(plane_portable),
     }
 }
 
-/// The compiled copies of [`span_body`]: one per vector width, chosen at run time.
-macro_rules! span_kernel {
+/// The compiled copies of [`plane_body`]: one per vector width, chosen at run time.
+macro_rules! plane_kernel {
     ($(#[$attr:meta])* $name:ident) => {
         $(#[$attr])*
+        #[allow(clippy::too_many_arguments)]
         #[inline(never)]
         fn $name<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
             weights: &D,
@@ -160,65 +170,70 @@ macro_rules! span_kernel {
             view: &PlaneView,
             occluders: &[Occluder],
             sigma_t: Vec3,
-            rays: SpanRays,
-            sums: SpanSums,
+            spans: &[Span],
+            rays: &BandRays,
+            sums: &mut BandSums,
         ) -> u64 {
-            span_body::<D, GREY, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, rays, sums)
+            plane_body::<D, GREY, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, spans, rays, sums)
         }
     };
 }
 
-span_kernel!(
-    /// [`span_body`] compiled for 16-wide vectors.
+plane_kernel!(
+    /// [`plane_body`] compiled for 16-wide vectors.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
-    span_avx512
+    plane_avx512
 );
-span_kernel!(
-    /// [`span_body`] compiled for 8-wide vectors.
+plane_kernel!(
+    /// [`plane_body`] compiled for 8-wide vectors.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    span_avx2
+    plane_avx2
 );
-span_kernel!(
-    /// [`span_body`] for the baseline target.
-    span_portable
+plane_kernel!(
+    /// [`plane_body`] for the baseline target.
+    plane_portable
 );
 
-/// The kernel proper: the span block by block. Each wrapper above is `inline(never)` on
-/// purpose: as separate slice arguments the sums and the rays are known not to alias (Rust
-/// marks them `noalias`). The plane is copied into a local first, so the compiler knows the
-/// stores to the sums cannot change it.
+/// The kernel proper: the plane's spans block by block. The plane's constants are loaded once
+/// per plane and band (not per span), and the hits are counted per lane and summed once.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn span_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+fn plane_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     weights: &D,
     plane: &D::Plane,
     view: &PlaneView,
     occluders: &[Occluder],
     sigma_t: Vec3,
-    rays: SpanRays,
-    sums: SpanSums,
+    spans: &[Span],
+    rays: &BandRays,
+    sums: &mut BandSums,
 ) -> u64 {
     let view = *view;
     let lanes = |s: &[f32], i: usize| -> [f32; LANES] { s[i..i + LANES].try_into().unwrap() };
-    let mut hits = 0u64;
-    for i in (0..rays.x.len() / LANES * LANES).step_by(LANES) {
-        let block = RayLanes {
-            x: lanes(rays.x, i),
-            y: lanes(rays.y, i),
-            z: lanes(rays.z, i),
-            t0: lanes(rays.t0, i),
-            t1: lanes(rays.t1, i),
-        };
-        let sums: [&mut [f32; LANES]; 3] = [
-            (&mut sums.r[i..i + LANES]).try_into().unwrap(),
-            (&mut sums.g[i..i + LANES]).try_into().unwrap(),
-            (&mut sums.b[i..i + LANES]).try_into().unwrap(),
-        ];
-        hits += view.gather_lanes::<D, LANES, GREY, CONTRIBUTE>(weights, plane, occluders, sigma_t, &block, sums)
-            as u64;
+    let mut hits = [0u32; LANES];
+    for span in spans {
+        let (start, end) = (span.start as usize, (span.start + span.len) as usize);
+        for i in (start..end).step_by(LANES) {
+            let block = RayLanes {
+                x: lanes(rays.x, i),
+                y: lanes(rays.y, i),
+                z: lanes(rays.z, i),
+                t0: lanes(rays.t0, i),
+                t1: lanes(rays.t1, i),
+            };
+            let block_sums: [&mut [f32; LANES]; 3] = [
+                (&mut sums.r[i..i + LANES]).try_into().unwrap(),
+                (&mut sums.g[i..i + LANES]).try_into().unwrap(),
+                (&mut sums.b[i..i + LANES]).try_into().unwrap(),
+            ];
+            view.gather_lanes::<D, LANES, GREY, CONTRIBUTE>(
+                weights, plane, occluders, sigma_t, &block, block_sums, &mut hits,
+            );
+        }
     }
-    hits
+    hits.iter().map(|&h| h as u64).sum()
 }
 
 #[cfg(test)]

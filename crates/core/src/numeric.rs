@@ -49,7 +49,7 @@ pub fn dot<T: Real>(a: V3<T>, b: V3<T>) -> T {
 
 /// exp(x) for x <= 0 in f32, branch-free so that loops over pixels vectorise: x = k ln 2 + r
 /// with k = round(x / ln 2) (Cody-Waite, |r| <= ln 2 / 2), exp(r) by its Taylor series to r^7
-/// (truncation below 6e-9 relative), and 2^k written into the exponent bits. Below -87 (where
+/// (truncation below 6e-9 relative, evaluated by Estrin's scheme), and 2^k written into the exponent bits. Below -87 (where
 /// 2^k would leave the normal range) the result is 0. Within 2e-7 relative of exp (tested).
 #[inline(always)]
 #[allow(clippy::manual_clamp)] // clamp has a panic path, which would stop vectorisation
@@ -64,10 +64,12 @@ pub fn exp_f32(x: f32) -> f32 {
     let shifted = xc * std::f32::consts::LOG2_E + ROUND;
     let k = shifted - ROUND;
     let r = (xc - k * LN2_HI) - k * LN2_LO;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
+    // The degree-7 Taylor polynomial by Estrin's scheme: the same terms as Horner's rule in
+    // a dependency chain of 6 operations instead of 14, so vector lanes wait less.
+    let (r2, r4) = (r * r, (r * r) * (r * r));
+    let low = (1.0 + r) + r2 * (0.5 + r * (1.0 / 6.0));
+    let high = (1.0 / 24.0 + r * (1.0 / 120.0)) + r2 * (1.0 / 720.0 + r * (1.0 / 5040.0));
+    let p = low + r4 * high;
     let scale = f32::from_bits(shifted.to_bits().wrapping_sub(0x4B40_0000 - 127) << 23);
     if x < -87.0 { 0.0 } else { p * scale }
 }

@@ -12,7 +12,7 @@
 
 use crate::camera::Camera;
 use crate::gather::{CameraRay, GatherContext, GatherStats, RayLanes};
-use crate::kernel::{Kernel, LANES, SpanRays, SpanSums, gather_span};
+use crate::kernel::{self, Kernel, LANES, Span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
@@ -209,52 +209,62 @@ impl ScreenRaster {
         let mut acc = BandSums::new(soa.x.len());
         let mut stats = GatherStats::default();
         let ext = ctx.extinction;
+        let band_rays = kernel::BandRays { x: &soa.x, y: &soa.y, z: &soa.z, t0: &soa.t0, t1: &soa.t1 };
+        let mut band_sums = kernel::BandSums { r: &mut acc.r, g: &mut acc.g, b: &mut acc.b };
+        let mut spans = Vec::with_capacity(BAND_ROWS as usize);
         for &plane in &self.bands[band] {
             let view = &ctx.views[plane as usize];
             let occluders = ctx.occluders_of(view);
-            let prepared = weights.prepare(&view.frame);
+            spans.clear();
             for row in first_row..first_row + rows {
                 let Some((first, last)) = self.span(plane as usize, row) else {
                     continue;
                 };
                 // Whole blocks: the span grown to a multiple of LANES, into the row's padding
                 // if need be (padding rays never hit). Every kernel tests the same pixels.
-                let len = (last - first + 1) as usize;
-                let base = (row - first_row) as usize * stride + first as usize;
-                let s = base..base + len.next_multiple_of(LANES);
-                stats.tests += s.len() as u64;
-                if kernel == Kernel::PerHit {
-                    for k in s {
-                        let one = RayLanes { x: [soa.x[k]], y: [soa.y[k]], z: [soa.z[k]], t0: [soa.t0[k]], t1: [soa.t1[k]] };
-                        let (r, g, b) = (&mut acc.r[k], &mut acc.g[k], &mut acc.b[k]);
-                        let sums = [std::array::from_mut(r), std::array::from_mut(g), std::array::from_mut(b)];
-                        stats.hits += if ext.grey {
-                            view.gather_lanes::<D, 1, true, CONTRIBUTE>(weights, &prepared, occluders, ext.sigma_t, &one, sums)
-                        } else {
-                            view.gather_lanes::<D, 1, false, CONTRIBUTE>(weights, &prepared, occluders, ext.sigma_t, &one, sums)
-                        } as u64;
+                let len = (last - first + 1).next_multiple_of(LANES as u32);
+                spans.push(Span { start: (row - first_row) * stride as u32 + first, len });
+                stats.tests += len as u64;
+            }
+            if spans.is_empty() {
+                continue;
+            }
+            let prepared = weights.prepare(&view.frame);
+            if kernel == Kernel::PerHit {
+                let mut hits = [0u32];
+                for k in spans.iter().flat_map(|s| s.start as usize..(s.start + s.len) as usize) {
+                    let one =
+                        RayLanes { x: [soa.x[k]], y: [soa.y[k]], z: [soa.z[k]], t0: [soa.t0[k]], t1: [soa.t1[k]] };
+                    let sums = [
+                        std::array::from_mut(&mut band_sums.r[k]),
+                        std::array::from_mut(&mut band_sums.g[k]),
+                        std::array::from_mut(&mut band_sums.b[k]),
+                    ];
+                    let (sigma_t, o) = (ext.sigma_t, occluders);
+                    if ext.grey {
+                        view.gather_lanes::<D, 1, true, CONTRIBUTE>(
+                            weights, &prepared, o, sigma_t, &one, sums, &mut hits,
+                        );
+                    } else {
+                        view.gather_lanes::<D, 1, false, CONTRIBUTE>(
+                            weights, &prepared, o, sigma_t, &one, sums, &mut hits,
+                        );
                     }
-                } else {
-                    let span_rays = SpanRays {
-                        x: &soa.x[s.clone()],
-                        y: &soa.y[s.clone()],
-                        z: &soa.z[s.clone()],
-                        t0: &soa.t0[s.clone()],
-                        t1: &soa.t1[s.clone()],
-                    };
-                    let span_sums = SpanSums { r: &mut acc.r[s.clone()], g: &mut acc.g[s.clone()], b: &mut acc.b[s] };
-                    stats.hits += gather_span::<D, CONTRIBUTE>(
-                        kernel,
-                        weights,
-                        &prepared,
-                        view,
-                        occluders,
-                        ext.sigma_t,
-                        ext.grey,
-                        span_rays,
-                        span_sums,
-                    );
                 }
+                stats.hits += hits[0] as u64;
+            } else {
+                stats.hits += kernel::gather_plane::<D, CONTRIBUTE>(
+                    kernel,
+                    weights,
+                    &prepared,
+                    view,
+                    occluders,
+                    ext.sigma_t,
+                    ext.grey,
+                    &spans,
+                    &band_rays,
+                    &mut band_sums,
+                );
             }
         }
         for (k, s) in sums.iter_mut().enumerate() {
@@ -281,14 +291,8 @@ impl BandRays {
     fn new(rays: &[CameraRay], width: usize) -> Self {
         let stride = (width + LANES - 1).next_multiple_of(LANES);
         let n = rays.len() / width * stride;
-        let mut soa = BandRays {
-            stride,
-            x: vec![0.0; n],
-            y: vec![0.0; n],
-            z: vec![0.0; n],
-            t0: vec![1.0; n],
-            t1: vec![0.0; n],
-        };
+        let mut soa =
+            BandRays { stride, x: vec![0.0; n], y: vec![0.0; n], z: vec![0.0; n], t0: vec![1.0; n], t1: vec![0.0; n] };
         for (k, r) in rays.iter().enumerate() {
             let i = (k / width) * stride + k % width;
             (soa.x[i], soa.y[i], soa.z[i], soa.t0[i], soa.t1[i]) = (r.dir.x, r.dir.y, r.dir.z, r.t0, r.t1);

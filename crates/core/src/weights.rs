@@ -435,8 +435,8 @@ impl Denominator for CmisExact {
         for l in 0..L {
             let (a_u, a_v) = a_uv(f, h.det[l], h.det_perp[l]);
             let (p, q) = f.vertex(h.a[l]);
-            out[l] = cmis_exact_mean(f.light_w as f64, f.light_h as f64, p as f64, q as f64, a_u as f64, a_v as f64)
-                as f32;
+            out[l] =
+                cmis_exact_mean(f.light_w as f64, f.light_h as f64, p as f64, q as f64, a_u as f64, a_v as f64) as f32;
         }
     }
 }
