@@ -14,6 +14,9 @@
 //! it with L = 1. Every lane does the same operations in the same order whatever L, so images are
 //! bit-identical whichever path found a hit.
 
+// Lane loops (`for l in 0..L`) index several arrays in step, as the vector code they become.
+#![allow(clippy::needless_range_loop)]
+
 use crate::light::RectLight;
 use crate::numeric::exp_f32;
 use crate::photon_plane::PhotonPlane;
