@@ -204,9 +204,9 @@ impl ScreenRaster {
         let w = self.width as usize;
         let first_row = band as u32 * BAND_ROWS;
         let rows = (rays.len() / w) as u32;
-        let soa = BandRays::new(rays, w);
+        let soa = PaddedRays::new(rays, w);
         let stride = soa.stride;
-        let mut acc = BandSums::new(soa.x.len());
+        let mut acc = PaddedSums::new(soa.x.len());
         let mut stats = GatherStats::default();
         let ext = ctx.extinction;
         let band_rays = kernel::BandRays { x: &soa.x, y: &soa.y, z: &soa.z, t0: &soa.t0, t1: &soa.t1 };
@@ -278,7 +278,7 @@ impl ScreenRaster {
 /// The camera rays of one band as a structure of arrays, so that a span vectorises. Each row is
 /// followed by at least LANES - 1 padding rays that never hit anything (zero direction, empty
 /// segment), so that a span grown to whole blocks stays in its row.
-struct BandRays {
+struct PaddedRays {
     stride: usize,
     x: Vec<f32>,
     y: Vec<f32>,
@@ -287,12 +287,18 @@ struct BandRays {
     t1: Vec<f32>,
 }
 
-impl BandRays {
+impl PaddedRays {
     fn new(rays: &[CameraRay], width: usize) -> Self {
         let stride = (width + LANES - 1).next_multiple_of(LANES);
         let n = rays.len() / width * stride;
-        let mut soa =
-            BandRays { stride, x: vec![0.0; n], y: vec![0.0; n], z: vec![0.0; n], t0: vec![1.0; n], t1: vec![0.0; n] };
+        let mut soa = PaddedRays {
+            stride,
+            x: vec![0.0; n],
+            y: vec![0.0; n],
+            z: vec![0.0; n],
+            t0: vec![1.0; n],
+            t1: vec![0.0; n],
+        };
         for (k, r) in rays.iter().enumerate() {
             let i = (k / width) * stride + k % width;
             (soa.x[i], soa.y[i], soa.z[i], soa.t0[i], soa.t1[i]) = (r.dir.x, r.dir.y, r.dir.z, r.t0, r.t1);
@@ -301,15 +307,15 @@ impl BandRays {
     }
 }
 
-/// Per-pixel RGB sums of one band (rows padded like [`BandRays`]), a structure of arrays.
-struct BandSums {
+/// Per-pixel RGB sums of one band (rows padded like [`PaddedRays`]), a structure of arrays.
+struct PaddedSums {
     r: Vec<f32>,
     g: Vec<f32>,
     b: Vec<f32>,
 }
 
-impl BandSums {
+impl PaddedSums {
     fn new(n: usize) -> Self {
-        BandSums { r: vec![0.0; n], g: vec![0.0; n], b: vec![0.0; n] }
+        PaddedSums { r: vec![0.0; n], g: vec![0.0; n], b: vec![0.0; n] }
     }
 }
