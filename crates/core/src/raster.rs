@@ -105,36 +105,61 @@ impl ScreenRaster {
         }
     }
 
-    /// The columns `[first, last]` whose pixel squares may meet polygon `i` in row `row`.
-    fn span(&self, i: usize, row: u32) -> Option<(u32, u32)> {
+    /// For each row of `first_row..first_row + rows` (at most [`BAND_ROWS`]), the columns
+    /// `[first, last]` whose pixel squares may meet polygon `i`, if any: the polygon's x-range
+    /// within the row's strip `[row - m, row + 1 + m]`, grown by m = [`SPAN_MARGIN`]. One walk
+    /// over the edges serves the whole band; each edge's slope is divided once.
+    fn spans(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
+        // Compare-and-select: one instruction each (f32::min and max spend several on NaN,
+        // which the finite vertices never are).
+        let min = |a: f32, b: f32| if a < b { a } else { b };
+        let max = |a: f32, b: f32| if a > b { a } else { b };
         let poly = &self.vertices[self.offsets[i] as usize..self.offsets[i + 1] as usize];
-        let (y0, y1) = (row as f32 - SPAN_MARGIN, row as f32 + 1.0 + SPAN_MARGIN);
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        let mut lo = [f32::INFINITY; BAND_ROWS as usize];
+        let mut hi = [f32::NEG_INFINITY; BAND_ROWS as usize];
+        let band_top = first_row as f32 - SPAN_MARGIN;
+        let band_bottom = (first_row + rows) as f32 + SPAN_MARGIN;
         for (k, &p) in poly.iter().enumerate() {
             let q = poly[(k + 1) % poly.len()];
-            let (ymin, ymax) = (p.y.min(q.y), p.y.max(q.y));
-            if ymax < y0 || ymin > y1 {
+            let (ymin, ymax) = (min(p.y, q.y), max(p.y, q.y));
+            if ymax < band_top || ymin > band_bottom {
                 continue;
             }
-            if ymax - ymin <= 0.0 {
-                lo = lo.min(p.x.min(q.x));
-                hi = hi.max(p.x.max(q.x));
+            // The band's rows whose strips the edge's y-range meets.
+            let first = max((ymin - 1.0 - SPAN_MARGIN).ceil() - first_row as f32, 0.0) as usize;
+            let last = (max((ymax + SPAN_MARGIN).floor() - first_row as f32, 0.0) as usize).min(rows as usize - 1);
+            let dy = q.y - p.y;
+            if dy == 0.0 {
+                // Horizontal: both ends lie in the strips it meets.
+                for j in first..=last {
+                    lo[j] = min(lo[j], min(p.x, q.x));
+                    hi[j] = max(hi[j], max(p.x, q.x));
+                }
                 continue;
             }
-            // The edge's x at the ends of its part inside the row.
-            for y in [ymin.max(y0), ymax.min(y1)] {
-                let s = ((y - p.y) / (q.y - p.y)).clamp(0.0, 1.0);
-                let x = p.x + (q.x - p.x) * s;
-                lo = lo.min(x);
-                hi = hi.max(x);
+            let slope = (q.x - p.x) / dy;
+            let (xlo, xhi) = (min(p.x, q.x), max(p.x, q.x));
+            for j in first..=last {
+                let row = (first_row as usize + j) as f32;
+                // The edge's x at the ends of its part inside the strip, kept on the edge.
+                for y in [max(ymin, row - SPAN_MARGIN), min(ymax, row + 1.0 + SPAN_MARGIN)] {
+                    let x = min(max(p.x + (y - p.y) * slope, xlo), xhi);
+                    lo[j] = min(lo[j], x);
+                    hi[j] = max(hi[j], x);
+                }
             }
         }
-        if lo > hi {
-            return None;
+        let mut out = [None; BAND_ROWS as usize];
+        for j in 0..rows as usize {
+            if lo[j] > hi[j] || hi[j] + SPAN_MARGIN < 0.0 {
+                continue;
+            }
+            // Truncation is floor for the non-negative values it is given.
+            let first = max(lo[j] - SPAN_MARGIN, 0.0) as u32;
+            let last = ((hi[j] + SPAN_MARGIN) as u32).min(self.width - 1);
+            out[j] = (first <= last).then_some((first, last));
         }
-        let first = (lo - SPAN_MARGIN).floor().max(0.0);
-        let last = (hi + SPAN_MARGIN).floor().min(self.width as f32 - 1.0);
-        (first <= last).then_some((first as u32, last as u32))
+        out
     }
 
     /// Gathers every plane into `out` (one RGB sum per pixel, row-major), for the rays `rays`
@@ -216,8 +241,8 @@ impl ScreenRaster {
             let view = &ctx.views[plane as usize];
             let occluders = ctx.occluders_of(view);
             spans.clear();
-            for row in first_row..first_row + rows {
-                let Some((first, last)) = self.span(plane as usize, row) else {
+            for (row, span) in (first_row..).zip(self.spans(plane as usize, first_row, rows)) {
+                let Some((first, last)) = span else {
                     continue;
                 };
                 // Whole blocks: the span grown to a multiple of LANES, into the row's padding
