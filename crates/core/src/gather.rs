@@ -158,6 +158,28 @@ impl PlaneView {
         }
     }
 
+    /// [`PlaneView::gather_lanes`] with the grey or RGB case of the medium's extinction chosen
+    /// at run time (the vector kernels choose it once per plane instead).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn gather_lanes_in<D: Denominator, const L: usize, const CONTRIBUTE: bool>(
+        &self,
+        weights: &D,
+        plane: &D::Plane,
+        occluders: &[Occluder],
+        extinction: Extinction,
+        rays: &RayLanes<L>,
+        sums: [&mut [f32; L]; 3],
+        hits: &mut [u32; L],
+    ) {
+        let sigma_t = extinction.sigma_t;
+        if extinction.grey {
+            self.gather_lanes::<D, L, true, CONTRIBUTE>(weights, plane, occluders, sigma_t, rays, sums, hits);
+        } else {
+            self.gather_lanes::<D, L, false, CONTRIBUTE>(weights, plane, occluders, sigma_t, rays, sums, hits);
+        }
+    }
+
     /// Where the ray with unit direction `dir` meets the plane, and whether that is a hit: inside
     /// `[t0, t1]`, on the chord (`0 <= a <= width`) and strictly in front of the light (r > 0).
     ///
@@ -363,12 +385,7 @@ impl GatherContext {
         let occluders = self.occluders_of(view);
         let (mut r, mut g, mut b, mut hits) = ([0.0f32], [0.0f32], [0.0f32], [0u32]);
         let sums = [&mut r, &mut g, &mut b];
-        let ext = self.extinction;
-        if ext.grey {
-            view.gather_lanes::<D, 1, true, true>(weights, &plane, occluders, ext.sigma_t, &rays, sums, &mut hits);
-        } else {
-            view.gather_lanes::<D, 1, false, true>(weights, &plane, occluders, ext.sigma_t, &rays, sums, &mut hits);
-        }
+        view.gather_lanes_in::<D, 1, true>(weights, &plane, occluders, self.extinction, &rays, sums, &mut hits);
         Some(Vec3::new(r[0], g[0], b[0]))
     }
 

@@ -126,8 +126,11 @@ impl ScreenRaster {
                 continue;
             }
             // The band's rows whose strips the edge's y-range meets.
-            let first = max((ymin - 1.0 - SPAN_MARGIN).ceil() - first_row as f32, 0.0) as usize;
-            let last = (max((ymax + SPAN_MARGIN).floor() - first_row as f32, 0.0) as usize).min(rows as usize - 1);
+            // (Truncation of non-negative values instead of floor and ceil, which are library
+            // calls on the baseline target.)
+            let from = max(ymin - 1.0 - SPAN_MARGIN - first_row as f32, 0.0);
+            let first = from as usize + ((from as usize as f32) < from) as usize;
+            let last = (max(ymax + SPAN_MARGIN - first_row as f32, 0.0) as usize).min(rows as usize - 1);
             let dy = q.y - p.y;
             if dy == 0.0 {
                 // Horizontal: both ends lie in the strips it meets.
@@ -265,16 +268,7 @@ impl ScreenRaster {
                         std::array::from_mut(&mut band_sums.g[k]),
                         std::array::from_mut(&mut band_sums.b[k]),
                     ];
-                    let (sigma_t, o) = (ext.sigma_t, occluders);
-                    if ext.grey {
-                        view.gather_lanes::<D, 1, true, CONTRIBUTE>(
-                            weights, &prepared, o, sigma_t, &one, sums, &mut hits,
-                        );
-                    } else {
-                        view.gather_lanes::<D, 1, false, CONTRIBUTE>(
-                            weights, &prepared, o, sigma_t, &one, sums, &mut hits,
-                        );
-                    }
+                    view.gather_lanes_in::<D, 1, CONTRIBUTE>(weights, &prepared, occluders, ext, &one, sums, &mut hits);
                 }
                 stats.hits += hits[0] as u64;
             } else {
