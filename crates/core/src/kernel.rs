@@ -1,7 +1,8 @@
 //! The vector kernels: one plane against its runs of pixels in a band of rows, in blocks of
 //! [`LANES`]. The loop body is the per-hit arithmetic of [`crate::gather`]
-//! ([`PlaneView::gather_lanes`]) and nothing else, written once in `plane_body` and compiled for each vector width the CPU may
-//! have (AVX-512, AVX2 with FMA, the portable baseline), chosen at run time by [`Kernel`].
+//! ([`PlaneView::gather_lanes`]) and nothing else, written once in `plane_body` and compiled
+//! for each vector width the CPU may have (AVX-512, AVX2 with FMA, the portable baseline),
+//! chosen at run time by [`Kernel`].
 //!
 //! No operation is fused or reordered between them (Rust never contracts `a * b + c`, and
 //! every operation used is exactly rounded), so every kernel gives bit-identical sums.

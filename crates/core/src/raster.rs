@@ -4,8 +4,9 @@
 //! whose image point lies in the projection of the plane's polygon (clipped to the box). Each
 //! polygon is projected once, clipped to the image, and binned into horizontal bands of rows.
 //! A band walks its planes in index order; for every row it covers, the conservative span of
-//! pixels whose squares meet the polygon is tested exactly with [`crate::gather::PlaneView::gather_lanes`]. The exact
-//! test decides; the span only has to contain every pixel that can hit, whatever the jitter.
+//! pixels whose squares meet the polygon is tested exactly with
+//! [`crate::gather::PlaneView::gather_lanes`]. The exact test decides; the span only has to
+//! contain every pixel that can hit, whatever the jitter.
 //!
 //! Each pixel's sum runs over planes in index order whatever the thread count, so images are
 //! bit-identical for a seed.
