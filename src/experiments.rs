@@ -417,15 +417,18 @@ impl Row {
 }
 
 impl Table {
-    /// The line above the table: scene, resolution, rays, seed, reference, shared time.
+    /// What was rendered: scene, resolution, rays and seed.
+    fn setting(&self) -> String {
+        let rays = if self.pixel_center { "pixel-centre" } else { "jittered" };
+        let [w, h] = self.resolution;
+        format!("{} at {w}x{h}, {rays} rays, seed {}", self.scene, self.seed)
+    }
+
+    /// The line above the table: the setting, the reference, the shared time.
     fn summary(&self) -> String {
         format!(
-            "{} at {}x{}, {} rays, seed {}, against `{}`; {:.3} s shared (planes, structure, rays).",
-            self.scene,
-            self.resolution[0],
-            self.resolution[1],
-            if self.pixel_center { "pixel-centre" } else { "jittered" },
-            self.seed,
+            "{}, against `{}`; {:.3} s shared (planes, structure, rays).",
+            self.setting(),
             self.reference,
             self.shared_seconds
         )
@@ -466,14 +469,10 @@ impl Table {
     /// The page's notes: what was measured, against what.
     fn notes(&self, planes: usize) -> String {
         let mut s = format!(
-            "{} at {}x{}, {planes} photon planes, {} rays, seed {}, every estimator gathering the same planes \
-             along the same rays (one plane set per sampler).\nReference: {}.\nShared by the estimators of one \
-             sampler: {:.3} s (planes, structure, rays).",
-            self.scene,
-            self.resolution[0],
-            self.resolution[1],
-            if self.pixel_center { "pixel-centre" } else { "jittered" },
-            self.seed,
+            "{}, {planes} photon planes, every estimator gathering the same planes along the same rays (one \
+             plane set per sampler).\nReference: {}.\nShared by the estimators of one sampler: {:.3} s (planes, \
+             structure, rays).",
+            self.setting(),
             self.reference,
             self.shared_seconds
         );

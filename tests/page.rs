@@ -147,7 +147,7 @@ fn table_writes_a_self_contained_comparison_page() {
         assert!(html.contains(&format!("<th scope=\"col\">{column}</th>")), "no column {column}");
     }
     assert!(html.contains("<svg") && html.contains("MSE against time"), "no plot");
-    assert!(html.contains("six_lights at 32x18, 500 photon planes") && html.contains("ref.exr"));
+    assert!(html.contains("six_lights at 32x18, ") && html.contains(", 500 photon planes") && html.contains("ref.exr"));
 
     // Nothing from outside, and a policy that forbids it anyway.
     assert_eq!(outside_references(&html), Vec::<String>::new());

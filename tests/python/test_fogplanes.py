@@ -261,6 +261,12 @@ def test_files_that_cannot_be_opened_raise_os_errors(tmp_path):
         fogplanes.save_image(tmp_path / "no" / "x.exr", np.zeros((2, 2, 3)))
     with pytest.raises(ValueError, match=r"\.exr .* or \.png"):
         fogplanes.save_image(tmp_path / "x.jpg", np.zeros((2, 2, 3)))
+    # A broadcast array claims a huge shape at no cost: refused before anything is allocated.
+    with pytest.raises(ValueError, match="each side must be between"):
+        fogplanes.save_image(tmp_path / "x.exr", np.broadcast_to(np.float32(0), (200000, 200000, 3)))
+    with pytest.raises(ValueError, match="exposure"):
+        fogplanes.save_image(tmp_path / "x.png", np.zeros((2, 2, 3)), exposure=float("nan"))
+    assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*.tmp"))
 
 
 def test_bad_options_raise_value_error_with_the_cli_message(tmp_path):

@@ -88,10 +88,13 @@ fn parent_dir(path: &Path) -> PathBuf {
     }
 }
 
-/// A hidden temporary name beside `path`, unique to this process.
+/// A hidden temporary name beside `path`, unique to this process and this call (two threads
+/// writing the same destination, as Python may, never share one).
 pub fn temporary_path(path: &Path) -> PathBuf {
+    static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    parent_dir(path).join(format!(".{name}.{}.tmp", std::process::id()))
+    parent_dir(path).join(format!(".{name}.{}.{n}.tmp", std::process::id()))
 }
 
 /// Temporary files being written now, for [`remove_unfinished_files`].
@@ -159,7 +162,11 @@ impl Film {
                 let p = self.pixels[y * w + x];
                 (p.x, p.y, p.z)
             })
-            .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
+            .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))?;
+            // On disk before the rename, as write_file_atomically does.
+            std::fs::File::open(tmp)
+                .and_then(|f| f.sync_all())
+                .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
         })
     }
 
@@ -175,8 +182,16 @@ impl Film {
         save_rgb8_png(&self.to_rgb8(exposure), path)
     }
 
-    /// Reads the first RGB(A) layer of an EXR file.
+    /// Reads the first RGB(A) layer of an EXR file. Its size is read from the header and
+    /// checked first, so that a small file claiming a huge image is refused, not allocated.
     pub fn load_exr(path: &Path) -> Result<Film> {
+        let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
+        let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
+        for header in meta.headers.iter() {
+            let size = header.layer_size;
+            let side = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+            crate::limits::check_resolution(side(size.width()), side(size.height())).map_err(|m| bad(&m))?;
+        }
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |resolution, _| Film::new(resolution.width() as u32, resolution.height() as u32),

@@ -13,6 +13,9 @@ pub const MAX_PLANES: u64 = 1 << 27;
 pub const MAX_SPP: u32 = 1 << 16;
 /// The largest number of stratified orientations accepted.
 pub const MAX_ORIENTATIONS: u32 = 64;
+/// The largest total light power (area x luminance) accepted: images are f32 (largest about
+/// 3.4e38), and a pixel sums the power of thousands of hits.
+pub const MAX_TOTAL_POWER: f64 = 1e30;
 /// The most worker threads.
 pub const MAX_THREADS: usize = 1024;
 

@@ -145,7 +145,7 @@ impl PreparedPlanes {
     }
 
     /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`;
-    /// the raster uses `kernel` (resolved, see [`Kernel::resolve`]) for unshadowed planes.
+    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]).
     pub fn gather(
         &self,
         weighting: Weighting,
@@ -404,9 +404,9 @@ pub fn render_cancellable(
 }
 
 /// The first pass of a render on a time budget, small so that even the slowest estimator
-/// (cmis-exact, about 1 ms per plane at 640x360) measures its speed early; each further pass
-/// doubles the plane count (so the Sobol sampler's counts stay powers of two) until the budget
-/// runs short.
+/// measures its speed early; each further pass doubles the plane count (the passes before
+/// the last keep the Sobol sampler's counts at powers of two) until the budget runs short, and
+/// the last is sized from the measured time per plane.
 const FIRST_PASS_PLANES: usize = 256;
 
 /// Renders the scene within `budget` of wall time: planes in passes, each extending the plane
@@ -472,6 +472,8 @@ pub fn render_in_passes(
         if next == 0 {
             break;
         }
+        check_memory(scene.camera.width, scene.camera.height, next as u64)
+            .map_err(|m| Error::option("--time-budget", m))?;
         let pass_start = Instant::now();
         // Planes weighted as one of 1: the division by the final count comes at the end.
         let prepared = PreparedPlanes::range(scene, done..done + next, 1, opts.seed, opts.sampler, opts.accelerator);
@@ -486,8 +488,11 @@ pub fn render_in_passes(
         done += next;
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
     }
+    if done == 0 {
+        return Err(Error::option("--time-budget", "no plane pass was made"));
+    }
     let mut film = Film::new(scene.camera.width, scene.camera.height);
-    let inv = 1.0 / done.max(1) as f32;
+    let inv = 1.0 / done as f32;
     for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
         *f = *s * inv + *e;
     }

@@ -19,10 +19,10 @@ const PLANE_STREAM: u64 = 0x9_1A4E;
 pub enum Sampler {
     /// Randomised quasi-Monte Carlo: plane i is point i of a 5D Owen-scrambled Sobol sequence,
     /// an independent scrambling per seed ([`crate::sobol`]). Unbiased for every seed, and the
-    /// planes cover the six dimensions far more evenly than independent ones.
+    /// planes cover the five dimensions far more evenly than independent ones.
     #[default]
     Sobol,
-    /// Six independent uniform numbers per plane, as in the paper.
+    /// Five independent uniform numbers per plane, as in the paper.
     Independent,
 }
 
@@ -48,6 +48,7 @@ impl Sampler {
             }
             Sampler::Sobol => {
                 // Plane counts stay far below 2^32 (limits::MAX_PLANES).
+                debug_assert!(index <= u32::MAX as u64, "plane index {index} beyond the Sobol sequence");
                 let stream = mix64(seed ^ PLANE_STREAM);
                 let point: [f64; 5] = SobolSampler::new(stream).point(index as u32);
                 // The digits below the sequence's 32 bits, uniform and independent, as an Owen

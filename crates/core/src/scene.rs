@@ -283,8 +283,18 @@ impl Scene {
             }
             lights.push(light);
         }
-        if !(lights.iter().map(|l| l.power()).sum::<f64>() > 0.0) {
+        let power = lights.iter().map(|l| l.power()).sum::<f64>();
+        if !(power > 0.0) {
             return Err(err("light".into(), "every light has zero power (area x luminance); nothing to render".into()));
+        }
+        if !(power <= crate::limits::MAX_TOTAL_POWER) {
+            return Err(err(
+                "light".into(),
+                format!(
+                    "the lights' total power (area x luminance) is {power:e}, above the {:e} an f32 image can sum",
+                    crate::limits::MAX_TOTAL_POWER
+                ),
+            ));
         }
 
         // Render defaults.
@@ -481,6 +491,7 @@ radiance = 4
         expect_error(&format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"), "render.estimator", "unknown estimator");
         expect_error(&format!("{MINIMAL}\n[render]\nsampler = \"halton\"\n"), "render.sampler", "unknown sampler");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = [1, 2]"), "light[0].radiance", "three numbers");
+        expect_error(&MINIMAL.replace("radiance = 4", "radiance = 1e300"), "light", "total power");
     }
 
     #[test]

@@ -230,7 +230,11 @@ fn array_to_film(array: &PyArrayLike3<'_, f32, AllowTypeChange>, what: &str) -> 
             "{what}: expected an array of shape (height, width, 3), got ({h}, {w}, {c})"
         )));
     }
-    let mut film = Film::new(u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
+    let (w32, h32) = (u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
+    // The renderer's own limit on image sides, before anything is allocated (a broadcast
+    // array can claim a huge shape at no cost).
+    fogplanes::limits::check_resolution(w32, h32).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
+    let mut film = Film::new(w32, h32);
     for ((y, x), p) in (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).zip(film.pixels.iter_mut()) {
         *p = glam::Vec3::new(view[[y, x, 0]], view[[y, x, 1]], view[[y, x, 2]]);
     }
@@ -642,6 +646,9 @@ fn save_image(
     image: PyArrayLike3<'_, f32, AllowTypeChange>,
     exposure: f32,
 ) -> PyResult<()> {
+    if !exposure.is_finite() {
+        return Err(PyValueError::new_err(format!("exposure must be a finite number of stops, got {exposure}")));
+    }
     let film = array_to_film(&image, "image")?;
     fogplanes::film::check_image_output(&path).map_err(py_error)?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)

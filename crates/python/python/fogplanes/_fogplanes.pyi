@@ -170,7 +170,23 @@ def render(
     kernel: str = "auto",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
-) -> Image: ...
+) -> Image:
+    """Renders a scene with photon planes: the image, shape (height, width, 3), float32.
+
+    The arguments are those of `fogplanes render`, and None takes the scene's [render]
+    default exactly as the command line does: `estimator` (the scene's, else smis-exact),
+    `planes`, `seed`, `spp`, and `orientations` (the scene's K applies only when the scene's
+    estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
+    in a pool of that many threads (None: all cores); the image depends on the seed alone.
+    The image is bit-identical to the EXR that `fogplanes render` writes for the same
+    arguments. `sampler` is where the planes' random numbers come from: "sobol"
+    (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol). With
+    `return_stats=True`, returns (image, stats).
+
+    Raises ValueError for bad input (the command line's message), OSError for a scene file
+    that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+    """
+
 @overload
 def render(
     scene: Scene | PathLike,
@@ -188,33 +204,6 @@ def render(
     return_stats: Literal[True],
     sampler: str | None = None,
 ) -> tuple[Image, RenderStats]: ...
-def render(
-    scene: Scene | PathLike,
-    estimator: str | None = None,
-    planes: int | None = None,
-    seed: int | None = None,
-    spp: int | None = None,
-    pixel_center: bool = False,
-    resolution: tuple[int, int] | None = None,
-    orientations: int | None = None,
-    threads: int | None = None,
-    accelerator: str = "raster",
-    kernel: str = "auto",
-    return_stats: bool = False,
-) -> Image | tuple[Image, RenderStats]:
-    """Renders a scene with photon planes: the image, shape (height, width, 3), float32.
-
-    The arguments are those of `fogplanes render`, and None takes the scene's [render]
-    default exactly as the command line does: `estimator` (the scene's, else smis-exact),
-    `planes`, `seed`, `spp`, and `orientations` (the scene's K applies only when the scene's
-    estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
-    in a pool of that many threads (None: all cores); the image depends on the seed alone.
-    The image is bit-identical to the EXR that `fogplanes render` writes for the same
-    arguments. With `return_stats=True`, returns (image, stats).
-
-    Raises ValueError for bad input (the command line's message), OSError for a scene file
-    that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
-    """
 
 def reference(
     scene: Scene | PathLike,
