@@ -505,6 +505,15 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
             scene.camera.height
         )));
     }
+    // The comparison page is written last: refuse what it cannot show before any work.
+    if scene.camera.width.max(scene.camera.height) > page::MAX_SIDE {
+        return Err(input(anyhow!(
+            "--resolution: the table's comparison page shows images up to {} pixels on a side, not {}x{}",
+            page::MAX_SIDE,
+            scene.camera.width,
+            scene.camera.height
+        )));
+    }
     let planes = a.planes.unwrap_or(scene.render.planes);
     check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
     for &n in &a.sweep {

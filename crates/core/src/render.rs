@@ -465,7 +465,10 @@ pub fn render_in_passes(
         seconds_rays: start.elapsed().as_secs_f64(),
         ..Default::default()
     };
-    let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
+    // Each pass sums its planes in f32 weighted 1 (not 1/N, which is known only at the end);
+    // the passes add up in f64, so that the sums stay as far from f32 overflow as a single
+    // pass's.
+    let mut total = vec![glam::DVec3::ZERO; pass_rays.rays.len()];
     let (mut done, mut per_plane) = (0usize, 0.0);
     loop {
         let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
@@ -478,7 +481,11 @@ pub fn render_in_passes(
         // Planes weighted as one of 1: the division by the final count comes at the end.
         let prepared = PreparedPlanes::range(scene, done..done + next, 1, opts.seed, opts.sampler, opts.accelerator);
         let t = Instant::now();
+        let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
         let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
+        for (t, s) in total.iter_mut().zip(&sums) {
+            *t += s.as_dvec3();
+        }
         stats.seconds_gather += t.elapsed().as_secs_f64();
         stats.seconds_sampling += prepared.seconds_sampling;
         stats.seconds_build += prepared.seconds_build;
@@ -492,9 +499,9 @@ pub fn render_in_passes(
         return Err(Error::option("--time-budget", "no plane pass was made"));
     }
     let mut film = Film::new(scene.camera.width, scene.camera.height);
-    let inv = 1.0 / done as f32;
-    for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
-        *f = *s * inv + *e;
+    let inv = 1.0 / done as f64;
+    for ((f, s), e) in film.pixels.iter_mut().zip(&total).zip(&pass_rays.emission) {
+        *f = (*s * inv).as_vec3() + *e;
     }
     stats.planes = done;
     stats.seconds_total = start.elapsed().as_secs_f64();
