@@ -13,6 +13,8 @@
 //! | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] |
 //! | [`limits`] | every range a setting must lie in, checked in one place |
 //! | [`camera`] | the pinhole camera and its rays (section 7) |
+//! | [`pixel`] | the pixel: its area, the ray sets and their plane groups (section 8) |
+//! | [`emission`] | direct emission integrated over the pixel (section 8) |
 //! | [`medium`] | the homogeneous medium box: clipping and transmittance |
 //! | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
 //! | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
@@ -34,6 +36,7 @@
 
 pub mod bvh;
 pub mod camera;
+pub mod emission;
 pub mod error;
 pub mod export;
 pub mod film;
@@ -45,6 +48,7 @@ pub mod medium;
 pub mod metrics;
 pub mod numeric;
 pub mod photon_plane;
+pub mod pixel;
 pub mod quadrature;
 pub mod raster;
 pub mod reference;

@@ -12,8 +12,9 @@ use crate::gather::{CameraRay, GatherContext};
 use crate::kernel::Kernel;
 use crate::limits::{check_memory, check_planes, check_spp};
 use crate::photon_plane::sample_plane_range;
+use crate::pixel::{PanelFootprints, RaySetGather, RaySets, camera_ray, plane_group, ray_set_position};
 use crate::raster::ScreenRaster;
-use crate::sampling::{Sampler, pixel_jitter};
+use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -64,24 +65,24 @@ pub struct PassRays {
     pub emission: Vec<Vec3>,
 }
 
-/// The rays of pass `pass`: one per pixel, jittered over the pixel from (seed, pass, pixel), or
+/// The rays of ray set `pass` (docs/mathematics.md section 8.1): one per pixel, at the set's
+/// position in the pixel ([`crate::pixel::ray_set_position`] of seed, pixel and set), or
 /// through pixel centres. Along each, the segment inside the medium before the first light
-/// panel, and the attenuated emission of that panel when its front faces the camera.
+/// panel, and the attenuated emission of that panel when its front faces the camera (only the
+/// panels that can cover the pixel are tested: the same answer, sooner).
 pub fn camera_rays(scene: &Scene, seed: u64, pass: u32, pixel_center: bool) -> PassRays {
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
+    let footprints = PanelFootprints::new(scene);
     let (rays, emission): (Vec<CameraRay>, Vec<Vec3>) = (0..w * h)
         .into_par_iter()
         .map(|k| {
             let (i, j) = ((k % w) as f64, (k / w) as f64);
-            let (sx, sy) = if pixel_center { (0.5, 0.5) } else { pixel_jitter(seed, pass, k as u64) };
+            let (sx, sy) = if pixel_center { (0.5, 0.5) } else { ray_set_position(seed, k as u64, pass) };
             let we = cam.direction(i + sx, j + sy).normalize();
-            let (segment, emitted) = scene.camera_segment(cam.position, we);
-            let ray = match segment {
-                Some((t0, t1)) => CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 },
-                None => CameraRay { dir: we.as_vec3(), t0: 1.0, t1: 0.0 },
-            };
-            (ray, emitted.as_vec3())
+            let lights = footprints.over((k % w) as u32, (k / w) as u32);
+            let (segment, emitted) = scene.camera_segment_among(cam.position, we, lights);
+            (camera_ray(we, segment), emitted.as_vec3())
         })
         .unzip();
     PassRays { rays, emission }
@@ -240,6 +241,8 @@ pub struct RenderOptions {
     pub seed: u64,
     /// Where the planes' random numbers come from.
     pub sampler: Sampler,
+    /// Camera samples per pixel: ray sets, each gathering its own share of the planes
+    /// (docs/mathematics.md section 8.1), so that more cost about as much as one.
     pub spp: u32,
     pub pixel_center: bool,
     pub accelerator: Accelerator,
@@ -253,7 +256,7 @@ impl Default for RenderOptions {
             weighting: Weighting::default(),
             seed: 1,
             sampler: Sampler::default(),
-            spp: 1,
+            spp: crate::pixel::DEFAULT_RAY_SETS,
             pixel_center: false,
             accelerator: Accelerator::Raster,
             kernel: Kernel::Auto,
@@ -348,8 +351,10 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
     }
 }
 
-/// Renders the scene: direct emission plus the photon-plane estimate of single scattering,
-/// averaged over `spp` passes. Checks the options first ([`RenderOptions::validate`]).
+/// Renders the scene: the mean over each pixel of the direct emission (integrated over the
+/// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
+/// gathered with one of the `spp` ray sets (docs/mathematics.md section 8). Checks the options
+/// first ([`RenderOptions::validate`]).
 pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result<(Film, RenderStats)> {
     render_cancellable(scene, opts, progress, &AtomicBool::new(false))
 }
@@ -368,37 +373,25 @@ pub fn render_cancellable(
     let kernel = opts.kernel.resolve()?;
     cancelled()?;
     let start = Instant::now();
-    let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.sampler, opts.accelerator);
-    cancelled()?;
-    let mut film = Film::new(scene.camera.width, scene.camera.height);
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),
         kernel: kernel.to_string(),
         planes: opts.planes,
         plane_passes: 1,
-        seconds_sampling: prepared.seconds_sampling,
-        seconds_build: prepared.seconds_build,
         ..Default::default()
     };
-    for pass in 0..opts.spp {
-        let t = Instant::now();
-        let pass_rays = camera_rays(scene, opts.seed, pass, opts.pixel_center);
-        stats.seconds_rays += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        // Scattering first, emission after: every accelerator then sums in the same order.
-        let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather_cancellable(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress, cancel);
-        cancelled()?;
-        stats.seconds_gather += t.elapsed().as_secs_f64();
-        stats.hits += s.hits;
-        stats.tests += s.tests;
-        stats.rays += pass_rays.rays.len() as u64;
-        for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
-            *f += *s + *e;
-        }
+    // Each plane with the ray set of its group, one group's planes at a time (section 8.1).
+    let gather = RaySetGather { scene, opts, kernel, progress, cancel };
+    let mut sums = vec![Vec3::ZERO; scene.camera.width as usize * scene.camera.height as usize];
+    gather.gather_range(0..opts.planes, opts.planes, &mut sums, &mut stats)?;
+    let t = Instant::now();
+    let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
+    stats.seconds_rays += t.elapsed().as_secs_f64();
+    // Scattering first, emission after: every accelerator then sums in the same order.
+    let mut film = Film::new(scene.camera.width, scene.camera.height);
+    for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&emission) {
+        *f = *s + *e;
     }
-    let inv = 1.0 / opts.spp as f32;
-    film.pixels.iter_mut().for_each(|p| *p *= inv);
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((film, stats))
 }
@@ -413,8 +406,10 @@ const FIRST_PASS_PLANES: usize = 256;
 /// set by the next points of the sampler (for Sobol, further points of the same sequence), until
 /// the next pass would not fit; the last pass is sized from the measured time per plane to use
 /// what remains. The image is the estimate of the N planes gathered, N = the total over passes:
-/// the same set, and so the same unbiased estimate, as a render of N planes (up to f32
-/// summation order). `opts.planes` is ignored; `opts.spp` must be 1. Returns as soon as
+/// the same planes as a render of N planes; each pass splits its planes among the `opts.spp` ray
+/// sets as a render of them alone would, so every plane is still gathered with a ray set
+/// uniform over the pixel, and the estimate is unbiased (docs/mathematics.md section 8.1).
+/// `opts.planes` is ignored. Returns as soon as
 /// `budget` would be exceeded by more work; the caller's own time (loading, writing) is not in
 /// it.
 pub fn render_for(
@@ -444,53 +439,56 @@ const MAX_PASS_PLANES: usize = 1 << 20;
 /// Renders planes in passes, each extending the set by the next planes of the sampler:
 /// `next_pass(planes so far, seconds per plane of the last pass)` sizes the next pass, 0 ends
 /// the render. The image is the estimate of all the planes gathered, the same set as a render
-/// of that many planes. `opts.planes` is ignored; `opts.spp` must be 1.
+/// of that many planes (with one pass, the same image up to f32 summation order). The ray sets
+/// are made once and kept. `opts.planes` is ignored.
 pub fn render_in_passes(
     scene: &Scene,
     opts: &RenderOptions,
     progress: Progress,
     next_pass: &mut dyn FnMut(usize, f64) -> usize,
 ) -> Result<(Film, RenderStats)> {
-    if opts.spp != 1 {
-        return Err(Error::option("--spp", "a render in plane passes takes one sample per pixel"));
-    }
     RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() }.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
     let start = Instant::now();
-    let pass_rays = camera_rays(scene, opts.seed, 0, opts.pixel_center);
+    let (width, height) = (scene.camera.width, scene.camera.height);
+    let gather = RaySetGather { scene, opts, kernel, progress, cancel: &AtomicBool::new(false) };
+    let ray_sets = gather.ray_sets();
+    // The ray sets are kept for every pass: their memory counts as that many planes'.
+    let rays_as_planes = RaySets::bytes(width, height, ray_sets) / crate::limits::BYTES_PER_PLANE;
+    check_memory(width, height, rays_as_planes).map_err(|m| Error::option("--spp", m))?;
+    let sets = RaySets::new(scene, opts.seed, ray_sets, opts.pixel_center);
+    let pixels = width as usize * height as usize;
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),
         kernel: kernel.to_string(),
-        rays: pass_rays.rays.len() as u64,
-        seconds_rays: start.elapsed().as_secs_f64(),
+        rays: (sets.sets.len() * pixels) as u64,
+        seconds_rays: sets.seconds,
         ..Default::default()
     };
     // Each pass sums its planes in f32 weighted 1 (not 1/N, which is known only at the end);
     // the passes add up in f64, so that the sums stay as far from f32 overflow as a single
     // pass's.
-    let mut total = vec![glam::DVec3::ZERO; pass_rays.rays.len()];
+    let mut total = vec![glam::DVec3::ZERO; pixels];
     let (mut done, mut per_plane) = (0usize, 0.0);
     loop {
         let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
         if next == 0 {
             break;
         }
-        check_memory(scene.camera.width, scene.camera.height, next as u64)
-            .map_err(|m| Error::option("--time-budget", m))?;
+        check_memory(width, height, next as u64 + rays_as_planes).map_err(|m| Error::option("--time-budget", m))?;
         let pass_start = Instant::now();
-        // Planes weighted as one of 1: the division by the final count comes at the end.
-        let prepared = PreparedPlanes::range(scene, done..done + next, 1, opts.seed, opts.sampler, opts.accelerator);
-        let t = Instant::now();
-        let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
+        // The pass's planes split among the ray sets as a render of them alone would
+        // (section 8.1); weighted as one of 1, the division by the final count comes at the end.
+        let mut sums = vec![Vec3::ZERO; pixels];
+        for k in 0..ray_sets {
+            let group = plane_group(k, next, ray_sets);
+            if !group.is_empty() {
+                gather.gather_group(done + group.start..done + group.end, 1, sets.get(k), &mut sums, &mut stats)?;
+            }
+        }
         for (t, s) in total.iter_mut().zip(&sums) {
             *t += s.as_dvec3();
         }
-        stats.seconds_gather += t.elapsed().as_secs_f64();
-        stats.seconds_sampling += prepared.seconds_sampling;
-        stats.seconds_build += prepared.seconds_build;
-        stats.hits += s.hits;
-        stats.tests += s.tests;
         stats.plane_passes += 1;
         done += next;
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
@@ -498,9 +496,12 @@ pub fn render_in_passes(
     if done == 0 {
         return Err(Error::option("--time-budget", "no plane pass was made"));
     }
-    let mut film = Film::new(scene.camera.width, scene.camera.height);
+    let t = Instant::now();
+    let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
+    stats.seconds_rays += t.elapsed().as_secs_f64();
+    let mut film = Film::new(width, height);
     let inv = 1.0 / done as f64;
-    for ((f, s), e) in film.pixels.iter_mut().zip(&total).zip(&pass_rays.emission) {
+    for ((f, s), e) in film.pixels.iter_mut().zip(&total).zip(&emission) {
         *f = (*s * inv).as_vec3() + *e;
     }
     stats.planes = done;

@@ -306,7 +306,7 @@ impl Scene {
             None => Estimator::SmisExact,
         };
         let weighting = Weighting::new(estimator, r.orientations).map_err(|m| err("render.orientations".into(), m))?;
-        let spp = r.spp.unwrap_or(1);
+        let spp = r.spp.unwrap_or(crate::pixel::DEFAULT_RAY_SETS);
         check_spp(spp).map_err(|m| err("render.spp".into(), m))?;
         let sampler = match &r.sampler {
             Some(name) => name.parse::<Sampler>().map_err(|m| err("render.sampler".into(), m))?,
@@ -321,10 +321,23 @@ impl Scene {
     /// The first light panel crossed by the ray `o + t we` with `t` in `(0, t_max)`: its distance
     /// and index.
     pub fn first_light(&self, o: DVec3, we: DVec3, t_max: f64) -> Option<(f64, usize)> {
+        self.first_light_among(o, we, t_max, 0..self.lights.len())
+    }
+
+    /// [`Scene::first_light`] among the panels `lights` (ascending indices): the same answer
+    /// whenever the others cannot be crossed (as outside a pixel's footprint,
+    /// [`crate::pixel::PanelFootprints`]).
+    pub fn first_light_among(
+        &self,
+        o: DVec3,
+        we: DVec3,
+        t_max: f64,
+        lights: impl IntoIterator<Item = usize>,
+    ) -> Option<(f64, usize)> {
         let mut best = None;
         let mut t_max = t_max;
-        for (k, l) in self.lights.iter().enumerate() {
-            if let Some(t) = l.intersect(o, we, 0.0, t_max) {
+        for k in lights {
+            if let Some(t) = self.lights[k].intersect(o, we, 0.0, t_max) {
                 t_max = t;
                 best = Some((t, k));
             }
@@ -336,19 +349,40 @@ impl Scene {
     /// first light panel (None if empty), and the attenuated emission of that panel when its
     /// front faces the ray (docs/mathematics.md section 1, the direct term).
     pub fn camera_segment(&self, o: DVec3, we: DVec3) -> (Option<(f64, f64)>, DVec3) {
-        let (t_surface, emission) = match self.first_light(o, we, f64::INFINITY) {
+        self.camera_segment_among(o, we, 0..self.lights.len())
+    }
+
+    /// [`Scene::camera_segment`] testing only the panels `lights` (ascending indices).
+    pub fn camera_segment_among(
+        &self,
+        o: DVec3,
+        we: DVec3,
+        lights: impl IntoIterator<Item = usize>,
+    ) -> (Option<(f64, f64)>, DVec3) {
+        let (t_surface, emission) = self.first_surface(o, we, lights);
+        (self.segment_before(o, we, t_surface), emission)
+    }
+
+    /// The part of the ray `o + t we` inside the medium and before `t_surface` (None if empty).
+    pub fn segment_before(&self, o: DVec3, we: DVec3, t_surface: f64) -> Option<(f64, f64)> {
+        match self.medium.clip_ray(o, we) {
+            Some((t0, t1)) if t0 < t_surface.min(t1) => Some((t0, t_surface.min(t1))),
+            _ => None,
+        }
+    }
+
+    /// The distance to the first of the panels `lights` that the ray `o + t we` crosses
+    /// (infinite if none), and the emission it sends back: `Tr(o, xL) Le` when its front faces
+    /// the ray, else 0 (docs/mathematics.md section 1, the direct term).
+    pub fn first_surface(&self, o: DVec3, we: DVec3, lights: impl IntoIterator<Item = usize>) -> (f64, DVec3) {
+        match self.first_light_among(o, we, f64::INFINITY, lights) {
             Some((t, k)) if we.dot(self.lights[k].n) < 0.0 => {
                 let tr = self.medium.transmittance(self.medium.length_inside(o, o + t * we));
                 (t, self.lights[k].radiance * tr)
             }
             Some((t, _)) => (t, DVec3::ZERO),
             None => (f64::INFINITY, DVec3::ZERO),
-        };
-        let segment = match self.medium.clip_ray(o, we) {
-            Some((t0, t1)) if t0 < t_surface.min(t1) => Some((t0, t_surface.min(t1))),
-            _ => None,
-        };
-        (segment, emission)
+        }
     }
 
     /// Whether a light panel other than `except` blocks the segment from light point `y` to `x`.

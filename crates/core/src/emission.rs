@@ -1,0 +1,253 @@
+//! Direct emission integrated over the pixel (docs/mathematics.md section 8.2).
+//!
+//! The emission `E` seen along a camera ray is discontinuous only where the ray crosses the
+//! projected outline of a panel (its four edges, and the line where two panels cross each
+//! other); elsewhere the same panel (or none) is first along every ray of a pixel and `E` varies
+//! only through the transmittance, smoothly. So the pixels whose square an outline crosses, a
+//! choice made from the geometry alone, integrate `E` with an `n x n` jittered grid of their
+//! own; every other pixel averages `E` over the positions of its ray sets. Both are unbiased
+//! estimates of the mean of `E` over the pixel, and pixels that no panel can cover pay nothing.
+
+use crate::camera::Camera;
+use crate::light::RectLight;
+use crate::pixel::{PanelFootprints, ray_set_position};
+use crate::sampling::{rng_for, unit_f64};
+use crate::scene::Scene;
+use glam::{DVec2, DVec3, Vec3};
+use rand::RngCore;
+use rayon::prelude::*;
+
+/// The side `n` of the jittered grid of an outline pixel (`n^2` samples): chosen by measurement
+/// (docs/mathematics.md section 8.2).
+pub const OUTLINE_GRID: u32 = 32;
+
+/// The random stream of the outline pixels' jitter.
+const OUTLINE_STREAM: u64 = 0xED_6E5;
+
+/// Slack in pixels when marking the pixels an outline crosses, far above the rounding of the
+/// projection (a pixel marked needlessly only costs samples).
+const MARGIN: f64 = 1e-3;
+
+/// The direct emission of every pixel: the mean of `E` over the pixel (section 8.2), or `E` at
+/// the pixel centre when `pixel_center`. `ray_sets` and `seed` fix the positions that pixels
+/// without an outline average over (those of the render's ray sets).
+pub fn direct_emission(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool) -> Vec<Vec3> {
+    direct_emission_with(scene, seed, ray_sets, pixel_center, OUTLINE_GRID)
+}
+
+/// [`direct_emission`] with an `grid x grid` jittered grid in outline pixels.
+pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool, grid: u32) -> Vec<Vec3> {
+    let cam = &scene.camera;
+    let (w, h) = (cam.width, cam.height);
+    let footprints = PanelFootprints::new(scene);
+    let outline = if pixel_center { vec![false; (w * h) as usize] } else { outline_pixels(scene) };
+    let ray_sets = ray_sets.max(1);
+    (0..w * h)
+        .into_par_iter()
+        .map(|p| {
+            let (i, j) = (p % w, p / w);
+            if !footprints.any_over(i, j) {
+                return Vec3::ZERO;
+            }
+            let lights = footprints.over(i, j);
+            let at = |x: f64, y: f64| emission_at(scene, cam, x, y, lights.clone());
+            let (x, y) = (i as f64, j as f64);
+            let sum = if pixel_center {
+                at(x + 0.5, y + 0.5)
+            } else if outline[p as usize] {
+                let mut rng = rng_for(seed, OUTLINE_STREAM, p as u64);
+                let mut sum = DVec3::ZERO;
+                let cell = 1.0 / grid as f64;
+                for a in 0..grid {
+                    for b in 0..grid {
+                        let (u, v) = (unit_f64(rng.next_u64()), unit_f64(rng.next_u64()));
+                        sum += at(x + (a as f64 + u) * cell, y + (b as f64 + v) * cell);
+                    }
+                }
+                sum / (grid * grid) as f64
+            } else {
+                let mut sum = DVec3::ZERO;
+                for k in 0..ray_sets {
+                    let (sx, sy) = ray_set_position(seed, p as u64, k);
+                    sum += at(x + sx, y + sy);
+                }
+                sum / ray_sets as f64
+            };
+            sum.as_vec3()
+        })
+        .collect()
+}
+
+/// The emission `E` along the camera ray through image point `(x, y)`, testing the panels
+/// `lights` (those that can cover the pixel).
+fn emission_at(scene: &Scene, cam: &Camera, x: f64, y: f64, lights: impl IntoIterator<Item = usize>) -> DVec3 {
+    scene.first_surface(cam.position, cam.direction(x, y).normalize(), lights).1
+}
+
+/// Which pixels an outline crosses (one flag per pixel, row after row): the squares met by a
+/// projected panel edge or by the projected line where two panels cross, each clipped to the
+/// part in front of the camera.
+pub fn outline_pixels(scene: &Scene) -> Vec<bool> {
+    let cam = &scene.camera;
+    let mut marked = vec![false; (cam.width * cam.height) as usize];
+    let mut segments = Vec::new();
+    for (k, l) in scene.lights.iter().enumerate() {
+        let c = l.corners();
+        segments.extend((0..4).map(|e| (c[e], c[(e + 1) % 4])));
+        for other in &scene.lights[k + 1..] {
+            segments.extend(crossing_segment(l, other));
+        }
+    }
+    let near = 1e-6 * scene.medium.diagonal();
+    for (a, b) in segments {
+        if let Some((p, q)) = project_segment(cam, a, b, near) {
+            mark_segment(&mut marked, cam.width, cam.height, p, q);
+        }
+    }
+    marked
+}
+
+/// The segment where panels `a` and `b` cross, if they do (not when coplanar: then their edges
+/// are the outline).
+fn crossing_segment(a: &RectLight, b: &RectLight) -> Option<(DVec3, DVec3)> {
+    let corners = a.corners();
+    let d = corners.map(|c| (c - b.corner).dot(b.n));
+    // Where a's boundary meets b's plane.
+    let mut points = Vec::with_capacity(4);
+    for e in 0..4 {
+        let (d0, d1) = (d[e], d[(e + 1) % 4]);
+        if d0 == 0.0 {
+            points.push(corners[e]);
+        } else if (d0 < 0.0) != (d1 < 0.0) && d1 != 0.0 {
+            points.push(corners[e] + (corners[(e + 1) % 4] - corners[e]) * (d0 / (d0 - d1)));
+        }
+    }
+    // The chord of a across b's plane: its two farthest points.
+    let mut best: Option<(DVec3, DVec3)> = None;
+    for (i, &p) in points.iter().enumerate() {
+        for &q in &points[i + 1..] {
+            if best.is_none_or(|(s, t)| (q - p).length_squared() > (t - s).length_squared()) {
+                best = Some((p, q));
+            }
+        }
+    }
+    let (p, q) = best?;
+    // Clipped to b, in b's local coordinates.
+    let local = |y: DVec3| DVec2::from(b.local(y));
+    let (s, t) = clip_segment(local(p), local(q), DVec2::ZERO, DVec2::new(b.width, b.height))?;
+    let (ls, lt) = (local(p), local(q));
+    let along = |u: DVec2| {
+        let len = (lt - ls).length_squared();
+        if len > 0.0 { (u - ls).dot(lt - ls) / len } else { 0.0 }
+    };
+    Some((p + (q - p) * along(s), p + (q - p) * along(t)))
+}
+
+/// The segment `a`-`b` (world) on the image: clipped to the camera-space depths above `near`,
+/// projected, and clipped to the image grown by a pixel.
+fn project_segment(cam: &Camera, a: DVec3, b: DVec3, near: f64) -> Option<(DVec2, DVec2)> {
+    let (mut a, mut b) = (cam.to_camera(a), cam.to_camera(b));
+    if !(a.z > near) && !(b.z > near) {
+        return None;
+    }
+    if !(a.z > near) {
+        a = b + (a - b) * ((b.z - near) / (b.z - a.z));
+    } else if !(b.z > near) {
+        b = a + (b - a) * ((a.z - near) / (a.z - b.z));
+    }
+    let (p, q) = (DVec2::from(cam.project(a)), DVec2::from(cam.project(b)));
+    let grown = DVec2::new(cam.width as f64 + 1.0, cam.height as f64 + 1.0);
+    clip_segment(p, q, DVec2::splat(-1.0), grown)
+}
+
+/// The part of the segment `p`-`q` inside the box `[lo, hi]` (Liang and Barsky), if any.
+fn clip_segment(p: DVec2, q: DVec2, lo: DVec2, hi: DVec2) -> Option<(DVec2, DVec2)> {
+    let d = q - p;
+    let (mut s0, mut s1) = (0.0f64, 1.0f64);
+    for axis in 0..2 {
+        for (num, den) in [(p[axis] - lo[axis], -d[axis]), (hi[axis] - p[axis], d[axis])] {
+            if den == 0.0 {
+                if num < 0.0 {
+                    return None;
+                }
+            } else {
+                let s = num / den;
+                if den < 0.0 {
+                    s0 = s0.max(s);
+                } else {
+                    s1 = s1.min(s);
+                }
+            }
+        }
+    }
+    (s0 <= s1).then(|| (p + d * s0, p + d * s1))
+}
+
+/// Marks every pixel whose square (grown by [`MARGIN`]) the image segment `p`-`q` meets.
+fn mark_segment(marked: &mut [bool], width: u32, height: u32, p: DVec2, q: DVec2) {
+    let d = q - p;
+    let row_of = |y: f64| y.floor().clamp(-1.0, height as f64) as i64;
+    let (first, last) = (row_of(p.y.min(q.y) - MARGIN).max(0), row_of(p.y.max(q.y) + MARGIN).min(height as i64 - 1));
+    for j in first..=last {
+        // The part of the segment within the row's strip.
+        let (mut s0, mut s1) = (0.0f64, 1.0f64);
+        if d.y != 0.0 {
+            let (a, b) = ((j as f64 - MARGIN - p.y) / d.y, (j as f64 + 1.0 + MARGIN - p.y) / d.y);
+            s0 = s0.max(a.min(b));
+            s1 = s1.min(a.max(b));
+        }
+        if s0 > s1 {
+            continue;
+        }
+        let (x0, x1) = (p.x + d.x * s0, p.x + d.x * s1);
+        let col_of = |x: f64| x.floor().clamp(-1.0, width as f64) as i64;
+        let (a, b) = (col_of(x0.min(x1) - MARGIN).max(0), col_of(x0.max(x1) + MARGIN).min(width as i64 - 1));
+        for i in a..=b {
+            marked[j as usize * width as usize + i as usize] = true;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_segment_marks_the_pixels_it_crosses() {
+        let (w, h) = (10u32, 6u32);
+        let mut m = vec![false; 60];
+        mark_segment(&mut m, w, h, DVec2::new(0.5, 0.5), DVec2::new(4.5, 2.5));
+        let marked: Vec<(usize, usize)> = (0..60).filter(|&k| m[k]).map(|k| (k % 10, k / 10)).collect();
+        // The line y = 0.5 + (x - 0.5) / 2 crosses (0,0), (1,0), (1,1) .. ; (2,1) it meets at x
+        // = 2.5, y = 1.5 on the corner of four squares, each within the margin.
+        for want in [(0, 0), (1, 0), (1, 1), (2, 1), (3, 1), (3, 2), (4, 2)] {
+            assert!(marked.contains(&want), "{want:?} missing from {marked:?}");
+        }
+        assert!(!marked.contains(&(5, 2)) && !marked.contains(&(0, 1)) && !marked.contains(&(4, 0)));
+        // Off the image: nothing, and no panic.
+        let mut m = vec![false; 60];
+        mark_segment(&mut m, w, h, DVec2::new(-5.0, 20.0), DVec2::new(-1.0, 30.0));
+        assert!(m.iter().all(|&x| !x));
+    }
+
+    #[test]
+    fn clipping_keeps_the_inside() {
+        let (lo, hi) = (DVec2::ZERO, DVec2::new(2.0, 1.0));
+        let (a, b) = clip_segment(DVec2::new(-1.0, 0.5), DVec2::new(3.0, 0.5), lo, hi).unwrap();
+        assert_eq!((a, b), (DVec2::new(0.0, 0.5), DVec2::new(2.0, 0.5)));
+        assert!(clip_segment(DVec2::new(-1.0, 2.0), DVec2::new(3.0, 2.0), lo, hi).is_none());
+    }
+
+    #[test]
+    fn crossing_panels_meet_in_a_segment() {
+        let a = RectLight::new("a", DVec3::new(-1.0, 0.0, -1.0), DVec3::X * 2.0, DVec3::Z * 2.0, DVec3::ONE);
+        let b = RectLight::new("b", DVec3::new(0.0, -1.0, -0.5), DVec3::Y * 2.0, DVec3::Z * 4.0, DVec3::ONE);
+        let (p, q) = crossing_segment(&a, &b).unwrap();
+        // x = 0, y = 0, z over a's [-1, 1] within b's [-0.5, 3.5].
+        let (lo, hi) = if p.z < q.z { (p, q) } else { (q, p) };
+        assert!((lo - DVec3::new(0.0, 0.0, -0.5)).length() < 1e-12, "{lo}");
+        assert!((hi - DVec3::new(0.0, 0.0, 1.0)).length() < 1e-12, "{hi}");
+        let far = RectLight::new("c", DVec3::new(5.0, -1.0, -0.5), DVec3::Y * 2.0, DVec3::Z * 4.0, DVec3::ONE);
+        assert!(crossing_segment(&a, &far).is_none());
+    }
+}

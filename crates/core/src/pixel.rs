@@ -1,0 +1,347 @@
+//! The pixel: its area, the ray sets that sample it and the plane groups they gather
+//! (docs/mathematics.md section 8).
+//!
+//! A pixel's value is the mean of the radiance over its square (a box filter). With `K` ray
+//! sets (`--spp K`), ray set `k` crosses every pixel once, at point `k` of a per-pixel
+//! Owen-scrambled 2D Sobol sequence, and the `N` planes are split into `K` groups of consecutive
+//! indices: plane `i` is gathered only with ray set `floor(i K / N)`. Every plane is used once
+//! and still weighs `1/N`, so the pixel gets `K` stratified positions for the cost of one pass
+//! ([`ray_set_of_plane`], [`plane_group`], [`ray_set_position`]). The direct emission is
+//! integrated over the pixel separately ([`crate::emission`]).
+
+use crate::error::{Error, Result};
+use crate::gather::{CameraRay, GatherStats};
+use crate::kernel::Kernel;
+use crate::render::{PreparedPlanes, Progress, RenderOptions, RenderStats};
+use crate::sampling::mix64;
+use crate::scene::Scene;
+use crate::sobol::{nested_uniform_scramble, sobol_u32};
+use crate::weights::Weighting;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Ray sets per pixel when neither the command line nor the scene says (`--spp`): chosen by
+/// measurement (README, "Whole pixels").
+pub const DEFAULT_RAY_SETS: u32 = 16;
+
+/// The random stream of the ray sets' positions in their pixels.
+const RAY_SET_STREAM: u64 = 0x9_1A5E_75;
+
+/// The ray set that plane `i` of a set of `planes` is gathered with when pixels have
+/// `ray_sets` ray sets: `floor(i K / N)` (section 8.1). It depends on (i, N, K) alone, so a
+/// plane meets the same rays in a render of the whole set and in a render of any range of it.
+pub fn ray_set_of_plane(i: usize, planes: usize, ray_sets: u32) -> u32 {
+    (i as u128 * ray_sets as u128 / planes.max(1) as u128) as u32
+}
+
+/// The planes gathered with ray set `k`: the indices `i` with `floor(i K / N) = k`, that is
+/// `ceil(k N / K) .. ceil((k + 1) N / K)`: consecutive blocks, empty when `N < K` leaves a ray
+/// set without planes.
+pub fn plane_group(k: u32, planes: usize, ray_sets: u32) -> Range<usize> {
+    let start = |k: u32| (k as u128 * planes as u128).div_ceil(ray_sets.max(1) as u128) as usize;
+    start(k)..start(k + 1)
+}
+
+/// Where ray set `k` crosses pixel `pixel` under `seed`, in `[0, 1)^2` of the pixel: point `k`
+/// of a 2D Sobol (0,2)-sequence under nested uniform (Owen) scrambling of its own per pixel
+/// (hash-based, as the planes', [`crate::sobol`]), at the centre of the 2^-32 cell the 32-bit
+/// point names. Every point is uniform over the pixel (whatever `k`), and the first `2^m` points
+/// of a pixel form a (0,m,2)-net: one in each elementary box of area `2^-m` (section 8.1).
+#[inline]
+pub fn ray_set_position(seed: u64, pixel: u64, k: u32) -> (f64, f64) {
+    let scramble = mix64(mix64(seed ^ RAY_SET_STREAM) ^ pixel);
+    let coordinate = |dim: usize, seed: u32| {
+        (nested_uniform_scramble(sobol_u32(k, dim), seed) as f64 + 0.5) * (1.0 / 4_294_967_296.0)
+    };
+    (coordinate(0, scramble as u32), coordinate(1, (scramble >> 32) as u32))
+}
+
+/// The pixels each light panel can cover: a box of pixels around its projection, so that a
+/// ray through a pixel is tested only against the panels it can cross.
+///
+/// A panel wholly in front of the camera projects to the convex quadrilateral of its projected
+/// corners; its box is that of the corners grown by a pixel (far above the rounding of the
+/// projection). A panel reaching behind the camera may cover any pixel.
+#[derive(Clone, Debug)]
+pub struct PanelFootprints {
+    /// Per panel: first and last column, first and last row (inclusive).
+    boxes: Vec<[i64; 4]>,
+}
+
+impl PanelFootprints {
+    pub fn new(scene: &Scene) -> Self {
+        let cam = &scene.camera;
+        let near = 1e-6 * scene.medium.diagonal();
+        let everywhere = [0, cam.width as i64 - 1, 0, cam.height as i64 - 1];
+        let boxes = scene
+            .lights
+            .iter()
+            .map(|l| {
+                let corners = l.corners().map(|c| cam.to_camera(c));
+                if corners.iter().any(|c| !(c.z > near)) {
+                    return everywhere;
+                }
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for c in corners {
+                    let (x, y) = cam.project(c);
+                    (lo[0], lo[1], hi[0], hi[1]) = (lo[0].min(x), lo[1].min(y), hi[0].max(x), hi[1].max(y));
+                }
+                // Clamped before the conversion, so that a huge projection stays an i64.
+                let cell = |v: f64, side: u32| (v.floor().clamp(-2.0, side as f64 + 1.0)) as i64;
+                [
+                    cell(lo[0] - 1.0, cam.width),
+                    cell(hi[0] + 1.0, cam.width),
+                    cell(lo[1] - 1.0, cam.height),
+                    cell(hi[1] + 1.0, cam.height),
+                ]
+            })
+            .collect();
+        PanelFootprints { boxes }
+    }
+
+    /// The panels (ascending indices) whose box holds pixel `(i, j)`.
+    pub fn over(&self, i: u32, j: u32) -> impl Iterator<Item = usize> + Clone + '_ {
+        let (i, j) = (i as i64, j as i64);
+        self.boxes
+            .iter()
+            .enumerate()
+            .filter(move |(_, b)| b[0] <= i && i <= b[1] && b[2] <= j && j <= b[3])
+            .map(|(k, _)| k)
+    }
+
+    /// Whether some panel's box holds pixel `(i, j)`.
+    pub fn any_over(&self, i: u32, j: u32) -> bool {
+        self.over(i, j).next().is_some()
+    }
+}
+
+/// The camera ray along unit `we` with its segment in the medium (an empty one, `t0 > t1`,
+/// when there is none).
+pub fn camera_ray(we: DVec3, segment: Option<(f64, f64)>) -> CameraRay {
+    match segment {
+        Some((t0, t1)) => CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 },
+        None => CameraRay { dir: we.as_vec3(), t0: 1.0, t1: 0.0 },
+    }
+}
+
+/// The rays of ray set `k` alone, without the emission along them: the rays of
+/// [`crate::render::camera_rays`], for the gathering (the emission comes from
+/// [`crate::emission`]).
+pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec<CameraRay> {
+    let cam = &scene.camera;
+    let w = cam.width as usize;
+    let footprints = PanelFootprints::new(scene);
+    // Camera::direction is affine in the image point: origin and steps computed once.
+    let (o, dx, dy) = (cam.direction(0.0, 0.0), cam.direction(1.0, 0.0), cam.direction(0.0, 1.0));
+    let (dx, dy) = (dx - o, dy - o);
+    (0..w * cam.height as usize)
+        .into_par_iter()
+        .map(|p| {
+            let (i, j) = ((p % w) as u32, (p / w) as u32);
+            let (sx, sy) = if pixel_center { (0.5, 0.5) } else { ray_set_position(seed, p as u64, k) };
+            let we = (o + (i as f64 + sx) * dx + (j as f64 + sy) * dy).normalize();
+            let first = scene.first_light_among(cam.position, we, f64::INFINITY, footprints.over(i, j));
+            camera_ray(we, scene.segment_before(cam.position, we, first.map_or(f64::INFINITY, |(t, _)| t)))
+        })
+        .collect()
+}
+
+/// What gathering with ray sets needs besides the planes: the scene, the settings, the kernel
+/// and the caller's progress and cancel flag.
+pub struct RaySetGather<'a> {
+    pub scene: &'a Scene,
+    pub opts: &'a RenderOptions,
+    /// Resolved ([`Kernel::resolve`]).
+    pub kernel: Kernel,
+    pub progress: Progress<'a>,
+    pub cancel: &'a AtomicBool,
+}
+
+impl RaySetGather<'_> {
+    fn cancelled(&self) -> Result<()> {
+        if self.cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(()) }
+    }
+
+    /// Ray sets per pixel: `opts.spp`, or one at pixel centres (where every set would be the
+    /// same rays).
+    pub fn ray_sets(&self) -> u32 {
+        if self.opts.pixel_center { 1 } else { self.opts.spp.max(1) }
+    }
+
+    /// Gathers planes `range` of the set of `opts.planes`, each with the ray set of its group
+    /// ([`ray_set_of_plane`]), each weighted as one of `weight_total` (`opts.planes` for a
+    /// whole render, 1 for unnormalised sums), adding into `sums` (one per pixel). One group's
+    /// planes exist at a time. The same plane meets the same rays whatever `range`, so ranges
+    /// rendered apart and added give the render of their union (up to f32 summation order).
+    pub fn gather_range(
+        &self,
+        range: Range<usize>,
+        weight_total: usize,
+        sums: &mut [Vec3],
+        stats: &mut RenderStats,
+    ) -> Result<()> {
+        let (planes, ray_sets) = (self.opts.planes, self.ray_sets());
+        for k in 0..ray_sets {
+            let group = plane_group(k, planes, ray_sets);
+            let share = group.start.max(range.start)..group.end.min(range.end);
+            if share.is_empty() {
+                continue;
+            }
+            let t = Instant::now();
+            let rays = ray_set_rays(self.scene, self.opts.seed, k, self.opts.pixel_center);
+            stats.seconds_rays += t.elapsed().as_secs_f64();
+            stats.rays += rays.len() as u64;
+            self.gather_group(share, weight_total, &rays, sums, stats)?;
+        }
+        Ok(())
+    }
+
+    /// Gathers planes `range` (weighted as one of `weight_total`) along `rays` into `sums`.
+    pub fn gather_group(
+        &self,
+        range: Range<usize>,
+        weight_total: usize,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        stats: &mut RenderStats,
+    ) -> Result<()> {
+        let o = self.opts;
+        let prepared = PreparedPlanes::range(self.scene, range, weight_total, o.seed, o.sampler, o.accelerator);
+        self.cancelled()?;
+        let t = Instant::now();
+        let s = prepared.gather_cancellable(o.weighting, self.kernel, rays, sums, self.progress, self.cancel);
+        self.cancelled()?;
+        stats.seconds_gather += t.elapsed().as_secs_f64();
+        stats.seconds_sampling += prepared.seconds_sampling;
+        stats.seconds_build += prepared.seconds_build;
+        stats.hits += s.hits;
+        stats.tests += s.tests;
+        Ok(())
+    }
+}
+
+/// The camera rays of ray sets `0..ray_sets` (one set at pixel centres, which every set
+/// shares), kept for gathering several times: the passes of a render on a time budget, the
+/// estimators of the table.
+pub struct RaySets {
+    pub sets: Vec<Vec<CameraRay>>,
+    pub seconds: f64,
+}
+
+impl RaySets {
+    pub fn new(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool) -> Self {
+        let t = Instant::now();
+        let count = if pixel_center { 1 } else { ray_sets.max(1) };
+        let sets = (0..count).map(|k| ray_set_rays(scene, seed, k, pixel_center)).collect();
+        RaySets { sets, seconds: t.elapsed().as_secs_f64() }
+    }
+
+    /// The rays of ray set `k`.
+    pub fn get(&self, k: u32) -> &[CameraRay] {
+        &self.sets[k as usize % self.sets.len()]
+    }
+
+    /// Bytes the rays of `ray_sets` sets take at a resolution (for the memory check).
+    pub fn bytes(width: u32, height: u32, ray_sets: u32) -> u64 {
+        (width as u64 * height as u64).saturating_mul(ray_sets as u64 * std::mem::size_of::<CameraRay>() as u64)
+    }
+}
+
+/// A render's planes prepared group by group, with the ray sets, for gathering with several
+/// weightings (the table): the same planes along the same rays as [`crate::render::render`].
+pub struct PreparedPixels {
+    groups: Vec<(u32, PreparedPlanes)>,
+    pub rays: RaySets,
+    /// Direct emission over each pixel ([`crate::emission::direct_emission`]).
+    pub emission: Vec<Vec3>,
+    /// Seconds spent sampling planes, building the structures, making rays and emission.
+    pub seconds: f64,
+}
+
+/// How [`PreparedPixels`] are made.
+#[derive(Clone, Copy, Debug)]
+pub struct PixelSettings {
+    pub planes: usize,
+    pub ray_sets: u32,
+    pub seed: u64,
+    pub sampler: crate::sampling::Sampler,
+    pub pixel_center: bool,
+}
+
+impl PreparedPixels {
+    pub fn new(scene: &Scene, s: PixelSettings) -> Self {
+        let start = Instant::now();
+        let rays = RaySets::new(scene, s.seed, s.ray_sets, s.pixel_center);
+        let ray_sets = if s.pixel_center { 1 } else { s.ray_sets.max(1) };
+        let groups = (0..ray_sets)
+            .map(|k| (k, plane_group(k, s.planes, ray_sets)))
+            .filter(|(_, g)| !g.is_empty())
+            .map(|(k, g)| {
+                (k, PreparedPlanes::range(scene, g, s.planes, s.seed, s.sampler, crate::render::Accelerator::Raster))
+            })
+            .collect();
+        let emission = crate::emission::direct_emission(scene, s.seed, s.ray_sets, s.pixel_center);
+        PreparedPixels { groups, rays, emission, seconds: start.elapsed().as_secs_f64() }
+    }
+
+    /// Every group gathered along its ray set with `weighting`: the scattering sums (one per
+    /// pixel, weighted 1/N) and the statistics.
+    pub fn gather(&self, weighting: Weighting, kernel: Kernel) -> (Vec<Vec3>, GatherStats) {
+        let mut sums = vec![Vec3::ZERO; self.emission.len()];
+        let mut stats = GatherStats::default();
+        for (k, prepared) in &self.groups {
+            stats += prepared.gather(weighting, kernel, self.rays.get(*k), &mut sums, &|| {});
+        }
+        (sums, stats)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn groups_are_the_planes_of_their_ray_set() {
+        for (planes, ray_sets) in [(40_960usize, 16u32), (1000, 16), (7, 16), (16, 16), (5, 1), (100_003, 7)] {
+            let mut next = 0;
+            for k in 0..ray_sets {
+                let g = plane_group(k, planes, ray_sets);
+                assert_eq!(g.start, next, "{planes} {ray_sets} {k}");
+                for i in g.clone() {
+                    assert_eq!(ray_set_of_plane(i, planes, ray_sets), k);
+                }
+                // Sizes differ by at most one.
+                assert!(g.len() == planes / ray_sets as usize || g.len() == planes.div_ceil(ray_sets as usize));
+                next = g.end;
+            }
+            assert_eq!(next, planes);
+        }
+        assert_eq!(plane_group(3, 40_960, 16), 7680..10_240);
+    }
+
+    #[test]
+    fn the_first_ray_sets_of_a_pixel_are_a_net() {
+        for pixel in 0..50u64 {
+            for m in 0..=6u32 {
+                let n = 1u32 << m;
+                let points: Vec<(f64, f64)> = (0..n).map(|k| ray_set_position(9, pixel, k)).collect();
+                // Every elementary box 2^-a x 2^-(m-a) holds one point.
+                for a in 0..=m {
+                    let mut seen = vec![false; n as usize];
+                    for &(x, y) in &points {
+                        assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+                        let cell =
+                            ((x * (1u64 << a) as f64) as usize) << (m - a) | (y * (1u64 << (m - a)) as f64) as usize;
+                        assert!(!seen[cell], "pixel {pixel}: two of {n} points in one box ({a})");
+                        seen[cell] = true;
+                    }
+                }
+            }
+        }
+        assert_ne!(ray_set_position(1, 5, 0), ray_set_position(1, 6, 0));
+        assert_ne!(ray_set_position(1, 5, 0), ray_set_position(2, 5, 0));
+    }
+}

@@ -1,0 +1,394 @@
+//! Whole pixels (docs/mathematics.md section 8) stay unbiased:
+//!
+//! - plane groups gathered each with its own ray (a ray set per plane group) match quadrature
+//!   of the rays' single scattering, weighted by the groups' sizes, within 4 standard errors;
+//! - the direct emission over a pixel fully covered by a light, half covered and at a light's
+//!   corner matches its closed form (1, 1/2, 1/4 of the radiance) within 4 standard errors;
+//! - whole images (box filter, and pixel centres) match the independent reference renderer's in
+//!   the image mean and in blocks of pixels within 4.5 standard errors (both errors combined),
+//!   for a fixed plane count and for a render in plane passes;
+//! - plane ranges rendered apart add up to the render of the whole set.
+//!
+//! Fixed seeds throughout; every tolerance is in standard errors measured from the samples.
+
+use fogplanes::film::Film;
+use fogplanes::gather::{CameraRay, GatherContext};
+use fogplanes::photon_plane::sample_plane_range;
+use fogplanes::pixel::{RaySetGather, plane_group, ray_set_of_plane};
+use fogplanes::quadrature::single_scattering;
+use fogplanes::reference::{ReferenceOptions, render_reference};
+use fogplanes::render::{RenderOptions, RenderStats, render, render_in_passes};
+use fogplanes::sampling::Sampler;
+use fogplanes::scene::Scene;
+use fogplanes::weights::{Denominator, Weighting, WithDenominator};
+use glam::{DVec3, Vec3};
+use std::sync::atomic::AtomicBool;
+
+mod common;
+use common::{MeanEstimate, MeanRgb};
+
+/// A fog box with a ceiling panel and a tilted one (as tests/unbiasedness.rs).
+const FOG: &str = r#"
+[camera]
+position = [0.0, 1.5, 6.0]
+look_at = [0.0, 1.5, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 50.0
+resolution = [24, 16]
+
+[medium]
+min = [-2.0, 0.0, -2.0]
+max = [2.0, 3.0, 2.0]
+sigma_s = [0.5, 0.3, 0.2]
+sigma_a = [0.1, 0.2, 0.05]
+
+[[light]]
+name = "ceiling"
+corner = [-0.5, 2.9, -0.25]
+edge_u = [1.0, 0.0, 0.0]
+edge_v = [0.0, 0.0, 0.5]
+radiance = [4.0, 3.0, 2.0]
+
+[[light]]
+name = "tilted"
+corner = [1.2, 2.9, -0.5]
+edge_u = [0.2, 0.1, 0.0]
+edge_v = [0.0, 0.0, 1.0]
+radiance = [1.0, 2.0, 6.0]
+"#;
+
+/// Two panels crossing each other (the line where they meet is an outline), and a strip reaching
+/// from the far wall to behind the camera (its outline crosses the camera's plane).
+const CROSSING: &str = r#"
+[camera]
+position = [1.0, 1.8, 6.0]
+look_at = [0.0, 1.5, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 60.0
+resolution = [32, 18]
+
+[medium]
+min = [-3.0, 0.0, -3.0]
+max = [3.0, 3.0, 8.0]
+sigma_s = [0.3, 0.25, 0.2]
+sigma_a = 0.05
+
+[[light]]
+name = "upright"          # x = 0.2, facing +x (towards the camera)
+corner = [0.2, 0.5, 1.0]
+edge_u = [0.0, 0.0, -2.0]
+edge_v = [0.0, 2.0, 0.0]
+radiance = [5.0, 4.0, 3.0]
+
+[[light]]
+name = "floor"            # y = 1.2, facing up, crossing the upright one
+corner = [-1.0, 1.2, -0.8]
+edge_u = [0.0, 0.0, 1.6]
+edge_v = [2.0, 0.0, 0.0]
+radiance = [1.0, 2.0, 4.0]
+
+[[light]]
+name = "strip"            # from z = -2 to z = 7, past the camera at z = 6
+corner = [-2.5, 0.3, -2.0]
+edge_u = [0.0, 0.0, 9.0]
+edge_v = [0.5, 0.0, 0.0]
+radiance = [2.0, 6.0, 2.0]
+"#;
+
+struct Estimate<'a> {
+    ctx: &'a GatherContext,
+    ray: &'a CameraRay,
+}
+
+impl WithDenominator for Estimate<'_> {
+    type Output = Vec3;
+    fn run<D: Denominator>(self, weights: &D) -> Vec3 {
+        self.ctx.gather_brute_force(weights, self.ray).0
+    }
+}
+
+/// N planes in K groups (N not a multiple of K, so the groups differ in size and start off the
+/// Sobol sequence's powers of two), group k gathered along ray k alone, every plane weighted
+/// 1/N: the expectation is sum_k |G_k|/N L(ray k), with L by quadrature.
+#[test]
+fn a_ray_set_per_plane_group_matches_quadrature() {
+    let scene = Scene::parse(FOG, "fog.toml", "fog").unwrap();
+    let o = scene.camera.position;
+    let dirs: Vec<DVec3> = [(-0.1, 0.05), (0.12, 0.2), (0.02, -0.1), (0.25, 0.3), (-0.3, 0.25)]
+        .iter()
+        .map(|&(x, y)| DVec3::new(x, y, -1.0).normalize())
+        .collect();
+    let (planes, ray_sets) = (6001usize, dirs.len() as u32);
+    let rays: Vec<CameraRay> = dirs
+        .iter()
+        .map(|&we| {
+            let (t0, t1) = scene.camera_segment(o, we).0.unwrap();
+            CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 }
+        })
+        .collect();
+    let mut truth = DVec3::ZERO;
+    for (k, &we) in dirs.iter().enumerate() {
+        let share = plane_group(k as u32, planes, ray_sets).len() as f64 / planes as f64;
+        truth += share * single_scattering(&scene, o, we, 1e-7);
+    }
+    let weighting = Weighting::default();
+    let mut failures = Vec::new();
+    for sampler in Sampler::ALL {
+        let mut tally = MeanRgb::default();
+        for seed in 0..300u64 {
+            let mut sum = Vec3::ZERO;
+            for (k, ray) in rays.iter().enumerate() {
+                let group = plane_group(k as u32, planes, ray_sets);
+                let mut ctx = GatherContext::empty(&scene, o);
+                ctx.push_planes(&scene, &sample_plane_range(&scene, sampler, 500 + seed, group), planes);
+                sum += weighting.dispatch(Estimate { ctx: &ctx, ray });
+            }
+            tally.add(sum);
+        }
+        for c in 0..3 {
+            let e = &tally.0[c];
+            let z = e.z(truth[c], 0.0);
+            let line = format!(
+                "{sampler} ch{c}: quadrature {:.6e}, estimate {:.6e} +- {:.2e}, z = {z:+.2}",
+                truth[c],
+                e.mean(),
+                e.stderr()
+            );
+            println!("{line}");
+            if !(z.abs() <= 4.0) || !(e.stderr() < 0.01 * truth[c]) {
+                failures.push(line);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "outside 4 standard errors or above 1%:\n{}", failures.join("\n"));
+}
+
+/// A camera looking down -z at a light in the plane z = 0 (facing it), in a medium that neither
+/// scatters nor absorbs: a pixel's value is the light's radiance times the fraction of the pixel
+/// it covers. The light's edges are turned by 0.3 rad against the pixel grid, so a straight edge
+/// through the pixel's centre covers exactly half of it and a corner there a quarter (a right
+/// angle at the centre of a square covers a quarter of it whatever its turn).
+#[test]
+fn emission_over_a_pixel_matches_its_coverage() {
+    let text = |corner: DVec3, u: DVec3, v: DVec3| {
+        format!(
+            r#"
+[camera]
+position = [0.0, 0.0, 5.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 40.0
+resolution = [8, 8]
+
+[medium]
+min = [-10.0, -10.0, -10.0]
+max = [10.0, 10.0, 10.0]
+sigma_s = 0.0
+sigma_a = 0.0
+
+[[light]]
+corner = [{}, {}, {}]
+edge_u = [{}, {}, {}]
+edge_v = [{}, {}, {}]
+radiance = [3.0, 2.0, 1.0]
+"#,
+            corner.x, corner.y, corner.z, u.x, u.y, u.z, v.x, v.y, v.z
+        )
+    };
+    let probe = Scene::parse(&text(DVec3::ZERO, DVec3::X, DVec3::Y), "c.toml", "c").unwrap();
+    let cam = &probe.camera;
+    // Pixel (3, 4)'s centre on the plane z = 0 (directions have forward component 1).
+    let centre = cam.position + 5.0 * cam.direction(3.5, 4.5);
+    assert!(centre.z.abs() < 1e-12);
+    let (u, v) = (DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0), DVec3::new(-0.3f64.sin(), 0.3f64.cos(), 0.0));
+    let cases = [
+        ("fully covered", centre - 2.0 * u - 2.0 * v, 1.0),
+        ("half covered", centre - 2.0 * u, 0.5),
+        ("a corner", centre, 0.25),
+    ];
+    let le = DVec3::new(3.0, 2.0, 1.0);
+    let mut failures = Vec::new();
+    for (name, corner, fraction) in cases {
+        let scene = Scene::parse(&text(corner, 4.0 * u, 4.0 * v), "c.toml", "c").unwrap();
+        let mut tally = MeanRgb::default();
+        for seed in 0..100 {
+            let opts = RenderOptions { planes: 16, seed, ..RenderOptions::default() };
+            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+            tally.add(film.get(3, 4));
+        }
+        for c in 0..3 {
+            let (e, want) = (&tally.0[c], le[c] * fraction);
+            // A light covering the whole pixel is seen by every sample: exact.
+            let z = if e.stderr() == 0.0 {
+                if (e.mean() - want).abs() < 1e-6 { 0.0 } else { f64::INFINITY }
+            } else {
+                e.z(want, 0.0)
+            };
+            let line = format!("{name} ch{c}: {want:.6} wanted, {:.6} +- {:.2e}, z = {z:+.2}", e.mean(), e.stderr());
+            println!("{line}");
+            // The stratified samples keep one estimate within 1% of the radiance.
+            let spread = e.stderr() * (e.count() as f64).sqrt();
+            if !(z.abs() <= 4.0) || !(spread < 0.01 * le[c]) {
+                failures.push(line);
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The image mean and the means of blocks of pixels over `seeds` plane sets, against the
+/// reference's (its standard errors from its replicates): every |z| within 4.5. Returns the
+/// lines printed.
+fn against_reference(
+    name: &str,
+    scene: &Scene,
+    pixel_center: bool,
+    seeds: u64,
+    image: &dyn Fn(u64) -> Film,
+) -> Vec<String> {
+    let reference =
+        render_reference(scene, &ReferenceOptions { spp: 4096, uniform: false, seed: 17, pixel_center }, &|| {});
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    const BLOCK: usize = 8;
+    let blocks_x = w.div_ceil(BLOCK);
+    let block_of = |k: usize| (k / w / BLOCK) * blocks_x + (k % w) / BLOCK;
+    let blocks = blocks_x * h.div_ceil(BLOCK);
+    // Per region (the whole image, then each block) and channel: the renders' means over seeds,
+    // and the reference's mean with its standard error.
+    let mut renders = vec![[MeanEstimate::default(); 3]; blocks + 1];
+    let mut refs = vec![[(0.0f64, 0.0f64); 3]; blocks + 1];
+    let mut sizes = vec![0.0f64; blocks + 1];
+    for k in 0..w * h {
+        for region in [0, 1 + block_of(k)] {
+            sizes[region] += 1.0;
+            for c in 0..3 {
+                let (m, s) = (reference.mean.pixels[k][c] as f64, reference.stderr.pixels[k][c] as f64);
+                refs[region][c].0 += m;
+                refs[region][c].1 += s * s;
+            }
+        }
+    }
+    for seed in 0..seeds {
+        let film = image(seed);
+        assert!(film.all_finite_non_negative(), "{name}: seed {seed}");
+        let mut sums = vec![[0.0f64; 3]; blocks + 1];
+        for (k, p) in film.pixels.iter().enumerate() {
+            for region in [0, 1 + block_of(k)] {
+                for c in 0..3 {
+                    sums[region][c] += p[c] as f64;
+                }
+            }
+        }
+        for (r, s) in renders.iter_mut().zip(&sums) {
+            for c in 0..3 {
+                r[c].add(s[c]);
+            }
+        }
+    }
+    let mut failures = Vec::new();
+    for region in 0..=blocks {
+        for c in 0..3 {
+            let n = sizes[region];
+            let (ref_mean, ref_se) = (refs[region][c].0 / n, refs[region][c].1.sqrt() / n);
+            let e = &renders[region][c];
+            // Pixels are f32: means agree no closer than about 1e-6 relative.
+            let scale = (e.stderr() / n).hypot(ref_se).hypot(1e-6 * ref_mean);
+            // Blocks that see nothing (no fog, no light) are exactly zero in both.
+            let z = if scale == 0.0 && e.mean() == 0.0 && ref_mean == 0.0 {
+                0.0
+            } else {
+                (e.mean() / n - ref_mean) / scale
+            };
+            let label = if region == 0 { "image".to_string() } else { format!("block {}", region - 1) };
+            let line = format!(
+                "{name} {label} ch{c}: {:.6e} +- {:.1e}, reference {ref_mean:.6e} +- {ref_se:.1e}, z = {z:+.2}",
+                e.mean() / n,
+                e.stderr() / n
+            );
+            if region == 0 {
+                println!("{line}");
+            }
+            if !(z.abs() <= 4.5) {
+                failures.push(line);
+            }
+        }
+    }
+    failures
+}
+
+fn scene(file: &str, w: u32, h: u32) -> Scene {
+    Scene::load(std::path::Path::new(file)).unwrap().with_resolution(w, h).unwrap()
+}
+
+/// Whole pixels and pixel centres, on the benchmark and on hard camera placements (inside the
+/// box, a light edge-on, two lights facing each other close by), against the reference.
+#[test]
+fn whole_pixel_images_match_the_reference() {
+    let mut failures = Vec::new();
+    let crossing = Scene::parse(CROSSING, "crossing.toml", "crossing").unwrap();
+    for (file, pixel_center) in [
+        ("media_scenes/six_lights.toml", false),
+        ("media_scenes/six_lights.toml", true),
+        ("media_scenes/hard/camera_inside_box.toml", false),
+        ("media_scenes/hard/edge_on_light.toml", false),
+        ("media_scenes/hard/facing_lights_close.toml", false),
+        ("crossing", false),
+    ] {
+        let s = if file == "crossing" { crossing.clone() } else { scene(file, 32, 18) };
+        let name = format!("{file}{}", if pixel_center { " (pixel centres)" } else { "" });
+        failures.extend(against_reference(&name, &s, pixel_center, 64, &|seed| {
+            let opts = RenderOptions { planes: 1500, seed: 40 + seed, pixel_center, ..RenderOptions::default() };
+            render(&s, &opts, &|| {}).unwrap().0
+        }));
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// A render in plane passes (the mechanism of `--time-budget`) splits each pass among the ray
+/// sets: unbiased too.
+#[test]
+fn a_render_in_passes_matches_the_reference() {
+    let s = scene("media_scenes/six_lights.toml", 32, 18);
+    let failures = against_reference("passes", &s, false, 24, &|seed| {
+        let opts = RenderOptions { seed: 70 + seed, ..RenderOptions::default() };
+        let mut schedule = [256usize, 256, 512, 1000, 0].into_iter();
+        render_in_passes(&s, &opts, &|| {}, &mut |_, _| schedule.next().unwrap()).unwrap().0
+    });
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// Each plane meets the ray set of its group whatever range is rendered: ranges rendered apart
+/// (unnormalised) and added give the whole render's sums, up to f32 summation order.
+#[test]
+fn plane_ranges_rendered_apart_add_up_to_the_render() {
+    let s = scene("media_scenes/six_lights.toml", 48, 27);
+    let opts = RenderOptions { planes: 5000, seed: 9, ..RenderOptions::default() };
+    assert_eq!(ray_set_of_plane(4999, 5000, opts.spp), opts.spp - 1);
+    let kernel = opts.kernel.resolve().unwrap();
+    let gather = RaySetGather { scene: &s, opts: &opts, kernel, progress: &|| {}, cancel: &AtomicBool::new(false) };
+    let pixels = 48 * 27;
+    let sums_of = |range: std::ops::Range<usize>| {
+        let mut sums = vec![Vec3::ZERO; pixels];
+        gather.gather_range(range, 1, &mut sums, &mut RenderStats::default()).unwrap();
+        sums
+    };
+    let whole = sums_of(0..5000);
+    let mut parts = vec![DVec3::ZERO; pixels];
+    // Chunks that cut groups (5000 planes in 16 groups of 312 or 313) anywhere.
+    for range in [0..1000, 1000..1001, 1001..4096, 4096..5000] {
+        for (p, s) in parts.iter_mut().zip(sums_of(range)) {
+            *p += s.as_dvec3();
+        }
+    }
+    let largest = whole.iter().map(|v| v.max_element()).fold(0.0f32, f32::max);
+    assert!(largest > 0.0);
+    for (a, b) in parts.iter().zip(&whole) {
+        assert!((*a - b.as_dvec3()).abs().max_element() <= 1e-5 * largest as f64, "{a} vs {b}");
+    }
+    // The render is those sums over N plus the emission.
+    let (film, _) = render(&s, &opts, &|| {}).unwrap();
+    let emission = fogplanes::emission::direct_emission(&s, opts.seed, opts.spp, false);
+    for ((f, w), e) in film.pixels.iter().zip(&whole).zip(&emission) {
+        assert!((*f - (*w / 5000.0 + *e)).abs().max_element() <= 1e-5 * f.max_element().max(1e-3));
+    }
+}
