@@ -2,8 +2,8 @@
 //! (docs/mathematics.md section 5) and the scaling study. Each gathers numbers and hands them to
 //! [`crate::pictures`] to draw.
 //!
-//! Every estimator gathers the same planes along the same camera rays (pixel centres by
-//! default), so the planes are the only source of difference between them, and each is timed on
+//! Every estimator gathers the same planes along the same camera rays (whole pixels, the render's
+//! ray sets, by default; pixel centres on request), so the planes are the only source of difference between them, and each is timed on
 //! its own. Speed against error is reported as efficiency 1 / (MSE x seconds), with both the
 //! gathering time and the whole time (plane sampling, structure build, rays and gathering).
 
@@ -15,11 +15,11 @@ use fogplanes::film::{Film, write_file_atomically};
 use fogplanes::gather::GatherStats;
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::{ErrorMetrics, compare};
-use fogplanes::render::{Accelerator, PreparedPlanes, RenderOptions, camera_rays, render, render_for};
+use fogplanes::pixel::{DEFAULT_RAY_SETS, PixelSettings, PreparedPixels};
+use fogplanes::render::{RenderOptions, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
-use glam::Vec3;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -108,6 +108,9 @@ pub struct Table {
     pub reference: String,
     pub resolution: [u32; 2],
     pub pixel_center: bool,
+    /// The pixel filter, in words: whole pixels (box, the default) or pixel centres; the
+    /// reference must use the same.
+    pub filter: String,
     pub seed: u64,
     /// Shared by all estimators of the first sampler: plane sampling, structure build, rays.
     pub shared_seconds: f64,
@@ -132,7 +135,7 @@ pub struct EqualTimeRow {
     pub mse_vs_unweighted: f64,
 }
 
-/// Renders every entry for `budget` seconds (pixel centres as the table, the table's seed) and
+/// Renders every entry for `budget` seconds (the table's pixel filter and seed) and
 /// measures each against the reference.
 fn equal_time(
     scene: &Scene,
@@ -203,17 +206,16 @@ fn measure(
     let kernel = Kernel::Auto.resolve().expect("auto always resolves");
     let mut out = Vec::new();
     for &sampler in samplers {
-        let start = Instant::now();
-        let prepared = PreparedPlanes::new(scene, planes, seed, sampler, Accelerator::Raster);
-        let pass = camera_rays(scene, seed, 0, pixel_center);
-        let shared_seconds = start.elapsed().as_secs_f64();
+        // The render's whole pixels (or pixel centres): its ray sets, plane groups and emission.
+        let settings = PixelSettings { planes, ray_sets: DEFAULT_RAY_SETS, seed, sampler, pixel_center };
+        let prepared = PreparedPixels::new(scene, settings);
+        let shared_seconds = prepared.seconds;
         for &weighting in weightings {
             let t = Instant::now();
-            let mut sums = vec![Vec3::ZERO; pass.rays.len()];
-            let stats = prepared.gather(weighting, kernel, &pass.rays, &mut sums, &|| {});
+            let (sums, stats) = prepared.gather(weighting, kernel);
             let gather_seconds = t.elapsed().as_secs_f64();
             let mut film = Film::new(scene.camera.width, scene.camera.height);
-            for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass.emission) {
+            for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&prepared.emission) {
                 *f = *s + *e;
             }
             out.push(Measured { entry: Entry { weighting, sampler }, film, stats, gather_seconds, shared_seconds });
@@ -310,6 +312,11 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         reference: opts.reference_path.display().to_string(),
         resolution: [scene.camera.width, scene.camera.height],
         pixel_center: opts.pixel_center,
+        filter: if opts.pixel_center {
+            "pixel-centre rays".to_string()
+        } else {
+            format!("whole pixels (box filter, {DEFAULT_RAY_SETS} ray sets)")
+        },
         seed: opts.seed,
         shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
@@ -419,9 +426,8 @@ impl Row {
 impl Table {
     /// What was rendered: scene, resolution, rays and seed.
     fn setting(&self) -> String {
-        let rays = if self.pixel_center { "pixel-centre" } else { "jittered" };
         let [w, h] = self.resolution;
-        format!("{} at {w}x{h}, {rays} rays, seed {}", self.scene, self.seed)
+        format!("{} at {w}x{h}, {}, seed {}", self.scene, self.filter, self.seed)
     }
 
     /// The line above the table: the setting, the reference, the shared time.

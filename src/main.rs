@@ -146,14 +146,17 @@ struct RenderArgs {
     /// default) or independent (the paper's planes). Default: the scene's, else sobol.
     #[arg(long, value_parser = sampler_parser())]
     sampler: Option<Sampler>,
-    /// Camera samples per pixel, each a full pass over the same planes.
+    /// Camera samples per pixel (ray sets), stratified over the pixel; each gathers its own
+    /// share of the N planes, so K of them cost about what one does (default: the scene's, else
+    /// 16).
     #[arg(long, value_name = "K")]
     spp: Option<u32>,
     /// Render for this many seconds of wall time (the whole command) instead of a fixed plane
     /// count: planes in passes, each extending the set, until the budget is spent.
     #[arg(long, value_name = "SECONDS", conflicts_with = "planes")]
     time_budget: Option<f64>,
-    /// Trace pixel centres instead of jittered samples.
+    /// Pixel centres instead of whole pixels (the box filter, by default): compare with
+    /// `reference --pixel-center`.
     #[arg(long)]
     pixel_center: bool,
     /// How rays find planes.
@@ -183,7 +186,8 @@ struct ReferenceArgs {
     /// Random seed.
     #[arg(long, short, value_name = "S", default_value_t = 1)]
     seed: u64,
-    /// Sample pixel centres (to compare with `render --pixel-center` and `table`).
+    /// Sample pixel centres instead of whole pixels (to compare with `render --pixel-center`
+    /// and `table --pixel-center`).
     #[arg(long)]
     pixel_center: bool,
     /// The same number of samples in every pixel (by default a pilot pass spreads them by need).
@@ -217,7 +221,9 @@ struct CompareArgs {
 struct TableArgs {
     /// The scene file (TOML).
     scene: PathBuf,
-    /// Reference image (EXR) rendered with --pixel-center at the same resolution.
+    /// Reference image (EXR) at the same resolution and with the same pixel filter: whole
+    /// pixels (`reference` as it is), or pixel centres (`reference --pixel-center`) with
+    /// --pixel-center.
     #[arg(long, value_name = "REF")]
     reference: PathBuf,
     /// Number of photon planes of the table (default: the scene's).
@@ -226,9 +232,9 @@ struct TableArgs {
     /// Random seed of the table's planes (the sweep uses seed + 1000 onwards).
     #[arg(long, short, value_name = "S")]
     seed: Option<u64>,
-    /// Jittered rays instead of pixel centres (then the reference must be jittered too).
+    /// Pixel centres instead of whole pixels (box filter); the reference must match.
     #[arg(long)]
-    jitter: bool,
+    pixel_center: bool,
     /// Plane counts of the error-versus-time sweep, comma separated.
     #[arg(long, value_delimiter = ',', default_values_t = [5120u64, 10240, 20480, 40960, 81920, 163840])]
     sweep: Vec<u64>,
@@ -416,7 +422,7 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
 
     let bar = progress_bar(
         a.common.quiet,
-        progress_units_per_pass(&scene, a.accelerator) * opts.spp as u64,
+        progress_units_per_pass(&scene, a.accelerator) * if opts.pixel_center { 1 } else { opts.spp as u64 },
         weighting.label().as_str(),
     );
     let cpu = system::cpu_seconds();
@@ -534,7 +540,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     let opts = TableOptions {
         planes: planes as usize,
         seed: a.seed.unwrap_or(scene.render.seed),
-        pixel_center: !a.jitter,
+        pixel_center: a.pixel_center,
         sweep: if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() },
         sweep_seeds: a.sweep_seeds,
         weightings: Weighting::all(&a.orientations),

@@ -114,11 +114,9 @@ impl WithDenominator for Estimate<'_> {
 fn a_ray_set_per_plane_group_matches_quadrature() {
     let scene = Scene::parse(FOG, "fog.toml", "fog").unwrap();
     let o = scene.camera.position;
-    let dirs: Vec<DVec3> = [(-0.1, 0.05), (0.12, 0.2), (0.02, -0.1), (0.25, 0.3), (-0.3, 0.25)]
-        .iter()
-        .map(|&(x, y)| DVec3::new(x, y, -1.0).normalize())
-        .collect();
-    let (planes, ray_sets) = (6001usize, dirs.len() as u32);
+    let dirs: Vec<DVec3> =
+        [(-0.1, 0.05), (0.12, 0.2), (0.25, 0.3)].iter().map(|&(x, y)| DVec3::new(x, y, -1.0).normalize()).collect();
+    let (planes, ray_sets) = (2001usize, dirs.len() as u32);
     let rays: Vec<CameraRay> = dirs
         .iter()
         .map(|&we| {
@@ -135,7 +133,7 @@ fn a_ray_set_per_plane_group_matches_quadrature() {
     let mut failures = Vec::new();
     for sampler in Sampler::ALL {
         let mut tally = MeanRgb::default();
-        for seed in 0..300u64 {
+        for seed in 0..400u64 {
             let mut sum = Vec3::ZERO;
             for (k, ray) in rays.iter().enumerate() {
                 let group = plane_group(k as u32, planes, ray_sets);
@@ -155,24 +153,41 @@ fn a_ray_set_per_plane_group_matches_quadrature() {
                 e.stderr()
             );
             println!("{line}");
-            if !(z.abs() <= 4.0) || !(e.stderr() < 0.01 * truth[c]) {
+            if !(z.abs() <= 4.0) || !(e.stderr() < 0.02 * truth[c]) {
                 failures.push(line);
             }
         }
     }
-    assert!(failures.is_empty(), "outside 4 standard errors or above 1%:\n{}", failures.join("\n"));
+    assert!(failures.is_empty(), "outside 4 standard errors or above 2%:\n{}", failures.join("\n"));
 }
 
 /// A camera looking down -z at a light in the plane z = 0 (facing it), in a medium that neither
 /// scatters nor absorbs: a pixel's value is the light's radiance times the fraction of the pixel
 /// it covers. The light's edges are turned by 0.3 rad against the pixel grid, so a straight edge
 /// through the pixel's centre covers exactly half of it and a corner there a quarter (a right
-/// angle at the centre of a square covers a quarter of it whatever its turn).
+/// angle at the centre of a square covers a quarter of it whatever its turn). Alone, the light's
+/// coverage is computed exactly; with a black panel (its back to the camera) behind it, filling
+/// the rest of the pixel, the pixel is sampled by its jittered grid.
 #[test]
 fn emission_over_a_pixel_matches_its_coverage() {
-    let text = |corner: DVec3, u: DVec3, v: DVec3| {
+    let light = |corner: DVec3, u: DVec3, v: DVec3, radiance: f64| {
         format!(
-            r#"
+            "[[light]]\ncorner = [{}, {}, {}]\nedge_u = [{}, {}, {}]\nedge_v = [{}, {}, {}]\nradiance = [{}, {}, {}]\n",
+            corner.x,
+            corner.y,
+            corner.z,
+            u.x,
+            u.y,
+            u.z,
+            v.x,
+            v.y,
+            v.z,
+            3.0 * radiance,
+            2.0 * radiance,
+            radiance
+        )
+    };
+    let camera = r#"
 [camera]
 position = [0.0, 0.0, 5.0]
 look_at = [0.0, 0.0, 0.0]
@@ -185,21 +200,16 @@ min = [-10.0, -10.0, -10.0]
 max = [10.0, 10.0, 10.0]
 sigma_s = 0.0
 sigma_a = 0.0
-
-[[light]]
-corner = [{}, {}, {}]
-edge_u = [{}, {}, {}]
-edge_v = [{}, {}, {}]
-radiance = [3.0, 2.0, 1.0]
-"#,
-            corner.x, corner.y, corner.z, u.x, u.y, u.z, v.x, v.y, v.z
-        )
-    };
-    let probe = Scene::parse(&text(DVec3::ZERO, DVec3::X, DVec3::Y), "c.toml", "c").unwrap();
+"#;
+    let probe =
+        Scene::parse(&format!("{camera}{}", light(DVec3::ZERO, DVec3::X, DVec3::Y, 1.0)), "c.toml", "c").unwrap();
     let cam = &probe.camera;
-    // Pixel (3, 4)'s centre on the plane z = 0 (directions have forward component 1).
+    // Pixel (3, 4)'s centre on the plane z = 0 (directions have forward component 1), and on
+    // the plane z = -1.
     let centre = cam.position + 5.0 * cam.direction(3.5, 4.5);
     assert!(centre.z.abs() < 1e-12);
+    let behind = cam.position + 6.0 * cam.direction(3.5, 4.5);
+    let black = light(behind - 2.0 * DVec3::X + 2.0 * DVec3::Y, 4.0 * DVec3::X, -4.0 * DVec3::Y, 1.0);
     let (u, v) = (DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0), DVec3::new(-0.3f64.sin(), 0.3f64.cos(), 0.0));
     let cases = [
         ("fully covered", centre - 2.0 * u - 2.0 * v, 1.0),
@@ -208,28 +218,30 @@ radiance = [3.0, 2.0, 1.0]
     ];
     let le = DVec3::new(3.0, 2.0, 1.0);
     let mut failures = Vec::new();
-    for (name, corner, fraction) in cases {
-        let scene = Scene::parse(&text(corner, 4.0 * u, 4.0 * v), "c.toml", "c").unwrap();
-        let mut tally = MeanRgb::default();
-        for seed in 0..100 {
-            let opts = RenderOptions { planes: 16, seed, ..RenderOptions::default() };
-            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
-            tally.add(film.get(3, 4));
-        }
-        for c in 0..3 {
-            let (e, want) = (&tally.0[c], le[c] * fraction);
-            // A light covering the whole pixel is seen by every sample: exact.
-            let z = if e.stderr() == 0.0 {
-                if (e.mean() - want).abs() < 1e-6 { 0.0 } else { f64::INFINITY }
-            } else {
-                e.z(want, 0.0)
-            };
-            let line = format!("{name} ch{c}: {want:.6} wanted, {:.6} +- {:.2e}, z = {z:+.2}", e.mean(), e.stderr());
-            println!("{line}");
-            // The stratified samples keep one estimate within 1% of the radiance.
-            let spread = e.stderr() * (e.count() as f64).sqrt();
-            if !(z.abs() <= 4.0) || !(spread < 0.01 * le[c]) {
-                failures.push(line);
+    for with_black in [false, true] {
+        for (name, corner, fraction) in cases {
+            let lights = light(corner, 4.0 * u, 4.0 * v, 1.0) + if with_black { black.as_str() } else { "" };
+            let scene = Scene::parse(&format!("{camera}{lights}"), "c.toml", "c").unwrap();
+            let mut tally = MeanRgb::default();
+            for seed in 0..100 {
+                let opts = RenderOptions { planes: 16, seed, ..RenderOptions::default() };
+                let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+                tally.add(film.get(3, 4));
+            }
+            for c in 0..3 {
+                let (e, want) = (&tally.0[c], le[c] * fraction);
+                // Exact but for rounding when nothing is sampled.
+                let exact = e.stderr() == 0.0;
+                let z = if exact { (e.mean() - want) / (1e-6 * want) } else { e.z(want, 0.0) };
+                let name = format!("{name}{}", if with_black { ", black panel behind" } else { "" });
+                let line =
+                    format!("{name} ch{c}: {want:.6} wanted, {:.6} +- {:.2e}, z = {z:+.2}", e.mean(), e.stderr());
+                println!("{line}");
+                // The stratified samples keep one estimate within 1% of the radiance.
+                let spread = e.stderr() * (e.count() as f64).sqrt();
+                if !(z.abs() <= 4.0) || !(spread < 0.01 * le[c]) {
+                    failures.push(line);
+                }
             }
         }
     }
@@ -261,10 +273,10 @@ fn against_reference(
     for k in 0..w * h {
         for region in [0, 1 + block_of(k)] {
             sizes[region] += 1.0;
-            for c in 0..3 {
-                let (m, s) = (reference.mean.pixels[k][c] as f64, reference.stderr.pixels[k][c] as f64);
-                refs[region][c].0 += m;
-                refs[region][c].1 += s * s;
+            let (mean, stderr) = (reference.mean.pixels[k], reference.stderr.pixels[k]);
+            for (c, r) in refs[region].iter_mut().enumerate() {
+                r.0 += mean[c] as f64;
+                r.1 += (stderr[c] as f64).powi(2);
             }
         }
     }

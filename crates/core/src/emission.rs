@@ -10,6 +10,7 @@
 
 use crate::camera::Camera;
 use crate::light::RectLight;
+use crate::photon_plane::Polygon;
 use crate::pixel::{PanelFootprints, ray_set_position};
 use crate::sampling::{rng_for, unit_f64};
 use crate::scene::Scene;
@@ -28,6 +29,14 @@ const OUTLINE_STREAM: u64 = 0xED_6E5;
 /// projection (a pixel marked needlessly only costs samples).
 const MARGIN: f64 = 1e-3;
 
+/// Side of the jittered grid that corrects an exactly covered pixel for the transmittance's
+/// variation across it (`n^2` samples of a term about a thousandth of the emission).
+const CORRECTION_GRID: u32 = 4;
+
+/// Below this fraction of a pixel, a panel's projection is taken not to meet it: the emission
+/// it could add is below the f32 rounding of the pixel.
+const TINY_AREA: f64 = 1e-9;
+
 /// The direct emission of every pixel: the mean of `E` over the pixel (section 8.2), or `E` at
 /// the pixel centre when `pixel_center`. `ray_sets` and `seed` fix the positions that pixels
 /// without an outline average over (those of the render's ray sets).
@@ -35,12 +44,13 @@ pub fn direct_emission(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bo
     direct_emission_with(scene, seed, ray_sets, pixel_center, OUTLINE_GRID)
 }
 
-/// [`direct_emission`] with an `grid x grid` jittered grid in outline pixels.
+/// [`direct_emission`] with a `grid x grid` jittered grid in the pixels that need one.
 pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool, grid: u32) -> Vec<Vec3> {
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
     let footprints = PanelFootprints::new(scene);
     let outline = if pixel_center { vec![false; (w * h) as usize] } else { outline_pixels(scene) };
+    let projected = projected_panels(scene);
     let ray_sets = ray_sets.max(1);
     (0..w * h)
         .into_par_iter()
@@ -52,30 +62,140 @@ pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_cente
             let lights = footprints.over(i, j);
             let at = |x: f64, y: f64| emission_at(scene, cam, x, y, lights.clone());
             let (x, y) = (i as f64, j as f64);
-            let sum = if pixel_center {
-                at(x + 0.5, y + 0.5)
-            } else if outline[p as usize] {
-                let mut rng = rng_for(seed, OUTLINE_STREAM, p as u64);
-                let mut sum = DVec3::ZERO;
-                let cell = 1.0 / grid as f64;
-                for a in 0..grid {
-                    for b in 0..grid {
-                        let (u, v) = (unit_f64(rng.next_u64()), unit_f64(rng.next_u64()));
-                        sum += at(x + (a as f64 + u) * cell, y + (b as f64 + v) * cell);
-                    }
+            if pixel_center {
+                return at(x + 0.5, y + 0.5).as_vec3();
+            }
+            let mut jitter = Jitter { x, y, rng: rng_for(seed, OUTLINE_STREAM, p as u64) };
+            let value = match meeting(&projected, lights.clone(), i, j) {
+                Meeting::None => DVec3::ZERO,
+                Meeting::One(l, area) => covered(scene, l, area, &mut jitter),
+                Meeting::Several if outline[p as usize] => {
+                    let mut sum = DVec3::ZERO;
+                    jitter.grid(grid, |x, y| sum += at(x, y));
+                    sum / (grid * grid) as f64
                 }
-                sum / (grid * grid) as f64
-            } else {
-                let mut sum = DVec3::ZERO;
-                for k in 0..ray_sets {
-                    let (sx, sy) = ray_set_position(seed, p as u64, k);
-                    sum += at(x + sx, y + sy);
+                // No outline crosses the pixel: the same panel is first along all its rays.
+                Meeting::Several => {
+                    let sum: DVec3 = (0..ray_sets)
+                        .map(|k| {
+                            let (sx, sy) = ray_set_position(seed, p as u64, k);
+                            at(x + sx, y + sy)
+                        })
+                        .sum();
+                    sum / ray_sets as f64
                 }
-                sum / ray_sets as f64
             };
-            sum.as_vec3()
+            value.as_vec3()
         })
         .collect()
+}
+
+/// Jittered samples over the pixel with corner `(x, y)`, from the pixel's own random stream.
+struct Jitter {
+    x: f64,
+    y: f64,
+    rng: rand_pcg::Pcg64Mcg,
+}
+
+impl Jitter {
+    /// Calls `f` at one uniform point in each cell of an `n x n` grid over the pixel.
+    fn grid(&mut self, n: u32, mut f: impl FnMut(f64, f64)) {
+        let cell = 1.0 / n as f64;
+        for a in 0..n {
+            for b in 0..n {
+                let (u, v) = (unit_f64(self.rng.next_u64()), unit_f64(self.rng.next_u64()));
+                f(self.x + (a as f64 + u) * cell, self.y + (b as f64 + v) * cell);
+            }
+        }
+    }
+}
+
+/// Which of the panels `lights` meet pixel `(i, j)` on the image.
+enum Meeting {
+    None,
+    /// Exactly one, covering this fraction of the pixel.
+    One(usize, f64),
+    /// Two or more, or one reaching behind the camera (whose projection is not a polygon).
+    Several,
+}
+
+fn meeting(projected: &[Option<Polygon<DVec2>>], lights: impl Iterator<Item = usize>, i: u32, j: u32) -> Meeting {
+    let mut found = Meeting::None;
+    for l in lights {
+        let Some(polygon) = &projected[l] else {
+            return Meeting::Several;
+        };
+        let area = area_in_pixel(polygon, i, j);
+        if area > TINY_AREA {
+            if !matches!(found, Meeting::None) {
+                return Meeting::Several;
+            }
+            found = Meeting::One(l, area);
+        }
+    }
+    found
+}
+
+/// The emission over a pixel that only panel `l` meets, covering `area` of it (section 8.2):
+/// `Le (Tr_c area + mean over a jittered grid of [hit] (Tr - Tr_c))`. The first term is exact;
+/// the second corrects for the transmittance's variation across the pixel (`Tr_c` is a fixed
+/// transmittance to the panel near the pixel), an unbiased estimate of a small term.
+fn covered(scene: &Scene, l: usize, area: f64, jitter: &mut Jitter) -> DVec3 {
+    let (cam, light) = (&scene.camera, &scene.lights[l]);
+    let o = cam.position;
+    // The camera sees the panel's back (black) or its front, the same for every ray.
+    if !((light.corner - o).dot(light.n) < 0.0) {
+        return DVec3::ZERO;
+    }
+    let medium = &scene.medium;
+    let tr = |to: DVec3| medium.transmittance(medium.length_inside(o, to));
+    // Where the pixel-centre ray meets the panel's plane, kept on the panel.
+    let we = cam.direction(jitter.x + 0.5, jitter.y + 0.5).normalize();
+    let t = (light.corner - o).dot(light.n) / we.dot(light.n);
+    let (p, q) =
+        if t > 0.0 && t.is_finite() { light.local(o + t * we) } else { (0.5 * light.width, 0.5 * light.height) };
+    let tr_c = tr(light.point(p.clamp(0.0, light.width), q.clamp(0.0, light.height)));
+    let mut correction = DVec3::ZERO;
+    jitter.grid(CORRECTION_GRID, |x, y| {
+        let we = cam.direction(x, y).normalize();
+        if let Some(t) = light.intersect(o, we, 0.0, f64::INFINITY) {
+            correction += tr(o + t * we) - tr_c;
+        }
+    });
+    let n = (CORRECTION_GRID * CORRECTION_GRID) as f64;
+    light.radiance * (tr_c * area + correction / n)
+}
+
+/// Each panel's projection on the image when it lies wholly in front of the camera (a convex
+/// quadrilateral, the image of the rectangle), else None.
+fn projected_panels(scene: &Scene) -> Vec<Option<Polygon<DVec2>>> {
+    let cam = &scene.camera;
+    let near = 1e-6 * scene.medium.diagonal();
+    scene
+        .lights
+        .iter()
+        .map(|l| {
+            let corners = l.corners().map(|c| cam.to_camera(c));
+            corners
+                .iter()
+                .all(|c| c.z > near)
+                .then(|| Polygon::from_slice(&corners.map(|c| DVec2::from(cam.project(c)))))
+        })
+        .collect()
+}
+
+/// The area of `polygon` (convex, image coordinates) inside the square of pixel `(i, j)`.
+fn area_in_pixel(polygon: &Polygon<DVec2>, i: u32, j: u32) -> f64 {
+    let (x, y) = (i as f64, j as f64);
+    let lerp = |p: DVec2, q: DVec2, s: f64| p + (q - p) * s;
+    let clipped = polygon
+        .clip(|v| v.x - x, lerp)
+        .clip(|v| x + 1.0 - v.x, lerp)
+        .clip(|v| v.y - y, lerp)
+        .clip(|v| y + 1.0 - v.y, lerp);
+    let pts = clipped.points();
+    let twice: f64 = (0..pts.len()).map(|k| pts[k].perp_dot(pts[(k + 1) % pts.len()])).sum();
+    (0.5 * twice.abs()).min(1.0)
 }
 
 /// The emission `E` along the camera ray through image point `(x, y)`, testing the panels

@@ -28,7 +28,7 @@ use std::time::Instant;
 pub const DEFAULT_RAY_SETS: u32 = 16;
 
 /// The random stream of the ray sets' positions in their pixels.
-const RAY_SET_STREAM: u64 = 0x9_1A5E_75;
+const RAY_SET_STREAM: u64 = 0x91A5_E75D;
 
 /// The ray set that plane `i` of a set of `planes` is gathered with when pixels have
 /// `ray_sets` ray sets: `floor(i K / N)` (section 8.1). It depends on (i, N, K) alone, so a
