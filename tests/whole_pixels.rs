@@ -363,7 +363,7 @@ fn a_render_in_passes_matches_the_reference() {
     let s = scene("media_scenes/six_lights.toml", 32, 18);
     let failures = against_reference("passes", &s, false, 24, &|seed| {
         let opts = RenderOptions { seed: 70 + seed, ..RenderOptions::default() };
-        let mut schedule = [256usize, 256, 512, 1000, 0].into_iter();
+        let mut schedule = [256usize, 256, 512, 3000, 0].into_iter();
         render_in_passes(&s, &opts, &|| {}, &mut |_, _| schedule.next().unwrap()).unwrap().0
     });
     assert!(failures.is_empty(), "{}", failures.join("\n"));

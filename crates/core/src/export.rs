@@ -23,7 +23,7 @@
 //!   truthful should the BSDF change.
 //! - The camera is a `perspective` sensor with `fov_axis` "y", the vertical field of view, the
 //!   look-at frame `(position, position + forward, up)` and a `box` pixel filter, so that a
-//!   pixel is the average over its square, as in fogplanes' jittered rendering. Its film
+//!   pixel is the average over its square, as in fogplanes' renders (whole pixels). Its film
 //!   column 0 is on the left (-right) and row 0 at the top, as in fogplanes: no mirroring is
 //!   needed (checked numerically by `tests/mitsuba/check_export.py`). A camera inside the box
 //!   (or on its boundary) gets the fog as its medium.

@@ -134,15 +134,12 @@ pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec
     let cam = &scene.camera;
     let w = cam.width as usize;
     let footprints = PanelFootprints::new(scene);
-    // Camera::direction is affine in the image point: origin and steps computed once.
-    let (o, dx, dy) = (cam.direction(0.0, 0.0), cam.direction(1.0, 0.0), cam.direction(0.0, 1.0));
-    let (dx, dy) = (dx - o, dy - o);
     (0..w * cam.height as usize)
         .into_par_iter()
         .map(|p| {
             let (i, j) = ((p % w) as u32, (p / w) as u32);
             let (sx, sy) = if pixel_center { (0.5, 0.5) } else { ray_set_position(seed, p as u64, k) };
-            let we = (o + (i as f64 + sx) * dx + (j as f64 + sy) * dy).normalize();
+            let we = cam.direction(i as f64 + sx, j as f64 + sy).normalize();
             let first = scene.first_light_among(cam.position, we, f64::INFINITY, footprints.over(i, j));
             camera_ray(we, scene.segment_before(cam.position, we, first.map_or(f64::INFINITY, |(t, _)| t)))
         })
@@ -224,24 +221,51 @@ impl RaySetGather<'_> {
 }
 
 /// The camera rays of ray sets `0..ray_sets` (one set at pixel centres, which every set
-/// shares), kept for gathering several times: the passes of a render on a time budget, the
-/// estimators of the table.
+/// shares), kept for gathering several times: the passes of a render on a time budget (which
+/// makes each set when first needed), the estimators of the table.
 pub struct RaySets {
-    pub sets: Vec<Vec<CameraRay>>,
+    seed: u64,
+    pixel_center: bool,
+    sets: Vec<Option<Vec<CameraRay>>>,
+    /// Seconds spent making rays.
     pub seconds: f64,
 }
 
 impl RaySets {
+    /// Every set, made now.
     pub fn new(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool) -> Self {
-        let t = Instant::now();
-        let count = if pixel_center { 1 } else { ray_sets.max(1) };
-        let sets = (0..count).map(|k| ray_set_rays(scene, seed, k, pixel_center)).collect();
-        RaySets { sets, seconds: t.elapsed().as_secs_f64() }
+        let mut sets = RaySets::empty(seed, ray_sets, pixel_center);
+        for k in 0..sets.sets.len() as u32 {
+            sets.rays(scene, k);
+        }
+        sets
     }
 
-    /// The rays of ray set `k`.
+    /// No set made yet.
+    pub fn empty(seed: u64, ray_sets: u32, pixel_center: bool) -> Self {
+        let count = if pixel_center { 1 } else { ray_sets.max(1) };
+        RaySets { seed, pixel_center, sets: vec![None; count as usize], seconds: 0.0 }
+    }
+
+    /// The rays of ray set `k`, made if need be.
+    pub fn rays(&mut self, scene: &Scene, k: u32) -> &[CameraRay] {
+        let k = k as usize % self.sets.len();
+        if self.sets[k].is_none() {
+            let t = Instant::now();
+            self.sets[k] = Some(ray_set_rays(scene, self.seed, k as u32, self.pixel_center));
+            self.seconds += t.elapsed().as_secs_f64();
+        }
+        self.sets[k].as_deref().unwrap_or_default()
+    }
+
+    /// The rays of ray set `k`, made before (empty otherwise).
     pub fn get(&self, k: u32) -> &[CameraRay] {
-        &self.sets[k as usize % self.sets.len()]
+        self.sets[k as usize % self.sets.len()].as_deref().unwrap_or_default()
+    }
+
+    /// Rays made so far.
+    pub fn count(&self) -> u64 {
+        self.sets.iter().flatten().map(|s| s.len() as u64).sum()
     }
 
     /// Bytes the rays of `ray_sets` sets take at a resolution (for the memory check).

@@ -407,7 +407,7 @@ const FIRST_PASS_PLANES: usize = 256;
 /// the next pass would not fit; the last pass is sized from the measured time per plane to use
 /// what remains. The image is the estimate of the N planes gathered, N = the total over passes:
 /// the same planes as a render of N planes; each pass splits its planes among the `opts.spp` ray
-/// sets as a render of them alone would, so every plane is still gathered with a ray set
+/// sets (fewer for small passes, taken in turn), so every plane is still gathered with a ray set
 /// uniform over the pixel, and the estimate is unbiased (docs/mathematics.md section 8.1).
 /// `opts.planes` is ignored. Returns as soon as
 /// `budget` would be exceeded by more work; the caller's own time (loading, writing) is not in
@@ -432,6 +432,10 @@ pub fn render_for(
     })
 }
 
+/// The fewest planes a pass of a render on a time budget gives each ray set it gathers with:
+/// smaller passes use fewer ray sets.
+const MIN_PASS_GROUP: usize = 1024;
+
 /// The largest pass of a render on a time budget (a pass's planes are held at once; this keeps
 /// them near 0.5 GB whatever the budget).
 const MAX_PASS_PLANES: usize = 1 << 20;
@@ -439,8 +443,9 @@ const MAX_PASS_PLANES: usize = 1 << 20;
 /// Renders planes in passes, each extending the set by the next planes of the sampler:
 /// `next_pass(planes so far, seconds per plane of the last pass)` sizes the next pass, 0 ends
 /// the render. The image is the estimate of all the planes gathered, the same set as a render
-/// of that many planes (with one pass, the same image up to f32 summation order). The ray sets
-/// are made once and kept. `opts.planes` is ignored.
+/// of that many planes (with one pass of at least 1024 planes per ray set, the same image up to
+/// f32 summation order). The ray sets are made when first needed and kept. `opts.planes` is
+/// ignored.
 pub fn render_in_passes(
     scene: &Scene,
     opts: &RenderOptions,
@@ -456,20 +461,14 @@ pub fn render_in_passes(
     // The ray sets are kept for every pass: their memory counts as that many planes'.
     let rays_as_planes = RaySets::bytes(width, height, ray_sets) / crate::limits::BYTES_PER_PLANE;
     check_memory(width, height, rays_as_planes).map_err(|m| Error::option("--spp", m))?;
-    let sets = RaySets::new(scene, opts.seed, ray_sets, opts.pixel_center);
+    let mut sets = RaySets::empty(opts.seed, ray_sets, opts.pixel_center);
     let pixels = width as usize * height as usize;
-    let mut stats = RenderStats {
-        estimator: opts.weighting.label(),
-        kernel: kernel.to_string(),
-        rays: (sets.sets.len() * pixels) as u64,
-        seconds_rays: sets.seconds,
-        ..Default::default()
-    };
+    let mut stats = RenderStats { estimator: opts.weighting.label(), kernel: kernel.to_string(), ..Default::default() };
     // Each pass sums its planes in f32 weighted 1 (not 1/N, which is known only at the end);
     // the passes add up in f64, so that the sums stay as far from f32 overflow as a single
     // pass's.
     let mut total = vec![glam::DVec3::ZERO; pixels];
-    let (mut done, mut per_plane) = (0usize, 0.0);
+    let (mut done, mut per_plane, mut next_set) = (0usize, 0.0, 0u32);
     loop {
         let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
         if next == 0 {
@@ -477,15 +476,18 @@ pub fn render_in_passes(
         }
         check_memory(width, height, next as u64 + rays_as_planes).map_err(|m| Error::option("--time-budget", m))?;
         let pass_start = Instant::now();
-        // The pass's planes split among the ray sets as a render of them alone would
-        // (section 8.1); weighted as one of 1, the division by the final count comes at the end.
+        // The pass's planes split into groups, each gathered along the next ray set in turn
+        // (section 8.1): as many groups as ray sets once a pass has MIN_PASS_GROUP planes per
+        // set, fewer before (a gather costs something per pixel). Weighted as one of 1, the
+        // division by the final count comes at the end.
+        let used = (next / MIN_PASS_GROUP).clamp(1, ray_sets as usize) as u32;
         let mut sums = vec![Vec3::ZERO; pixels];
-        for k in 0..ray_sets {
-            let group = plane_group(k, next, ray_sets);
-            if !group.is_empty() {
-                gather.gather_group(done + group.start..done + group.end, 1, sets.get(k), &mut sums, &mut stats)?;
-            }
+        for g in 0..used {
+            let group = plane_group(g, next, used);
+            let rays = sets.rays(scene, (next_set + g) % ray_sets);
+            gather.gather_group(done + group.start..done + group.end, 1, rays, &mut sums, &mut stats)?;
         }
+        next_set = (next_set + used) % ray_sets;
         for (t, s) in total.iter_mut().zip(&sums) {
             *t += s.as_dvec3();
         }
@@ -496,6 +498,7 @@ pub fn render_in_passes(
     if done == 0 {
         return Err(Error::option("--time-budget", "no plane pass was made"));
     }
+    (stats.rays, stats.seconds_rays) = (sets.count(), sets.seconds);
     let t = Instant::now();
     let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
     stats.seconds_rays += t.elapsed().as_secs_f64();

@@ -512,6 +512,8 @@ fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent"; the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
 /// estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
 /// in a pool of that many threads (None: all cores); the image depends on the seed alone.
+/// Pixels are whole: the mean over each pixel's square (box filter), with `spp` camera samples
+/// per pixel (the scene's, else 16) sharing the planes; `pixel_center=True` takes the centres.
 /// The image is bit-identical to the EXR that `fogplanes render` writes for the same
 /// arguments. With `return_stats=True`, returns (image, stats).
 ///
@@ -581,8 +583,9 @@ fn render<'py>(
 /// Renders the independent reference: (image, per-pixel standard error), both float32.
 ///
 /// As `fogplanes reference` with its -o and --stderr-image files: `spp` samples per pixel on
-/// average, spread by need unless `uniform`; `pixel_center` to compare with
-/// `render(..., pixel_center=True)`. Ctrl-C stops it with KeyboardInterrupt.
+/// average, spread by need unless `uniform`; whole pixels (box filter, as `render`), or
+/// `pixel_center` to compare with `render(..., pixel_center=True)`. Ctrl-C stops it with
+/// KeyboardInterrupt.
 #[pyfunction]
 #[pyo3(signature = (scene, spp = None, pixel_center = false, resolution = None, seed = None, uniform = false, threads = None))]
 #[pyo3(text_signature = "(scene, spp=1024, pixel_center=False, resolution=None, seed=1, uniform=False, threads=None)")]

@@ -178,6 +178,8 @@ def render(
     `planes`, `seed`, `spp`, and `orientations` (the scene's K applies only when the scene's
     estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
     in a pool of that many threads (None: all cores); the image depends on the seed alone.
+    Pixels are whole: the mean over each pixel's square (box filter), with `spp` camera samples
+    per pixel (the scene's, else 16) sharing the planes; `pixel_center=True` takes the centres.
     The image is bit-identical to the EXR that `fogplanes render` writes for the same
     arguments. `sampler` is where the planes' random numbers come from: "sobol"
     (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol). With
@@ -217,8 +219,8 @@ def reference(
     """Renders the independent reference: (image, per-pixel standard error), both float32.
 
     As `fogplanes reference` with its -o and --stderr-image files: `spp` samples per pixel on
-    average, spread by need unless `uniform`; `pixel_center` to compare with
-    `render(..., pixel_center=True)`.
+    average, spread by need unless `uniform`; whole pixels (box filter, as `render`), or
+    `pixel_center` to compare with `render(..., pixel_center=True)`.
     """
 
 def compare(image: npt.ArrayLike, reference: npt.ArrayLike) -> Metrics:
