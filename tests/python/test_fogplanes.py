@@ -208,7 +208,7 @@ def test_scene_fields_are_those_of_the_file():
         assert light.area == pytest.approx(np.linalg.norm(d["edge_u"]) * np.linalg.norm(d["edge_v"]))
         assert np.allclose(light.normal, np.cross(d["edge_u"], d["edge_v"]) / light.area)
     r = scene.render
-    assert (r.planes, r.estimator, r.orientations, r.seed, r.spp) == (desc["render"]["planes"], "smis-exact", 2, 1, 1)
+    assert (r.planes, r.estimator, r.orientations, r.seed, r.spp) == (desc["render"]["planes"], "smis-exact", 2, 1, 16)
     assert "six_lights" in repr(scene) and "ceiling" in repr(scene.lights[0])
     smaller = scene.with_resolution(32, 18)
     assert smaller.resolution == (32, 18) and scene.resolution == (640, 360)
@@ -377,7 +377,7 @@ scene = fogplanes.load_scene(sys.argv[1])
 print("rendering", flush=True)
 start = time.perf_counter()
 try:
-    fogplanes.render(scene, "smis-exact", spp=10000)  # an hour of work
+    fogplanes.render(scene, "smis-exact", spp=10000)  # minutes of work (10,000 ray sets)
 except KeyboardInterrupt:
     print(f"KeyboardInterrupt after {time.perf_counter() - start:.2f} s", flush=True)
 image = fogplanes.render(scene, planes=100, resolution=(16, 9))
