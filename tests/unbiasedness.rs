@@ -10,43 +10,11 @@ use fogplanes::photon_plane::sample_planes;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{Denominator, Weighting, WithDenominator};
-use glam::{DVec3, Vec3};
+use fogplanes::weights::Weighting;
+use glam::DVec3;
 
 mod common;
-use common::MeanRgb;
-
-/// A small fog box with two lights that cannot shadow each other (each lies behind the other's
-/// plane): a ceiling panel facing down, and a small panel tilted in the slab above it facing +x
-/// and down. RGB coefficients so that each channel is checked on its own.
-const SCENE: &str = r#"
-[camera]
-position = [0.0, 1.5, 6.0]
-look_at = [0.0, 1.5, 0.0]
-up = [0.0, 1.0, 0.0]
-vfov_deg = 50.0
-resolution = [64, 48]
-
-[medium]
-min = [-2.0, 0.0, -2.0]
-max = [2.0, 3.0, 2.0]
-sigma_s = [0.5, 0.3, 0.2]
-sigma_a = [0.1, 0.2, 0.05]
-
-[[light]]
-name = "ceiling"
-corner = [-0.5, 2.9, -0.25]
-edge_u = [1.0, 0.0, 0.0]
-edge_v = [0.0, 0.0, 0.5]
-radiance = [4.0, 3.0, 2.0]
-
-[[light]]
-name = "tilted"
-corner = [1.2, 2.9, -0.5]
-edge_u = [0.2, 0.1, 0.0]
-edge_v = [0.0, 0.0, 1.0]
-radiance = [1.0, 2.0, 6.0]
-"#;
+use common::{BruteForce, MeanRgb, TWO_LIGHTS};
 
 struct Case {
     name: &'static str,
@@ -68,21 +36,8 @@ fn cases() -> Vec<Case> {
     ]
 }
 
-/// The estimate of one weighting for a ray, from a set of prepared planes.
-struct Estimate<'a> {
-    ctx: &'a GatherContext,
-    ray: &'a CameraRay,
-}
-
-impl WithDenominator for Estimate<'_> {
-    type Output = Vec3;
-    fn run<D: Denominator>(self, weights: &D) -> Vec3 {
-        self.ctx.gather_brute_force(weights, self.ray).0
-    }
-}
-
 fn run(sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usize) {
-    let scene = Scene::parse(SCENE, "unbiasedness.toml", "unbiasedness").unwrap();
+    let scene = Scene::parse(TWO_LIGHTS, "unbiasedness.toml", "unbiasedness").unwrap();
     let mut failures = Vec::new();
     for case in cases() {
         let we = case.dir.normalize();
@@ -94,7 +49,7 @@ fn run(sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usi
             let planes = sample_planes(&scene, sampler, batch_size, 1000 + batch);
             let ctx = GatherContext::new(&scene, &planes, case.origin);
             for (tally, w) in tallies.iter_mut().zip(weightings) {
-                tally.add(w.dispatch(Estimate { ctx: &ctx, ray: &ray }));
+                tally.add(w.dispatch(BruteForce { ctx: &ctx, ray: &ray }));
             }
         }
         for (tally, w) in tallies.iter().zip(weightings) {

@@ -20,42 +20,12 @@ use fogplanes::reference::{ReferenceOptions, render_reference};
 use fogplanes::render::{RenderOptions, RenderStats, render, render_in_passes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{Denominator, Weighting, WithDenominator};
+use fogplanes::weights::Weighting;
 use glam::{DVec3, Vec3};
 use std::sync::atomic::AtomicBool;
 
 mod common;
-use common::{MeanEstimate, MeanRgb};
-
-/// A fog box with a ceiling panel and a tilted one (as tests/unbiasedness.rs).
-const FOG: &str = r#"
-[camera]
-position = [0.0, 1.5, 6.0]
-look_at = [0.0, 1.5, 0.0]
-up = [0.0, 1.0, 0.0]
-vfov_deg = 50.0
-resolution = [24, 16]
-
-[medium]
-min = [-2.0, 0.0, -2.0]
-max = [2.0, 3.0, 2.0]
-sigma_s = [0.5, 0.3, 0.2]
-sigma_a = [0.1, 0.2, 0.05]
-
-[[light]]
-name = "ceiling"
-corner = [-0.5, 2.9, -0.25]
-edge_u = [1.0, 0.0, 0.0]
-edge_v = [0.0, 0.0, 0.5]
-radiance = [4.0, 3.0, 2.0]
-
-[[light]]
-name = "tilted"
-corner = [1.2, 2.9, -0.5]
-edge_u = [0.2, 0.1, 0.0]
-edge_v = [0.0, 0.0, 1.0]
-radiance = [1.0, 2.0, 6.0]
-"#;
+use common::{BruteForce, MeanEstimate, MeanRgb, TWO_LIGHTS};
 
 /// Two panels crossing each other (the line where they meet is an outline), and a strip reaching
 /// from the far wall to behind the camera (its outline crosses the camera's plane).
@@ -95,24 +65,12 @@ edge_v = [0.5, 0.0, 0.0]
 radiance = [2.0, 6.0, 2.0]
 "#;
 
-struct Estimate<'a> {
-    ctx: &'a GatherContext,
-    ray: &'a CameraRay,
-}
-
-impl WithDenominator for Estimate<'_> {
-    type Output = Vec3;
-    fn run<D: Denominator>(self, weights: &D) -> Vec3 {
-        self.ctx.gather_brute_force(weights, self.ray).0
-    }
-}
-
 /// N planes in K groups (N not a multiple of K, so the groups differ in size and start off the
 /// Sobol sequence's powers of two), group k gathered along ray k alone, every plane weighted
 /// 1/N: the expectation is sum_k |G_k|/N L(ray k), with L by quadrature.
 #[test]
 fn a_ray_set_per_plane_group_matches_quadrature() {
-    let scene = Scene::parse(FOG, "fog.toml", "fog").unwrap();
+    let scene = Scene::parse(TWO_LIGHTS, "fog.toml", "fog").unwrap();
     let o = scene.camera.position;
     let dirs: Vec<DVec3> =
         [(-0.1, 0.05), (0.12, 0.2), (0.25, 0.3)].iter().map(|&(x, y)| DVec3::new(x, y, -1.0).normalize()).collect();
@@ -139,7 +97,7 @@ fn a_ray_set_per_plane_group_matches_quadrature() {
                 let group = plane_group(k as u32, planes, ray_sets);
                 let mut ctx = GatherContext::empty(&scene, o);
                 ctx.push_planes(&scene, &sample_plane_range(&scene, sampler, 500 + seed, group), planes);
-                sum += weighting.dispatch(Estimate { ctx: &ctx, ray });
+                sum += weighting.dispatch(BruteForce { ctx: &ctx, ray });
             }
             tally.add(sum);
         }

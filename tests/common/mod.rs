@@ -2,6 +2,54 @@
 //! how many standard errors it lies from a truth.
 #![allow(dead_code)] // each test file uses its own part
 
+use fogplanes::gather::{CameraRay, GatherContext};
+use fogplanes::weights::{Denominator, WithDenominator};
+
+/// A small fog box with two lights that cannot shadow each other (each lies behind the other's
+/// plane): a ceiling panel facing down, and a small panel tilted in the slab above it facing +x
+/// and down. RGB coefficients so that each channel is checked on its own.
+pub const TWO_LIGHTS: &str = r#"
+[camera]
+position = [0.0, 1.5, 6.0]
+look_at = [0.0, 1.5, 0.0]
+up = [0.0, 1.0, 0.0]
+vfov_deg = 50.0
+resolution = [64, 48]
+
+[medium]
+min = [-2.0, 0.0, -2.0]
+max = [2.0, 3.0, 2.0]
+sigma_s = [0.5, 0.3, 0.2]
+sigma_a = [0.1, 0.2, 0.05]
+
+[[light]]
+name = "ceiling"
+corner = [-0.5, 2.9, -0.25]
+edge_u = [1.0, 0.0, 0.0]
+edge_v = [0.0, 0.0, 0.5]
+radiance = [4.0, 3.0, 2.0]
+
+[[light]]
+name = "tilted"
+corner = [1.2, 2.9, -0.5]
+edge_u = [0.2, 0.1, 0.0]
+edge_v = [0.0, 0.0, 1.0]
+radiance = [1.0, 2.0, 6.0]
+"#;
+
+/// One weighting's estimate for a ray from a set of prepared planes, every plane tested.
+pub struct BruteForce<'a> {
+    pub ctx: &'a GatherContext,
+    pub ray: &'a CameraRay,
+}
+
+impl WithDenominator for BruteForce<'_> {
+    type Output = glam::Vec3;
+    fn run<D: Denominator>(self, weights: &D) -> glam::Vec3 {
+        self.ctx.gather_brute_force(weights, self.ray).0
+    }
+}
+
 /// Running sums of independent estimates of one quantity.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MeanEstimate {
