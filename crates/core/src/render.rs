@@ -1,8 +1,10 @@
 //! The photon-plane renderer: camera rays, direct emission, planes, gathering.
 //!
-//! A render is three steps that the table command reuses separately: sample the planes and
-//! build the intersection structure once ([`PreparedPlanes`]), make the camera rays of a pass
-//! ([`camera_rays`]), and gather them with one weighting ([`PreparedPlanes::gather`]).
+//! A render is three steps: sample the planes and build the intersection structure
+//! ([`PreparedPlanes`]), make the camera rays of a ray set ([`camera_rays`]), and gather them
+//! with one weighting ([`PreparedPlanes::gather`]); each group of planes goes with its own ray
+//! set, and the direct emission is integrated over the pixel apart ([`crate::pixel`],
+//! [`crate::emission`]). The table reuses the steps through [`crate::pixel::PreparedPixels`].
 
 use crate::bvh::PlaneBvh;
 use crate::error::{Error, Result};
