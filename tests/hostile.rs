@@ -16,6 +16,28 @@ fn fogplanes(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
 }
 
+/// As [`fogplanes`], but a run longer than `seconds` is killed and fails the test (the table
+/// once hung after rendering against a NaN reference).
+fn fogplanes_within(seconds: u64, args: &[&str]) -> Output {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the binary runs");
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed().as_secs() >= seconds {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{args:?} did not finish within {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("fogplanes-hostile-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -203,17 +225,20 @@ fn compare_refuses_every_crafted_file_with_one_line() {
 fn table_refuses_a_non_finite_reference_before_any_work() {
     let dir = scratch("table");
     let out = dir.join("out");
-    let o = fogplanes(&[
-        "table",
-        "media_scenes/six_lights.toml",
-        "--reference",
-        &corpus_path("all_nan.exr"),
-        "--resolution",
-        "4x3",
-        "--quiet",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = fogplanes_within(
+        60,
+        &[
+            "table",
+            "media_scenes/six_lights.toml",
+            "--reference",
+            &corpus_path("all_nan.exr"),
+            "--resolution",
+            "4x3",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
     assert_refused(&o, "table --reference all_nan.exr", "the reference holds a value that is not a finite number");
     assert!(!out.exists() || std::fs::read_dir(&out).unwrap().next().is_none(), "an output was written");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -229,8 +254,8 @@ fn endless_scene_files_are_refused_after_the_limit() {
     assert!(!Path::new("never.exr").exists());
 }
 
-/// A pipe reports size 0; 2 MiB of comments written through one used to be read whole. Now
-/// the read stops one byte past the limit (and the writer sees its pipe closed).
+/// A pipe reports size 0: whatever came through one was read whole. Now the read stops one
+/// byte past the limit, and the writer finds the pipe closed long before its 16 MiB are out.
 #[cfg(unix)]
 #[test]
 fn a_pipe_longer_than_the_limit_is_refused() {
@@ -242,19 +267,22 @@ fn a_pipe_longer_than_the_limit_is_refused() {
         std::thread::spawn(move || {
             use std::io::Write;
             let mut f = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
-            let line = b"# a comment line that is long enough to fill the pipe quickly\n".repeat(64);
+            let lines = b"# a comment line that is long enough to fill the pipe quickly\n".repeat(64);
             let mut written = 0;
-            while written < 2 << 20 {
-                match f.write(&line) {
+            while written < 16 << 20 {
+                match f.write(&lines) {
                     Ok(n) => written += n,
-                    Err(_) => break, // the reader stopped
+                    Err(_) => break, // the reader is gone
                 }
             }
+            written
         })
     };
     let e = fogplanes::scene::Scene::load(&fifo).unwrap_err().to_string();
+    let written = writer.join().unwrap();
     assert!(e.contains("holds more than 1048576 bytes"), "{e}");
-    writer.join().unwrap();
+    // The limit, plus what the pipe and one write hold.
+    assert!(written < 2 << 20, "{written} bytes went through the pipe");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
