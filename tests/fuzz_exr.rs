@@ -107,23 +107,32 @@ fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
     Ok(())
 }
 
-/// Sizes at and beyond every limit, and ordinary ones.
+/// Sizes at and beyond every limit, and (mostly) ordinary ones.
 fn side() -> impl Strategy<Value = i32> {
     prop_oneof![
-        1..40i32,
-        Just(0),
-        Just(-1),
-        Just(8192),
-        Just(32768),
-        Just(32769),
-        Just(65536),
-        Just(1 << 30),
-        Just(i32::MAX)
+        16 => 1..40i32,
+        1 => Just(0),
+        1 => Just(-1),
+        1 => Just(8192),
+        1 => Just(32768),
+        1 => Just(32769),
+        1 => Just(65536),
+        1 => Just(1 << 30),
+        1 => Just(i32::MAX),
     ]
 }
 
 fn origin() -> impl Strategy<Value = i32> {
-    prop_oneof![Just(0), -5..5i32, Just(i32::MIN), Just(i32::MAX), Just(i32::MAX - 4), Just(-(1 << 30))]
+    prop_oneof![
+        12 => Just(0),
+        4 => -5..5i32,
+        1 => Just(i32::MIN),
+        1 => Just(i32::MAX),
+        1 => Just(i32::MAX - 4),
+        // Either side of the largest coordinate a window may have (2^30 - 1, exclusive).
+        1 => Just((1 << 30) - 50),
+        1 => Just(-(1 << 30) + 2),
+    ]
 }
 
 fn channel() -> impl Strategy<Value = Channel> {
@@ -140,9 +149,10 @@ fn channel() -> impl Strategy<Value = Channel> {
 
 fn channels() -> impl Strategy<Value = Vec<Channel>> {
     prop_oneof![
-        // Valid RGB of one type, as most files are.
-        (0..3i32).prop_map(|t| ["B", "G", "R"].iter().map(|n| Channel::new(n, t)).collect()),
-        prop::collection::vec(channel(), 0..6),
+        // Valid RGB(A) of any types, as most files are.
+        3 => prop::collection::vec(0..3i32, 4).prop_map(|t| ["A", "B", "G", "R"].iter().zip(t).map(|(n, t)| Channel::new(n, t)).collect()),
+        3 => (0..3i32).prop_map(|t| ["B", "G", "R"].iter().map(|n| Channel::new(n, t)).collect()),
+        2 => prop::collection::vec(channel(), 0..6),
     ]
 }
 
@@ -171,23 +181,41 @@ fn header() -> impl Strategy<Value = Header> {
 }
 
 /// What follows a header: an offset table of some length, then chunks that are absent, zeroed,
-/// random, or shaped right (line number and size) over zeroed data.
+/// random, shaped right (line number and size) over zeroed data, or exact: every chunk of the
+/// header's scan lines with its uncompressed size (which the reader takes as raw under any
+/// codec) over random bytes, perhaps cut short.
 #[derive(Clone, Debug)]
 enum Body {
     Table(usize),
     Zeros(usize),
     Random(Vec<u8>),
     Chunks { lines: usize, line_bytes: usize },
+    Exact { fill: Vec<u8>, cut: usize },
 }
 
 fn body() -> impl Strategy<Value = Body> {
     prop_oneof![
-        (0..64usize).prop_map(Body::Table),
-        (0..4096usize).prop_map(Body::Zeros),
-        prop::collection::vec(any::<u8>(), 0..512).prop_map(Body::Random),
-        (1..40usize, 0..512usize).prop_map(|(lines, line_bytes)| Body::Chunks { lines, line_bytes }),
+        1 => (0..64usize).prop_map(Body::Table),
+        1 => (0..4096usize).prop_map(Body::Zeros),
+        1 => prop::collection::vec(any::<u8>(), 0..512).prop_map(Body::Random),
+        1 => (1..40usize, 0..512usize).prop_map(|(lines, line_bytes)| Body::Chunks { lines, line_bytes }),
+        4 => (prop::collection::vec(any::<u8>(), 1..64), prop_oneof![3 => Just(0usize), 1 => 0..600usize])
+            .prop_map(|(fill, cut)| Body::Exact { fill, cut }),
     ]
 }
+
+/// Scan lines per chunk by compression code, as the format fixes them.
+fn lines_per_chunk(code: u8) -> usize {
+    match code {
+        3 | 5 => 16,
+        4 | 6 | 7 | 8 => 32,
+        9 => 256,
+        _ => 1,
+    }
+}
+
+/// At most this much body is written: a header claiming more makes a truncated file.
+const MAX_BODY: usize = 256 << 10;
 
 fn assemble(header: &Header, body: &Body) -> Vec<u8> {
     let mut out = header.bytes();
@@ -205,6 +233,32 @@ fn assemble(header: &Header, body: &Body) -> Vec<u8> {
                 out.extend((*line_bytes as i32).to_le_bytes());
                 out.resize(out.len() + line_bytes, 0);
             }
+        }
+        Body::Exact { fill, cut } => {
+            let [x0, y0, x1, y1] = header.data_window.map(i64::from);
+            let (width, height) = ((x1 - x0 + 1).max(0) as usize, (y1 - y0 + 1).max(0) as usize);
+            let pixel_bytes: usize = header.channels.iter().map(|c| if c.sample_type == 1 { 2 } else { 4 }).sum();
+            let per_chunk = lines_per_chunk(header.compression);
+            let chunks = height.div_ceil(per_chunk).min(MAX_BODY / 8);
+            let chunk_bytes =
+                |i: usize| 8 + width.saturating_mul(pixel_bytes).saturating_mul(per_chunk.min(height - i * per_chunk));
+            let start = out.len();
+            let mut offset = start + 8 * chunks;
+            for i in 0..chunks {
+                out.extend((offset as u64).to_le_bytes());
+                offset = offset.saturating_add(chunk_bytes(i));
+            }
+            let mut noise = fill.iter().copied().cycle();
+            for i in 0..chunks {
+                if out.len() - start > MAX_BODY {
+                    break;
+                }
+                let data = chunk_bytes(i) - 8;
+                out.extend((y0 as i32).wrapping_add((i * per_chunk) as i32).to_le_bytes());
+                out.extend((data as i32).to_le_bytes());
+                out.extend(noise.by_ref().take(data.min(MAX_BODY)));
+            }
+            out.truncate(out.len().saturating_sub(*cut));
         }
     }
     out

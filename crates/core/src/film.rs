@@ -221,7 +221,8 @@ impl Film {
     ///
     /// The header is read and checked first ([`check_exr_headers`]): a small file claiming a
     /// huge image is refused before any pixel buffer exists. The buffer is then reserved
-    /// fallibly, so that an image the machine cannot hold is an input error, not an abort.
+    /// fallibly, so that an image the machine cannot hold (under a memory limit) is an input
+    /// error, not an abort.
     pub fn load_exr(path: &Path) -> Result<Film> {
         let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
         let file = std::fs::metadata(path).map_err(|e| bad(&e))?;
@@ -231,6 +232,16 @@ impl Film {
         let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
         exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
         check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
+        let unavailable = |size: (usize, usize)| {
+            let gib = (size.0 * size.1 * std::mem::size_of::<Vec3>()) as f64 / (1u64 << 30) as f64;
+            bad(&format!("{}x{} pixels need {gib:.1} GiB, which this machine cannot allocate now", size.0, size.1))
+        };
+        // Probed (and given back) before decoding, which would otherwise run to the file's end
+        // before the failure could be told.
+        if let Some(h) = meta.headers.iter().max_by_key(|h| h.layer_size.area()) {
+            let size = (h.layer_size.width(), h.layer_size.height());
+            Vec::<Vec3>::new().try_reserve_exact(size.0 * size.1).map_err(|_| unavailable(size))?;
+        }
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |resolution, _| {
@@ -251,13 +262,9 @@ impl Film {
         )
         .map_err(|e| bad(&e))?;
         let film = image.layer_data.channel_data.pixels;
-        if film.pixels.len() != film.width as usize * film.height as usize {
-            return Err(bad(&format!(
-                "{}x{} pixels need {:.1} GiB, which this machine cannot allocate now",
-                film.width,
-                film.height,
-                film.width as f64 * film.height as f64 * std::mem::size_of::<Vec3>() as f64 / (1u64 << 30) as f64
-            )));
+        let size = (film.width as usize, film.height as usize);
+        if film.pixels.len() != size.0 * size.1 {
+            return Err(unavailable(size));
         }
         Ok(film)
     }
