@@ -27,27 +27,21 @@ struct Counting;
 static LARGEST: AtomicUsize = AtomicUsize::new(0);
 const REFUSED_ABOVE: usize = 4 << 30;
 
+/// Records an allocation of `size` bytes; whether it may be made.
+fn allowed(size: usize) -> bool {
+    LARGEST.fetch_max(size, Ordering::Relaxed);
+    size <= REFUSED_ABOVE
+}
+
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        LARGEST.fetch_max(layout.size(), Ordering::Relaxed);
-        if layout.size() > REFUSED_ABOVE {
-            return std::ptr::null_mut();
-        }
-        unsafe { System.alloc(layout) }
+        if allowed(layout.size()) { unsafe { System.alloc(layout) } } else { std::ptr::null_mut() }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        LARGEST.fetch_max(layout.size(), Ordering::Relaxed);
-        if layout.size() > REFUSED_ABOVE {
-            return std::ptr::null_mut();
-        }
-        unsafe { System.alloc_zeroed(layout) }
+        if allowed(layout.size()) { unsafe { System.alloc_zeroed(layout) } } else { std::ptr::null_mut() }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        LARGEST.fetch_max(new_size, Ordering::Relaxed);
-        if new_size > REFUSED_ABOVE {
-            return std::ptr::null_mut();
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
+        if allowed(new_size) { unsafe { System.realloc(ptr, layout, new_size) } } else { std::ptr::null_mut() }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
