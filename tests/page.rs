@@ -5,6 +5,7 @@
 //! `tests/browser/check.sh` opens the page in headless Chromium, outside `cargo test`.)
 
 use std::io::Write as _;
+use std::path::Path;
 use std::process::Command;
 
 /// Everything in `html` that could make a browser load from outside the page: any absolute URL
@@ -218,6 +219,25 @@ fn the_viewer_script_parses() {
     }
 }
 
+/// The page of a 16x9 table without a sweep (200 planes) against a 4-spp reference written to
+/// `reference`; the table goes to `out`.
+fn small_page(scene: &Path, reference: &Path, out: &Path) -> String {
+    let (s, r) = (scene.to_str().unwrap(), reference.to_str().unwrap());
+    for args in [
+        vec!["reference", s, "--resolution", "16x9", "--pixel-center", "--spp", "4", "--quiet", "-o", r],
+        vec!["table", s, "--resolution", "16x9", "--reference", r, "--planes", "200", "--no-sweep", "--quiet"],
+    ] {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_fogplanes"));
+        c.args(&args);
+        if args[0] == "table" {
+            c.arg("--out").arg(out);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    std::fs::read_to_string(out.join("index.html")).unwrap()
+}
+
 /// A scene file and a reference path full of HTML's special characters make an ordinary page:
 /// the title and notes are text, not markup.
 #[test]
@@ -228,21 +248,7 @@ fn names_with_markup_are_text_on_the_page() {
     let scene = dir.join("<!--<script>&'x.toml");
     std::fs::copy("media_scenes/six_lights.toml", &scene).unwrap();
     let reference = dir.join("a<").join("script>\"b.exr"); // the path holds `</script>"`
-    let out = dir.join("report");
-    let (s, r) = (scene.to_str().unwrap(), reference.to_str().unwrap());
-    for args in [
-        vec!["reference", s, "--resolution", "16x9", "--pixel-center", "--spp", "4", "--quiet", "-o", r],
-        vec!["table", s, "--resolution", "16x9", "--reference", r, "--planes", "200", "--no-sweep", "--quiet"],
-    ] {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_fogplanes"));
-        c.args(&args);
-        if args[0] == "table" {
-            c.arg("--out").arg(&out);
-        }
-        let o = c.output().unwrap();
-        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-    }
-    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let html = small_page(&scene, &reference, &dir.join("report"));
     page_structure(&html);
     assert!(html.contains("<title>fogplanes: &lt;!--&lt;script&gt;&amp;&#39;x estimators</title>"));
     assert!(html.contains("a&lt;/script&gt;&quot;b.exr"));
@@ -255,24 +261,8 @@ fn the_page_has_no_plot_without_a_sweep() {
     let dir = std::env::temp_dir().join(format!("fogplanes-page-nosweep-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let reference = dir.join("ref.exr");
     let out = dir.join("report");
-    let bin = env!("CARGO_BIN_EXE_fogplanes");
-    let scene = "media_scenes/six_lights.toml";
-    let r = reference.to_str().unwrap();
-    for args in [
-        vec!["reference", scene, "--resolution", "16x9", "--pixel-center", "--spp", "4", "--quiet", "-o", r],
-        vec!["table", scene, "--resolution", "16x9", "--reference", r, "--planes", "200", "--no-sweep", "--quiet"],
-    ] {
-        let mut c = Command::new(bin);
-        c.args(&args);
-        if args[0] == "table" {
-            c.arg("--out").arg(&out);
-        }
-        let o = c.output().unwrap();
-        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-    }
-    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let html = small_page(Path::new("media_scenes/six_lights.toml"), &dir.join("ref.exr"), &out);
     page_structure(&html);
     assert!(
         !html.contains("id=\"plot\"") && !html.contains("data:image/svg") && !out.join("error_vs_time.svg").exists()
