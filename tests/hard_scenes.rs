@@ -12,8 +12,7 @@ use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use std::path::PathBuf;
 
-mod common;
-use common::MeanEstimate;
+use crate::common::MeanEstimate;
 
 fn hard_scenes() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir("media_scenes/hard")

@@ -14,8 +14,7 @@ fn six_lights() -> Scene {
     Scene::load(Path::new("media_scenes/six_lights.toml")).unwrap()
 }
 
-mod common;
-use common::MeanEstimate;
+use crate::common::MeanEstimate;
 
 #[test]
 fn reference_samples_match_quadrature_at_pixel_centres() {
