@@ -10,7 +10,7 @@
 use crate::page::{PageImage, PageInput, comparison_page};
 use crate::pictures::{plot_error_vs_time, plot_scaling, save_panel};
 use crate::report::{
-    EqualTimeRow, Entry, Measured, Row, SCALING_COLUMNS, ScalingPoint, SweepPoint, Table, markdown_heading,
+    Entry, EqualTimeRow, Measured, Row, SCALING_COLUMNS, ScalingPoint, SweepPoint, Table, markdown_heading,
     rays_and_seed,
 };
 use crate::system::{cpu_seconds, peak_memory_bytes};
@@ -357,9 +357,14 @@ mod tests {
     /// The scaling table's heading says what the renders used, not what they once did.
     #[test]
     fn the_scaling_heading_comes_from_the_options() {
-        let opts = RenderOptions { seed: 9, pixel_center: true, sampler: Sampler::Independent, ..RenderOptions::default() };
+        let opts =
+            RenderOptions { seed: 9, pixel_center: true, sampler: Sampler::Independent, ..RenderOptions::default() };
         let heading = scaling_heading("fog", &opts);
-        assert!(heading.starts_with(&format!("fog with {}, independent planes, pixel-centre rays, seed 9, ", opts.weighting)), "{heading}");
+        assert!(
+            heading
+                .starts_with(&format!("fog with {}, independent planes, pixel-centre rays, seed 9, ", opts.weighting)),
+            "{heading}"
+        );
         let heading = scaling_heading("fog", &RenderOptions { seed: 3, ..RenderOptions::default() });
         assert!(heading.contains("jittered rays, seed 3, "), "{heading}");
     }

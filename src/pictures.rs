@@ -113,8 +113,13 @@ pub fn plot_error_vs_time(table: &Table, out: &std::path::Path) -> Result<Option
     if points.is_empty() {
         return Ok(None);
     }
-    save_plot(out, "error_vs_time", |a| draw_error_vs_time(table, &points, a), |a| draw_error_vs_time(table, &points, a))
-        .map(Some)
+    save_plot(
+        out,
+        "error_vs_time",
+        |a| draw_error_vs_time(table, &points, a),
+        |a| draw_error_vs_time(table, &points, a),
+    )
+    .map(Some)
 }
 
 /// A plot as `<stem>.png` and `<stem>.svg` in `out`, each written whole; returns the SVG text.
@@ -322,7 +327,8 @@ mod tests {
     fn the_plot_leaves_out_only_the_points_it_cannot_show() {
         let (svg, dir) = plot("some", &[(1e-3, 0.5), (0.0, 0.6), (5e-4, 1.0), (f64::NAN, 1.2)]);
         let svg = svg.expect("two points can be shown");
-        assert!(svg.contains("<svg") && svg.contains("unweighted"), "{svg}");
+        // The smis-exact points (MSE 0 and NaN) are left out, and with them their line.
+        assert!(svg.contains("<svg") && svg.contains("unweighted") && !svg.contains("smis-exact"), "{svg}");
         assert!(dir.join("error_vs_time.png").exists());
         std::fs::remove_dir_all(dir).unwrap();
     }

@@ -340,7 +340,6 @@ impl Table {
     }
 }
 
-
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;

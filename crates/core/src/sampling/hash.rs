@@ -16,12 +16,11 @@ pub(super) const fn splitmix64_finalizer(mut z: u64) -> u64 {
 }
 
 /// The number a SplitMix64 generator in state `z` returns: one step (the increment
-/// [`GOLDEN`]), then [`splitmix64_finalizer`]. A bijective 64-bit hash.
+/// `GOLDEN`), then its output function. A bijective 64-bit hash.
 #[inline]
 pub const fn splitmix64(z: u64) -> u64 {
     splitmix64_finalizer(z.wrapping_add(GOLDEN))
 }
-
 
 /// An independent generator for item `index` of stream `stream` under `seed`.
 pub fn rng_for(seed: u64, stream: u64, index: u64) -> rand_pcg::Pcg64Mcg {
@@ -48,7 +47,7 @@ mod tests {
     /// what they were.
     #[test]
     fn splitmix64_is_the_reference_generator() {
-            let mut state = 0u64;
+        let mut state = 0u64;
         let mut next = || {
             let out = splitmix64(state);
             state = state.wrapping_add(GOLDEN);
@@ -56,7 +55,6 @@ mod tests {
         };
         assert_eq!([next(), next(), next()], [0xE220_A839_7B1D_CDAF, 0x6E78_9E6A_A1B9_65F4, 0x06C4_5D18_8009_454F]);
     }
-
 
     #[test]
     fn jitter_is_a_pure_function_of_its_inputs() {

@@ -101,9 +101,18 @@ mod tests {
     #[test]
     fn sobol_plane_numbers_are_unchanged() {
         let want: [((u64, u64), [u64; 5]); 4] = [
-            ((0x1, 0), [0x3fe627a7eb0c5998, 0x3fd76485af70769e, 0x3fde476d9d17bd55, 0x3fd4ad8e49392647, 0x3fee28f00babc07b]),
-            ((0x1, 1), [0x3fd05e0482279ff4, 0x3fe45a6df62519ee, 0x3fe452a116556238, 0x3fe566799cec51d3, 0x3fccd039268907a6]),
-            ((0x7, 12345), [0x3fbdffbbbfa214b0, 0x3fa5550ae2830502, 0x3faf51bf0da62adc, 0x3fd6b11abf1225f1, 0x3fe21d3d84b0ad17]),
+            (
+                (0x1, 0),
+                [0x3fe627a7eb0c5998, 0x3fd76485af70769e, 0x3fde476d9d17bd55, 0x3fd4ad8e49392647, 0x3fee28f00babc07b],
+            ),
+            (
+                (0x1, 1),
+                [0x3fd05e0482279ff4, 0x3fe45a6df62519ee, 0x3fe452a116556238, 0x3fe566799cec51d3, 0x3fccd039268907a6],
+            ),
+            (
+                (0x7, 12345),
+                [0x3fbdffbbbfa214b0, 0x3fa5550ae2830502, 0x3faf51bf0da62adc, 0x3fd6b11abf1225f1, 0x3fe21d3d84b0ad17],
+            ),
             (
                 (0xdeadbeef, 4000000),
                 [0x3fca337e18fdebfc, 0x3fc8390648cbc46f, 0x3fe43dcd6ed966bd, 0x3fe8e0fadcda5ee8, 0x3fcb13b8c0dd8556],

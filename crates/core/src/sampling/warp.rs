@@ -71,7 +71,6 @@ pub fn concentric_disk(u1: f64, u2: f64) -> (f64, f64) {
 mod tests {
     use super::*;
 
-
     #[test]
     fn discrete_follows_its_weights_and_skips_zero() {
         let d = Discrete::new(&[1.0, 0.0, 3.0]);

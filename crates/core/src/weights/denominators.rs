@@ -247,8 +247,8 @@ impl Denominator for StratifiedK {
 }
 
 /// `cmis-exact`: D = (1/pi) int_0^pi g(beta) d beta, the closed form of section 3 in f32
-/// ([`cmis_exact_mean_f32`], vectorised over the lanes). The f64 form [`cmis_exact_mean`] is
-/// its reference in the tests.
+/// ([`cmis_exact_mean_f32`], vectorised over the lanes). The f64 form
+/// [`cmis_exact_mean`](super::cmis_exact_mean) is its reference in the tests.
 pub struct CmisExact;
 
 /// A plane prepared for `cmis-exact`: the light's sides in units of W + H, so that the
