@@ -5,6 +5,7 @@
 mod experiments;
 mod page;
 mod pictures;
+mod report;
 mod system;
 
 use anyhow::{Context, Result, anyhow};
@@ -519,6 +520,8 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     for &n in &a.sweep {
         check_planes(n).map_err(|m| input(anyhow!("--sweep: {m}")))?;
     }
+    let sweep: Vec<usize> = if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() };
+    experiments::check_sweep_seeds(a.sweep_seeds, &sweep).map_err(|m| input(anyhow!(m)))?;
     for &k in &a.orientations {
         Weighting::new(Estimator::SmisExact, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?;
     }
@@ -535,7 +538,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
         planes: planes as usize,
         seed: a.seed.unwrap_or(scene.render.seed),
         pixel_center: !a.jitter,
-        sweep: if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() },
+        sweep,
         sweep_seeds: a.sweep_seeds,
         weightings: Weighting::all(&a.orientations),
         samplers: a.samplers.clone(),

@@ -4,7 +4,6 @@
 use fogplanes::film::Film;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference, scattering_sample};
-use fogplanes::sampling::light_distribution;
 use fogplanes::sampling::{rng_for, unit_f64};
 use fogplanes::scene::Scene;
 use rand::RngCore;
@@ -19,7 +18,7 @@ use crate::common::MeanEstimate;
 #[test]
 fn reference_samples_match_quadrature_at_pixel_centres() {
     let scene = six_lights();
-    let lights = light_distribution(&scene);
+    let lights = scene.light_distribution();
     let cam = &scene.camera;
     let mut failures = Vec::new();
     // Pixels in the open fog, beside the red spot, under the ceiling, near the edge-on amber

@@ -3,14 +3,15 @@
 //! Per pixel sample: a light chosen by power, a point uniform on it, a distance on the camera
 //! segment by equiangular sampling toward that point (Kulla and Fajardo 2012), and the
 //! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares with the
-//! photon planes only the scene, the medium and the elementary routines of [`crate::sampling`]
-//! (light choice by power, random streams): no plane, chord, weight or gathering code. It
+//! photon planes only the scene (with its light choice by power), the medium and the elementary
+//! routines of [`crate::sampling`] (random streams, its low-discrepancy sequence): no plane,
+//! chord, weight or gathering code. It
 //! measures its own per-pixel standard error.
 
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::medium::PHASE;
-use crate::sampling::{Discrete, rng_for, unit_f64};
+use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rand::RngCore;
@@ -88,35 +89,6 @@ pub fn scattering_sample(
 
 /// Independent replicates per pixel: the standard error comes from their spread.
 pub const REPLICATES: u32 = 16;
-
-/// The additive-recurrence (Kronecker) low-discrepancy sequence of Roberts' generalised golden
-/// ratio in `D` dimensions: x_i = frac(shift + i alpha), alpha_j = phi_D^-(j+1), with phi_D the
-/// positive root of x^(D+1) = x + 1.
-pub struct Kronecker<const D: usize> {
-    alpha: [f64; D],
-}
-
-impl<const D: usize> Kronecker<D> {
-    pub fn new() -> Self {
-        let mut phi = 2.0f64;
-        for _ in 0..60 {
-            phi -= (phi.powi(D as i32 + 1) - phi - 1.0) / ((D as f64 + 1.0) * phi.powi(D as i32) - 1.0);
-        }
-        Kronecker { alpha: std::array::from_fn(|j| phi.powi(-(j as i32 + 1)).fract()) }
-    }
-
-    /// Point `i` of the sequence rotated by `shift` (Cranley-Patterson): uniform in [0, 1)^D
-    /// for a uniform shift, so each replicate is an unbiased estimate.
-    pub fn point(&self, i: u64, shift: &[f64; D]) -> [f64; D] {
-        std::array::from_fn(|j| (shift[j] + (i as f64 * self.alpha[j]).fract()).fract())
-    }
-}
-
-impl<const D: usize> Default for Kronecker<D> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
 
 /// Renders the reference image with an average of `spp` samples per pixel.
 ///
@@ -196,7 +168,7 @@ fn render_pixels(
 ) -> (Film, Film) {
     let cam = &scene.camera;
     let w = cam.width as usize;
-    let lights = crate::sampling::light_distribution(scene);
+    let lights = scene.light_distribution();
     let sequence = Kronecker::<6>::new();
     let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
         .into_par_iter()

@@ -7,7 +7,7 @@ use crate::camera::Camera;
 use crate::light::RectLight;
 use crate::limits::{MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_memory, check_planes, check_resolution, check_spp};
 use crate::medium::Medium;
-use crate::sampling::Sampler;
+use crate::sampling::{Discrete, Sampler};
 use crate::weights::{Estimator, Weighting};
 use glam::DVec3;
 use serde::Deserialize;
@@ -363,6 +363,12 @@ impl Scene {
             .iter()
             .enumerate()
             .any(|(k, l)| k != except && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
+    }
+
+    /// Light choice by power, P_l proportional to A_l luminance(Le_l) (docs/mathematics.md
+    /// section 2, step 1): shared by the photon planes and the reference.
+    pub fn light_distribution(&self) -> Discrete {
+        Discrete::new(&self.lights.iter().map(RectLight::power).collect::<Vec<_>>())
     }
 
     /// The same scene seen at another resolution (checked against the memory budget with the
