@@ -15,7 +15,7 @@ use fogplanes::kernel::Kernel;
 use fogplanes::limits::{check_planes, check_spp, check_threads};
 use fogplanes::metrics::compare as compare_films;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{Accelerator, RenderOptions, RenderStats, render};
+use fogplanes::render::{Accelerator, RenderOptions, RenderStats};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
@@ -574,7 +574,8 @@ fn render<'py>(
     };
     opts.validate(&scene).map_err(py_error)?;
 
-    let (film, stats) = run_interruptible(py, pool, |cancel| render(&scene, &opts, Control::with_cancel(cancel)))?;
+    let (film, stats) =
+        run_interruptible(py, pool, |cancel| fogplanes::render::render(&scene, &opts, Control::with_cancel(cancel)))?;
     let image = film_to_array(py, &film).into_any();
     if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
 }
