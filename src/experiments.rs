@@ -15,6 +15,7 @@ use crate::report::{
 };
 use crate::system::{cpu_seconds, peak_memory_bytes};
 use anyhow::{Context, Result, bail};
+use fogplanes::control::Control;
 use fogplanes::film::{Film, write_file_atomically};
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::compare;
@@ -78,7 +79,7 @@ fn equal_time(
                 pixel_center: opts.pixel_center,
                 ..RenderOptions::default()
             };
-            let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), &|| {})?;
+            let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), Control::none())?;
             let metrics = compare(&film, reference)?;
             log(format!("equal time: {} {} planes in {:.2} s", entry.label(), st.planes, st.seconds_total));
             rows.push(EqualTimeRow {
@@ -119,13 +120,15 @@ fn measure(
     let mut out = Vec::new();
     for &sampler in samplers {
         let start = Instant::now();
-        let prepared = PreparedPlanes::new(scene, planes, seed, sampler, Accelerator::Raster);
+        let prepared = PreparedPlanes::new(scene, planes, seed, sampler, Accelerator::Raster, Control::none())
+            .expect("never cancelled");
         let pass = camera_rays(scene, seed, 0, pixel_center);
         let shared_seconds = start.elapsed().as_secs_f64();
         for &weighting in weightings {
             let t = Instant::now();
             let mut sums = vec![Vec3::ZERO; pass.rays.len()];
-            let stats = prepared.gather(weighting, kernel, &pass.rays, &mut sums, &|| {});
+            let stats =
+                prepared.gather(weighting, kernel, &pass.rays, &mut sums, Control::none()).expect("never cancelled");
             let gather_seconds = t.elapsed().as_secs_f64();
             let mut film = Film::new(scene.camera.width, scene.camera.height);
             for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass.emission) {
@@ -294,7 +297,7 @@ pub fn run_scaling(
         for &n in planes {
             let opts = RenderOptions { planes: n, ..base.clone() };
             let cpu = cpu_seconds();
-            let (_, st) = render(&s, &opts, &|| {})?;
+            let (_, st) = render(&s, &opts, Control::none())?;
             let cpu = cpu.zip(cpu_seconds()).map(|(a, b)| b - a);
             if !quiet {
                 eprintln!("{w}x{h}, {n} planes: {}", st.summary());

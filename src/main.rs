@@ -12,6 +12,7 @@ use anyhow::{Context, Result, anyhow};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use experiments::{TableOptions, run_table};
+use fogplanes::control::Control;
 use fogplanes::film::{Film, check_image_output, check_writable, write_file_atomically};
 use fogplanes::kernel::Kernel;
 use fogplanes::limits::{check_planes, check_resolution, check_spp, check_threads};
@@ -422,13 +423,14 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     );
     let cpu = system::cpu_seconds();
     let (film, stats) = match a.time_budget {
-        None => render(&scene, &opts, &|| bar.inc(1))?,
+        None => render(&scene, &opts, Control::with_progress(&|| bar.inc(1)))?,
         Some(seconds) => {
             bar.set_length(u64::MAX);
             // What the command spent before rendering, and what writing the file will take.
             let reserve = 0.02 + 5e-8 * film_pixels(&scene);
             let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
-            render_for(&scene, &opts, std::time::Duration::from_secs_f64(left.max(0.0)), &|| bar.inc(1))?
+            let budget = std::time::Duration::from_secs_f64(left.max(0.0));
+            render_for(&scene, &opts, budget, Control::with_progress(&|| bar.inc(1)))?
         }
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
@@ -460,7 +462,7 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let opts = ReferenceOptions { spp: a.spp, uniform: a.uniform, seed: a.seed, pixel_center: a.pixel_center };
     let passes = if a.uniform { 1 } else { 2 };
     let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
-    let reference = render_reference(&scene, &opts, &|| bar.inc(1));
+    let reference = render_reference(&scene, &opts, Control::with_progress(&|| bar.inc(1)))?;
     bar.finish_and_clear();
     reference.mean.save(&output, a.exposure)?;
     if let Some(p) = &a.stderr_image {

@@ -2,6 +2,7 @@
 //! that CI runs them in seconds; raise PROPTEST_CASES for a longer fuzzing run):
 //! no input panics, and every scene that loads renders only finite, non-negative pixels.
 
+use fogplanes::control::Control;
 use fogplanes::render::{RenderOptions, render};
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
@@ -141,7 +142,7 @@ proptest! {
                 seed,
                 ..RenderOptions::default()
             };
-            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+            let (film, _) = render(&scene, &opts, Control::none()).unwrap();
             prop_assert!(film.all_finite_non_negative(), "{}", text);
         }
     }

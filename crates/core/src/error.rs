@@ -22,7 +22,7 @@ pub enum Error {
     /// An output that cannot be written (the destination keeps its old contents).
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
-    /// The caller stopped the work (through the flag of [`crate::render::render_cancellable`]).
+    /// The caller stopped the work (through the flag of its [`crate::control::Control`]).
     #[error("cancelled")]
     Cancelled,
 }

@@ -27,6 +27,7 @@
 //! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
 //! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
 //! | [`render`] | the photon-plane renderer and its options |
+//! | [`control`] | following and stopping a long job: progress callback and cancel flag |
 //! | [`reference`](mod@reference) | the independent reference renderer (section 4) |
 //! | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
@@ -35,6 +36,7 @@
 
 pub mod bvh;
 pub mod camera;
+pub mod control;
 pub mod error;
 pub mod export;
 pub mod film;

@@ -9,12 +9,13 @@
 //! core's cancel flag and raises `KeyboardInterrupt` once the work under way has stopped.
 
 use fogplanes::Error;
+use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::kernel::Kernel;
 use fogplanes::limits::{check_planes, check_spp, check_threads};
 use fogplanes::metrics::compare as compare_films;
-use fogplanes::reference::{ReferenceOptions, render_reference_cancellable};
-use fogplanes::render::{Accelerator, RenderOptions, RenderStats, render_cancellable};
+use fogplanes::reference::{ReferenceOptions, render_reference};
+use fogplanes::render::{Accelerator, RenderOptions, RenderStats};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
@@ -573,7 +574,8 @@ fn render<'py>(
     };
     opts.validate(&scene).map_err(py_error)?;
 
-    let (film, stats) = run_interruptible(py, pool, |cancel| render_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let (film, stats) =
+        run_interruptible(py, pool, |cancel| fogplanes::render::render(&scene, &opts, Control::with_cancel(cancel)))?;
     let image = film_to_array(py, &film).into_any();
     if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
 }
@@ -603,7 +605,7 @@ fn reference<'py>(
     check_spp(spp).map_err(|m| invalid("--spp", m))?;
     let seed = uint(seed, "--seed")?.unwrap_or(1);
     let opts = ReferenceOptions { spp, uniform, seed, pixel_center };
-    let image = run_interruptible(py, pool, |cancel| render_reference_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let image = run_interruptible(py, pool, |cancel| render_reference(&scene, &opts, Control::with_cancel(cancel)))?;
     Ok((film_to_array(py, &image.mean), film_to_array(py, &image.stderr)))
 }
 
