@@ -2,6 +2,7 @@
 //! can tell bad input from a failure of the machine and word both its own way.
 
 use crate::scene::SceneError;
+use crate::settings::{Origin, Setting};
 use std::path::{Path, PathBuf};
 
 /// Everything the library can fail with. Nothing in the library panics on any input.
@@ -10,9 +11,11 @@ pub enum Error {
     /// A scene file that cannot be read or does not describe a valid scene.
     #[error(transparent)]
     Scene(#[from] SceneError),
-    /// A setting out of range, named as the command line spells it (`--planes`, ...).
-    #[error("{option}: {message}")]
-    InvalidOption { option: &'static str, message: String },
+    /// A setting out of range. The setting is named neutrally (each front end words it as its
+    /// user gave it: `--planes` on the command line, `planes=` in Python, see
+    /// [`Error::worded`]); `origin` says whether the caller gave the value or the scene did.
+    #[error("{}: {message}", origin.describe(*setting))]
+    InvalidSetting { setting: Setting, origin: Origin, message: String },
     /// An input file (an image) that cannot be read or used.
     #[error("{}: {message}", path.display())]
     BadInput { path: PathBuf, message: String },
@@ -34,8 +37,21 @@ impl Error {
         !matches!(self, Error::Write { .. } | Error::Cancelled)
     }
 
-    pub(crate) fn option(option: &'static str, message: impl Into<String>) -> Self {
-        Error::InvalidOption { option, message: message.into() }
+    /// The error in one line, a setting the caller gave named by `name` (the command line
+    /// passes [`Setting::flag`], Python the keyword with the value it was given); a value
+    /// that came from the scene is named as the scene file names it, whoever words it.
+    pub fn worded(&self, name: impl Fn(Setting) -> String) -> String {
+        match self {
+            Error::InvalidSetting { setting, origin: Origin::Given, message } => {
+                format!("{}: {message}", name(*setting))
+            }
+            e => e.to_string(),
+        }
+    }
+
+    /// A value the caller gave for `setting` is out of range.
+    pub(crate) fn option(setting: Setting, message: impl Into<String>) -> Self {
+        Error::InvalidSetting { setting, origin: Origin::Given, message: message.into() }
     }
 
     pub(crate) fn bad_input(path: &Path, message: impl Into<String>) -> Self {

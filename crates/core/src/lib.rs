@@ -12,6 +12,8 @@
 //! |---|---|
 //! | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] and its light choice by power |
 //! | [`limits`] | every range a setting must lie in, checked in one place |
+//! | [`settings`] | what a user may set, resolved once: defaults, overrides, checks |
+//! | [`outputs`] | every output path checked before any work |
 //! | [`camera`] | the pinhole camera and its rays (section 7) |
 //! | [`medium`] | the homogeneous medium box: clipping and transmittance |
 //! | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
@@ -47,6 +49,7 @@ pub mod limits;
 pub mod medium;
 pub mod metrics;
 pub mod numeric;
+pub mod outputs;
 pub mod photon_plane;
 pub mod quadrature;
 pub mod raster;
@@ -54,6 +57,7 @@ pub mod reference;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod settings;
 pub mod weights;
 
 pub use error::{Error, Result};

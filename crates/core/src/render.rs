@@ -16,6 +16,7 @@ use crate::photon_plane::sample_plane_range;
 use crate::raster::{Gathering, ScreenRaster};
 use crate::sampling::{Sampler, pixel_jitter};
 use crate::scene::Scene;
+use crate::settings::Setting;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -283,12 +284,12 @@ impl RenderOptions {
     /// Checks every setting against the scene (the memory budget at its resolution) and the
     /// CPU (the kernel), naming the option at fault.
     pub fn validate(&self, scene: &Scene) -> Result<()> {
-        check_planes(self.planes as u64).map_err(|m| Error::option("--planes", m))?;
-        check_spp(self.spp).map_err(|m| Error::option("--spp", m))?;
+        check_planes(self.planes as u64).map_err(|m| Error::option(Setting::Planes, m))?;
+        check_spp(self.spp).map_err(|m| Error::option(Setting::Spp, m))?;
         Weighting::new(self.weighting.estimator, Some(self.weighting.orientations))
-            .map_err(|m| Error::option("--orientations", m))?;
+            .map_err(|m| Error::option(Setting::Orientations, m))?;
         check_memory(scene.camera.width, scene.camera.height, self.planes as u64)
-            .map_err(|m| Error::option("--resolution", m))?;
+            .map_err(|m| Error::option(Setting::Resolution, m))?;
         self.kernel.resolve()?;
         Ok(())
     }
@@ -443,7 +444,7 @@ pub fn render_in_passes(
     next_pass: &mut dyn FnMut(usize, f64) -> usize,
 ) -> Result<(Film, RenderStats)> {
     if opts.spp != 1 {
-        return Err(Error::option("--spp", "a render in plane passes takes one sample per pixel"));
+        return Err(Error::option(Setting::Spp, "a render in plane passes takes one sample per pixel"));
     }
     RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() }.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
@@ -468,7 +469,7 @@ pub fn render_in_passes(
             break;
         }
         check_memory(scene.camera.width, scene.camera.height, next as u64)
-            .map_err(|m| Error::option("--time-budget", m))?;
+            .map_err(|m| Error::option(Setting::TimeBudget, m))?;
         let pass_start = Instant::now();
         // Planes weighted as one of 1: the division by the final count comes at the end.
         let range = done..done + next;
@@ -489,7 +490,7 @@ pub fn render_in_passes(
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
     }
     if done == 0 {
-        return Err(Error::option("--time-budget", "no plane pass was made"));
+        return Err(Error::option(Setting::TimeBudget, "no plane pass was made"));
     }
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let inv = 1.0 / done as f64;

@@ -371,12 +371,10 @@ impl Scene {
         Discrete::new(&self.lights.iter().map(RectLight::power).collect::<Vec<_>>())
     }
 
-    /// The same scene seen at another resolution (checked against the memory budget with the
-    /// scene's own plane count; a render checks its own).
+    /// The same scene seen at another resolution (each side in range; the memory a render
+    /// needs at that size is checked with its own plane count, see [`crate::settings`]).
     pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, crate::Error> {
-        let invalid = |m| crate::Error::option("--resolution", m);
-        check_resolution(width, height).map_err(invalid)?;
-        check_memory(width, height, self.render.planes).map_err(invalid)?;
+        check_resolution(width, height).map_err(|m| crate::Error::option(crate::settings::Setting::Resolution, m))?;
         let c = &self.camera;
         let mut s = self.clone();
         s.camera = Camera { width, height, ..c.clone() };
