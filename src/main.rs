@@ -523,6 +523,7 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     )?;
     let scene = &r.scene;
     let reference = Film::load_exr(&a.reference).map_err(input)?;
+    reference.check_finite("reference").map_err(|e| input(anyhow!("{}: {e}", a.reference.display())))?;
     if (reference.width, reference.height) != (scene.camera.width, scene.camera.height) {
         return Err(input(anyhow!(
             "{}: the reference is {}x{} but the scene renders at {}x{} (use --resolution)",

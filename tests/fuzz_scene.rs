@@ -1,6 +1,7 @@
 //! Property tests of the scene loader and the renderer on hostile input (proptest, bounded so
-//! that CI runs them in seconds; raise PROPTEST_CASES for a longer fuzzing run):
-//! no input panics, and every scene that loads renders only finite, non-negative pixels.
+//! that CI runs them in seconds; `PROPTEST_CASES=100000 cargo test --release --test
+//! fuzz_scene` fuzzes for longer): no input panics, and every scene that loads renders only
+//! finite, non-negative pixels.
 
 use fogplanes::control::Control;
 use fogplanes::render::{RenderOptions, render};
@@ -36,6 +37,12 @@ const NASTY: &[&str] = &[
     "[0, 0, 0]",
 ];
 
+/// `PROPTEST_CASES` if set (a longer run), else `default` (CI). An explicit `cases` in the
+/// config would override the variable.
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
 fn mutate(text: &str, edits: &[(usize, u8, usize)]) -> String {
     let mut s: Vec<u8> = text.as_bytes().to_vec();
     for &(pos, kind, arg) in edits {
@@ -64,7 +71,7 @@ fn mutate(text: &str, edits: &[(usize, u8, usize)]) -> String {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(512), ..ProptestConfig::default() })]
 
     #[test]
     fn mutated_scene_files_never_panic(edits in prop::collection::vec((any::<usize>(), any::<u8>(), any::<usize>()), 1..6)) {
@@ -111,7 +118,7 @@ fn scene_text(cam: [f64; 6], lights: &[([f64; 9], f64)], sigma: (f64, f64)) -> S
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(96), ..ProptestConfig::default() })]
 
     /// Random valid-looking scenes (lights anywhere, any orientation and size, tiny to large
     /// coefficients, cameras inside and outside the box): loads or fails cleanly, and renders

@@ -22,6 +22,9 @@ pub enum Error {
     /// Two images that cannot be compared.
     #[error("the images differ in size: {}x{} against a {}x{} reference", image.0, image.1, reference.0, reference.1)]
     SizeMismatch { image: (u32, u32), reference: (u32, u32) },
+    /// An image holding NaN or infinity where numbers are needed (a metric would hide it).
+    #[error("the {image} holds a value that is not a finite number: {pixel}")]
+    NonFinitePixel { image: &'static str, pixel: crate::film::NonFinitePixel },
     /// An output that cannot be written (the destination keeps its old contents).
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },

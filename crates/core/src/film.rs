@@ -38,6 +38,41 @@ impl Film {
     pub fn all_finite_non_negative(&self) -> bool {
         self.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0)
     }
+
+    /// The first pixel channel (in row-major order, then R, G, B) that is NaN or infinite.
+    pub fn first_non_finite(&self) -> Option<NonFinitePixel> {
+        let w = self.width.max(1) as usize;
+        self.pixels.iter().enumerate().find_map(|(i, p)| {
+            let channel = (0..3).find(|&c| !p[c].is_finite())?;
+            Some(NonFinitePixel { x: (i % w) as u32, y: (i / w) as u32, channel, value: p[channel] })
+        })
+    }
+
+    /// Refuses an image holding a NaN or infinite value, naming the first one; `image` says
+    /// which image it is ("image", "reference").
+    pub fn check_finite(&self, image: &'static str) -> Result<()> {
+        match self.first_non_finite() {
+            Some(pixel) => Err(Error::NonFinitePixel { image, pixel }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A pixel channel that is not a finite number: where it is and what it holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NonFinitePixel {
+    pub x: u32,
+    pub y: u32,
+    /// 0, 1, 2 for R, G, B.
+    pub channel: usize,
+    pub value: f32,
+}
+
+impl std::fmt::Display for NonFinitePixel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let channel = ["R", "G", "B"][self.channel];
+        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
+    }
 }
 
 /// The image formats, chosen by file extension.
@@ -199,27 +234,116 @@ impl Film {
         save_rgb8_png(&self.to_rgb8(exposure), path)
     }
 
-    /// Reads the first RGB(A) layer of an EXR file. Its size is read from the header and
-    /// checked first, so that a small file claiming a huge image is refused, not allocated.
+    /// Reads the first RGB(A) layer of an EXR file.
+    ///
+    /// The header is read and checked first ([`check_exr_headers`]): a small file claiming a
+    /// huge image is refused before any pixel buffer exists. The buffer is then reserved
+    /// fallibly, so that an image the machine cannot hold is an input error, not an abort.
     pub fn load_exr(path: &Path) -> Result<Film> {
         let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
-        let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
-        for header in meta.headers.iter() {
-            let size = header.layer_size;
-            let side = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-            crate::limits::check_resolution(side(size.width()), side(size.height())).map_err(|m| bad(&m))?;
+        let file = std::fs::metadata(path).map_err(|e| bad(&e))?;
+        if !file.is_file() {
+            return Err(Error::bad_input(path, "not a regular file"));
         }
+        let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
+        exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
+        check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
-            |resolution, _| Film::new(resolution.width() as u32, resolution.height() as u32),
+            |resolution, _| {
+                let n = resolution.width() * resolution.height();
+                // Left empty if the memory is not there: checked after reading.
+                let mut pixels = Vec::new();
+                if pixels.try_reserve_exact(n).is_ok() {
+                    pixels.resize(n, Vec3::ZERO);
+                }
+                Film { width: resolution.width() as u32, height: resolution.height() as u32, pixels }
+            },
             |film: &mut Film, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
                 let w = film.width as usize;
-                film.pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
+                if let Some(p) = film.pixels.get_mut(pos.y() * w + pos.x()) {
+                    *p = Vec3::new(r, g, b);
+                }
             },
         )
-        .map_err(|e| Error::bad_input(path, format!("cannot read as an EXR image: {e}")))?;
-        Ok(image.layer_data.channel_data.pixels)
+        .map_err(|e| bad(&e))?;
+        let film = image.layer_data.channel_data.pixels;
+        if film.pixels.len() != film.width as usize * film.height as usize {
+            return Err(bad(&format!(
+                "{}x{} pixels need {:.1} GiB, which this machine cannot allocate now",
+                film.width,
+                film.height,
+                film.width as f64 * film.height as f64 * std::mem::size_of::<Vec3>() as f64 / (1u64 << 30) as f64
+            )));
+        }
+        Ok(film)
     }
+}
+
+/// The most bytes of samples that one byte of a chunk can decode to under `compression`, or
+/// `None` for a codec this reader cannot decode. Each figure is the codec's worst case, so that
+/// no valid file is refused:
+///
+/// - none: 1; RLE: 64 (a run of 128 bytes is coded in 2);
+/// - ZIP, ZIPS: 1032, deflate's limit (a 258-byte match coded in 2 bits);
+/// - PXR24: 1376, deflate of floats kept as 24 bits that decode to 32 (1032 x 4 / 3);
+/// - PIZ: 454, Huffman codes of at least one bit and 8-bit run lengths (255 values of 16 bits
+///   in 9 bits), the wavelet keeping the size;
+/// - B44, B44A: 11 (a flat 4x4 block of halves, 32 bytes, coded in 3);
+/// - DWAA, DWAB: 66048, deflate over a run-length or DC stream that is itself at most 64:1 (one
+///   16-bit DC value per 8x8 block of halves).
+fn exr_max_expansion(compression: exr::compression::Compression) -> Option<u64> {
+    use exr::compression::Compression::*;
+    Some(match compression {
+        Uncompressed => 1,
+        RLE => 64,
+        ZIP1 | ZIP16 => 1032,
+        PXR24 => 1376,
+        PIZ => 454,
+        B44 | B44A => 11,
+        DWAA(_) | DWAB(_) => 66_048,
+        HTJ2K32 | HTJ2K256 => return None,
+    })
+}
+
+/// Checks EXR headers against the size of the file that holds them, before anything is
+/// allocated for pixels: each chunk takes at least 16 bytes (its offset-table entry, its line
+/// or tile number and its size), and the samples at least their uncompressed size over the
+/// codec's worst-case expansion ([`exr_max_expansion`]). A header claiming more than the file
+/// can hold is refused as truncated or crafted. Also refuses what this reader cannot decode
+/// (deep data, HTJ2K) and sizes beyond [`crate::limits::check_resolution`].
+pub fn check_exr_headers(headers: &[exr::meta::header::Header], file_bytes: u64) -> Result<(), String> {
+    let mut needed: u128 = 0;
+    for header in headers {
+        let (w, h) = (header.layer_size.width(), header.layer_size.height());
+        let side = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        crate::limits::check_resolution(side(w), side(h))?;
+        if header.deep {
+            return Err("deep data is not supported".into());
+        }
+        let ratio =
+            exr_max_expansion(header.compression).ok_or_else(|| format!("{} is not supported", header.compression))?;
+        // Samples of the largest level alone (mip levels and rounding up only add), per
+        // channel as subsampled.
+        let samples: u128 = header
+            .channels
+            .list
+            .iter()
+            .map(|c| {
+                let (sx, sy) = (c.sampling.x().max(1), c.sampling.y().max(1));
+                (w / sx) as u128 * (h / sy) as u128 * c.sample_type.bytes_per_sample() as u128
+            })
+            .sum();
+        needed += 16 * header.chunk_count as u128 + samples.div_ceil(ratio as u128);
+    }
+    if needed > file_bytes as u128 {
+        let size = headers.first().map_or((0, 0), |h| (h.layer_size.width(), h.layer_size.height()));
+        return Err(format!(
+            "the header claims {}x{} pixels, which need at least {needed} bytes, but the file has {file_bytes}: it is truncated or crafted",
+            size.0, size.1
+        ));
+    }
+    Ok(())
 }
 
 /// Encodes a PNG in memory, then writes it whole.

@@ -167,7 +167,18 @@ impl Scene {
                 MAX_SCENE_FILE_BYTES
             )));
         }
-        let bytes = std::fs::read(path).map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        use std::io::Read as _;
+        // The size above is the file's word for it: /dev/zero, a pipe or a file growing as it
+        // is read say otherwise. Read one byte past the limit at most and refuse if it came.
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_SCENE_FILE_BYTES + 1).read_to_end(&mut bytes))
+            .map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        if bytes.len() as u64 > MAX_SCENE_FILE_BYTES {
+            return Err(whole(format!(
+                "the file holds more than {MAX_SCENE_FILE_BYTES} bytes; scene files are limited to {MAX_SCENE_FILE_BYTES} bytes"
+            )));
+        }
         let text = String::from_utf8(bytes).map_err(|e| whole(format!("not UTF-8 text ({e})")))?;
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
         Scene::parse(&text, &file, &name)
