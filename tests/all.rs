@@ -4,12 +4,15 @@
 //! `every_test_file_is_declared` fails if one is not.
 
 mod common;
+mod craft;
 
 mod benchmark_scene;
 mod cli;
 mod cmis_f32;
+mod fuzz_exr;
 mod fuzz_scene;
 mod hard_scenes;
+mod hostile;
 mod mitsuba_export;
 mod page;
 mod reference;

@@ -6,12 +6,11 @@
 //! largest single allocation while loading a file of n bytes stays below 8 MiB + 2 n R, with R
 //! the worst-case expansion of the file's codec (`fogplanes::film::check_exr_headers`): a
 //! pixel costs the image 12 bytes and the file at least 6 (three half samples). CI runs a few
-//! hundred cases in seconds; `PROPTEST_CASES=100000 cargo test --release --test fuzz_exr` fuzzes
+//! hundred cases in seconds; `PROPTEST_CASES=100000 cargo test --release --test all -- fuzz_exr::` fuzzes
 //! for longer.
 
-mod craft;
-
-use craft::{Channel, Header};
+use crate::craft;
+use crate::craft::{Channel, Header};
 use fogplanes::film::Film;
 use fogplanes::metrics::compare;
 use glam::Vec3;
