@@ -1,8 +1,8 @@
 //! The library's errors: what went wrong, typed, so that a caller (the command line, Python)
 //! can tell bad input from a failure of the machine and word both its own way.
 
-use crate::scene::SceneError;
 use crate::settings::{Origin, Setting};
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// Everything the library can fail with. Nothing in the library panics on any input.
@@ -67,3 +67,29 @@ impl Error {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A problem with a scene file or with the render settings derived from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneError {
+    pub file: String,
+    /// 1-based line and column, when the problem has a place in the text.
+    pub position: Option<(usize, usize)>,
+    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
+    pub field: String,
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let Some((line, col)) = self.position {
+            write!(f, ":{line}:{col}")?;
+        }
+        if !self.field.is_empty() {
+            write!(f, ": {}", self.field)?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for SceneError {}

@@ -14,31 +14,7 @@ use serde::Deserialize;
 use std::fmt;
 use std::path::Path;
 
-/// A problem with a scene file or with the render settings derived from it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SceneError {
-    pub file: String,
-    /// 1-based line and column, when the problem has a place in the text.
-    pub position: Option<(usize, usize)>,
-    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
-    pub field: String,
-    pub message: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
-        if let Some((line, col)) = self.position {
-            write!(f, ":{line}:{col}")?;
-        }
-        if !self.field.is_empty() {
-            write!(f, ": {}", self.field)?;
-        }
-        write!(f, ": {}", self.message)
-    }
-}
-
-impl std::error::Error for SceneError {}
+pub use crate::error::SceneError;
 
 /// An RGB triple that may be written as a single number (grey).
 #[derive(Clone, Copy, Debug, PartialEq)]
