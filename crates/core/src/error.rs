@@ -23,7 +23,7 @@ pub enum Error {
     SizeMismatch { image: (u32, u32), reference: (u32, u32) },
     /// An image holding NaN or infinity where numbers are needed (a metric would hide it).
     #[error("the {image} holds a value that is not a finite number: {pixel}")]
-    NonFinitePixel { image: &'static str, pixel: crate::film::NonFinitePixel },
+    NonFinitePixel { image: &'static str, pixel: NonFinitePixel },
     /// An output that cannot be written (the destination keeps its old contents).
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
@@ -199,5 +199,22 @@ impl Origin {
             (Origin::Scene, Some(field)) => format!("the scene's {field}"),
             _ => setting.keyword().to_string(),
         }
+    }
+}
+
+/// A pixel channel that is not a finite number: where it is and what it holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NonFinitePixel {
+    pub x: u32,
+    pub y: u32,
+    /// 0, 1, 2 for R, G, B.
+    pub channel: usize,
+    pub value: f32,
+}
+
+impl std::fmt::Display for NonFinitePixel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let channel = ["R", "G", "B"][self.channel];
+        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
     }
 }

@@ -3,7 +3,7 @@
 //! Every file is written to a temporary name beside its destination and renamed over it, so a
 //! destination holds either its old contents or the complete new image, never part of one.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NonFinitePixel, Result};
 use glam::Vec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -55,23 +55,6 @@ impl Film {
             Some(pixel) => Err(Error::NonFinitePixel { image, pixel }),
             None => Ok(()),
         }
-    }
-}
-
-/// A pixel channel that is not a finite number: where it is and what it holds.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NonFinitePixel {
-    pub x: u32,
-    pub y: u32,
-    /// 0, 1, 2 for R, G, B.
-    pub channel: usize,
-    pub value: f32,
-}
-
-impl std::fmt::Display for NonFinitePixel {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let channel = ["R", "G", "B"][self.channel];
-        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
     }
 }
 

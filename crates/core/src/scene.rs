@@ -361,7 +361,7 @@ impl Scene {
     /// The same scene seen at another resolution (each side in range; the memory a render
     /// needs at that size is checked with its own plane count, see [`crate::settings`]).
     pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, crate::Error> {
-        check_resolution(width, height).map_err(|m| crate::Error::option(crate::settings::Setting::Resolution, m))?;
+        check_resolution(width, height).map_err(|m| crate::Error::option(crate::error::Setting::Resolution, m))?;
         let c = &self.camera;
         let mut s = self.clone();
         s.camera = Camera { width, height, ..c.clone() };
