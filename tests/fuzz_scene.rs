@@ -1,8 +1,9 @@
 //! Property tests of the scene loader and the renderer on hostile input (proptest, bounded so
-//! that CI runs them in seconds; `PROPTEST_CASES=100000 cargo test --release --test
-//! fuzz_scene` fuzzes for longer): no input panics, and every scene that loads renders only
+//! that CI runs them in seconds; `PROPTEST_CASES=100000 cargo test --release --test all --
+//! fuzz_scene::` fuzzes for longer): no input panics, and every scene that loads renders only
 //! finite, non-negative pixels.
 
+use fogplanes::control::Control;
 use fogplanes::limits::MAX_SCENE_FILE_BYTES;
 use fogplanes::render::{RenderOptions, render};
 use fogplanes::scene::Scene;
@@ -182,7 +183,7 @@ proptest! {
                 seed,
                 ..RenderOptions::default()
             };
-            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+            let (film, _) = render(&scene, &opts, Control::none()).unwrap();
             prop_assert!(film.all_finite_non_negative(), "{}", text);
         }
     }

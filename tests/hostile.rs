@@ -2,11 +2,10 @@
 //! allocate gigabytes for a 313-byte file, score an image of NaN as perfect, or read without
 //! end. Each gives exit code 2 and one error line, no panic and no output. The files are made
 //! by the recipes below (tests/craft/ writes EXR byte by byte); `cargo test --release --test
-//! hostile -- --ignored write_the_corpus` writes them again after a recipe changes.
+//! all -- --ignored hostile::write_the_corpus` writes them again after a recipe changes.
 
-mod craft;
-
-use craft::{HALF, Header};
+use crate::craft;
+use crate::craft::{HALF, Header};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 

@@ -13,8 +13,7 @@ use fogplanes::scene::Scene;
 use fogplanes::weights::{Denominator, Weighting, WithDenominator};
 use glam::{DVec3, Vec3};
 
-mod common;
-use common::MeanRgb;
+use crate::common::MeanRgb;
 
 /// A small fog box with two lights that cannot shadow each other (each lies behind the other's
 /// plane): a ceiling panel facing down, and a small panel tilted in the slab above it facing +x

@@ -3,7 +3,7 @@
 //! Every file is written to a temporary name beside its destination and renamed over it, so a
 //! destination holds either its old contents or the complete new image, never part of one.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NonFinitePixel, Result};
 use glam::Vec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -58,23 +58,6 @@ impl Film {
     }
 }
 
-/// A pixel channel that is not a finite number: where it is and what it holds.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NonFinitePixel {
-    pub x: u32,
-    pub y: u32,
-    /// 0, 1, 2 for R, G, B.
-    pub channel: usize,
-    pub value: f32,
-}
-
-impl std::fmt::Display for NonFinitePixel {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let channel = ["R", "G", "B"][self.channel];
-        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
-    }
-}
-
 /// The image formats, chosen by file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageFormat {
@@ -109,6 +92,8 @@ pub fn check_writable(path: &Path) -> Result<()> {
     if path.is_dir() {
         return Err(Error::bad_input(path, "is a directory"));
     }
+    // Made and removed under the lock of the unfinished files: an interruption never finds it.
+    let _unfinished = unfinished();
     let probe = temporary_path(path);
     std::fs::File::create(&probe)
         .map_err(|e| Error::bad_input(path, format!("cannot write to {}: {e}", dir.display())))?;
@@ -132,42 +117,56 @@ pub fn temporary_path(path: &Path) -> PathBuf {
     parent_dir(path).join(format!(".{name}.{}.{n}.tmp", std::process::id()))
 }
 
-/// Temporary files being written now, for [`remove_unfinished_files`].
+/// Temporary files being written now, for [`remove_unfinished_files`]. A temporary file is
+/// created and registered, and renamed and unregistered, under this lock, which the removal
+/// keeps until the process ends: a file is either registered (and removed) or never made.
 static UNFINISHED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
 
-/// Removes every temporary file still being written (called on interruption): the
-/// destinations keep their old contents.
+fn unfinished() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Removes every temporary file still being written, for a process about to exit on an
+/// interruption (Ctrl-C, SIGTERM): the destinations keep their old contents, and no write can
+/// start or finish after this (they wait for a lock that is never released).
 pub fn remove_unfinished_files() {
-    let list = UNFINISHED.lock().unwrap_or_else(|e| e.into_inner());
+    let list = unfinished();
     for p in list.iter() {
         let _ = std::fs::remove_file(p);
     }
+    std::mem::forget(list);
 }
 
-/// Writes through `write` to a temporary file, then renames it to `path`; on any failure the
-/// temporary file is removed and `path` is untouched.
-pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let tmp = temporary_path(path);
-    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).push(tmp.clone());
-    let result = write(&tmp).and_then(|()| {
+/// Writes through `write` to a new temporary file, then renames it to `path`; on any failure
+/// the temporary file is removed and `path` is untouched.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
+    let (tmp, mut file) = {
+        let mut list = unfinished();
+        let tmp = temporary_path(path);
+        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
+        list.push(tmp.clone());
+        (tmp, file)
+    };
+    let result = write(&mut file).and_then(|()| {
+        // On disk before the rename.
+        file.sync_all().map_err(|e| Error::write(path, format!("cannot write: {e}")))
+    });
+    drop(file);
+    let mut list = unfinished();
+    let result = result.and_then(|()| {
         std::fs::rename(&tmp, path)
             .map_err(|e| Error::write(path, format!("cannot move the finished file into place: {e}")))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).retain(|p| p != &tmp);
+    list.retain(|p| p != &tmp);
     result
 }
 
 /// Writes bytes whole or not at all.
 pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomically(path, |tmp| {
-        let fail = |e: std::io::Error| Error::write(path, format!("cannot write: {e}"));
-        let mut f = std::fs::File::create(tmp).map_err(fail)?;
-        f.write_all(bytes).map_err(fail)?;
-        f.sync_all().map_err(fail)
-    })
+    write_atomically(path, |f| f.write_all(bytes).map_err(|e| Error::write(path, format!("cannot write: {e}"))))
 }
 
 /// sRGB encoding of a linear value in [0, 1].
@@ -191,16 +190,17 @@ impl Film {
     }
 
     pub fn save_exr(&self, path: &Path) -> Result<()> {
-        write_atomically(path, |tmp| {
+        use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+        write_atomically(path, |file| {
             let w = self.width as usize;
-            exr::prelude::write_rgb_file(tmp, w, self.height as usize, |x, y| {
+            // What exr::prelude::write_rgb_file writes, into the file already open.
+            let rgb = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
                 let p = self.pixels[y * w + x];
                 (p.x, p.y, p.z)
-            })
-            .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))?;
-            // On disk before the rename, as write_file_atomically does.
-            std::fs::File::open(tmp)
-                .and_then(|f| f.sync_all())
+            });
+            Image::from_channels((w, self.height as usize), rgb)
+                .write()
+                .to_unbuffered(file)
                 .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
         })
     }

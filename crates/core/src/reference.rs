@@ -3,19 +3,20 @@
 //! Per pixel sample: a light chosen by power, a point uniform on it, a distance on the camera
 //! segment by equiangular sampling toward that point (Kulla and Fajardo 2012), and the
 //! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares with the
-//! photon planes only the scene, the medium and the elementary routines of [`crate::sampling`]
-//! (light choice by power, random streams): no plane, chord, weight or gathering code. It
+//! photon planes only the scene (with its light choice by power), the medium and the elementary
+//! routines of [`crate::sampling`] (random streams, its low-discrepancy sequence): no plane,
+//! chord, weight or gathering code. It
 //! measures its own per-pixel standard error.
 
-use crate::error::{Error, Result};
+use crate::control::Control;
+use crate::error::Result;
 use crate::film::Film;
 use crate::medium::PHASE;
-use crate::sampling::{Discrete, rng_for, unit_f64};
+use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rand::RngCore;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 const REFERENCE_STREAM: u64 = 0x2EF_E2E;
 
@@ -89,35 +90,6 @@ pub fn scattering_sample(
 /// Independent replicates per pixel: the standard error comes from their spread.
 pub const REPLICATES: u32 = 16;
 
-/// The additive-recurrence (Kronecker) low-discrepancy sequence of Roberts' generalised golden
-/// ratio in `D` dimensions: x_i = frac(shift + i alpha), alpha_j = phi_D^-(j+1), with phi_D the
-/// positive root of x^(D+1) = x + 1.
-pub struct Kronecker<const D: usize> {
-    alpha: [f64; D],
-}
-
-impl<const D: usize> Kronecker<D> {
-    pub fn new() -> Self {
-        let mut phi = 2.0f64;
-        for _ in 0..60 {
-            phi -= (phi.powi(D as i32 + 1) - phi - 1.0) / ((D as f64 + 1.0) * phi.powi(D as i32) - 1.0);
-        }
-        Kronecker { alpha: std::array::from_fn(|j| phi.powi(-(j as i32 + 1)).fract()) }
-    }
-
-    /// Point `i` of the sequence rotated by `shift` (Cranley-Patterson): uniform in [0, 1)^D
-    /// for a uniform shift, so each replicate is an unbiased estimate.
-    pub fn point(&self, i: u64, shift: &[f64; D]) -> [f64; D] {
-        std::array::from_fn(|j| (shift[j] + (i as f64 * self.alpha[j]).fract()).fract())
-    }
-}
-
-impl<const D: usize> Default for Kronecker<D> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
 /// Renders the reference image with an average of `spp` samples per pixel.
 ///
 /// Its noise is concentrated in few pixels (those that see a light panel or pass close to one,
@@ -128,37 +100,19 @@ impl<const D: usize> Default for Kronecker<D> {
 /// weighs) and at most 64 times the average. The image and its standard
 /// error come from the second pass alone, whose sample counts are fixed before it runs, so
 /// every pixel stays unbiased. `uniform` gives every pixel `spp` samples instead.
-pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn Fn() + Sync)) -> ReferenceImage {
-    reference_until(scene, opts, progress, &AtomicBool::new(false))
-}
-
-/// [`render_reference`] that another thread can stop by setting `cancel`: the rows under way
-/// finish, the others are skipped, and the result is [`Error::Cancelled`].
-pub fn render_reference_cancellable(
-    scene: &Scene,
-    opts: &ReferenceOptions,
-    progress: &(dyn Fn() + Sync),
-    cancel: &AtomicBool,
-) -> Result<ReferenceImage> {
-    let image = reference_until(scene, opts, progress, cancel);
-    if cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(image) }
-}
-
-/// The reference, with the rows not started once `cancel` is set left black.
-fn reference_until(
-    scene: &Scene,
-    opts: &ReferenceOptions,
-    progress: &(dyn Fn() + Sync),
-    cancel: &AtomicBool,
-) -> ReferenceImage {
+///
+/// Reports each finished row to `control` (both passes' rows, unless `uniform`); once another
+/// thread cancels it, the work stops before the next pixel and the result is
+/// [`crate::Error::Cancelled`].
+pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, control: Control) -> Result<ReferenceImage> {
     let start = std::time::Instant::now();
     let pixels = scene.camera.width as usize * scene.camera.height as usize;
     let (mean, stderr) = if opts.uniform {
-        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], progress, cancel)
+        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], control)?
     } else {
         let pilot_spp = (opts.spp / 8).max(REPLICATES);
         let (_, pilot_se) =
-            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress, cancel);
+            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], control)?;
         // Standard deviation of one sample, the mean over channels.
         let sigma: Vec<f64> =
             pilot_se.pixels.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
@@ -174,9 +128,9 @@ fn reference_until(
                 (floor + share).min(cap).round() as u32
             })
             .collect();
-        render_pixels(scene, opts.seed, opts.pixel_center, &counts, progress, cancel)
+        render_pixels(scene, opts.seed, opts.pixel_center, &counts, control)?
     };
-    ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() }
+    Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
 }
 
 /// Seed offset of the pilot pass, so that it shares no samples with the final one.
@@ -186,27 +140,25 @@ const PILOT_SEED: u64 = 0x9_11_07;
 /// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
 /// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
 /// their mean and its standard error comes from their spread, an honest measure of the noise.
-fn render_pixels(
-    scene: &Scene,
-    seed: u64,
-    pixel_center: bool,
-    spp: &[u32],
-    progress: &(dyn Fn() + Sync),
-    cancel: &AtomicBool,
-) -> (Film, Film) {
+/// The cancel flag is read before each pixel (at most 64 times the average samples, a few
+/// milliseconds).
+fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], control: Control) -> Result<(Film, Film)> {
     let cam = &scene.camera;
     let w = cam.width as usize;
-    let lights = crate::sampling::light_distribution(scene);
+    let lights = scene.light_distribution();
     let sequence = Kronecker::<6>::new();
     let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
         .into_par_iter()
         .map(|j| {
-            if cancel.load(Ordering::Relaxed) {
-                return (vec![Vec3::ZERO; w], vec![Vec3::ZERO; w]);
-            }
             let mut means = Vec::with_capacity(w);
             let mut errors = Vec::with_capacity(w);
             for i in 0..w {
+                if control.is_cancelled() {
+                    // The image is discarded: the row's length is all that matters.
+                    means.resize(w, Vec3::ZERO);
+                    errors.resize(w, Vec3::ZERO);
+                    return (means, errors);
+                }
                 let pixel = (j * w + i) as u64;
                 let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
                 let replicates = REPLICATES.min(spp[pixel as usize]).max(1);
@@ -245,40 +197,46 @@ fn render_pixels(
                         .as_vec3(),
                 );
             }
-            progress();
+            control.progress();
             (means, errors)
         })
         .collect();
+    control.check()?;
     let mut mean = Film::new(cam.width, cam.height);
     let mut stderr = Film::new(cam.width, cam.height);
     for (j, (m, e)) in rows.into_iter().enumerate() {
         mean.pixels[j * w..(j + 1) * w].copy_from_slice(&m);
         stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);
     }
-    (mean, stderr)
+    Ok((mean, stderr))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::AtomicUsize;
+    use crate::error::Error;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
+    /// Cancelled when the first row ends: on one thread no other row runs; on two, the other
+    /// thread's row stops before its next pixel (it may have finished just before the flag).
     #[test]
     fn cancelling_stops_the_reference_after_the_rows_under_way() {
         let scene =
             Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(24, 16).unwrap();
-        let opts = ReferenceOptions { spp: 32, uniform: false, seed: 1, pixel_center: false };
-        let a = render_reference(&scene, &opts, &|| {});
-        let b = render_reference_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();
-        assert_eq!((a.mean, a.stderr), (b.mean, b.stderr));
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-        let (cancel, rows) = (AtomicBool::new(false), AtomicUsize::new(0));
-        let progress = || {
-            rows.fetch_add(1, Ordering::Relaxed);
-            cancel.store(true, Ordering::Relaxed);
-        };
-        let e = pool.install(|| render_reference_cancellable(&scene, &opts, &progress, &cancel)).err().unwrap();
-        assert!(matches!(e, Error::Cancelled) && !e.is_input());
-        assert!(rows.into_inner() <= 2);
+        for uniform in [false, true] {
+            let opts = ReferenceOptions { spp: 32, uniform, seed: 1, pixel_center: false };
+            for threads in [1, 2] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let (cancel, rows) = (AtomicBool::new(false), AtomicUsize::new(0));
+                let progress = || {
+                    rows.fetch_add(1, Ordering::Relaxed);
+                    cancel.store(true, Ordering::Relaxed);
+                };
+                let control = Control::new(&progress, &cancel);
+                let e = pool.install(|| render_reference(&scene, &opts, control)).err().unwrap();
+                assert!(matches!(e, Error::Cancelled) && !e.is_input());
+                assert!(rows.into_inner() <= threads, "{threads} threads, uniform {uniform}");
+            }
+        }
     }
 }

@@ -5,6 +5,8 @@
 //! ([`camera_rays`]), and gather them with one weighting ([`PreparedPlanes::gather`]).
 
 use crate::bvh::PlaneBvh;
+use crate::control::Control;
+use crate::error::Setting;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::gather::GatherStats;
@@ -12,13 +14,12 @@ use crate::gather::{CameraRay, GatherContext};
 use crate::kernel::Kernel;
 use crate::limits::{check_memory, check_planes, check_spp};
 use crate::photon_plane::sample_plane_range;
-use crate::raster::ScreenRaster;
+use crate::raster::{Gathering, ScreenRaster};
 use crate::sampling::{Sampler, pixel_jitter};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// How camera rays find the planes they hit.
@@ -104,12 +105,20 @@ pub struct PreparedPlanes {
 
 impl PreparedPlanes {
     /// The first `planes` planes of the set made with `seed` and `sampler`.
-    pub fn new(scene: &Scene, planes: usize, seed: u64, sampler: Sampler, accelerator: Accelerator) -> Self {
-        PreparedPlanes::range(scene, 0..planes, planes, seed, sampler, accelerator)
+    pub fn new(
+        scene: &Scene,
+        planes: usize,
+        seed: u64,
+        sampler: Sampler,
+        accelerator: Accelerator,
+        control: Control,
+    ) -> Result<Self> {
+        PreparedPlanes::range(scene, 0..planes, planes, seed, sampler, accelerator, control)
     }
 
     /// Planes `range` of the set, each weighted as one of `planes_total` (1 leaves the
-    /// division by N to the caller, as passes that extend a set do).
+    /// division by N to the caller, as passes that extend a set do). [`Error::Cancelled`] once
+    /// `control` is cancelled (checked after each piece of [`PLANE_CHUNK`] planes).
     pub fn range(
         scene: &Scene,
         range: std::ops::Range<usize>,
@@ -117,7 +126,8 @@ impl PreparedPlanes {
         seed: u64,
         sampler: Sampler,
         accelerator: Accelerator,
-    ) -> Self {
+        control: Control,
+    ) -> Result<Self> {
         let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
@@ -125,6 +135,7 @@ impl PreparedPlanes {
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
         for start in range.clone().step_by(PLANE_CHUNK) {
+            control.check()?;
             let t = Instant::now();
             let chunk = sample_plane_range(scene, sampler, seed, start..(start + PLANE_CHUNK).min(range.end));
             seconds_sampling += t.elapsed().as_secs_f64();
@@ -138,75 +149,70 @@ impl PreparedPlanes {
                 all.extend(chunk);
             }
         }
+        control.check()?;
         let t = Instant::now();
-        let bvh = (accelerator == Accelerator::Bvh).then(|| PlaneBvh::build(&all, &scene.medium, origin));
+        let bvh = match accelerator {
+            Accelerator::Bvh => Some(PlaneBvh::build(&all, &scene.medium, origin, control)?),
+            _ => None,
+        };
         seconds_build += t.elapsed().as_secs_f64();
-        PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build }
+        Ok(PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build })
     }
 
     /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`;
-    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]).
+    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]). Reports each band of rows
+    /// (or chunk of rays) to `control`; once it is cancelled, the work stops before the next
+    /// plane (or ray) and the result is [`Error::Cancelled`], with `sums` incomplete.
     pub fn gather(
         &self,
         weighting: Weighting,
         kernel: Kernel,
         rays: &[CameraRay],
         sums: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-    ) -> GatherStats {
-        self.gather_cancellable(weighting, kernel, rays, sums, on_band, &AtomicBool::new(false))
-    }
-
-    /// [`PreparedPlanes::gather`] that stops early once `cancel` is set: the bands (or chunks
-    /// of rays) not yet started are skipped, so `sums` is incomplete if `cancel` is set after.
-    pub fn gather_cancellable(
-        &self,
-        weighting: Weighting,
-        kernel: Kernel,
-        rays: &[CameraRay],
-        sums: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-        cancel: &AtomicBool,
-    ) -> GatherStats {
+        control: Control,
+    ) -> Result<GatherStats> {
         struct Gather<'a> {
             planes: &'a PreparedPlanes,
             kernel: Kernel,
             rays: &'a [CameraRay],
             sums: &'a mut [Vec3],
-            on_band: &'a (dyn Fn() + Sync),
-            cancel: &'a AtomicBool,
+            control: Control<'a>,
         }
         impl WithDenominator for Gather<'_> {
             type Output = GatherStats;
             fn run<D: Denominator>(self, weights: &D) -> GatherStats {
-                self.planes.gather_with(weights, self.kernel, self.rays, self.sums, self.on_band, self.cancel)
+                let with = Gathering { ctx: &self.planes.context, weights, kernel: self.kernel };
+                self.planes.gather_with(with, self.rays, self.sums, self.control)
             }
         }
-        weighting.dispatch(Gather { planes: self, kernel, rays, sums, on_band, cancel })
+        let stats = weighting.dispatch(Gather { planes: self, kernel, rays, sums, control });
+        control.check()?;
+        Ok(stats)
     }
 
+    /// [`PreparedPlanes::gather`] with the weights chosen (`with.kernel` serves the raster).
     fn gather_with<D: Denominator>(
         &self,
-        weights: &D,
-        kernel: Kernel,
+        with: Gathering<D>,
         rays: &[CameraRay],
         sums: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-        cancel: &AtomicBool,
+        control: Control,
     ) -> GatherStats {
-        let ctx = &self.context;
         if let Some(raster) = &self.raster {
-            return raster.gather(ctx, weights, kernel, rays, sums, on_band, cancel);
+            return raster.gather(with, rays, sums, control);
         }
-        // Per-ray structures: chunks of rays in parallel, one progress unit per chunk.
+        let Gathering { ctx, weights, .. } = with;
+        // Per-ray structures: chunks of rays in parallel, one progress unit per chunk, the
+        // cancel flag read before each ray (against every plane, a brute-force ray is the
+        // longest unit of work: milliseconds at a million planes).
         sums.par_chunks_mut(RAY_CHUNK)
             .zip(rays.par_chunks(RAY_CHUNK))
             .map(|(sums, rays)| {
                 let mut stats = GatherStats::default();
-                if cancel.load(Ordering::Relaxed) {
-                    return stats;
-                }
                 for (sum, ray) in sums.iter_mut().zip(rays) {
+                    if control.is_cancelled() {
+                        return stats;
+                    }
                     let (value, s) = match &self.bvh {
                         Some(bvh) => bvh.gather(ctx, weights, ray),
                         None => {
@@ -217,7 +223,7 @@ impl PreparedPlanes {
                     *sum += value;
                     stats += s;
                 }
-                on_band();
+                control.progress();
                 stats
             })
             .reduce(GatherStats::default, |mut a, b| {
@@ -278,12 +284,12 @@ impl RenderOptions {
     /// Checks every setting against the scene (the memory budget at its resolution) and the
     /// CPU (the kernel), naming the option at fault.
     pub fn validate(&self, scene: &Scene) -> Result<()> {
-        check_planes(self.planes as u64).map_err(|m| Error::option("--planes", m))?;
-        check_spp(self.spp).map_err(|m| Error::option("--spp", m))?;
+        check_planes(self.planes as u64).map_err(|m| Error::option(Setting::Planes, m))?;
+        check_spp(self.spp).map_err(|m| Error::option(Setting::Spp, m))?;
         Weighting::new(self.weighting.estimator, Some(self.weighting.orientations))
-            .map_err(|m| Error::option("--orientations", m))?;
+            .map_err(|m| Error::option(Setting::Orientations, m))?;
         check_memory(scene.camera.width, scene.camera.height, self.planes as u64)
-            .map_err(|m| Error::option("--resolution", m))?;
+            .map_err(|m| Error::option(Setting::Resolution, m))?;
         self.kernel.resolve()?;
         Ok(())
     }
@@ -336,9 +342,6 @@ impl RenderStats {
     }
 }
 
-/// A progress callback: called once per finished unit of work (band or row).
-pub type Progress<'a> = &'a (dyn Fn() + Sync);
-
 /// Number of progress units in one pass (for sizing a progress bar).
 pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
     let pixels = scene.camera.width as u64 * scene.camera.height as u64;
@@ -350,26 +353,14 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
 
 /// Renders the scene: direct emission plus the photon-plane estimate of single scattering,
 /// averaged over `spp` passes. Checks the options first ([`RenderOptions::validate`]).
-pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result<(Film, RenderStats)> {
-    render_cancellable(scene, opts, progress, &AtomicBool::new(false))
-}
-
-/// [`render`] that another thread can stop by setting `cancel`: the work then ends after the
-/// bands of rows (or chunks of rays) under way, and the result is [`Error::Cancelled`].
-/// Unless `cancel` is set, the same image and statistics as [`render`].
-pub fn render_cancellable(
-    scene: &Scene,
-    opts: &RenderOptions,
-    progress: Progress,
-    cancel: &AtomicBool,
-) -> Result<(Film, RenderStats)> {
-    let cancelled = || if cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(()) };
+/// Reports each band of rows (or chunk of rays) to `control`; once another thread cancels it,
+/// the work stops within a plane (or a ray) and the result is [`Error::Cancelled`].
+pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
     opts.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
-    cancelled()?;
+    control.check()?;
     let start = Instant::now();
-    let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.sampler, opts.accelerator);
-    cancelled()?;
+    let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.sampler, opts.accelerator, control)?;
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let mut stats = RenderStats {
         estimator: opts.weighting.label(),
@@ -387,8 +378,7 @@ pub fn render_cancellable(
         let t = Instant::now();
         // Scattering first, emission after: every accelerator then sums in the same order.
         let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather_cancellable(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress, cancel);
-        cancelled()?;
+        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, control)?;
         stats.seconds_gather += t.elapsed().as_secs_f64();
         stats.hits += s.hits;
         stats.tests += s.tests;
@@ -416,16 +406,16 @@ const FIRST_PASS_PLANES: usize = 256;
 /// the same set, and so the same unbiased estimate, as a render of N planes (up to f32
 /// summation order). `opts.planes` is ignored; `opts.spp` must be 1. Returns as soon as
 /// `budget` would be exceeded by more work; the caller's own time (loading, writing) is not in
-/// it.
+/// it. `control` as for [`render`]: cancelled, it stops mid-pass.
 pub fn render_for(
     scene: &Scene,
     opts: &RenderOptions,
     budget: std::time::Duration,
-    progress: Progress,
+    control: Control,
 ) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
     let deadline = budget.as_secs_f64();
-    render_in_passes(scene, opts, progress, &mut |done, seconds_per_plane| {
+    render_in_passes(scene, opts, control, &mut |done, seconds_per_plane| {
         if done == 0 {
             return FIRST_PASS_PLANES;
         }
@@ -444,15 +434,17 @@ const MAX_PASS_PLANES: usize = 1 << 20;
 /// Renders planes in passes, each extending the set by the next planes of the sampler:
 /// `next_pass(planes so far, seconds per plane of the last pass)` sizes the next pass, 0 ends
 /// the render. The image is the estimate of all the planes gathered, the same set as a render
-/// of that many planes. `opts.planes` is ignored; `opts.spp` must be 1.
+/// of that many planes. `opts.planes` is ignored; `opts.spp` must be 1. `control` as for
+/// [`render`]: cancelled, it stops mid-pass (while sampling or gathering) and no further pass
+/// starts.
 pub fn render_in_passes(
     scene: &Scene,
     opts: &RenderOptions,
-    progress: Progress,
+    control: Control,
     next_pass: &mut dyn FnMut(usize, f64) -> usize,
 ) -> Result<(Film, RenderStats)> {
     if opts.spp != 1 {
-        return Err(Error::option("--spp", "a render in plane passes takes one sample per pixel"));
+        return Err(Error::option(Setting::Spp, "a render in plane passes takes one sample per pixel"));
     }
     RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() }.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
@@ -471,18 +463,20 @@ pub fn render_in_passes(
     let mut total = vec![glam::DVec3::ZERO; pass_rays.rays.len()];
     let (mut done, mut per_plane) = (0usize, 0.0);
     loop {
+        control.check()?;
         let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
         if next == 0 {
             break;
         }
         check_memory(scene.camera.width, scene.camera.height, next as u64)
-            .map_err(|m| Error::option("--time-budget", m))?;
+            .map_err(|m| Error::option(Setting::TimeBudget, m))?;
         let pass_start = Instant::now();
         // Planes weighted as one of 1: the division by the final count comes at the end.
-        let prepared = PreparedPlanes::range(scene, done..done + next, 1, opts.seed, opts.sampler, opts.accelerator);
+        let range = done..done + next;
+        let prepared = PreparedPlanes::range(scene, range, 1, opts.seed, opts.sampler, opts.accelerator, control)?;
         let t = Instant::now();
         let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, progress);
+        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, control)?;
         for (t, s) in total.iter_mut().zip(&sums) {
             *t += s.as_dvec3();
         }
@@ -496,7 +490,7 @@ pub fn render_in_passes(
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
     }
     if done == 0 {
-        return Err(Error::option("--time-budget", "no plane pass was made"));
+        return Err(Error::option(Setting::TimeBudget, "no plane pass was made"));
     }
     let mut film = Film::new(scene.camera.width, scene.camera.height);
     let inv = 1.0 / done as f64;
@@ -511,21 +505,26 @@ pub fn render_in_passes(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::AtomicUsize;
+    use crate::weights::{HitLanes, PlaneFrame, Unweighted};
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    fn small_scene() -> Scene {
+        Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap()
+    }
 
     #[test]
     fn cancelling_stops_a_render_after_the_work_under_way() {
-        let scene =
-            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap();
+        let scene = small_scene();
         let opts = RenderOptions { planes: 3000, spp: 3, ..RenderOptions::default() };
-        // Never set: the same image as `render`.
-        let (a, _) = render(&scene, &opts, &|| {}).unwrap();
-        let (b, _) = render_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();
+        // Never set: the same image as without a flag.
+        let (a, _) = render(&scene, &opts, Control::none()).unwrap();
+        let (b, _) = render(&scene, &opts, Control::with_cancel(&AtomicBool::new(false))).unwrap();
         assert_eq!(a, b);
         // Set before: nothing runs.
-        let e = render_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(true)).unwrap_err();
+        let e = render(&scene, &opts, Control::with_cancel(&AtomicBool::new(true))).unwrap_err();
         assert!(matches!(e, Error::Cancelled) && !e.is_input(), "{e}");
-        // Set when the first band (or chunk of rays) ends: at most one more per thread finishes.
+        // Set when the first band (or chunk of rays) ends: the other thread's stops within a
+        // plane (or a ray), and no further unit starts.
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
         for accelerator in Accelerator::ALL {
             let opts = RenderOptions { accelerator, ..opts.clone() };
@@ -534,7 +533,7 @@ mod tests {
                 units.fetch_add(1, Ordering::Relaxed);
                 cancel.store(true, Ordering::Relaxed);
             };
-            let e = pool.install(|| render_cancellable(&scene, &opts, &progress, &cancel)).unwrap_err();
+            let e = pool.install(|| render(&scene, &opts, Control::new(&progress, &cancel))).unwrap_err();
             assert!(matches!(e, Error::Cancelled));
             let per_pass = progress_units_per_pass(&scene, accelerator) as usize;
             assert!(per_pass >= 3, "{accelerator}: {per_pass} units a pass");
@@ -544,5 +543,116 @@ mod tests {
                 units.into_inner()
             );
         }
+    }
+
+    /// The unweighted D, counting the planes prepared (once per plane and band on the raster,
+    /// once per hit on the per-ray paths) and setting `cancel` when the count reaches `after`:
+    /// a flag set in the middle of a band, where no progress is reported.
+    struct CancelAfter<'a> {
+        prepared: AtomicUsize,
+        after: usize,
+        cancel: &'a AtomicBool,
+    }
+
+    impl Denominator for CancelAfter<'_> {
+        type Plane = PlaneFrame;
+        fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+            if self.prepared.fetch_add(1, Ordering::Relaxed) + 1 == self.after {
+                self.cancel.store(true, Ordering::Relaxed);
+            }
+            *f
+        }
+        fn denominators<const L: usize>(&self, p: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+            Unweighted.denominators(p, h, out)
+        }
+    }
+
+    /// Cancelled in the middle of a band, the raster stops before the next plane: each thread
+    /// prepares at most one plane after the flag is set, with every kernel. The per-ray paths
+    /// stop before the next ray: each thread finishes at most the hits of its ray under way.
+    /// Counted in planes prepared, out of the millions a whole pass prepares.
+    #[test]
+    fn cancelling_stops_gathering_within_a_plane_or_a_ray() {
+        let scene = small_scene();
+        let pass = camera_rays(&scene, 1, 0, false);
+        let (planes, after, threads) = (3000, 20, 2);
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        for accelerator in Accelerator::ALL {
+            let prepared =
+                PreparedPlanes::new(&scene, planes, 1, Sampler::default(), accelerator, Control::none()).unwrap();
+            let kernels = if accelerator == Accelerator::Raster { Kernel::available() } else { vec![Kernel::Portable] };
+            for kernel in kernels {
+                let run = |after: usize| {
+                    let cancel = AtomicBool::new(false);
+                    let weights = CancelAfter { prepared: AtomicUsize::new(0), after, cancel: &cancel };
+                    let mut sums = vec![Vec3::ZERO; pass.rays.len()];
+                    let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
+                    let stats = pool
+                        .install(|| prepared.gather_with(with, &pass.rays, &mut sums, Control::with_cancel(&cancel)));
+                    (weights.prepared.into_inner(), stats, cancel.into_inner())
+                };
+                let (whole, whole_stats, set) = run(usize::MAX);
+                assert!(!set && whole > 100 * after, "{accelerator} {kernel}: {whole} planes prepared in a pass");
+                let (done, stats, set) = run(after);
+                assert!(set);
+                let bound = match accelerator {
+                    Accelerator::Raster => after + (threads - 1),
+                    _ => after + threads * planes,
+                };
+                assert!(done <= bound, "{accelerator} {kernel}: {done} planes prepared, at most {bound} expected");
+                // On the raster the ray-plane tests follow the planes (the per-ray paths test
+                // every plane of a ray whether it hits or not).
+                if accelerator == Accelerator::Raster {
+                    assert!(stats.tests < whole_stats.tests / 20, "{kernel}: {stats:?} of {whole_stats:?}");
+                }
+            }
+        }
+    }
+
+    /// A render in passes, and so a render on a time budget, stops in the middle of a pass.
+    #[test]
+    fn cancelling_stops_a_render_in_passes_mid_pass() {
+        let scene = small_scene();
+        let opts = RenderOptions::default();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let progress = || {
+            units.fetch_add(1, Ordering::Relaxed);
+            cancel.store(true, Ordering::Relaxed);
+        };
+        let control = Control::new(&progress, &cancel);
+        // Passes of 4096 planes, each of 12 bands: set after the first band of the first pass.
+        let mut passes = 0;
+        let mut next = |_: usize, _: f64| {
+            passes += 1;
+            4096
+        };
+        let e = pool.install(|| render_in_passes(&scene, &opts, control, &mut next)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled), "{e}");
+        assert_eq!((passes, units.load(Ordering::Relaxed)), (1, 1));
+        // Set between passes: the next pass gathers nothing.
+        let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let count = || {
+            units.fetch_add(1, Ordering::Relaxed);
+        };
+        let mut next = |done: usize, _: f64| {
+            if done > 0 {
+                cancel.store(true, Ordering::Relaxed);
+            }
+            256
+        };
+        let e = render_in_passes(&scene, &opts, Control::new(&count, &cancel), &mut next).unwrap_err();
+        assert!(matches!(e, Error::Cancelled));
+        assert_eq!(units.into_inner() as u64, progress_units_per_pass(&scene, Accelerator::Raster));
+        // On a budget of an hour: the first band ends it.
+        let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let progress = || {
+            units.fetch_add(1, Ordering::Relaxed);
+            cancel.store(true, Ordering::Relaxed);
+        };
+        let control = Control::new(&progress, &cancel);
+        let hour = std::time::Duration::from_secs(3600);
+        let e = pool.install(|| render_for(&scene, &opts, hour, control)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled) && units.into_inner() == 1, "{e}");
     }
 }

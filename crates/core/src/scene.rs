@@ -7,38 +7,14 @@ use crate::camera::Camera;
 use crate::light::RectLight;
 use crate::limits::{MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_memory, check_planes, check_resolution, check_spp};
 use crate::medium::Medium;
-use crate::sampling::Sampler;
+use crate::sampling::{Discrete, Sampler};
 use crate::weights::{Estimator, Weighting};
 use glam::DVec3;
 use serde::Deserialize;
 use std::fmt;
 use std::path::Path;
 
-/// A problem with a scene file or with the render settings derived from it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SceneError {
-    pub file: String,
-    /// 1-based line and column, when the problem has a place in the text.
-    pub position: Option<(usize, usize)>,
-    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
-    pub field: String,
-    pub message: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
-        if let Some((line, col)) = self.position {
-            write!(f, ":{line}:{col}")?;
-        }
-        if !self.field.is_empty() {
-            write!(f, ": {}", self.field)?;
-        }
-        write!(f, ": {}", self.message)
-    }
-}
-
-impl std::error::Error for SceneError {}
+pub use crate::error::SceneError;
 
 /// An RGB triple that may be written as a single number (grey).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -376,12 +352,16 @@ impl Scene {
             .any(|(k, l)| k != except && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
     }
 
-    /// The same scene seen at another resolution (checked against the memory budget with the
-    /// scene's own plane count; a render checks its own).
+    /// Light choice by power, P_l proportional to A_l luminance(Le_l) (docs/mathematics.md
+    /// section 2, step 1): shared by the photon planes and the reference.
+    pub fn light_distribution(&self) -> Discrete {
+        Discrete::new(&self.lights.iter().map(RectLight::power).collect::<Vec<_>>())
+    }
+
+    /// The same scene seen at another resolution (each side in range; the memory a render
+    /// needs at that size is checked with its own plane count, see [`crate::settings`]).
     pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, crate::Error> {
-        let invalid = |m| crate::Error::option("--resolution", m);
-        check_resolution(width, height).map_err(invalid)?;
-        check_memory(width, height, self.render.planes).map_err(invalid)?;
+        check_resolution(width, height).map_err(|m| crate::Error::option(crate::error::Setting::Resolution, m))?;
         let c = &self.camera;
         let mut s = self.clone();
         s.camera = Camera { width, height, ..c.clone() };

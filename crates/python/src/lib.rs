@@ -3,21 +3,24 @@
 //! (height, width, 3) and float32.
 //!
 //! Everything a call can fail with is a Python exception: `ValueError` for bad input, with the
-//! command line's own one-line message (the `Display` of `fogplanes::Error`); `OSError` (or
-//! its subclass `FileNotFoundError`, ...) for a file that cannot be read. Renders run on a worker
+//! command line's one-line message, a setting named as the caller gave it (`planes=0: ...`
+//! where the command line says `--planes: ...`); `OSError` (or its subclass
+//! `FileNotFoundError`, ...) for a file that cannot be read. The settings are resolved by the
+//! core (`fogplanes::settings`), as for the command line: the same defaults, the same checks. Renders run on a worker
 //! thread with the GIL released, while the calling thread watches for signals: Ctrl-C sets the
 //! core's cancel flag and raises `KeyboardInterrupt` once the work under way has stopped.
 
 use fogplanes::Error;
+use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::kernel::Kernel;
-use fogplanes::limits::{check_planes, check_spp, check_threads};
 use fogplanes::metrics::compare as compare_films;
-use fogplanes::reference::{ReferenceOptions, render_reference_cancellable};
-use fogplanes::render::{Accelerator, RenderOptions, RenderStats, render_cancellable};
+use fogplanes::reference::render_reference;
+use fogplanes::render::{Accelerator, RenderStats, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{Estimator, Weighting};
+use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
+use fogplanes::weights::Estimator;
 use numpy::ndarray::Array3;
 use numpy::{AllowTypeChange, PyArray3, PyArrayLike3};
 use pyo3::exceptions::{
@@ -44,18 +47,19 @@ fn triple(v: glam::DVec3) -> Vec3 {
 // ---------------------------------------------------------------------------------------------
 // Errors
 
-/// The exception for a library error: `ValueError` for the caller's input, `OSError` otherwise.
-fn py_error(e: Error) -> PyErr {
+/// The exception for a library error, a setting named by `name`: `ValueError` for the
+/// caller's input, `OSError` for a write that failed, `RuntimeError` for cancelled work.
+fn py_error_named(e: Error, name: impl Fn(Setting) -> String) -> PyErr {
     match e {
         Error::Write { .. } => PyOSError::new_err(e.to_string()),
         Error::Cancelled => PyRuntimeError::new_err("the work was cancelled"),
-        e => PyValueError::new_err(e.to_string()),
+        e => PyValueError::new_err(e.worded(name)),
     }
 }
 
-/// `ValueError("{option}: {message}")`, as the command line words a bad option.
-fn invalid(option: &str, message: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(format!("{option}: {message}"))
+/// [`py_error_named`] with settings named by their keyword alone.
+fn py_error(e: Error) -> PyErr {
+    py_error_named(e, |s| s.keyword().to_string())
 }
 
 /// The `OSError` subclass Python raises for an I/O error of this kind.
@@ -84,33 +88,92 @@ fn file_error(path: &Path, message: String) -> PyErr {
 // ---------------------------------------------------------------------------------------------
 // Arguments
 
-/// A non-negative integer argument; a Python int out of range is a `ValueError` naming the
-/// option, anything but an int a `TypeError`.
-fn uint(value: Option<&Bound<'_, PyAny>>, option: &str) -> PyResult<Option<u64>> {
-    let Some(v) = value else { return Ok(None) };
-    match v.extract::<u64>() {
-        Ok(n) => Ok(Some(n)),
-        Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => Err(invalid(option, format!("{v} is out of range"))),
-        Err(e) => Err(PyTypeError::new_err(format!("{option}: expected an integer ({e})"))),
+/// The settings a caller gave, as Python shows them, so that an error names a setting the way
+/// the caller wrote it (`planes=0: ...`), and never a command-line flag.
+#[derive(Default)]
+struct Given {
+    reprs: Vec<(Setting, String)>,
+}
+
+impl Given {
+    /// `keyword=value` of a setting given, the keyword alone of one not given.
+    fn name(&self, setting: Setting) -> String {
+        match self.reprs.iter().rev().find(|(s, _)| *s == setting) {
+            Some((_, repr)) => format!("{}={repr}", setting.keyword()),
+            None => setting.keyword().to_string(),
+        }
     }
-}
 
-/// A `u32` argument (out of range as in [`uint`]).
-fn uint32(value: Option<&Bound<'_, PyAny>>, option: &str) -> PyResult<Option<u32>> {
-    uint(value, option)?
-        .map(|n| u32::try_from(n).map_err(|_| invalid(option, format!("{n} is out of range"))))
-        .transpose()
-}
+    fn error(&self, e: Error) -> PyErr {
+        py_error_named(e, |s| self.name(s))
+    }
 
-/// `(width, height)` of the `resolution` argument.
-fn resolution_arg(value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
-    let Some(v) = value else { return Ok(None) };
-    let (w, h): (Bound<PyAny>, Bound<PyAny>) =
-        v.extract().map_err(|_| PyTypeError::new_err(format!("--resolution: expected (width, height), got {v}")))?;
-    Ok(Some((
-        uint32(Some(&w), "--resolution")?.unwrap_or_default(),
-        uint32(Some(&h), "--resolution")?.unwrap_or_default(),
-    )))
+    fn invalid(&self, setting: Setting, message: impl std::fmt::Display) -> PyErr {
+        PyValueError::new_err(format!("{}: {message}", self.name(setting)))
+    }
+
+    fn note(&mut self, setting: Setting, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.reprs.push((setting, value.repr()?.to_string()));
+        Ok(())
+    }
+
+    /// A non-negative integer: a Python int out of range is a `ValueError` naming the setting,
+    /// anything but an int a `TypeError`.
+    fn uint(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
+        let Some(v) = value else { return Ok(None) };
+        self.note(setting, v)?;
+        match v.extract::<u64>() {
+            Ok(n) => Ok(Some(n)),
+            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
+                Err(self.invalid(setting, "out of range (a non-negative integer below 2**64)"))
+            }
+            Err(e) => Err(PyTypeError::new_err(format!("{}: expected an integer ({e})", setting.keyword()))),
+        }
+    }
+
+    /// A `u32` (out of range as in [`Given::uint`]).
+    fn uint32(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u32>> {
+        self.uint(setting, value)?
+            .map(|n| u32::try_from(n).map_err(|_| self.invalid(setting, "out of range (an integer below 2**32)")))
+            .transpose()
+    }
+
+    /// A number of seconds or stops (a float, or an int).
+    fn float(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<f64>> {
+        let Some(v) = value else { return Ok(None) };
+        self.note(setting, v)?;
+        v.extract::<f64>()
+            .map(Some)
+            .map_err(|e| PyTypeError::new_err(format!("{}: expected a number ({e})", setting.keyword())))
+    }
+
+    /// A name from a closed list (estimator, sampler, ...).
+    fn named<T: std::str::FromStr<Err = String>>(
+        &mut self,
+        setting: Setting,
+        value: Option<&str>,
+    ) -> PyResult<Option<T>> {
+        let Some(v) = value else { return Ok(None) };
+        self.reprs.push((setting, py_str(v)));
+        v.parse().map(Some).map_err(|m| self.invalid(setting, m))
+    }
+
+    /// `(width, height)`.
+    fn resolution(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
+        let Some(v) = value else { return Ok(None) };
+        let (w, h): (Bound<PyAny>, Bound<PyAny>) =
+            v.extract().map_err(|_| PyTypeError::new_err(format!("resolution: expected (width, height), got {v}")))?;
+        let (w, h) = (self.uint32(Setting::Resolution, Some(&w))?, self.uint32(Setting::Resolution, Some(&h))?);
+        self.note(Setting::Resolution, v)?;
+        Ok(w.zip(h))
+    }
+
+    /// A thread count (its range is the core's to check).
+    fn threads(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<usize>> {
+        self.uint(Setting::Threads, value)?
+            .map(|t| usize::try_from(t).map_err(|_| self.invalid(Setting::Threads, "out of range")))
+            .transpose()
+    }
 }
 
 fn load(path: &Path) -> PyResult<Scene> {
@@ -118,29 +181,23 @@ fn load(path: &Path) -> PyResult<Scene> {
 }
 
 /// The scene of a `scene` argument: a `Scene`, or the path of a scene file (str or
-/// os.PathLike), with `resolution` applied.
-fn scene_arg(scene: &Bound<'_, PyAny>, resolution: Option<&Bound<'_, PyAny>>) -> PyResult<Scene> {
-    let scene = if let Ok(s) = scene.cast::<PyScene>() {
-        s.get().inner.clone()
+/// os.PathLike).
+fn scene_arg(scene: &Bound<'_, PyAny>) -> PyResult<Scene> {
+    if let Ok(s) = scene.cast::<PyScene>() {
+        Ok(s.get().inner.clone())
     } else if let Ok(path) = scene.extract::<PathBuf>() {
-        load(&path)?
+        load(&path)
     } else {
-        return Err(PyTypeError::new_err(format!(
+        Err(PyTypeError::new_err(format!(
             "scene: expected a fogplanes.Scene or the path of a scene file, got {}",
             scene.get_type().name()?
-        )));
-    };
-    match resolution_arg(resolution)? {
-        Some((w, h)) => scene.with_resolution(w, h).map_err(py_error),
-        None => Ok(scene),
+        )))
     }
 }
 
-/// The worker pool of the `threads` argument (None: rayon's global pool).
-fn pool_arg(threads: Option<&Bound<'_, PyAny>>) -> PyResult<Option<rayon::ThreadPool>> {
-    let Some(t) = uint(threads, "--threads")? else { return Ok(None) };
-    let t = usize::try_from(t).map_err(|_| invalid("--threads", format!("{t} is out of range")))?;
-    check_threads(t).map_err(|m| invalid("--threads", m))?;
+/// The worker pool of `threads` resolved (None: rayon's global pool).
+fn pool(threads: Option<usize>) -> PyResult<Option<rayon::ThreadPool>> {
+    let Some(t) = threads else { return Ok(None) };
     rayon::ThreadPoolBuilder::new()
         .num_threads(t)
         .thread_name(|i| format!("fogplanes-{i}"))
@@ -149,21 +206,18 @@ fn pool_arg(threads: Option<&Bound<'_, PyAny>>) -> PyResult<Option<rayon::Thread
         .map_err(|e| PyRuntimeError::new_err(format!("cannot start the worker threads: {e}")))
 }
 
-fn named<T: std::str::FromStr<Err = String>>(value: &str, option: &str) -> PyResult<T> {
-    value.parse().map_err(|m| invalid(option, m))
-}
-
 // ---------------------------------------------------------------------------------------------
 // Running work interruptibly
 
 /// Runs `work` on a worker thread (inside `pool` if given) with the GIL released, checking for
 /// signals on this thread every 50 ms. A signal's exception (KeyboardInterrupt for Ctrl-C) sets
 /// the cancel flag, waits for the worker to stop and is raised. A panic becomes RuntimeError.
+/// The work's own error is the library's, for the caller to word.
 fn run_interruptible<T: Send>(
     py: Python<'_>,
     pool: Option<rayon::ThreadPool>,
     work: impl FnOnce(&AtomicBool) -> fogplanes::Result<T> + Send,
-) -> PyResult<T> {
+) -> PyResult<fogplanes::Result<T>> {
     let cancel = AtomicBool::new(false);
     let (tx, rx) = mpsc::channel();
     std::thread::scope(|s| {
@@ -185,7 +239,7 @@ fn run_interruptible<T: Send>(
             let (received, back) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
             rx = back;
             match received {
-                Ok(Ok(result)) => return result.map_err(py_error),
+                Ok(Ok(result)) => return Ok(result),
                 Ok(Err(panic)) => {
                     let what = panic
                         .downcast_ref::<&str>()
@@ -221,20 +275,38 @@ fn film_to_array<'py>(py: Python<'py>, film: &Film) -> Image<'py> {
     PyArray3::from_owned_array(py, array)
 }
 
-fn array_to_film(array: &PyArrayLike3<'_, f32, AllowTypeChange>, what: &str) -> PyResult<Film> {
-    let view = array.as_array();
-    let (h, w, c) = view.dim();
-    let too_large = || PyValueError::new_err(format!("{what}: {h}x{w} pixels is too large"));
-    if c != 3 {
-        return Err(PyValueError::new_err(format!(
-            "{what}: expected an array of shape (height, width, 3), got ({h}, {w}, {c})"
-        )));
+/// The shape of an array as Python writes it: `(2, 3)`, `(5,)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!("({})", shape.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")),
     }
-    let (w32, h32) = (u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
-    // The renderer's own limit on image sides, before anything is allocated (a broadcast
-    // array can claim a huge shape at no cost).
-    fogplanes::limits::check_resolution(w32, h32).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
-    let mut film = Film::new(w32, h32);
+}
+
+/// The image of an array-like argument (any real dtype), its shape checked against the
+/// renderer's limits before anything is converted: a broadcast or float64 array that claims a
+/// huge shape costs nothing until converted to float32.
+fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> {
+    let py = image.py();
+    // Arrays keep their own shape (no copy); nested lists become one to have one.
+    let array = match image.getattr("shape") {
+        Ok(_) => image.clone(),
+        Err(_) => py.import("numpy")?.call_method1("asarray", (image,))?,
+    };
+    let Ok(shape) = array.getattr("shape")?.extract::<Vec<usize>>() else {
+        return Err(PyTypeError::new_err(format!("{what}: expected an array, got {}", image.get_type().name()?)));
+    };
+    let [h, w, 3] = shape[..] else {
+        return Err(PyValueError::new_err(format!(
+            "{what}: expected an array of shape (height, width, 3), got {}",
+            shape_text(&shape)
+        )));
+    };
+    let side = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    fogplanes::limits::check_resolution(side(w), side(h)).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
+    let array: PyArrayLike3<'_, f32, AllowTypeChange> = array.extract()?;
+    let view = array.as_array();
+    let mut film = Film::new(w as u32, h as u32);
     for ((y, x), p) in (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).zip(film.pixels.iter_mut()) {
         *p = glam::Vec3::new(view[[y, x, 0]], view[[y, x, 1]], view[[y, x, 2]]);
     }
@@ -246,6 +318,7 @@ fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Bound<'py, PyDi
     d.set_item("estimator", &s.estimator)?;
     d.set_item("kernel", &s.kernel)?;
     d.set_item("planes", s.planes)?;
+    d.set_item("plane_passes", s.plane_passes)?;
     d.set_item("rays", s.rays)?;
     d.set_item("hits", s.hits)?;
     d.set_item("tests", s.tests)?;
@@ -408,9 +481,11 @@ impl PyScene {
 
     /// The same scene at another resolution.
     fn with_resolution(&self, width: &Bound<'_, PyAny>, height: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let w = uint32(Some(width), "--resolution")?.unwrap_or_default();
-        let h = uint32(Some(height), "--resolution")?.unwrap_or_default();
-        self.inner.with_resolution(w, h).map(|inner| PyScene { inner }).map_err(py_error)
+        let mut given = Given::default();
+        let w = given.uint32(Setting::Resolution, Some(width))?.unwrap_or_default();
+        let h = given.uint32(Setting::Resolution, Some(height))?.unwrap_or_default();
+        given.reprs.push((Setting::Resolution, format!("({w}, {h})")));
+        self.inner.with_resolution(w, h).map(|inner| PyScene { inner }).map_err(|e| given.error(e))
     }
 
     /// The file stem (or the name given to from_toml).
@@ -508,20 +583,24 @@ fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// Renders a scene with photon planes: the image, shape (height, width, 3), float32.
 ///
 /// The arguments are those of `fogplanes render`, and None takes the scene's [render]
-/// default exactly as the command line does: `estimator` (the scene's, else smis-exact),
-/// `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent"; the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
-/// estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
-/// in a pool of that many threads (None: all cores); the image depends on the seed alone.
-/// The image is bit-identical to the EXR that `fogplanes render` writes for the same
+/// default exactly as the command line does (both resolve them in the core): `estimator` (the
+/// scene's, else smis-exact), `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent";
+/// the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
+/// estimator is the one rendered). `resolution` is (width, height). `time_budget` renders for
+/// that many seconds instead of a plane count: planes in passes, each extending the set, with
+/// one sample per pixel (the stats give "planes" and "plane_passes"). `threads` runs the
+/// render in a pool of that many threads (None: all cores); the image depends on the seed
+/// alone. The image is bit-identical to the EXR that `fogplanes render` writes for the same
 /// arguments. With `return_stats=True`, returns (image, stats).
 ///
-/// Raises ValueError for bad input (the command line's message), OSError for a scene file
-/// that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+/// Raises ValueError for bad input (the command line's message, the setting named as given
+/// here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
+/// on Ctrl-C. The GIL is released while rendering.
 #[pyfunction]
 #[pyo3(signature = (
     scene, estimator = None, planes = None, seed = None, spp = None, pixel_center = false,
     resolution = None, orientations = None, threads = None, accelerator = "raster",
-    kernel = "auto", return_stats = false, sampler = None
+    kernel = "auto", return_stats = false, sampler = None, time_budget = None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
@@ -539,41 +618,33 @@ fn render<'py>(
     kernel: &str,
     return_stats: bool,
     sampler: Option<&str>,
+    time_budget: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    // The order of src/main.rs `cmd_render`: scene and its overrides, then the options.
-    let scene = scene_arg(scene, resolution)?;
-    let pool = pool_arg(threads)?;
-    let estimator = estimator.map(|e| named::<Estimator>(e, "--estimator")).transpose()?;
-    let accelerator = named::<Accelerator>(accelerator, "--accelerator")?;
-    let kernel = named::<Kernel>(kernel, "--kernel")?;
-    let sampler = sampler.map(|s| named::<Sampler>(s, "--sampler")).transpose()?;
-    let orientations = uint32(orientations, "--orientations")?;
-    let planes = uint(planes, "--planes")?;
-    let seed = uint(seed, "--seed")?;
-    let spp = uint32(spp, "--spp")?;
-
-    let defaults = RenderOptions::from_scene(&scene);
-    let estimator = estimator.unwrap_or(defaults.weighting.estimator);
-    // The scene's K applies only when the scene's estimator is the one rendered.
-    let scene_k = (estimator == defaults.weighting.estimator && estimator.has_orientations())
-        .then_some(defaults.weighting.orientations);
-    let weighting = Weighting::new(estimator, orientations.or(scene_k)).map_err(|m| invalid("--orientations", m))?;
-    let planes = planes.unwrap_or(defaults.planes as u64);
-    check_planes(planes).map_err(|m| invalid("--planes", m))?;
-    let planes = usize::try_from(planes).map_err(|_| invalid("--planes", format!("{planes} is out of range")))?;
-    let opts = RenderOptions {
-        planes,
-        weighting,
-        seed: seed.unwrap_or(defaults.seed),
-        sampler: sampler.unwrap_or(defaults.sampler),
-        spp: spp.unwrap_or(defaults.spp),
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = Overrides {
+        estimator: given.named::<Estimator>(Setting::Estimator, estimator)?,
+        orientations: given.uint32(Setting::Orientations, orientations)?,
+        planes: given.uint(Setting::Planes, planes)?,
+        seed: given.uint(Setting::Seed, seed)?,
+        sampler: given.named::<Sampler>(Setting::Sampler, sampler)?,
+        spp: given.uint32(Setting::Spp, spp)?,
         pixel_center,
-        accelerator,
-        kernel,
+        accelerator: given.named::<Accelerator>(Setting::Accelerator, Some(accelerator))?,
+        kernel: given.named::<Kernel>(Setting::Kernel, Some(kernel))?,
+        time_budget: given.float(Setting::TimeBudget, time_budget)?,
+        resolution: given.resolution(resolution)?,
+        threads: given.threads(threads)?,
+        exposure: None,
     };
-    opts.validate(&scene).map_err(py_error)?;
-
-    let (film, stats) = run_interruptible(py, pool, |cancel| render_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
+    let (film, stats) = run_interruptible(py, pool(r.threads)?, |cancel| match r.time_budget {
+        None => fogplanes::render::render(&r.scene, &r.options, Control::with_cancel(cancel)),
+        Some(seconds) => {
+            render_for(&r.scene, &r.options, Duration::from_secs_f64(seconds), Control::with_cancel(cancel))
+        }
+    })?
+    .map_err(|e| given.error(e))?;
     let image = film_to_array(py, &film).into_any();
     if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
 }
@@ -597,13 +668,22 @@ fn reference<'py>(
     uniform: bool,
     threads: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Image<'py>, Image<'py>)> {
-    let scene = scene_arg(scene, resolution)?;
-    let pool = pool_arg(threads)?;
-    let spp = uint32(spp, "--spp")?.unwrap_or(1024);
-    check_spp(spp).map_err(|m| invalid("--spp", m))?;
-    let seed = uint(seed, "--seed")?.unwrap_or(1);
-    let opts = ReferenceOptions { spp, uniform, seed, pixel_center };
-    let image = run_interruptible(py, pool, |cancel| render_reference_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = ReferenceOverrides {
+        spp: given.uint32(Setting::Spp, spp)?,
+        seed: given.uint(Setting::Seed, seed)?,
+        pixel_center,
+        uniform,
+        resolution: given.resolution(resolution)?,
+        threads: given.threads(threads)?,
+        exposure: None,
+    };
+    let r = settings::resolve_reference(&scene, &overrides).map_err(|e| given.error(e))?;
+    let image = run_interruptible(py, pool(r.threads)?, |cancel| {
+        render_reference(&r.scene, &r.options, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
     Ok((film_to_array(py, &image.mean), film_to_array(py, &image.stderr)))
 }
 
@@ -614,11 +694,11 @@ fn reference<'py>(
 #[pyfunction]
 fn compare<'py>(
     py: Python<'py>,
-    image: PyArrayLike3<'py, f32, AllowTypeChange>,
-    reference: PyArrayLike3<'py, f32, AllowTypeChange>,
+    image: &Bound<'py, PyAny>,
+    reference: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let image = array_to_film(&image, "image")?;
-    let reference = array_to_film(&reference, "reference")?;
+    let image = image_arg(image, "image")?;
+    let reference = image_arg(reference, "reference")?;
     let m = compare_films(&image, &reference).map_err(py_error)?;
     let d = PyDict::new(py);
     d.set_item("smape", m.smape)?;
@@ -639,18 +719,19 @@ fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<'py>> {
 /// Writes an array (height, width, 3) as .exr (linear float32) or .png (tone-mapped sRGB by
 /// `exposure` stops), whole or not at all, as the command line writes its images.
 #[pyfunction]
-#[pyo3(signature = (path, image, exposure = 0.0))]
+#[pyo3(signature = (path, image, exposure = None))]
+#[pyo3(text_signature = "(path, image, exposure=0.0)")]
 fn save_image(
     py: Python<'_>,
     path: PathBuf,
-    image: PyArrayLike3<'_, f32, AllowTypeChange>,
-    exposure: f32,
+    image: &Bound<'_, PyAny>,
+    exposure: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<()> {
-    if !exposure.is_finite() {
-        return Err(PyValueError::new_err(format!("exposure must be a finite number of stops, got {exposure}")));
-    }
-    let film = array_to_film(&image, "image")?;
-    fogplanes::film::check_image_output(&path).map_err(py_error)?;
+    let mut given = Given::default();
+    let exposure = given.float(Setting::Exposure, exposure)?;
+    let exposure = settings::exposure(exposure.map(|e| e as f32)).map_err(|e| given.error(e))?;
+    let film = image_arg(image, "image")?;
+    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)]).map_err(py_error)?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)
 }
 

@@ -10,7 +10,8 @@ Images are numpy arrays of shape (height, width, 3), float32, linear RGB.
     >>> ref, err = fogplanes.reference(scene, spp=256, resolution=(160, 90))
     >>> fogplanes.compare(image, ref)["mse"]  # doctest: +SKIP
 
-Bad input raises ValueError with the command line's message; a file that cannot be opened
+Bad input raises ValueError with the command line's message, the setting named as given here
+(`planes=0: ...` where the command line says `--planes: ...`); a file that cannot be opened
 raises OSError (FileNotFoundError, ...). Ctrl-C stops a render with KeyboardInterrupt.
 """
 

@@ -131,6 +131,8 @@ class RenderStats(TypedDict):
     estimator: str
     kernel: str
     planes: int
+    #: 1, or the passes of a render on a time budget.
+    plane_passes: int
     rays: int
     hits: int
     tests: int
@@ -170,21 +172,25 @@ def render(
     kernel: str = "auto",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
+    time_budget: float | None = None,
 ) -> Image:
     """Renders a scene with photon planes: the image, shape (height, width, 3), float32.
 
     The arguments are those of `fogplanes render`, and None takes the scene's [render]
-    default exactly as the command line does: `estimator` (the scene's, else smis-exact),
-    `planes`, `seed`, `spp`, and `orientations` (the scene's K applies only when the scene's
-    estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
-    in a pool of that many threads (None: all cores); the image depends on the seed alone.
-    The image is bit-identical to the EXR that `fogplanes render` writes for the same
-    arguments. `sampler` is where the planes' random numbers come from: "sobol"
-    (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol). With
-    `return_stats=True`, returns (image, stats).
+    default exactly as the command line does (both resolve them in the core): `estimator`
+    (the scene's, else smis-exact), `planes`, `seed`, `spp`, and `orientations` (the scene's K
+    applies only when the scene's estimator is the one rendered). `resolution` is (width,
+    height). `time_budget` renders for that many seconds instead of a plane count: planes in
+    passes, each extending the set, one sample per pixel (the stats give "planes" and
+    "plane_passes"). `threads` runs the render in a pool of that many threads (None: all
+    cores); the image depends on the seed alone. The image is bit-identical to the EXR that
+    `fogplanes render` writes for the same arguments. `sampler` is where the planes' random
+    numbers come from: "sobol" (randomised quasi-Monte Carlo) or "independent" (None: the
+    scene's, else sobol). With `return_stats=True`, returns (image, stats).
 
-    Raises ValueError for bad input (the command line's message), OSError for a scene file
-    that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+    Raises ValueError for bad input (the command line's message, the setting named as given
+    here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
+    on Ctrl-C. The GIL is released while rendering.
     """
 
 @overload
@@ -203,6 +209,7 @@ def render(
     *,
     return_stats: Literal[True],
     sampler: str | None = None,
+    time_budget: float | None = None,
 ) -> tuple[Image, RenderStats]: ...
 
 def reference(
@@ -233,4 +240,4 @@ def load_image(path: PathLike) -> Image:
 
 def save_image(path: PathLike, image: npt.ArrayLike, exposure: float = 0.0) -> None:
     """Writes an image (height, width, 3) as .exr (linear float32) or .png (sRGB, tone-mapped
-    by `exposure` stops), whole or not at all."""
+    by `exposure` stops), whole or not at all. The shape is checked before any conversion."""
