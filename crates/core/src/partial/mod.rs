@@ -24,6 +24,9 @@
 //! (the index in one sequence), its orientations, and the camera rays of every pass. The one
 //! function that gathers a plane range is [`ChunkRenderer::gather_planes`].
 
+pub mod file;
+pub mod parts;
+
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::film::Film;
