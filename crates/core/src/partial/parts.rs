@@ -61,7 +61,13 @@ fn options_of(r: &RenderRecord) -> std::result::Result<RenderOptions, String> {
 /// Identifies a reference image (`pilot`: its pilot pass): the scene's content and every
 /// setting that changes it.
 pub fn reference_fingerprint(scene: &Scene, o: &ReferenceOptions, pilot: bool) -> String {
-    let what = if pilot { "pilot" } else if o.uniform { "uniform" } else { "adaptive" };
+    let what = if pilot {
+        "pilot"
+    } else if o.uniform {
+        "uniform"
+    } else {
+        "adaptive"
+    };
     let description = format!(
         "fogplanes {} reference {what} | {:?} | {:?} | {:?} | spp {} | seed {} | centre {}",
         env!("CARGO_PKG_VERSION"),
@@ -127,7 +133,8 @@ pub fn save_reference_part(
     let mut meta = meta_of(PartKind::Reference, reference_fingerprint(scene, opts, false), scene, range)?;
     (meta.seconds, meta.reference) = (seconds, Some(reference_record(opts)));
     let shape = pixel_shape(rows.len(), scene.camera.width);
-    let arrays = [meta_array(&meta), Array::f32s("mean", shape.clone(), f32s(mean)), Array::f32s("stderr", shape, f32s(stderr))];
+    let arrays =
+        [meta_array(&meta), Array::f32s("mean", shape.clone(), f32s(mean)), Array::f32s("stderr", shape, f32s(stderr))];
     file::write_npz(path, &arrays)
 }
 
@@ -223,7 +230,10 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     let parts = paths.iter().map(|p| read_part(p)).collect::<Result<Vec<_>>>()?;
     let first = parts.first().ok_or_else(|| Error::Partial("no parts to merge".into()))?;
     for p in &parts[1..] {
-        if p.meta.kind != first.meta.kind || p.meta.fingerprint != first.meta.fingerprint || p.meta.total != first.meta.total {
+        if p.meta.kind != first.meta.kind
+            || p.meta.fingerprint != first.meta.fingerprint
+            || p.meta.total != first.meta.total
+        {
             return Err(Error::Partial(format!(
                 "{} and {} are parts of different images (another scene, other settings or another kind)",
                 first.path.display(),
@@ -237,7 +247,9 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
             let record = first.meta.render.as_ref().ok_or_else(|| first.bad("no render settings"))?;
             let options = options_of(record).map_err(|m| first.bad(m))?;
             if fingerprint(&scene, &options) != first.meta.fingerprint {
-                return Err(first.bad("its settings do not give its fingerprint (written by another fogplanes version?)"));
+                return Err(
+                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
+                );
             }
             let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
             let partial = super::merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
@@ -249,7 +261,9 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
             let options = reference_options_of(record);
             let pilot = kind == PartKind::Pilot;
             if reference_fingerprint(&scene, &options, pilot) != first.meta.fingerprint {
-                return Err(first.bad("its settings do not give its fingerprint (written by another fogplanes version?)"));
+                return Err(
+                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
+                );
             }
             let mut order: Vec<&Part> = parts.iter().collect();
             order.sort_by_key(|p| (p.meta.start, p.meta.end));
