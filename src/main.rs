@@ -638,7 +638,7 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
     };
     let (mean, stderr) = reference_rows(scene, opts, rows.clone(), counts.as_deref(), control)?;
     bar.finish_and_clear();
-    save_reference_part(part, scene, opts, rows.clone(), &mean, &stderr, start.elapsed().as_secs_f64())?;
+    save_reference_part(part, scene, opts, rows.clone(), (&mean, &stderr), start.elapsed().as_secs_f64())?;
     say!("wrote {} (rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
     Ok(())
 }

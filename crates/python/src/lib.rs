@@ -710,18 +710,7 @@ fn reference<'py>(
     uniform: bool,
     threads: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Image<'py>, Image<'py>)> {
-    let scene = scene_arg(scene)?;
-    let mut given = Given::default();
-    let overrides = ReferenceOverrides {
-        spp: given.uint32(Setting::Spp, spp)?,
-        seed: given.uint(Setting::Seed, seed)?,
-        pixel_center,
-        uniform,
-        resolution: given.resolution(resolution)?,
-        threads: given.threads(threads)?,
-        exposure: None,
-    };
-    let r = settings::resolve_reference(&scene, &overrides).map_err(|e| given.error(e))?;
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
     let image = run_interruptible(py, pool(r.threads)?, |cancel| {
         render_reference(&r.scene, &r.options, Control::with_cancel(cancel))
     })?

@@ -125,17 +125,10 @@ pub fn save_reference_part(
     scene: &Scene,
     opts: &ReferenceOptions,
     rows: std::ops::Range<u32>,
-    mean: &Film,
-    stderr: &Film,
+    (mean, stderr): (&Film, &Film),
     seconds: f64,
 ) -> Result<()> {
-    let range = (rows.start as usize, rows.end as usize, scene.camera.height as usize);
-    let mut meta = meta_of(PartKind::Reference, reference_fingerprint(scene, opts, false), scene, range)?;
-    (meta.seconds, meta.reference) = (seconds, Some(reference_record(opts)));
-    let shape = pixel_shape(rows.len(), scene.camera.width);
-    let arrays =
-        [meta_array(&meta), Array::f32s("mean", shape.clone(), f32s(mean)), Array::f32s("stderr", shape, f32s(stderr))];
-    file::write_npz(path, &arrays)
+    save_band(path, PartKind::Reference, scene, opts, rows, &[("mean", mean), ("stderr", stderr)], seconds)
 }
 
 /// Writes rows `rows` of an adaptive reference's pilot pass (the whole image when they are all
@@ -148,10 +141,26 @@ pub fn save_pilot_part(
     pilot: &Film,
     seconds: f64,
 ) -> Result<()> {
+    save_band(path, PartKind::Pilot, scene, opts, rows, &[("pilot", pilot)], seconds)
+}
+
+/// Writes the `films` of a band of rows of a reference or its pilot.
+fn save_band(
+    path: &Path,
+    kind: PartKind,
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    films: &[(&str, &Film)],
+    seconds: f64,
+) -> Result<()> {
     let range = (rows.start as usize, rows.end as usize, scene.camera.height as usize);
-    let mut meta = meta_of(PartKind::Pilot, reference_fingerprint(scene, opts, true), scene, range)?;
+    let fingerprint = reference_fingerprint(scene, opts, kind == PartKind::Pilot);
+    let mut meta = meta_of(kind, fingerprint, scene, range)?;
     (meta.seconds, meta.reference) = (seconds, Some(reference_record(opts)));
-    let arrays = [meta_array(&meta), Array::f32s("pilot", pixel_shape(rows.len(), scene.camera.width), f32s(pilot))];
+    let shape = pixel_shape(rows.len(), scene.camera.width);
+    let mut arrays = vec![meta_array(&meta)];
+    arrays.extend(films.iter().map(|(name, film)| Array::f32s(name, shape.clone(), f32s(film))));
     file::write_npz(path, &arrays)
 }
 
