@@ -17,8 +17,10 @@ use fogplanes::film::{Film, check_writable, write_file_atomically};
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::compare;
 use fogplanes::outputs::{Output, check_outputs};
-use fogplanes::reference::render_reference;
-use fogplanes::render::{Accelerator, progress_units_per_pass, render, render_for};
+use fogplanes::partial::parts::{Merged, merge_parts, read_pilot, save_pilot_part, save_reference_part, save_render_part};
+use fogplanes::partial::render_chunk;
+use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference};
+use fogplanes::render::{Accelerator, RenderOptions, progress_units, progress_units_per_pass, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
@@ -53,6 +55,17 @@ enum Command {
     Reference(ReferenceArgs),
     /// Compare an image against a reference: SMAPE, MSE, relMSE, largest absolute error.
     Compare(CompareArgs),
+    /// Merge partial files into one image: the plane ranges of a render (`render --plane-range
+    /// A:B --partial part.npz`) or the row bands of a reference (`reference --rows J0:J1
+    /// --partial part.npz`), written by the jobs of a job array.
+    ///
+    /// The parts may come in any order; they must be parts of one image (same scene and
+    /// settings), without overlap or gap. A render's parts are added in the same fixed order as
+    /// `render` adds its chunks, so the image is bit-identical to `render`'s when each part is
+    /// a chunk of 16384 planes (or an aligned power-of-two run of them). Pilot parts of an
+    /// adaptive reference (`reference --rows J0:J1 --pilot-pass`) merge into the .npz that
+    /// `reference --pilot` reads.
+    Merge(MergeArgs),
     /// Render every estimator from the same planes and rays, and write the table, panel and plot.
     ///
     /// Writes table.md, table.json, panel.png, error_vs_time.png (and .svg) and index.html (an
@@ -69,6 +82,25 @@ enum Command {
     /// max_depth 2, no Russian roulette); resolution, samples and seed are its parameters resx,
     /// resy, spp and seed. tests/mitsuba/check_export.py compares it with `reference`.
     Export(ExportArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The partial files (.npz).
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// Output: an image (.exr or .png) for render and reference parts, a .npz for pilot parts.
+    #[arg(long, short, value_name = "OUT")]
+    output: PathBuf,
+    /// Reference parts: also write the per-pixel standard error as an image.
+    #[arg(long, value_name = "PATH")]
+    stderr_image: Option<PathBuf>,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    exposure: Option<f32>,
+    /// No summary line.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 /// The formats `export` writes.
@@ -167,11 +199,19 @@ struct RenderArgs {
     #[arg(long, value_parser = kernel_parser())]
     kernel: Option<Kernel>,
     /// Output: .exr (linear float) or .png (tone-mapped sRGB). Default: <scene name>.exr here.
-    #[arg(long, short, value_name = "OUT")]
+    #[arg(long, short, value_name = "OUT", conflicts_with = "partial")]
     output: Option<PathBuf>,
     /// Exposure in stops for PNG output [default: 0].
     #[arg(long, value_name = "EV", allow_negative_numbers = true)]
     exposure: Option<f32>,
+    /// Render only planes A to B (excluded) of the N, for a job array: A and B multiples of
+    /// 16384 (the render's chunks) or N. Needs --partial; `fogplanes merge` adds the parts.
+    #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with = "time_budget")]
+    plane_range: Option<(u64, u64)>,
+    /// Write the unnormalised sums of the planes rendered (all, or --plane-range) to this .npz
+    /// file instead of an image (numpy loads it: `sums` and a JSON `meta`).
+    #[arg(long, value_name = "PART.npz", conflicts_with = "time_budget")]
+    partial: Option<PathBuf>,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -201,6 +241,22 @@ struct ReferenceArgs {
     /// Exposure in stops for PNG output [default: 0].
     #[arg(long, value_name = "EV", allow_negative_numbers = true)]
     exposure: Option<f32>,
+    /// Render only rows J0 to J1 (excluded), for a job array; needs --partial, and `fogplanes
+    /// merge` assembles the bands. Without --uniform, the bands share one pilot pass: render its
+    /// bands with --pilot-pass, merge them into pilot.npz, then render each band with --pilot
+    /// pilot.npz.
+    #[arg(long, value_name = "J0:J1", value_parser = parse_range, requires = "partial")]
+    rows: Option<(u64, u64)>,
+    /// Write the rows' mean and standard error (or pilot) to this .npz instead of images.
+    #[arg(long, value_name = "PART.npz", conflicts_with_all = ["output", "stderr_image"])]
+    partial: Option<PathBuf>,
+    /// Render the rows of the adaptive reference's pilot pass (its per-pixel standard errors).
+    #[arg(long, requires = "partial", conflicts_with_all = ["uniform", "pilot"])]
+    pilot_pass: bool,
+    /// The adaptive reference's whole pilot pass (a .npz merged from --pilot-pass parts): the
+    /// sample counts come from it instead of a pilot pass of this run's own.
+    #[arg(long, value_name = "PILOT.npz", conflicts_with = "uniform")]
+    pilot: Option<PathBuf>,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -339,6 +395,7 @@ fn main() -> ExitCode {
         Command::Render(a) => cmd_render(a),
         Command::Reference(a) => cmd_reference(a),
         Command::Compare(a) => cmd_compare(a),
+        Command::Merge(a) => cmd_merge(a),
         Command::Table(a) => cmd_table(a),
         Command::Scaling(a) => cmd_scaling(a),
         Command::Export(a) => cmd_export(a),
@@ -356,6 +413,26 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
     Ok((parse(w)?, parse(h)?))
+}
+
+/// `A:B` with A < B.
+fn parse_range(s: &str) -> Result<(u64, u64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("expected START:END, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u64>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
+    let (a, b) = (parse(a)?, parse(b)?);
+    if a >= b {
+        return Err(format!("{s:?}: the start must be below the end"));
+    }
+    Ok((a, b))
+}
+
+/// A partial file's name ends in .npz (numpy loads it by that name).
+fn check_partial_output(path: &std::path::Path) -> Result<(), Failure> {
+    if path.extension().and_then(|e| e.to_str()) != Some("npz") {
+        return Err(input(anyhow!("{}: a partial file is a .npz", path.display())));
+    }
+    check_outputs(&[Output::File(path)])?;
+    Ok(())
 }
 
 /// Starts the worker threads the settings ask for (none: rayon's default, every core).
@@ -405,15 +482,14 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         },
     )?;
     let (scene, opts) = (&r.scene, &r.options);
+    if let Some(part) = &a.partial {
+        return render_part(&a, scene, opts, part, r.threads);
+    }
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
     check_outputs(&[Output::Image(&output)])?;
     start_threads(r.threads)?;
 
-    let bar = progress_bar(
-        a.common.quiet,
-        progress_units_per_pass(scene, opts.accelerator) * opts.spp as u64,
-        opts.weighting.label().as_str(),
-    );
+    let bar = progress_bar(a.common.quiet, progress_units(scene, opts), opts.weighting.label().as_str());
     let cpu = system::cpu_seconds();
     let (film, stats) = match r.time_budget {
         None => render(scene, opts, Control::with_progress(&|| bar.inc(1)))?,
@@ -444,6 +520,120 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// `render --partial`: planes `--plane-range` (all by default) into a partial file.
+fn render_part(
+    a: &RenderArgs,
+    scene: &Scene,
+    opts: &RenderOptions,
+    part: &std::path::Path,
+    threads: Option<usize>,
+) -> Result<(), Failure> {
+    check_partial_output(part)?;
+    let (start, end) = a.plane_range.unwrap_or((0, opts.planes as u64));
+    let range = start as usize..end as usize;
+    fogplanes::partial::chunk_indices(opts.planes, &range)?;
+    start_threads(threads)?;
+    let units = progress_units_per_pass(scene, opts.accelerator)
+        * opts.spp as u64
+        * range.len().div_ceil(fogplanes::partial::CHUNK_PLANES) as u64;
+    let bar = progress_bar(a.common.quiet, units, opts.weighting.label().as_str());
+    let (partial, stats) = render_chunk(scene, opts, range, Control::with_progress(&|| bar.inc(1)))?;
+    bar.finish_and_clear();
+    save_render_part(part, scene, opts, &partial)?;
+    say!("{}", stats.summary());
+    say!("wrote {} (planes {}:{} of {})", part.display(), partial.start, partial.end, partial.planes_total);
+    Ok(())
+}
+
+fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
+    let merged = merge_parts(&a.parts)?;
+    let exposure = settings::exposure(a.exposure)?;
+    match merged {
+        Merged::Render { partial, image, .. } => {
+            if a.stderr_image.is_some() {
+                return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
+            }
+            check_outputs(&[Output::Image(&a.output)])?;
+            image.save(&a.output, exposure)?;
+            if !a.quiet {
+                say!(
+                    "merged {} parts: {} planes, {} hits, {:.3} s of rendering",
+                    a.parts.len(),
+                    partial.planes_total,
+                    partial.hits,
+                    partial.seconds
+                );
+                say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", a.output.display(), image.width, image.height, image.mean(), image.max());
+            }
+        }
+        Merged::Reference { mean, stderr, seconds, .. } => {
+            let mut outputs = vec![Output::Image(&a.output)];
+            outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+            check_outputs(&outputs)?;
+            mean.save(&a.output, exposure)?;
+            if let Some(p) = &a.stderr_image {
+                stderr.save(p, exposure)?;
+            }
+            if !a.quiet {
+                say!("merged {} reference bands ({:.3} s of rendering)", a.parts.len(), seconds);
+                say!("wrote {}", a.output.display());
+            }
+        }
+        Merged::Pilot { scene, options, pilot, seconds } => {
+            if a.stderr_image.is_some() {
+                return Err(input(anyhow!("--stderr-image: pilot parts merge into one .npz")));
+            }
+            check_partial_output(&a.output)?;
+            let rows = 0..scene.camera.height;
+            save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
+            if !a.quiet {
+                say!("merged {} pilot bands; wrote {} (for reference --pilot)", a.parts.len(), a.output.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `reference --partial`: rows `--rows` (all by default) into a partial file: the pilot's with
+/// `--pilot-pass`, else the reference's (counts from `--pilot` unless uniform).
+fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std::path::Path) -> Result<(), Failure> {
+    check_partial_output(part)?;
+    let (scene, opts) = (&r.scene, &r.options);
+    let (j0, j1) = a.rows.unwrap_or((0, scene.camera.height as u64));
+    let rows = u32::try_from(j0).unwrap_or(u32::MAX)..u32::try_from(j1).unwrap_or(u32::MAX);
+    start_threads(r.threads)?;
+    let bar = progress_bar(a.common.quiet, rows.len() as u64, "reference");
+    let tick = || bar.inc(1);
+    let control = Control::with_progress(&tick);
+    let start = std::time::Instant::now();
+    if a.pilot_pass {
+        let pilot = reference_pilot_rows(scene, opts, rows.clone(), control)?;
+        bar.finish_and_clear();
+        save_pilot_part(part, scene, opts, rows.clone(), &pilot, start.elapsed().as_secs_f64())?;
+        say!("wrote {} (pilot rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+        return Ok(());
+    }
+    let counts = match (&a.pilot, opts.uniform) {
+        (_, true) => None,
+        (Some(p), false) => Some(reference_counts(opts, &read_pilot(p, scene, opts)?.pixels)),
+        (None, false) if rows.len() as u32 == scene.camera.height => {
+            let pilot = reference_pilot_rows(scene, opts, 0..scene.camera.height, control)?;
+            Some(reference_counts(opts, &pilot.pixels))
+        }
+        (None, false) => {
+            return Err(input(anyhow!(
+                "--rows: the bands of an adaptive reference share one pilot pass: give --pilot PILOT.npz \
+                 (made by `reference --rows J0:J1 --pilot-pass` for each band and `merge`), or --uniform"
+            )));
+        }
+    };
+    let (mean, stderr) = reference_rows(scene, opts, rows.clone(), counts.as_deref(), control)?;
+    bar.finish_and_clear();
+    save_reference_part(part, scene, opts, rows.clone(), &mean, &stderr, start.elapsed().as_secs_f64())?;
+    say!("wrote {} (rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+    Ok(())
+}
+
 fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let scene = Scene::load(&a.scene).map_err(input)?;
     let r = settings::resolve_reference(
@@ -458,6 +648,12 @@ fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
             exposure: a.exposure,
         },
     )?;
+    if let Some(part) = &a.partial {
+        return reference_part(&a, &r, part);
+    }
+    if a.pilot_pass || a.pilot.is_some() {
+        return Err(input(anyhow!("--pilot and --pilot-pass make partial files: give --partial PART.npz")));
+    }
     let scene = &r.scene;
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
     let mut outputs = vec![Output::Image(&output)];

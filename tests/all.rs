@@ -15,6 +15,7 @@ mod hard_scenes;
 mod hostile;
 mod mitsuba_export;
 mod page;
+mod partials;
 mod reference;
 mod sampling;
 mod structures;

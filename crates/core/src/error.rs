@@ -28,6 +28,11 @@ pub enum Error {
     /// An output that cannot be written (the destination keeps its old contents).
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
+    /// Partial renders that do not make up one render (another scene or other settings,
+    /// overlapping or missing plane ranges), or a plane range that is not one of a render's
+    /// chunks.
+    #[error("{0}")]
+    Partial(String),
     /// The caller stopped the work (through the flag of its [`crate::control::Control`]).
     #[error("cancelled")]
     Cancelled,

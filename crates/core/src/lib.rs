@@ -29,6 +29,7 @@
 //! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
 //! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
 //! | [`render`] | the photon-plane renderer and its options |
+//! | [`partial`] | partial renders: canonical chunks of the plane set, their f64 sums, the canonical merge |
 //! | [`control`] | following and stopping a long job: progress callback and cancel flag |
 //! | [`reference`](mod@reference) | the independent reference renderer (section 4) |
 //! | [`metrics`] | SMAPE, MSE and friends (section 5) |
@@ -50,6 +51,7 @@ pub mod medium;
 pub mod metrics;
 pub mod numeric;
 pub mod outputs;
+pub mod partial;
 pub mod photon_plane;
 pub mod quadrature;
 pub mod raster;

@@ -106,48 +106,121 @@ pub const REPLICATES: u32 = 16;
 /// [`crate::Error::Cancelled`].
 pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, control: Control) -> Result<ReferenceImage> {
     let start = std::time::Instant::now();
-    let pixels = scene.camera.width as usize * scene.camera.height as usize;
-    let (mean, stderr) = if opts.uniform {
-        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], control)?
+    let all = 0..scene.camera.height;
+    let counts = if opts.uniform {
+        None
     } else {
-        let pilot_spp = (opts.spp / 8).max(REPLICATES);
-        let (_, pilot_se) =
-            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], control)?;
-        // Standard deviation of one sample, the mean over channels.
-        let sigma: Vec<f64> =
-            pilot_se.pixels.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
-        let total_sigma: f64 = sigma.iter().sum();
-        let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
-        let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
-        // The floor is taken first; the rest goes by need.
-        let budget = (budget - floor * pixels as f64).max(0.0);
-        let counts: Vec<u32> = sigma
-            .iter()
-            .map(|&s| {
-                let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
-                (floor + share).min(cap).round() as u32
-            })
-            .collect();
-        render_pixels(scene, opts.seed, opts.pixel_center, &counts, control)?
+        let pilot = reference_pilot_rows(scene, opts, all.clone(), control)?;
+        Some(reference_counts(opts, &pilot.pixels))
     };
+    let (mean, stderr) = reference_rows(scene, opts, all, counts.as_deref(), control)?;
     Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
+}
+
+/// Samples per pixel of the pilot pass of the adaptive reference.
+fn pilot_spp(opts: &ReferenceOptions) -> u32 {
+    (opts.spp / 8).max(REPLICATES)
+}
+
+/// Rows `rows` of the reference (a band `rows.len()` high): its mean and standard error, with
+/// `counts` samples in each pixel of the whole image (row-major, from [`reference_counts`]) or,
+/// when `None`, `opts.spp` in every pixel (which `opts.uniform` asks for). Each pixel's random
+/// stream is keyed by the seed and the pixel alone, so the bands of an image, rendered anywhere,
+/// are its rows bit for bit.
+pub fn reference_rows(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    counts: Option<&[u32]>,
+    control: Control,
+) -> Result<(Film, Film)> {
+    check_rows(scene, &rows)?;
+    match counts {
+        Some(c) => {
+            let pixels = scene.camera.width as usize * scene.camera.height as usize;
+            if c.len() != pixels {
+                return Err(crate::Error::Partial(format!(
+                    "{} sample counts for an image of {pixels} pixels",
+                    c.len()
+                )));
+            }
+            render_pixels(scene, opts.seed, opts.pixel_center, rows, &|p| c[p], control)
+        }
+        None => render_pixels(scene, opts.seed, opts.pixel_center, rows, &|_| opts.spp, control),
+    }
+}
+
+/// Rows `rows` of the adaptive reference's pilot pass: each pixel's standard error (the
+/// measure of its need that [`reference_counts`] reads).
+pub fn reference_pilot_rows(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    control: Control,
+) -> Result<Film> {
+    check_rows(scene, &rows)?;
+    let spp = pilot_spp(opts);
+    Ok(render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, rows, &|_| spp, control)?.1)
+}
+
+/// The rows `rows` lie in the image and are not empty.
+fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
+    let h = scene.camera.height;
+    if rows.start >= rows.end || rows.end > h {
+        return Err(crate::Error::Partial(format!(
+            "rows {}:{} are not a band of the image's {h} rows (0 <= J0 < J1 <= {h})",
+            rows.start, rows.end
+        )));
+    }
+    Ok(())
+}
+
+/// The adaptive reference's sample count of every pixel from the whole pilot's standard errors
+/// `pilot` (row-major): the allocation described at [`render_reference`].
+pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3]) -> Vec<u32> {
+    let pixels = pilot.len();
+    let pilot_spp = pilot_spp(opts);
+    // Standard deviation of one sample, the mean over channels.
+    let sigma: Vec<f64> =
+        pilot.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
+    let total_sigma: f64 = sigma.iter().sum();
+    let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
+    let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
+    // The floor is taken first; the rest goes by need.
+    let budget = (budget - floor * pixels as f64).max(0.0);
+    sigma
+        .iter()
+        .map(|&s| {
+            let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
+            (floor + share).min(cap).round() as u32
+        })
+        .collect()
 }
 
 /// Seed offset of the pilot pass, so that it shares no samples with the final one.
 const PILOT_SEED: u64 = 0x9_11_07;
 
-/// Renders every pixel with its own sample count, in [`REPLICATES`] independent replicates of
+/// Renders rows `rows` (a band of the image), pixel `p` (row-major in the whole image) with
+/// `spp(p)` samples, in [`REPLICATES`] independent replicates of
 /// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
 /// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
 /// their mean and its standard error comes from their spread, an honest measure of the noise.
 /// The cancel flag is read before each pixel (at most 64 times the average samples, a few
 /// milliseconds).
-fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], control: Control) -> Result<(Film, Film)> {
+fn render_pixels(
+    scene: &Scene,
+    seed: u64,
+    pixel_center: bool,
+    rows: std::ops::Range<u32>,
+    spp: &(dyn Fn(usize) -> u32 + Sync),
+    control: Control,
+) -> Result<(Film, Film)> {
     let cam = &scene.camera;
     let w = cam.width as usize;
     let lights = scene.light_distribution();
     let sequence = Kronecker::<6>::new();
-    let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
+    let band = rows.len() as u32;
+    let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (rows.start as usize..rows.end as usize)
         .into_par_iter()
         .map(|j| {
             let mut means = Vec::with_capacity(w);
@@ -161,8 +234,9 @@ fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], cont
                 }
                 let pixel = (j * w + i) as u64;
                 let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
-                let replicates = REPLICATES.min(spp[pixel as usize]).max(1);
-                let per_replicate = spp[pixel as usize].div_ceil(replicates) as u64;
+                let count = spp(pixel as usize);
+                let replicates = REPLICATES.min(count).max(1);
+                let per_replicate = count.div_ceil(replicates) as u64;
                 let centre_dir = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
                 let centre = scene.camera_segment(cam.position, centre_dir);
                 let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
@@ -202,8 +276,8 @@ fn render_pixels(scene: &Scene, seed: u64, pixel_center: bool, spp: &[u32], cont
         })
         .collect();
     control.check()?;
-    let mut mean = Film::new(cam.width, cam.height);
-    let mut stderr = Film::new(cam.width, cam.height);
+    let mut mean = Film::new(cam.width, band);
+    let mut stderr = Film::new(cam.width, band);
     for (j, (m, e)) in rows.into_iter().enumerate() {
         mean.pixels[j * w..(j + 1) * w].copy_from_slice(&m);
         stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);

@@ -355,42 +355,28 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
 /// averaged over `spp` passes. Checks the options first ([`RenderOptions::validate`]).
 /// Reports each band of rows (or chunk of rays) to `control`; once another thread cancels it,
 /// the work stops within a plane (or a ray) and the result is [`Error::Cancelled`].
+///
+/// The planes are rendered in the canonical chunks of [`crate::partial`] and added along its
+/// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
+/// bit; only one chunk's planes exist at a time.
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
-    opts.validate(scene)?;
-    let kernel = opts.kernel.resolve()?;
-    control.check()?;
     let start = Instant::now();
-    let prepared = PreparedPlanes::new(scene, opts.planes, opts.seed, opts.sampler, opts.accelerator, control)?;
-    let mut film = Film::new(scene.camera.width, scene.camera.height);
-    let mut stats = RenderStats {
-        estimator: opts.weighting.label(),
-        kernel: kernel.to_string(),
-        planes: opts.planes,
-        plane_passes: 1,
-        seconds_sampling: prepared.seconds_sampling,
-        seconds_build: prepared.seconds_build,
-        ..Default::default()
-    };
-    for pass in 0..opts.spp {
-        let t = Instant::now();
-        let pass_rays = camera_rays(scene, opts.seed, pass, opts.pixel_center);
-        stats.seconds_rays += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        // Scattering first, emission after: every accelerator then sums in the same order.
-        let mut sums = vec![Vec3::ZERO; pass_rays.rays.len()];
-        let s = prepared.gather(opts.weighting, kernel, &pass_rays.rays, &mut sums, control)?;
-        stats.seconds_gather += t.elapsed().as_secs_f64();
-        stats.hits += s.hits;
-        stats.tests += s.tests;
-        stats.rays += pass_rays.rays.len() as u64;
-        for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&pass_rays.emission) {
-            *f += *s + *e;
-        }
-    }
-    let inv = 1.0 / opts.spp as f32;
-    film.pixels.iter_mut().for_each(|p| *p *= inv);
+    let mut chunks = crate::partial::ChunkRenderer::new(scene, opts, control)?;
+    let partial = chunks.render(0..opts.planes)?;
+    let mut stats = chunks.stats;
+    let t = Instant::now();
+    let film = crate::partial::finish(scene, opts, &partial)?;
+    stats.seconds_rays += t.elapsed().as_secs_f64();
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+/// Progress units of a whole [`render`]: [`progress_units_per_pass`] for every pass of every
+/// chunk.
+pub fn progress_units(scene: &Scene, opts: &RenderOptions) -> u64 {
+    progress_units_per_pass(scene, opts.accelerator)
+        * opts.spp as u64
+        * crate::partial::chunks(opts.planes).len() as u64
 }
 
 /// The first pass of a render on a time budget, small so that even the slowest estimator

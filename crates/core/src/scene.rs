@@ -149,6 +149,16 @@ pub struct Scene {
     pub medium: Medium,
     pub lights: Vec<RectLight>,
     pub render: RenderDefaults,
+    /// The text it was parsed from and the file that named it, so that a scene can travel to
+    /// another process as text (Python's pickle); `None` for a scene made from a description.
+    source: Option<std::sync::Arc<SceneSource>>,
+}
+
+/// The TOML text of a scene and the file name its errors cite.
+#[derive(Debug, PartialEq, Eq)]
+pub struct SceneSource {
+    pub text: String,
+    pub file: String,
 }
 
 impl Scene {
@@ -187,7 +197,14 @@ impl Scene {
     /// Parses and validates scene text; `file` names it in errors.
     pub fn parse(text: &str, file: &str, name: &str) -> Result<Scene, SceneError> {
         let desc = parse_file(text, file)?;
-        Scene::from_desc(&desc, file, name)
+        let mut scene = Scene::from_desc(&desc, file, name)?;
+        scene.source = Some(std::sync::Arc::new(SceneSource { text: text.to_string(), file: file.to_string() }));
+        Ok(scene)
+    }
+
+    /// The text the scene was parsed from ([`Scene::parse`], [`Scene::load`]), if it was.
+    pub fn source(&self) -> Option<&SceneSource> {
+        self.source.as_deref()
     }
 
     /// Validates a parsed description.
@@ -326,7 +343,7 @@ impl Scene {
         let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp, sampler };
         check_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
 
-        Ok(Scene { name: name.to_string(), camera, medium, lights, render })
+        Ok(Scene { name: name.to_string(), camera, medium, lights, render, source: None })
     }
 
     /// The first light panel crossed by the ray `o + t we` with `t` in `(0, t_max)`: its distance

@@ -15,20 +15,21 @@ use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::compare as compare_films;
-use fogplanes::reference::render_reference;
+use fogplanes::partial::{self, Partial, stable_hash};
+use fogplanes::reference::{self as refs, render_reference};
 use fogplanes::render::{Accelerator, RenderStats, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
 use fogplanes::weights::Estimator;
 use numpy::ndarray::Array3;
-use numpy::{AllowTypeChange, PyArray3, PyArrayLike3};
+use numpy::{AllowTypeChange, PyArray2, PyArray3, PyArrayLike2, PyArrayLike3};
 use pyo3::exceptions::{
     PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyOverflowError, PyPermissionError, PyRuntimeError,
     PyTypeError, PyValueError,
 };
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyTuple};
 use std::io::ErrorKind;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -479,6 +480,44 @@ impl PyScene {
         Scene::parse(text, file, name).map(|inner| PyScene { inner }).map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
+    /// The scene made from its text, name, file and resolution: what a pickled scene is
+    /// rebuilt with (`__reduce__`).
+    #[staticmethod]
+    fn _from_parts(text: &str, name: &str, file: &str, resolution: (u32, u32)) -> PyResult<Self> {
+        let scene = Scene::parse(text, file, name).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        scene.with_resolution(resolution.0, resolution.1).map(|inner| PyScene { inner }).map_err(py_error)
+    }
+
+    /// Pickles as its text, name, file and resolution (not a pointer): a scene travels to
+    /// another process (a Dask worker) and is rebuilt there, identical.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String, String, String, (u32, u32)))> {
+        let s = &slf.get().inner;
+        let source = s.source().ok_or_else(|| PyValueError::new_err("this scene has no text to pickle"))?;
+        let make = slf.get_type().getattr("_from_parts")?;
+        Ok((make, (source.text.clone(), s.name.clone(), source.file.clone(), (s.camera.width, s.camera.height))))
+    }
+
+    /// A stable token (32 hex digits, the same in every process and run): a hash of the
+    /// scene's text, name, file and resolution, for Dask's task keys.
+    fn __dask_tokenize__(&self) -> String {
+        let s = &self.inner;
+        let (text, file) = s.source().map_or(("", ""), |src| (src.text.as_str(), src.file.as_str()));
+        let resolution = format!("{}x{}", s.camera.width, s.camera.height);
+        stable_hash(&[text.as_bytes(), s.name.as_bytes(), file.as_bytes(), resolution.as_bytes()])
+    }
+
+    /// The TOML text the scene was made from.
+    #[getter]
+    fn source(&self) -> String {
+        self.inner.source().map(|s| s.text.clone()).unwrap_or_default()
+    }
+
+    /// The file name the scene's errors cite (`<string>` for from_toml's default).
+    #[getter]
+    fn file(&self) -> String {
+        self.inner.source().map(|s| s.file.clone()).unwrap_or_default()
+    }
+
     /// The same scene at another resolution.
     fn with_resolution(&self, width: &Bound<'_, PyAny>, height: &Bound<'_, PyAny>) -> PyResult<Self> {
         let mut given = Given::default();
@@ -735,6 +774,392 @@ fn save_image(
     py.detach(|| film.save(&path, exposure)).map_err(py_error)
 }
 
+// ---------------------------------------------------------------------------------------------
+// Renders in chunks, references in row bands (the cluster layer, fogplanes.distributed)
+
+/// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names.
+fn render_overrides(kwargs: Option<&Bound<'_, PyDict>>, given: &mut Given) -> PyResult<Overrides> {
+    let mut o = Overrides::default();
+    let Some(kwargs) = kwargs else { return Ok(o) };
+    for (key, value) in kwargs.iter() {
+        let key: String = key.extract()?;
+        let value = (!value.is_none()).then_some(value);
+        let text = |v: &Option<Bound<'_, PyAny>>| -> PyResult<Option<String>> { v.as_ref().map(|v| v.extract()).transpose() };
+        match key.as_str() {
+            "estimator" => o.estimator = given.named(Setting::Estimator, text(&value)?.as_deref())?,
+            "orientations" => o.orientations = given.uint32(Setting::Orientations, value.as_ref())?,
+            "planes" => o.planes = given.uint(Setting::Planes, value.as_ref())?,
+            "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
+            "sampler" => o.sampler = given.named(Setting::Sampler, text(&value)?.as_deref())?,
+            "spp" => o.spp = given.uint32(Setting::Spp, value.as_ref())?,
+            "pixel_center" => o.pixel_center = value.map(|v| v.is_truthy()).transpose()?.unwrap_or(false),
+            "accelerator" => o.accelerator = given.named(Setting::Accelerator, text(&value)?.as_deref())?,
+            "kernel" => o.kernel = given.named(Setting::Kernel, text(&value)?.as_deref())?,
+            "resolution" => o.resolution = given.resolution(value.as_ref())?,
+            "threads" => o.threads = given.threads(value.as_ref())?,
+            "time_budget" if value.is_some() => {
+                return Err(PyValueError::new_err(
+                    "time_budget: a render in chunks has a plane count; give planes= instead",
+                ));
+            }
+            "time_budget" => {}
+            other => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{other}'"))),
+        }
+    }
+    Ok(o)
+}
+
+/// The render `scene` and `**kwargs` describe, resolved as `render` resolves it.
+fn resolve_chunked(
+    scene: &Bound<'_, PyAny>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(settings::ResolvedRender, Given)> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = render_overrides(kwargs, &mut given)?;
+    let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
+    Ok((r, given))
+}
+
+/// The plan of a render in chunks: its resolved settings (the keyword arguments of `render`),
+/// `planes` N, `chunk_planes` (a fixed power of two), `chunks` (the (start, end) plane ranges,
+/// in order, covering 0..N), `fingerprint` (the scene and every setting that changes the
+/// image) and `shape` (height, width, 3). Raises ValueError as `render` does.
+#[pyfunction]
+#[pyo3(signature = (scene, **kwargs))]
+fn plan_render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let (scene, o) = (&r.scene, &r.options);
+    o.validate(scene).map_err(|e| given.error(e))?;
+    let d = PyDict::new(py);
+    d.set_item("planes", o.planes)?;
+    d.set_item("chunk_planes", partial::CHUNK_PLANES)?;
+    let chunks: Vec<(usize, usize)> = partial::chunks(o.planes).into_iter().map(|c| (c.start, c.end)).collect();
+    d.set_item("chunks", chunks)?;
+    d.set_item("fingerprint", partial::fingerprint(scene, o))?;
+    d.set_item("shape", (scene.camera.height, scene.camera.width, 3))?;
+    d.set_item("estimator", o.weighting.estimator.name())?;
+    d.set_item("orientations", o.weighting.orientations)?;
+    d.set_item("seed", o.seed)?;
+    d.set_item("sampler", o.sampler.name())?;
+    d.set_item("spp", o.spp)?;
+    d.set_item("pixel_center", o.pixel_center)?;
+    d.set_item("accelerator", o.accelerator.name())?;
+    d.set_item("kernel", o.kernel.name())?;
+    d.set_item("resolution", (scene.camera.width, scene.camera.height))?;
+    d.set_item("threads", r.threads)?;
+    Ok(d)
+}
+
+/// A partial render: the unnormalised sums of planes `start` to `end` (excluded) of a render of
+/// `planes_total`, float64 (height, width, 3). Picklable; `a + b` adds adjacent partials of one
+/// render (`combine`); `merge_partials` adds many in the canonical order.
+#[pyclass(frozen, module = "fogplanes", name = "Partial")]
+struct PyPartial {
+    inner: Partial,
+}
+
+#[pymethods]
+impl PyPartial {
+    /// The sums, float64 (height, width, 3) (a copy).
+    #[getter]
+    fn sums<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
+        let p = &self.inner;
+        let flat: Vec<f64> = p.sums.iter().flat_map(|s| s.to_array()).collect();
+        let array = Array3::from_shape_vec((p.height as usize, p.width as usize, 3), flat)
+            .unwrap_or_else(|_| Array3::zeros((p.height as usize, p.width as usize, 3)));
+        PyArray3::from_owned_array(py, array)
+    }
+    #[getter]
+    fn start(&self) -> usize {
+        self.inner.start
+    }
+    #[getter]
+    fn end(&self) -> usize {
+        self.inner.end
+    }
+    #[getter]
+    fn planes_total(&self) -> usize {
+        self.inner.planes_total
+    }
+    #[getter]
+    fn fingerprint(&self) -> &str {
+        &self.inner.fingerprint
+    }
+    #[getter]
+    fn hits(&self) -> u64 {
+        self.inner.hits
+    }
+    /// Seconds spent rendering it (added up over merged partials).
+    #[getter]
+    fn seconds(&self) -> f64 {
+        self.inner.seconds
+    }
+    /// (height, width, 3).
+    #[getter]
+    fn shape(&self) -> (u32, u32, u32) {
+        (self.inner.height, self.inner.width, 3)
+    }
+
+    fn __add__(&self, other: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+        let other = other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
+        partial::combine(&self.inner, &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+    }
+
+    /// Rebuilds a pickled partial.
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    fn _from_state(
+        width: u32,
+        height: u32,
+        sums: &[u8],
+        start: usize,
+        end: usize,
+        planes_total: usize,
+        fingerprint: String,
+        hits: u64,
+        seconds: f64,
+    ) -> PyResult<Self> {
+        let pixels = width as usize * height as usize;
+        if sums.len() != pixels * 24 || start >= end || end > planes_total {
+            return Err(PyValueError::new_err("not the state of a fogplanes.Partial"));
+        }
+        let values: Vec<f64> = sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
+        let sums = values.chunks_exact(3).map(|c| glam::DVec3::new(c[0], c[1], c[2])).collect();
+        Ok(PyPartial { inner: Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds } })
+    }
+
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let p = &slf.get().inner;
+        let bytes: Vec<u8> = p.sums.iter().flat_map(|s| s.to_array()).flat_map(f64::to_le_bytes).collect();
+        let args = (
+            p.width,
+            p.height,
+            PyBytes::new(py, &bytes),
+            p.start,
+            p.end,
+            p.planes_total,
+            p.fingerprint.clone(),
+            p.hits,
+            p.seconds,
+        )
+            .into_pyobject(py)?;
+        Ok((slf.get_type().getattr("_from_state")?, args))
+    }
+
+    fn __repr__(&self) -> String {
+        let p = &self.inner;
+        format!("Partial(planes {}:{} of {}, {}x{}, {} hits)", p.start, p.end, p.planes_total, p.width, p.height, p.hits)
+    }
+}
+
+/// Renders planes `chunk` = (start, end) of the render `**kwargs` describe (the keyword
+/// arguments of `render`): one of `plan_render`'s chunks or a union of consecutive ones. Each
+/// plane meets exactly what it meets in a whole render. The GIL is released; Ctrl-C cancels.
+#[pyfunction]
+#[pyo3(signature = (scene, chunk, **kwargs))]
+fn render_chunk(
+    py: Python<'_>,
+    scene: &Bound<'_, PyAny>,
+    chunk: (usize, usize),
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PyPartial> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let (p, _) = run_interruptible(py, pool(r.threads)?, |cancel| {
+        partial::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok(PyPartial { inner: p })
+}
+
+/// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in
+/// float64. ValueError for partials of different renders, overlapping or not adjacent.
+#[pyfunction]
+fn combine(a: &Bound<'_, PyPartial>, b: &Bound<'_, PyPartial>) -> PyResult<PyPartial> {
+    partial::combine(&a.get().inner, &b.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+}
+
+/// Merges partials (any order) into one covering their union, added in the canonical order that
+/// `render` uses: with the plan's chunks, the bits of `render`. ValueError for partials of
+/// different renders, overlaps and gaps.
+#[pyfunction]
+fn merge_partials(py: Python<'_>, parts: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+    let mut all = Vec::new();
+    for p in parts.try_iter()? {
+        let p = p?;
+        let p = p.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("parts: expected Partial objects"))?;
+        all.push(p.get().inner.clone());
+    }
+    py.detach(|| partial::merge_in_canonical_order(all)).map(|inner| PyPartial { inner }).map_err(py_error)
+}
+
+/// The image (float32, (height, width, 3)) of a render from the partial of all its planes:
+/// divided by N, plus the direct emission (computed here). `**kwargs` are the render's, as
+/// given to `plan_render`. ValueError if the partial is of another render or does not cover
+/// 0..N. With `return_stats=True`: (image, stats).
+#[pyfunction]
+#[pyo3(signature = (scene, partial, return_stats = false, **kwargs))]
+fn finish_render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    partial: &Bound<'py, PyPartial>,
+    return_stats: bool,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let p = &partial.get().inner;
+    let film = run_interruptible(py, pool(r.threads)?, |_| partial::finish(&r.scene, &r.options, p))?
+        .map_err(|e| given.error(e))?;
+    let image = film_to_array(py, &film).into_any();
+    if !return_stats {
+        return Ok(image);
+    }
+    let o = &r.options;
+    let stats = RenderStats {
+        estimator: o.weighting.label(),
+        kernel: o.kernel.resolve().map(|k| k.to_string()).unwrap_or_default(),
+        planes: o.planes,
+        plane_passes: 1,
+        rays: film.pixels.len() as u64 * o.spp as u64,
+        hits: p.hits,
+        seconds_total: p.seconds,
+        ..Default::default()
+    };
+    Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any())
+}
+
+/// The reference resolved from the arguments of `reference`.
+#[allow(clippy::too_many_arguments)]
+fn resolve_reference_args(
+    scene: &Bound<'_, PyAny>,
+    spp: Option<&Bound<'_, PyAny>>,
+    seed: Option<&Bound<'_, PyAny>>,
+    pixel_center: bool,
+    uniform: bool,
+    resolution: Option<&Bound<'_, PyAny>>,
+    threads: Option<&Bound<'_, PyAny>>,
+) -> PyResult<(settings::ResolvedReference, Given)> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = ReferenceOverrides {
+        spp: given.uint32(Setting::Spp, spp)?,
+        seed: given.uint(Setting::Seed, seed)?,
+        pixel_center,
+        uniform,
+        resolution: given.resolution(resolution)?,
+        threads: given.threads(threads)?,
+        exposure: None,
+    };
+    let r = settings::resolve_reference(&scene, &overrides).map_err(|e| given.error(e))?;
+    Ok((r, given))
+}
+
+/// Rows `rows` = (j0, j1) of the reference: (mean, stderr), float32 (j1 - j0, width, 3),
+/// bit-identical to those rows of `reference(...)` with the same arguments. The adaptive
+/// reference (`uniform=False`) needs `counts`, the per-pixel sample counts from
+/// `reference_counts` (uint32 (height, width)).
+#[pyfunction]
+#[pyo3(signature = (scene, rows, spp = None, seed = None, pixel_center = false, uniform = false, counts = None, resolution = None, threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_rows<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    rows: (u32, u32),
+    spp: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    uniform: bool,
+    counts: Option<&Bound<'py, PyAny>>,
+    resolution: Option<&Bound<'py, PyAny>>,
+    threads: Option<&Bound<'py, PyAny>>,
+) -> PyResult<(Image<'py>, Image<'py>)> {
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
+    let (w, h) = (r.scene.camera.width as usize, r.scene.camera.height as usize);
+    let counts: Option<Vec<u32>> = match (counts, uniform) {
+        (None, false) => {
+            return Err(PyValueError::new_err(
+                "counts: the adaptive reference in rows needs the per-pixel counts (reference_counts), or uniform=True",
+            ));
+        }
+        (Some(_), true) => return Err(PyValueError::new_err("counts: a uniform reference takes no counts")),
+        (None, true) => None,
+        (Some(c), false) => {
+            let c: PyArrayLike2<'_, u32, AllowTypeChange> = c.extract()?;
+            let view = c.as_array();
+            if view.shape() != [h, w] {
+                return Err(PyValueError::new_err(format!(
+                    "counts: expected shape ({h}, {w}), got {}",
+                    shape_text(view.shape())
+                )));
+            }
+            Some(view.iter().copied().collect())
+        }
+    };
+    let (mean, stderr) = run_interruptible(py, pool(r.threads)?, |cancel| {
+        refs::reference_rows(&r.scene, &r.options, rows.0..rows.1, counts.as_deref(), Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok((film_to_array(py, &mean), film_to_array(py, &stderr)))
+}
+
+/// Rows `rows` = (j0, j1) of the adaptive reference's pilot pass: each pixel's standard error,
+/// float32 (j1 - j0, width, 3). The whole pilot (the rows stacked) goes to `reference_counts`.
+#[pyfunction]
+#[pyo3(signature = (scene, rows, spp = None, seed = None, pixel_center = false, resolution = None, threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_pilot_rows<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    rows: (u32, u32),
+    spp: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    resolution: Option<&Bound<'py, PyAny>>,
+    threads: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Image<'py>> {
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, false, resolution, threads)?;
+    let pilot = run_interruptible(py, pool(r.threads)?, |cancel| {
+        refs::reference_pilot_rows(&r.scene, &r.options, rows.0..rows.1, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok(film_to_array(py, &pilot))
+}
+
+/// The adaptive reference's per-pixel sample counts, uint32 (height, width), from its whole
+/// pilot (float32 (height, width, 3): `reference_pilot_rows` of every row, stacked), by the
+/// core code `reference` uses.
+#[pyfunction]
+#[pyo3(signature = (scene, pilot, spp = None, seed = None, pixel_center = false, resolution = None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_counts<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    pilot: &Bound<'py, PyAny>,
+    spp: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    resolution: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<u32>>> {
+    let (r, _) = resolve_reference_args(scene, spp, seed, pixel_center, false, resolution, None)?;
+    let pilot = image_arg(pilot, "pilot")?;
+    let (w, h) = (r.scene.camera.width, r.scene.camera.height);
+    if (pilot.width, pilot.height) != (w, h) {
+        return Err(PyValueError::new_err(format!(
+            "pilot: expected shape ({h}, {w}, 3), the whole image, got ({}, {}, 3)",
+            pilot.height, pilot.width
+        )));
+    }
+    let counts = refs::reference_counts(&r.options, &pilot.pixels);
+    let array = numpy::ndarray::Array2::from_shape_vec((h as usize, w as usize), counts)
+        .unwrap_or_else(|_| numpy::ndarray::Array2::zeros((h as usize, w as usize)));
+    Ok(PyArray2::from_owned_array(py, array))
+}
+
 #[pymodule]
 fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
@@ -748,6 +1173,15 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(load_image, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
+    m.add_class::<PyPartial>()?;
+    m.add_function(wrap_pyfunction!(plan_render, m)?)?;
+    m.add_function(wrap_pyfunction!(render_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(combine, m)?)?;
+    m.add_function(wrap_pyfunction!(merge_partials, m)?)?;
+    m.add_function(wrap_pyfunction!(finish_render, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_pilot_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_counts, m)?)?;
     m.add("ESTIMATORS", PyTuple::new(m.py(), Estimator::names())?)?;
     m.add("KERNELS", PyTuple::new(m.py(), Kernel::ALL.iter().map(|k| k.name()))?)?;
     m.add("SAMPLERS", PyTuple::new(m.py(), Sampler::ALL.iter().map(|s| s.name()))?)?;
