@@ -51,7 +51,7 @@ def scene():
 @pytest.fixture(scope="module")
 def client():
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=None, env={"RAYON_NUM_THREADS": "1"})
+                           dashboard_address="127.0.0.1:0", env={"RAYON_NUM_THREADS": "1"})
     with Client(cluster) as c:
         yield c
     cluster.close()
@@ -93,7 +93,7 @@ def test_render_is_the_same_bits_for_1_and_2_workers_as_the_local_merge_and_rend
 
 
 def test_a_worker_killed_mid_render_changes_no_bit(client, scene):
-    kwargs = dict(resolution=(160, 90), planes=48 * chunk_planes(scene))
+    kwargs = dict(resolution=(64, 36), planes=32 * chunk_planes(scene))
     future = fd.render_future(scene, client, threads=1, chunks_per_task=1, **kwargs)
     deadline = time.monotonic() + 60
     while True:  # until a worker holds a partial
@@ -151,11 +151,16 @@ def test_merge_refuses_mismatched_parts(scene):
 
 def test_bad_arguments_raise_value_error_before_any_cluster(scene):
     start = time.monotonic()
-    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0), dict(threads=2)):
+    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0)):
         with pytest.raises(ValueError):
             fd.render(scene, progress=False, **kwargs)
     with pytest.raises(ValueError):
         fd.render(scene, chunks_per_task=3, client=None, planes=10, progress=False)
+    for kwargs in (dict(spp=0), dict(resolution=(0, 5)), dict(seed=-1), dict(band_rows=0)):
+        with pytest.raises(ValueError):
+            fd.reference(scene, progress=False, **kwargs)
+    with pytest.raises(ValueError):
+        fd.table(scene, np.zeros((360, 640, 3), np.float32), estimators=["smis-exact", "nope"], progress=False)
     assert time.monotonic() - start < 5, "a cluster was started for bad arguments"
 
 

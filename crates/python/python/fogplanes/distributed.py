@@ -7,7 +7,7 @@ Needs Dask distributed (`pip install .[dask]`); `import fogplanes` alone never i
     >>> image = fogplanes.distributed.render(scene, planes=10_000_000)  # doctest: +SKIP
 
 Every function takes `client=None`: then it starts a `LocalCluster` of `workers` processes on
-this machine (bound to 127.0.0.1, no dashboard) and closes it afterwards. Pass a
+this machine (bound to 127.0.0.1) and closes it afterwards. Pass a
 `distributed.Client` to use a cluster you started yourself: a scheduler address
 (`Client("tcp://host:8786")`) or a batch queue (dask-jobqueue's `SLURMCluster`); the README's
 section "On a cluster" shows all three.
@@ -98,8 +98,8 @@ def _threads_per_task(client: Client) -> tuple[int, int]:
 
 @contextlib.contextmanager
 def local_client(workers: int = 1, threads: int | None = None) -> Iterator[Client]:
-    """A `LocalCluster` of `workers` processes, one Dask thread each, on 127.0.0.1 without a
-    dashboard, and its client; both closed on exit. Each worker's rayon pool gets `threads`
+    """A `LocalCluster` of `workers` processes, one Dask thread each, on 127.0.0.1 (the
+    dashboard, if bokeh is installed, on a free port: `client.dashboard_link`), and its client; both closed on exit. Each worker's rayon pool gets `threads`
     (default: this machine's cores over `workers`) through RAYON_NUM_THREADS."""
     if workers < 1:
         raise ValueError(f"workers={workers}: must be at least 1")
@@ -109,7 +109,7 @@ def local_client(workers: int = 1, threads: int | None = None) -> Iterator[Clien
         threads_per_worker=1,
         processes=True,
         host="127.0.0.1",
-        dashboard_address=None,
+        dashboard_address="127.0.0.1:0",  # a free port (its HTTP server runs even without the dashboard)
         env={"RAYON_NUM_THREADS": str(threads)},
     )
     try:
@@ -199,7 +199,8 @@ def _render_block(scene: native.Scene, planes: tuple[int, int], threads: int,
 
 
 def _add(left: native.Partial, right: native.Partial) -> native.Partial:
-    return native.merge_partials([left, right])
+    # Two adjacent subtrees, checked (one render, left.end == right.start) and added in f64.
+    return native.combine(left, right)
 
 
 def _finish(scene: native.Scene, partial: native.Partial, kwargs: dict[str, Any],
@@ -304,22 +305,20 @@ def reference(scene: native.Scene, spp: int | None = None, *, pixel_center: bool
     bands. `client`, `workers`, `threads`, `progress`, `retries` as in `render`."""
     if band_rows < 1:
         raise ValueError(f"band_rows={band_rows}: must be at least 1")
-    shared = {k: v for k, v in dict(spp=spp, resolution=resolution).items() if v is not None}
-    kwargs = dict(shared, pixel_center=pixel_center, **({} if seed is None else {"seed": seed}))
-    height = (resolution or scene.resolution)[1]
+    kwargs = {k: v for k, v in dict(spp=spp, resolution=resolution, seed=seed).items() if v is not None}
+    kwargs["pixel_center"] = pixel_center
+    # The errors before any cluster, by the core's checks: the settings on one pixel (its pilot
+    # costs milliseconds), the resolution on the scene.
+    native.reference_pilot_rows(scene, (0, 1), **dict(kwargs, resolution=(1, 1)))
+    height = (scene.with_resolution(*resolution) if resolution else scene).resolution[1]
     bands = _bands(height, band_rows)
-    # The errors before any cluster: the first row, checked by the core.
-    if uniform:
-        native.reference_rows(scene, (0, 0), uniform=True, **kwargs)
-    else:
-        native.reference_pilot_rows(scene, (0, 0), **kwargs)
     stem = f"{tokenize(scene)}-{tokenize(kwargs, uniform)}"
     with _session(client, workers, threads) as (c, per_task, _):
         counts = None
         if not uniform:
             pilot = [c.submit(_pilot_band, scene, rows, per_task, kwargs, retries=retries,
                               key=f"fogplanes-pilot-{stem}-{rows[0]}-{rows[1]}") for rows in bands]
-            counts = c.submit(_counts, scene, shared, *pilot, retries=retries,
+            counts = c.submit(_counts, scene, kwargs, *pilot, retries=retries,
                               key=f"fogplanes-counts-{stem}")
             del pilot
         final = dict(kwargs, uniform=uniform)
