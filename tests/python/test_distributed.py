@@ -151,7 +151,8 @@ def test_merge_refuses_mismatched_parts(scene):
 
 def test_bad_arguments_raise_value_error_before_any_cluster(scene):
     start = time.monotonic()
-    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0)):
+    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0), dict(threads=0),
+                   dict(workers=0)):
         with pytest.raises(ValueError):
             fd.render(scene, progress=False, **kwargs)
     with pytest.raises(ValueError):

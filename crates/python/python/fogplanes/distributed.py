@@ -96,13 +96,20 @@ def _threads_per_task(client: Client) -> tuple[int, int]:
     return threads, sum(slots_by_host.values())
 
 
+def _check_layout(workers: int, threads: int | None) -> None:
+    if not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers={workers!r}: must be an integer of at least 1")
+    if threads is not None and (not isinstance(threads, int) or threads < 1):
+        raise ValueError(f"threads={threads!r}: must be an integer of at least 1, or None")
+
+
 @contextlib.contextmanager
 def local_client(workers: int = 1, threads: int | None = None) -> Iterator[Client]:
     """A `LocalCluster` of `workers` processes, one Dask thread each, on 127.0.0.1 (the
-    dashboard, if bokeh is installed, on a free port: `client.dashboard_link`), and its client; both closed on exit. Each worker's rayon pool gets `threads`
-    (default: this machine's cores over `workers`) through RAYON_NUM_THREADS."""
-    if workers < 1:
-        raise ValueError(f"workers={workers}: must be at least 1")
+    dashboard, if bokeh is installed, on a free port: `client.dashboard_link`), and its client;
+    both closed on exit. Each worker's rayon pool gets `threads` (default: this machine's
+    cores over `workers`) through RAYON_NUM_THREADS."""
+    _check_layout(workers, threads)
     threads = threads or max(1, _cores() // workers)
     cluster = LocalCluster(
         n_workers=workers,
@@ -260,6 +267,7 @@ def render(scene: native.Scene, estimator: str | None = None, *, client: Client 
     Bad arguments raise ValueError before any cluster starts."""
     kwargs = dict(render_kwargs, estimator=estimator)
     native.plan_render(scene, **_render_kwargs(kwargs))  # the errors before any cluster
+    _check_layout(workers, threads)
     with _session(client, workers, threads) as (c, per_task, slots):
         future = render_future(scene, c, threads=per_task, slots=slots, retries=retries,
                                chunks_per_task=chunks_per_task, return_stats=return_stats,
@@ -305,6 +313,7 @@ def reference(scene: native.Scene, spp: int | None = None, *, pixel_center: bool
     bands. `client`, `workers`, `threads`, `progress`, `retries` as in `render`."""
     if band_rows < 1:
         raise ValueError(f"band_rows={band_rows}: must be at least 1")
+    _check_layout(workers, threads)
     kwargs = {k: v for k, v in dict(spp=spp, resolution=resolution, seed=seed).items() if v is not None}
     kwargs["pixel_center"] = pixel_center
     # The errors before any cluster, by the core's checks: the settings on one pixel (its pilot
@@ -378,6 +387,7 @@ def table(scene: native.Scene, reference: Any, estimators: str | Iterable[str] |
             for n in _listed(planes, [None]) for s in _listed(seeds, [None])]
     for e, n, s in runs:  # every setting checked before any cluster
         native.plan_render(scene, estimator=e, planes=n, seed=s, **kwargs)
+    _check_layout(workers, threads)
     stem = tokenize(scene, ref, kwargs)
     with _session(client, workers, threads) as (c, per_task, _):
         shared_ref = c.scatter(ref, broadcast=True, hash=True)
