@@ -70,3 +70,12 @@ __all__ = [
     "render_chunk",
     "save_image",
 ]
+
+
+def __getattr__(name: str):
+    # `fogplanes.distributed` (Dask) is imported on first use: `import fogplanes` needs no Dask.
+    if name == "distributed":
+        import importlib
+
+        return importlib.import_module(".distributed", __name__)
+    raise AttributeError(f"module 'fogplanes' has no attribute {name!r}")
