@@ -455,7 +455,10 @@ def test_the_gil_is_released_while_rendering():
 
 
 INTERRUPTED = """
-import sys, time, fogplanes
+import signal, sys, time, fogplanes
+# A shell that starts this test in the background hands SIGINT down ignored, and Python then
+# installs no KeyboardInterrupt handler: restore it, so the test does not depend on its parent.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 scene = fogplanes.load_scene(sys.argv[1])
 print("rendering", flush=True)
 start = time.perf_counter()
