@@ -301,8 +301,11 @@ pub fn read_npz(path: &Path) -> Result<Vec<Array>> {
 
 fn parse_npz(b: &[u8]) -> std::result::Result<Vec<Array>, String> {
     let not_zip = || "not a partial file (.npz): no zip directory".to_string();
+    if b.len() < 22 {
+        return Err(not_zip());
+    }
     // The end of the central directory: its signature, searched back over a comment.
-    let eocd = (0..=b.len().saturating_sub(22))
+    let eocd = (0..=b.len() - 22)
         .rev()
         .take(22 + 65_535)
         .find(|&i| b[i..i + 4] == 0x0605_4b50u32.to_le_bytes())

@@ -274,6 +274,9 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
                     first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
                 );
             }
+            if first.meta.total != scene.camera.height as usize {
+                return Err(first.bad("its rows do not match its scene's resolution"));
+            }
             let mut order: Vec<&Part> = parts.iter().collect();
             order.sort_by_key(|p| (p.meta.start, p.meta.end));
             let mut next = 0;
