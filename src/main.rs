@@ -17,7 +17,9 @@ use fogplanes::film::{Film, check_writable, write_file_atomically};
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::compare;
 use fogplanes::outputs::{Output, check_outputs};
-use fogplanes::partial::parts::{Merged, merge_parts, read_pilot, save_pilot_part, save_reference_part, save_render_part};
+use fogplanes::partial::parts::{
+    Merged, merge_parts, read_pilot, save_pilot_part, save_reference_part, save_render_part,
+};
 use fogplanes::partial::render_chunk;
 use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference};
 use fogplanes::render::{Accelerator, RenderOptions, progress_units, progress_units_per_pass, render, render_for};
@@ -563,7 +565,14 @@ fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                     partial.hits,
                     partial.seconds
                 );
-                say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", a.output.display(), image.width, image.height, image.mean(), image.max());
+                say!(
+                    "wrote {} ({}x{}, mean {:.6}, max {:.4})",
+                    a.output.display(),
+                    image.width,
+                    image.height,
+                    image.mean(),
+                    image.max()
+                );
             }
         }
         Merged::Reference { mean, stderr, seconds, .. } => {
@@ -629,7 +638,7 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
     };
     let (mean, stderr) = reference_rows(scene, opts, rows.clone(), counts.as_deref(), control)?;
     bar.finish_and_clear();
-    save_reference_part(part, scene, opts, rows.clone(), &mean, &stderr, start.elapsed().as_secs_f64())?;
+    save_reference_part(part, scene, opts, rows.clone(), (&mean, &stderr), start.elapsed().as_secs_f64())?;
     say!("wrote {} (rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
     Ok(())
 }

@@ -285,6 +285,28 @@ fn a_pipe_longer_than_the_limit_is_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A valid 12.7 MB file of 8192x8192 float pixels (RLE) under a 600 MB address-space limit:
+/// the 768 MiB pixel buffer is refused with one line where the allocation used to abort the
+/// process (SIGABRT). Not in the corpus for its size; written to a scratch directory.
+#[cfg(unix)]
+#[test]
+fn an_image_beyond_a_memory_limit_is_refused_not_aborted() {
+    let dir = scratch("memory");
+    let path = dir.join("rle_8192.exr");
+    std::fs::write(&path, craft::rle_file(8192, 8192)).unwrap();
+    let o = Command::new("sh")
+        .args(["-c", "ulimit -v 600000 && exec \"$0\" compare \"$1\" \"$1\"", env!("CARGO_BIN_EXE_fogplanes")])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert_refused(
+        &o,
+        "compare under ulimit -v",
+        "8192x8192 pixels need 0.8 GiB, which this machine cannot allocate now",
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Guards the recipes themselves: what tests/craft/ writes as a valid file reads back whole.
 #[test]
 fn the_crafted_good_file_reads_back() {

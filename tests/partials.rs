@@ -4,9 +4,7 @@
 
 use fogplanes::control::Control;
 use fogplanes::film::Film;
-use fogplanes::partial::{
-    CHUNK_PLANES, Partial, chunks, combine, finish, merge_in_canonical_order, render_chunk,
-};
+use fogplanes::partial::{CHUNK_PLANES, Partial, chunks, combine, finish, merge_in_canonical_order, render_chunk};
 use fogplanes::reference::{
     ReferenceOptions, reference_counts, reference_pilot_rows, reference_rows, render_reference,
 };
@@ -128,6 +126,7 @@ fn reference_bands_equal_the_whole_reference() {
         assert!(mean == whole.mean.pixels && stderr == whole.stderr.pixels, "uniform {uniform}");
     }
     let o = ReferenceOptions { spp: 8, uniform: true, seed: 1, pixel_center: false };
+    #[allow(clippy::reversed_empty_ranges)]
     for bad in [3..3, 0..15, 9..4] {
         assert!(reference_rows(&s, &o, bad.clone(), None, Control::none()).is_err(), "{bad:?}");
     }

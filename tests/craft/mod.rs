@@ -139,3 +139,23 @@ pub fn rgb_file(width: usize, height: usize, pixels: &[[f32; 3]]) -> Vec<u8> {
     }
     out
 }
+
+/// A complete float RGB file under RLE that is small for its size: every line one run of
+/// bytes after another (128 bytes coded in 2), 64 times smaller than its pixels. What the
+/// bytes decode to (RLE undoes a predictor) does not matter to the tests that use it.
+pub fn rle_file(width: usize, height: usize) -> Vec<u8> {
+    let line_bytes = 3 * 4 * width;
+    assert_eq!(line_bytes % 128, 0);
+    let runs = [0x7f, 0x00].repeat(line_bytes / 128);
+    let mut out = Header { compression: RLE, ..Header::rgb(width as i32, height as i32) }.bytes();
+    let table_end = out.len() + 8 * height;
+    for y in 0..height {
+        out.extend(((table_end + y * (8 + runs.len())) as u64).to_le_bytes());
+    }
+    for y in 0..height {
+        out.extend((y as i32).to_le_bytes());
+        out.extend((runs.len() as i32).to_le_bytes());
+        out.extend(&runs);
+    }
+    out
+}

@@ -483,3 +483,21 @@ def test_ctrl_c_stops_a_render_with_keyboard_interrupt():
     assert process.returncode == 0, err
     assert "KeyboardInterrupt after" in out and "rendered again (9, 16, 3)" in out, (out, err)
     assert stopped < 3.0, f"took {stopped:.2f} s to stop"
+
+
+def test_hostile_files_and_non_finite_images_raise_value_error():
+    corpus = ROOT / "tests" / "hostile"
+    # 313 bytes claiming 32768x32768 pixels: refused before anything is allocated (it was 12.9 GB).
+    with pytest.raises(ValueError, match="huge_header_32768.exr: .* it is truncated or crafted$"):
+        fogplanes.load_image(corpus / "huge_header_32768.exr")
+    # An image holding NaN loads, but no metric takes it (an all-NaN image scored SMAPE 0).
+    nan = fogplanes.load_image(corpus / "nan_pixel.exr")
+    good = fogplanes.load_image(corpus / "good_4x3.exr")
+    assert np.isnan(nan[1, 2, 1]) and fogplanes.compare(good, good)["smape"] == 0.0
+    with pytest.raises(ValueError, match=r"^the image holds .*: pixel \(x 2, y 1\) channel G is NaN$"):
+        fogplanes.compare(nan, good)
+    with pytest.raises(ValueError, match=r"^the reference holds .*: pixel \(x 0, y 0\) channel R is inf$"):
+        fogplanes.compare(good, np.full_like(good, np.inf))
+    # The size limit holds for a file whose size says nothing.
+    with pytest.raises(ValueError, match="/dev/zero: the file holds more than 1048576 bytes"):
+        fogplanes.load_scene("/dev/zero")

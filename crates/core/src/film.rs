@@ -3,7 +3,7 @@
 //! Every file is written to a temporary name beside its destination and renamed over it, so a
 //! destination holds either its old contents or the complete new image, never part of one.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NonFinitePixel, Result};
 use glam::Vec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -55,23 +55,6 @@ impl Film {
             Some(pixel) => Err(Error::NonFinitePixel { image, pixel }),
             None => Ok(()),
         }
-    }
-}
-
-/// A pixel channel that is not a finite number: where it is and what it holds.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NonFinitePixel {
-    pub x: u32,
-    pub y: u32,
-    /// 0, 1, 2 for R, G, B.
-    pub channel: usize,
-    pub value: f32,
-}
-
-impl std::fmt::Display for NonFinitePixel {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let channel = ["R", "G", "B"][self.channel];
-        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
     }
 }
 
@@ -238,7 +221,8 @@ impl Film {
     ///
     /// The header is read and checked first ([`check_exr_headers`]): a small file claiming a
     /// huge image is refused before any pixel buffer exists. The buffer is then reserved
-    /// fallibly, so that an image the machine cannot hold is an input error, not an abort.
+    /// fallibly, so that an image the machine cannot hold (under a memory limit) is an input
+    /// error, not an abort.
     pub fn load_exr(path: &Path) -> Result<Film> {
         let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
         let file = std::fs::metadata(path).map_err(|e| bad(&e))?;
@@ -248,6 +232,16 @@ impl Film {
         let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
         exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
         check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
+        let unavailable = |size: (usize, usize)| {
+            let gib = (size.0 * size.1 * std::mem::size_of::<Vec3>()) as f64 / (1u64 << 30) as f64;
+            bad(&format!("{}x{} pixels need {gib:.1} GiB, which this machine cannot allocate now", size.0, size.1))
+        };
+        // Probed (and given back) before decoding, which would otherwise run to the file's end
+        // before the failure could be told.
+        if let Some(h) = meta.headers.iter().max_by_key(|h| h.layer_size.area()) {
+            let size = (h.layer_size.width(), h.layer_size.height());
+            Vec::<Vec3>::new().try_reserve_exact(size.0 * size.1).map_err(|_| unavailable(size))?;
+        }
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |resolution, _| {
@@ -268,13 +262,9 @@ impl Film {
         )
         .map_err(|e| bad(&e))?;
         let film = image.layer_data.channel_data.pixels;
-        if film.pixels.len() != film.width as usize * film.height as usize {
-            return Err(bad(&format!(
-                "{}x{} pixels need {:.1} GiB, which this machine cannot allocate now",
-                film.width,
-                film.height,
-                film.width as f64 * film.height as f64 * std::mem::size_of::<Vec3>() as f64 / (1u64 << 30) as f64
-            )));
+        let size = (film.width as usize, film.height as usize);
+        if film.pixels.len() != size.0 * size.1 {
+            return Err(unavailable(size));
         }
         Ok(film)
     }

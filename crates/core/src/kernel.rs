@@ -74,7 +74,7 @@ impl Kernel {
                 Ok([Kernel::Avx512, Kernel::Avx2].into_iter().find(|k| k.is_available()).unwrap_or(Kernel::Portable))
             }
             k if k.is_available() => Ok(k),
-            k => Err(Error::option(crate::settings::Setting::Kernel, format!("this CPU cannot run the {k} kernel"))),
+            k => Err(Error::option(crate::error::Setting::Kernel, format!("this CPU cannot run the {k} kernel"))),
         }
     }
 }

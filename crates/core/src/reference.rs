@@ -181,8 +181,7 @@ pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3]) -> Vec<u32> {
     let pixels = pilot.len();
     let pilot_spp = pilot_spp(opts);
     // Standard deviation of one sample, the mean over channels.
-    let sigma: Vec<f64> =
-        pilot.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
+    let sigma: Vec<f64> = pilot.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
     let total_sigma: f64 = sigma.iter().sum();
     let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
     let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);

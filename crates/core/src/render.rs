@@ -6,6 +6,7 @@
 
 use crate::bvh::PlaneBvh;
 use crate::control::Control;
+use crate::error::Setting;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::gather::GatherStats;
@@ -16,7 +17,6 @@ use crate::photon_plane::sample_plane_range;
 use crate::raster::{Gathering, ScreenRaster};
 use crate::sampling::{Sampler, pixel_jitter};
 use crate::scene::Scene;
-use crate::settings::Setting;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use rayon::prelude::*;

@@ -14,31 +14,7 @@ use serde::Deserialize;
 use std::fmt;
 use std::path::Path;
 
-/// A problem with a scene file or with the render settings derived from it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SceneError {
-    pub file: String,
-    /// 1-based line and column, when the problem has a place in the text.
-    pub position: Option<(usize, usize)>,
-    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
-    pub field: String,
-    pub message: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
-        if let Some((line, col)) = self.position {
-            write!(f, ":{line}:{col}")?;
-        }
-        if !self.field.is_empty() {
-            write!(f, ": {}", self.field)?;
-        }
-        write!(f, ": {}", self.message)
-    }
-}
-
-impl std::error::Error for SceneError {}
+pub use crate::error::SceneError;
 
 /// An RGB triple that may be written as a single number (grey).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -402,7 +378,7 @@ impl Scene {
     /// The same scene seen at another resolution (each side in range; the memory a render
     /// needs at that size is checked with its own plane count, see [`crate::settings`]).
     pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, crate::Error> {
-        check_resolution(width, height).map_err(|m| crate::Error::option(crate::settings::Setting::Resolution, m))?;
+        check_resolution(width, height).map_err(|m| crate::Error::option(crate::error::Setting::Resolution, m))?;
         let c = &self.camera;
         let mut s = self.clone();
         s.camera = Camera { width, height, ..c.clone() };

@@ -10,6 +10,7 @@
 //! and `planes=` in Python, and a value the scene gave is named as the scene file names it.
 
 use crate::error::{Error, Result};
+pub use crate::error::{Origin, Setting};
 use crate::kernel::Kernel;
 use crate::limits::{
     MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes, check_resolution,
@@ -20,115 +21,6 @@ use crate::render::{Accelerator, RenderOptions};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::weights::{Estimator, Weighting};
-
-/// A setting a user may give, named neutrally; [`Setting::flag`] and [`Setting::keyword`] are
-/// its names on the command line and in Python.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Setting {
-    Estimator,
-    Orientations,
-    Planes,
-    Seed,
-    Sampler,
-    Spp,
-    Accelerator,
-    Kernel,
-    TimeBudget,
-    Resolution,
-    Threads,
-    Exposure,
-    /// The plane counts of the table's error-versus-time sweep.
-    Sweep,
-    SweepSeeds,
-    EqualTime,
-    /// The plane samplers the table measures.
-    Samplers,
-    /// The image sizes a scaling run measures.
-    Resolutions,
-}
-
-impl Setting {
-    pub const ALL: [Setting; 17] = [
-        Setting::Estimator,
-        Setting::Orientations,
-        Setting::Planes,
-        Setting::Seed,
-        Setting::Sampler,
-        Setting::Spp,
-        Setting::Accelerator,
-        Setting::Kernel,
-        Setting::TimeBudget,
-        Setting::Resolution,
-        Setting::Threads,
-        Setting::Exposure,
-        Setting::Sweep,
-        Setting::SweepSeeds,
-        Setting::EqualTime,
-        Setting::Samplers,
-        Setting::Resolutions,
-    ];
-
-    /// The name as a keyword argument (Python): `time_budget`.
-    pub fn keyword(self) -> &'static str {
-        match self {
-            Setting::Estimator => "estimator",
-            Setting::Orientations => "orientations",
-            Setting::Planes => "planes",
-            Setting::Seed => "seed",
-            Setting::Sampler => "sampler",
-            Setting::Spp => "spp",
-            Setting::Accelerator => "accelerator",
-            Setting::Kernel => "kernel",
-            Setting::TimeBudget => "time_budget",
-            Setting::Resolution => "resolution",
-            Setting::Threads => "threads",
-            Setting::Exposure => "exposure",
-            Setting::Sweep => "sweep",
-            Setting::SweepSeeds => "sweep_seeds",
-            Setting::EqualTime => "equal_time",
-            Setting::Samplers => "samplers",
-            Setting::Resolutions => "resolutions",
-        }
-    }
-
-    /// The name as a command-line flag: `--time-budget`.
-    pub fn flag(self) -> String {
-        format!("--{}", self.keyword().replace('_', "-"))
-    }
-
-    /// The field of a scene file that gives the setting's default, if any.
-    pub fn scene_field(self) -> Option<&'static str> {
-        Some(match self {
-            Setting::Estimator => "render.estimator",
-            Setting::Orientations => "render.orientations",
-            Setting::Planes => "render.planes",
-            Setting::Seed => "render.seed",
-            Setting::Sampler => "render.sampler",
-            Setting::Spp => "render.spp",
-            Setting::Resolution => "camera.resolution",
-            _ => return None,
-        })
-    }
-}
-
-/// Where the value of a setting came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Origin {
-    /// The caller gave it (a flag, a keyword argument).
-    Given,
-    /// The scene file gave it (its `[render]` table or its camera).
-    Scene,
-}
-
-impl Origin {
-    /// How an error names a value of `setting` from this origin when no front end words it.
-    pub fn describe(self, setting: Setting) -> String {
-        match (self, setting.scene_field()) {
-            (Origin::Scene, Some(field)) => format!("the scene's {field}"),
-            _ => setting.keyword().to_string(),
-        }
-    }
-}
 
 fn origin<T>(given: &Option<T>) -> Origin {
     if given.is_some() { Origin::Given } else { Origin::Scene }

@@ -38,6 +38,9 @@ use std::time::Duration;
 
 type Vec3 = (f64, f64, f64);
 
+/// What a pickled scene is rebuilt from: text, name, file, (width, height).
+type SceneParts = (String, String, String, (u32, u32));
+
 /// An image for Python: shape (height, width, 3), float32.
 type Image<'py> = Bound<'py, PyArray3<f32>>;
 
@@ -490,7 +493,7 @@ impl PyScene {
 
     /// Pickles as its text, name, file and resolution (not a pointer): a scene travels to
     /// another process (a Dask worker) and is rebuilt there, identical.
-    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String, String, String, (u32, u32)))> {
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, SceneParts)> {
         let s = &slf.get().inner;
         let source = s.source().ok_or_else(|| PyValueError::new_err("this scene has no text to pickle"))?;
         let make = slf.get_type().getattr("_from_parts")?;
@@ -707,18 +710,7 @@ fn reference<'py>(
     uniform: bool,
     threads: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Image<'py>, Image<'py>)> {
-    let scene = scene_arg(scene)?;
-    let mut given = Given::default();
-    let overrides = ReferenceOverrides {
-        spp: given.uint32(Setting::Spp, spp)?,
-        seed: given.uint(Setting::Seed, seed)?,
-        pixel_center,
-        uniform,
-        resolution: given.resolution(resolution)?,
-        threads: given.threads(threads)?,
-        exposure: None,
-    };
-    let r = settings::resolve_reference(&scene, &overrides).map_err(|e| given.error(e))?;
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
     let image = run_interruptible(py, pool(r.threads)?, |cancel| {
         render_reference(&r.scene, &r.options, Control::with_cancel(cancel))
     })?
@@ -784,7 +776,8 @@ fn render_overrides(kwargs: Option<&Bound<'_, PyDict>>, given: &mut Given) -> Py
     for (key, value) in kwargs.iter() {
         let key: String = key.extract()?;
         let value = (!value.is_none()).then_some(value);
-        let text = |v: &Option<Bound<'_, PyAny>>| -> PyResult<Option<String>> { v.as_ref().map(|v| v.extract()).transpose() };
+        let text =
+            |v: &Option<Bound<'_, PyAny>>| -> PyResult<Option<String>> { v.as_ref().map(|v| v.extract()).transpose() };
         match key.as_str() {
             "estimator" => o.estimator = given.named(Setting::Estimator, text(&value)?.as_deref())?,
             "orientations" => o.orientations = given.uint32(Setting::Orientations, value.as_ref())?,
@@ -906,7 +899,8 @@ impl PyPartial {
     }
 
     fn __add__(&self, other: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
-        let other = other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
+        let other =
+            other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
         partial::combine(&self.inner, &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
     }
 
@@ -928,7 +922,8 @@ impl PyPartial {
         if sums.len() != pixels * 24 || start >= end || end > planes_total {
             return Err(PyValueError::new_err("not the state of a fogplanes.Partial"));
         }
-        let values: Vec<f64> = sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
+        let values: Vec<f64> =
+            sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
         let sums = values.chunks_exact(3).map(|c| glam::DVec3::new(c[0], c[1], c[2])).collect();
         Ok(PyPartial { inner: Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds } })
     }
@@ -954,7 +949,10 @@ impl PyPartial {
 
     fn __repr__(&self) -> String {
         let p = &self.inner;
-        format!("Partial(planes {}:{} of {}, {}x{}, {} hits)", p.start, p.end, p.planes_total, p.width, p.height, p.hits)
+        format!(
+            "Partial(planes {}:{} of {}, {}x{}, {} hits)",
+            p.start, p.end, p.planes_total, p.width, p.height, p.hits
+        )
     }
 }
 

@@ -334,7 +334,8 @@ fn parse_npz(b: &[u8]) -> std::result::Result<Vec<Array>, String> {
         if u32_at(b, local) != Some(0x0403_4b50) {
             return Err(truncated());
         }
-        let start = local + 30 + u16_at(b, local + 26).ok_or_else(truncated)? + u16_at(b, local + 28).ok_or_else(truncated)?;
+        let start =
+            local + 30 + u16_at(b, local + 26).ok_or_else(truncated)? + u16_at(b, local + 28).ok_or_else(truncated)?;
         let data = b.get(start..start.checked_add(size).ok_or_else(truncated)?).ok_or_else(truncated)?;
         if crc32fast::hash(data) != crc {
             return Err(format!("{name}: damaged (its checksum does not match)"));
@@ -356,7 +357,10 @@ pub fn meta(arrays: &[Array]) -> std::result::Result<PartMeta, String> {
     let meta: PartMeta =
         serde_json::from_str(&text).map_err(|e| format!("its metadata is not a fogplanes partial's: {e}"))?;
     if meta.format != FORMAT || meta.version != VERSION {
-        return Err(format!("format {} version {}: not a partial file this fogplanes reads", meta.format, meta.version));
+        return Err(format!(
+            "format {} version {}: not a partial file this fogplanes reads",
+            meta.format, meta.version
+        ));
     }
     if meta.start >= meta.end || meta.end > meta.total {
         return Err(format!("its range {}:{} of {} is empty or out of bounds", meta.start, meta.end, meta.total));

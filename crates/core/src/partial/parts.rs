@@ -61,7 +61,13 @@ fn options_of(r: &RenderRecord) -> std::result::Result<RenderOptions, String> {
 /// Identifies a reference image (`pilot`: its pilot pass): the scene's content and every
 /// setting that changes it.
 pub fn reference_fingerprint(scene: &Scene, o: &ReferenceOptions, pilot: bool) -> String {
-    let what = if pilot { "pilot" } else if o.uniform { "uniform" } else { "adaptive" };
+    let what = if pilot {
+        "pilot"
+    } else if o.uniform {
+        "uniform"
+    } else {
+        "adaptive"
+    };
     let description = format!(
         "fogplanes {} reference {what} | {:?} | {:?} | {:?} | spp {} | seed {} | centre {}",
         env!("CARGO_PKG_VERSION"),
@@ -119,16 +125,10 @@ pub fn save_reference_part(
     scene: &Scene,
     opts: &ReferenceOptions,
     rows: std::ops::Range<u32>,
-    mean: &Film,
-    stderr: &Film,
+    (mean, stderr): (&Film, &Film),
     seconds: f64,
 ) -> Result<()> {
-    let range = (rows.start as usize, rows.end as usize, scene.camera.height as usize);
-    let mut meta = meta_of(PartKind::Reference, reference_fingerprint(scene, opts, false), scene, range)?;
-    (meta.seconds, meta.reference) = (seconds, Some(reference_record(opts)));
-    let shape = pixel_shape(rows.len(), scene.camera.width);
-    let arrays = [meta_array(&meta), Array::f32s("mean", shape.clone(), f32s(mean)), Array::f32s("stderr", shape, f32s(stderr))];
-    file::write_npz(path, &arrays)
+    save_band(path, PartKind::Reference, scene, opts, rows, &[("mean", mean), ("stderr", stderr)], seconds)
 }
 
 /// Writes rows `rows` of an adaptive reference's pilot pass (the whole image when they are all
@@ -141,10 +141,26 @@ pub fn save_pilot_part(
     pilot: &Film,
     seconds: f64,
 ) -> Result<()> {
+    save_band(path, PartKind::Pilot, scene, opts, rows, &[("pilot", pilot)], seconds)
+}
+
+/// Writes the `films` of a band of rows of a reference or its pilot.
+fn save_band(
+    path: &Path,
+    kind: PartKind,
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    films: &[(&str, &Film)],
+    seconds: f64,
+) -> Result<()> {
     let range = (rows.start as usize, rows.end as usize, scene.camera.height as usize);
-    let mut meta = meta_of(PartKind::Pilot, reference_fingerprint(scene, opts, true), scene, range)?;
+    let fingerprint = reference_fingerprint(scene, opts, kind == PartKind::Pilot);
+    let mut meta = meta_of(kind, fingerprint, scene, range)?;
     (meta.seconds, meta.reference) = (seconds, Some(reference_record(opts)));
-    let arrays = [meta_array(&meta), Array::f32s("pilot", pixel_shape(rows.len(), scene.camera.width), f32s(pilot))];
+    let shape = pixel_shape(rows.len(), scene.camera.width);
+    let mut arrays = vec![meta_array(&meta)];
+    arrays.extend(films.iter().map(|(name, film)| Array::f32s(name, shape.clone(), f32s(film))));
     file::write_npz(path, &arrays)
 }
 
@@ -223,7 +239,10 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     let parts = paths.iter().map(|p| read_part(p)).collect::<Result<Vec<_>>>()?;
     let first = parts.first().ok_or_else(|| Error::Partial("no parts to merge".into()))?;
     for p in &parts[1..] {
-        if p.meta.kind != first.meta.kind || p.meta.fingerprint != first.meta.fingerprint || p.meta.total != first.meta.total {
+        if p.meta.kind != first.meta.kind
+            || p.meta.fingerprint != first.meta.fingerprint
+            || p.meta.total != first.meta.total
+        {
             return Err(Error::Partial(format!(
                 "{} and {} are parts of different images (another scene, other settings or another kind)",
                 first.path.display(),
@@ -237,7 +256,9 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
             let record = first.meta.render.as_ref().ok_or_else(|| first.bad("no render settings"))?;
             let options = options_of(record).map_err(|m| first.bad(m))?;
             if fingerprint(&scene, &options) != first.meta.fingerprint {
-                return Err(first.bad("its settings do not give its fingerprint (written by another fogplanes version?)"));
+                return Err(
+                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
+                );
             }
             let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
             let partial = super::merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
@@ -249,7 +270,9 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
             let options = reference_options_of(record);
             let pilot = kind == PartKind::Pilot;
             if reference_fingerprint(&scene, &options, pilot) != first.meta.fingerprint {
-                return Err(first.bad("its settings do not give its fingerprint (written by another fogplanes version?)"));
+                return Err(
+                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
+                );
             }
             let mut order: Vec<&Part> = parts.iter().collect();
             order.sort_by_key(|p| (p.meta.start, p.meta.end));
