@@ -75,7 +75,7 @@ def load():
 
 def cluster(workers, threads):
     local = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                         dashboard_address=None, env={"RAYON_NUM_THREADS": str(threads)})
+                         dashboard_address="127.0.0.1:0", env={"RAYON_NUM_THREADS": str(threads)})
     return local, Client(local)
 
 
