@@ -131,6 +131,13 @@ def test_task_keys_are_stable_and_name_the_work(client, scene):
     assert_bit_identical(a.result(), b.result())
 
 
+def test_the_progress_bar_is_on_stderr(client, scene, capfd):
+    fd.render(scene, client=client, threads=1, resolution=(32, 18), planes=2 * chunk_planes(scene) + 1)
+    out, err = capfd.readouterr()
+    # 3 chunks (one per task: too few for more), 2 additions and the finish.
+    assert out == "" and "fogplanes render [" in err and "6/6 tasks" in err
+
+
 def test_merge_refuses_mismatched_parts(scene):
     kwargs = dict(resolution=(32, 18), planes=2 * chunk_planes(scene))
     first, second = fogplanes.plan_render(scene, **kwargs)["chunks"]
