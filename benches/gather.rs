@@ -2,6 +2,7 @@
 //! per-hit cost of each weighting. `cargo bench` runs them all; `cargo bench -- weight` one group.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use fogplanes::control::Control;
 use fogplanes::gather::GatherContext;
 use fogplanes::kernel::Kernel;
 use fogplanes::photon_plane::sample_planes;
@@ -35,11 +36,12 @@ fn planes_and_structure(c: &mut Criterion) {
 
 fn gathering(c: &mut Criterion) {
     let s = scene().with_resolution(160, 90).unwrap();
-    let prepared = PreparedPlanes::new(&s, 40_960, 1, Sampler::default(), Accelerator::Raster);
+    let prepared =
+        PreparedPlanes::new(&s, 40_960, 1, Sampler::default(), Accelerator::Raster, Control::none()).unwrap();
     let pass = camera_rays(&s, 1, 0, false);
     let mut sums = vec![Vec3::ZERO; pass.rays.len()];
     let kernel = Kernel::Auto.resolve().unwrap();
-    let hits = prepared.gather(Weighting::default(), kernel, &pass.rays, &mut sums, &|| {}).hits;
+    let hits = prepared.gather(Weighting::default(), kernel, &pass.rays, &mut sums, Control::none()).unwrap().hits;
     let mut g = c.benchmark_group("gather 160x90, 40960 planes");
     g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
     let raster = prepared.raster.as_ref().unwrap();
@@ -48,7 +50,7 @@ fn gathering(c: &mut Criterion) {
     });
     for w in Weighting::all(&[4]) {
         g.bench_function(BenchmarkId::from_parameter(w.label()), |b| {
-            b.iter(|| prepared.gather(w, kernel, &pass.rays, black_box(&mut sums), &|| {}))
+            b.iter(|| prepared.gather(w, kernel, &pass.rays, black_box(&mut sums), Control::none()))
         });
     }
     g.finish();

@@ -1,20 +1,24 @@
 //! The experiments the command line runs: the estimator table with its error-versus-time sweep
-//! (docs/mathematics.md section 5) and the scaling study. Each gathers numbers and hands them to
-//! [`crate::pictures`] to draw.
+//! (docs/mathematics.md section 5) and the scaling study. Each gathers numbers into the result
+//! types of [`crate::report`] and hands them to [`crate::pictures`] to draw.
 //!
 //! Every estimator gathers the same planes along the same camera rays (whole pixels, the render's
 //! ray sets, by default; pixel centres on request), so the planes are the only source of difference between them, and each is timed on
 //! its own. Speed against error is reported as efficiency 1 / (MSE x seconds), with both the
 //! gathering time and the whole time (plane sampling, structure build, rays and gathering).
 
-use crate::page::{PageImage, PageInput, comparison_page, html_table};
+use crate::page::{PageImage, PageInput, comparison_page};
 use crate::pictures::{plot_error_vs_time, plot_scaling, save_panel};
+use crate::report::{
+    Entry, EqualTimeRow, Measured, Row, SCALING_COLUMNS, ScalingPoint, SweepPoint, Table, markdown_heading,
+    pixel_filter,
+};
 use crate::system::{cpu_seconds, peak_memory_bytes};
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
+use fogplanes::control::Control;
 use fogplanes::film::{Film, write_file_atomically};
-use fogplanes::gather::GatherStats;
 use fogplanes::kernel::Kernel;
-use fogplanes::metrics::{ErrorMetrics, compare};
+use fogplanes::metrics::compare;
 use fogplanes::pixel::{DEFAULT_RAY_SETS, PixelSettings, PreparedPixels};
 use fogplanes::render::{RenderOptions, render, render_for};
 use fogplanes::sampling::Sampler;
@@ -29,6 +33,8 @@ pub struct TableOptions {
     pub pixel_center: bool,
     /// Plane counts of the error-versus-time sweep (empty: no sweep).
     pub sweep: Vec<usize>,
+    /// Seeds per plane count of the sweep: at least one when there is a sweep
+    /// ([`check_sweep_seeds`]).
     pub sweep_seeds: u32,
     /// The weightings of the table, the baseline ([`Estimator::BASELINE`]) among them.
     pub weightings: Vec<Weighting>,
@@ -42,97 +48,15 @@ pub struct TableOptions {
     pub reference_path: PathBuf,
 }
 
-/// One line of the table: a weighting gathering the planes of one sampler.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Entry {
-    pub weighting: Weighting,
-    pub sampler: Sampler,
-}
-
-impl Entry {
-    /// `smis-exact` for the default sampler, `smis-exact/independent` for another.
-    pub fn label(&self) -> String {
-        if self.sampler == Sampler::default() {
-            self.weighting.label()
-        } else {
-            format!("{}/{}", self.weighting.label(), self.sampler)
-        }
+/// Refuses a sweep without seeds, whose points would hold no measurement: the command line
+/// calls it with the other checks of its input, before any work.
+pub fn check_sweep_seeds(sweep_seeds: u32, sweep: &[usize]) -> Result<(), String> {
+    if sweep_seeds == 0 && !sweep.is_empty() {
+        return Err("--sweep-seeds: the error-versus-time sweep needs at least one seed per plane count (or \
+                    --no-sweep), got 0"
+            .to_string());
     }
-}
-
-/// One estimator's row.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct Row {
-    /// The label: the weighting, with `/independent` for independent planes.
-    pub estimator: String,
-    pub weighting: String,
-    pub sampler: String,
-    pub planes: usize,
-    pub hits: u64,
-    /// Ray-plane tests per hit, and wall nanoseconds of gathering per hit.
-    pub tests_per_hit: f64,
-    pub gather_ns_per_hit: f64,
-    pub gather_seconds: f64,
-    pub total_seconds: f64,
-    pub metrics: ErrorMetrics,
-    pub smape_e2: f64,
-    pub mse_e4: f64,
-    /// 1 / (MSE x gather seconds) and 1 / (MSE x total seconds).
-    pub efficiency_gather: f64,
-    pub efficiency_total: f64,
-    /// Ratios to the baseline (`unweighted` with independent planes, the paper's, when
-    /// measured): MSE, gather time, efficiency (gather), efficiency (total).
-    pub mse_vs_unweighted: f64,
-    pub gather_time_vs_unweighted: f64,
-    pub efficiency_gather_vs_unweighted: f64,
-    pub efficiency_total_vs_unweighted: f64,
-    /// MSE over the same weighting's with independent planes (1 for those).
-    pub mse_vs_independent: Option<f64>,
-}
-
-/// One point of the sweep: mean over seeds at one plane count.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct SweepPoint {
-    pub estimator: String,
-    pub planes: usize,
-    pub seeds: u32,
-    pub mse: f64,
-    pub smape: f64,
-    pub gather_seconds: f64,
-    pub total_seconds: f64,
-}
-
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct Table {
-    pub scene: String,
-    pub reference: String,
-    pub resolution: [u32; 2],
-    pub pixel_center: bool,
-    /// The pixel filter, in words: whole pixels (box, the default) or pixel centres; the
-    /// reference must use the same.
-    pub filter: String,
-    pub seed: u64,
-    /// Shared by all estimators of the first sampler: plane sampling, structure build, rays.
-    pub shared_seconds: f64,
-    pub rows: Vec<Row>,
-    pub sweep: Vec<SweepPoint>,
-    /// Every entry rendered for the same wall time ([`fogplanes::render::render_for`]).
-    pub equal_time: Vec<EqualTimeRow>,
-}
-
-/// One entry rendered within a time budget: as many planes as it can gather in that time.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct EqualTimeRow {
-    pub estimator: String,
-    pub weighting: String,
-    pub sampler: String,
-    pub budget_seconds: f64,
-    pub seconds: f64,
-    pub planes: usize,
-    pub plane_passes: u32,
-    pub metrics: ErrorMetrics,
-    /// MSE over the baseline's at the same time.
-    pub mse_vs_unweighted: f64,
+    Ok(())
 }
 
 /// Renders every entry for `budget` seconds (the table's pixel filter and seed) and
@@ -155,7 +79,7 @@ fn equal_time(
                 pixel_center: opts.pixel_center,
                 ..RenderOptions::default()
             };
-            let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), &|| {})?;
+            let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), Control::none())?;
             let metrics = compare(&film, reference)?;
             log(format!("equal time: {} {} planes in {:.2} s", entry.label(), st.planes, st.seconds_total));
             rows.push(EqualTimeRow {
@@ -183,17 +107,6 @@ fn equal_time(
     Ok(rows)
 }
 
-/// What one entry measured over one plane set.
-pub struct Measured {
-    pub entry: Entry,
-    pub film: Film,
-    pub stats: GatherStats,
-    pub gather_seconds: f64,
-    /// Sampling the planes, building the structure and making the rays, shared by every
-    /// weighting of the same sampler.
-    pub shared_seconds: f64,
-}
-
 /// One measurement: every weighting over the plane set of each sampler.
 fn measure(
     scene: &Scene,
@@ -208,11 +121,11 @@ fn measure(
     for &sampler in samplers {
         // The render's whole pixels (or pixel centres): its ray sets, plane groups and emission.
         let settings = PixelSettings { planes, ray_sets: DEFAULT_RAY_SETS, seed, sampler, pixel_center };
-        let prepared = PreparedPixels::new(scene, settings);
+        let prepared = PreparedPixels::new(scene, settings, Control::none()).expect("never cancelled");
         let shared_seconds = prepared.seconds;
         for &weighting in weightings {
             let t = Instant::now();
-            let (sums, stats) = prepared.gather(weighting, kernel);
+            let (sums, stats) = prepared.gather(weighting, kernel, Control::none()).expect("never cancelled");
             let gather_seconds = t.elapsed().as_secs_f64();
             let mut film = Film::new(scene.camera.width, scene.camera.height);
             for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&prepared.emission) {
@@ -227,6 +140,9 @@ fn measure(
 /// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg and
 /// index.html (the comparison page, [`crate::page`]).
 pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result<String> {
+    if let Err(m) = check_sweep_seeds(opts.sweep_seeds, &opts.sweep) {
+        bail!(m);
+    }
     let weightings = &opts.weightings;
     let log = |s: String| {
         if !opts.quiet {
@@ -287,7 +203,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
                 *a = (a.0 + m.mse, a.1 + m.smape, a.2 + g, a.3 + r.shared_seconds + g);
             }
         }
-        let k = opts.sweep_seeds.max(1) as f64;
+        let k = opts.sweep_seeds as f64;
         for (r, a) in results.iter().zip(&acc) {
             sweep.push(SweepPoint {
                 estimator: r.entry.label(),
@@ -312,11 +228,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         reference: opts.reference_path.display().to_string(),
         resolution: [scene.camera.width, scene.camera.height],
         pixel_center: opts.pixel_center,
-        filter: if opts.pixel_center {
-            "pixel-centre rays".to_string()
-        } else {
-            format!("whole pixels (box filter, {DEFAULT_RAY_SETS} ray sets)")
-        },
+        filter: pixel_filter(opts.pixel_center, DEFAULT_RAY_SETS),
         seed: opts.seed,
         shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
@@ -334,7 +246,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         .map(|r| (r.entry.weighting.label(), &r.film))
         .collect();
     save_panel(&images, reference, opts.exposure, &opts.out.join("panel.png"))?;
-    let svg = if table.sweep.is_empty() { None } else { Some(plot_error_vs_time(&table, &opts.out)?) };
+    let svg = plot_error_vs_time(&table, &opts.out)?;
 
     // The comparison page: the reference and every entry's image, the table, the plot.
     let pixels = |film: &Film| film.pixels.iter().map(|p| p.to_array()).collect::<Vec<[f32; 3]>>();
@@ -364,150 +276,6 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
     Ok(markdown)
 }
 
-/// The table's columns, in the Markdown table and the page's HTML table alike.
-const COLUMNS: [&str; 15] = [
-    "estimator",
-    "sampler",
-    "planes",
-    "hits",
-    "ns/hit",
-    "gather s",
-    "total s",
-    "SMAPE x10^2",
-    "MSE x10^4",
-    "1/(MSE s) gather",
-    "1/(MSE s) total",
-    "MSE vs unweighted",
-    "gather time vs unweighted",
-    "efficiency vs unweighted (gather / total)",
-    "MSE vs independent",
-];
-
-/// The columns of the equal-time table.
-const EQUAL_TIME_COLUMNS: [&str; 8] =
-    ["estimator", "sampler", "seconds", "planes", "plane passes", "SMAPE x10^2", "MSE x10^4", "MSE vs unweighted"];
-
-impl EqualTimeRow {
-    fn cells(&self) -> Vec<String> {
-        vec![
-            self.sampler.clone(),
-            format!("{:.2}", self.seconds),
-            self.planes.to_string(),
-            self.plane_passes.to_string(),
-            format!("{:.4}", self.metrics.smape_e2()),
-            format!("{:.4}", self.metrics.mse_e4()),
-            format!("{:.3}", self.mse_vs_unweighted),
-        ]
-    }
-}
-
-impl Row {
-    /// The cells after the row's label, as both tables print them.
-    fn cells(&self) -> Vec<String> {
-        vec![
-            self.sampler.clone(),
-            self.planes.to_string(),
-            format!("{:.3e}", self.hits as f64),
-            format!("{:.2}", self.gather_ns_per_hit),
-            format!("{:.3}", self.gather_seconds),
-            format!("{:.3}", self.total_seconds),
-            format!("{:.4}", self.smape_e2),
-            format!("{:.4}", self.mse_e4),
-            format!("{:.4e}", self.efficiency_gather),
-            format!("{:.4e}", self.efficiency_total),
-            format!("{:.3}", self.mse_vs_unweighted),
-            format!("{:.3}", self.gather_time_vs_unweighted),
-            format!("{:.2} / {:.2}", self.efficiency_gather_vs_unweighted, self.efficiency_total_vs_unweighted),
-            self.mse_vs_independent.map_or("-".to_string(), |v| format!("{v:.3}")),
-        ]
-    }
-}
-
-impl Table {
-    /// What was rendered: scene, resolution, rays and seed.
-    fn setting(&self) -> String {
-        let [w, h] = self.resolution;
-        format!("{} at {w}x{h}, {}, seed {}", self.scene, self.filter, self.seed)
-    }
-
-    /// The line above the table: the setting, the reference, the shared time.
-    fn summary(&self) -> String {
-        format!(
-            "{}, against `{}`; {:.3} s shared (planes, structure, rays).",
-            self.setting(),
-            self.reference,
-            self.shared_seconds
-        )
-    }
-
-    pub fn markdown(&self) -> String {
-        let mut s = format!("{}\n\n| {} |\n", self.summary(), COLUMNS.join(" | "));
-        s += "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
-        for r in &self.rows {
-            s += &format!("| {} | {} |\n", r.weighting, r.cells().join(" | "));
-        }
-        if let Some(first) = self.equal_time.first() {
-            s += &format!(
-                "\nAt equal time: {:.2} s of wall time for each (a render on a time budget, planes in passes).\n\n| {} |\n|---|---|---:|---:|---:|---:|---:|---:|\n",
-                first.budget_seconds,
-                EQUAL_TIME_COLUMNS.join(" | ")
-            );
-            for r in &self.equal_time {
-                s += &format!("| {} | {} |\n", r.weighting, r.cells().join(" | "));
-            }
-        }
-        s
-    }
-
-    /// The same table as HTML, for the comparison page (rows named by the page's labels, so
-    /// that clicking a row shows its image).
-    fn html(&self) -> String {
-        let rows: Vec<(&str, Vec<String>)> = self.rows.iter().map(|r| (r.estimator.as_str(), r.cells())).collect();
-        let mut html = html_table(&COLUMNS, &rows);
-        if !self.equal_time.is_empty() {
-            let rows: Vec<(&str, Vec<String>)> =
-                self.equal_time.iter().map(|r| (r.estimator.as_str(), r.cells())).collect();
-            html += &html_table(&EQUAL_TIME_COLUMNS, &rows);
-        }
-        html
-    }
-
-    /// The page's notes: what was measured, against what.
-    fn notes(&self, planes: usize) -> String {
-        let mut s = format!(
-            "{}, {planes} photon planes, every estimator gathering the same planes along the same rays (one \
-             plane set per sampler).\nReference: {}.\nShared by the estimators of one sampler: {:.3} s (planes, \
-             structure, rays).",
-            self.setting(),
-            self.reference,
-            self.shared_seconds
-        );
-        if let (Some(first), Some(last)) = (self.sweep.first(), self.sweep.last()) {
-            s += &format!(
-                "\nError versus time: {} to {} planes, {} seed{} each (seed + 1000 onwards).",
-                first.planes,
-                last.planes,
-                first.seeds,
-                if first.seeds == 1 { "" } else { "s" }
-            );
-        }
-        s
-    }
-}
-
-/// One render of the scaling study.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct ScalingPoint {
-    pub planes: usize,
-    pub width: u32,
-    pub height: u32,
-    pub hits: u64,
-    pub seconds_total: f64,
-    pub seconds_gather: f64,
-    pub cpu_ns_per_hit: Option<f64>,
-    pub peak_memory_bytes: Option<u64>,
-}
-
 /// Renders over a grid of plane counts and resolutions, and writes scaling.json, scaling.md and
 /// seconds_vs_hits.png/.svg (log-log, one line per resolution): whether time grows linearly
 /// with the number of hits.
@@ -520,13 +288,14 @@ pub fn run_scaling(
     out: &std::path::Path,
     quiet: bool,
 ) -> Result<String> {
+    let base = RenderOptions { weighting, sampler, ..RenderOptions::default() };
     let mut points = Vec::new();
     for &(w, h) in resolutions {
         let s = scene.with_resolution(w, h)?;
         for &n in planes {
-            let opts = RenderOptions { planes: n, weighting, sampler, ..RenderOptions::default() };
+            let opts = RenderOptions { planes: n, ..base.clone() };
             let cpu = cpu_seconds();
-            let (_, st) = render(&s, &opts, &|| {})?;
+            let (_, st) = render(&s, &opts, Control::none())?;
             let cpu = cpu.zip(cpu_seconds()).map(|(a, b)| b - a);
             if !quiet {
                 eprintln!("{w}x{h}, {n} planes: {}", st.summary());
@@ -543,12 +312,7 @@ pub fn run_scaling(
             });
         }
     }
-    let mut md = format!(
-        "{} with {}, {sampler} planes, jittered rays, seed 1, {} threads\n\n| resolution | planes | hits | total s | gather s | ns/hit wall | ns/hit CPU |\n|---|---:|---:|---:|---:|---:|---:|\n",
-        scene.name,
-        weighting,
-        rayon::current_num_threads()
-    );
+    let mut md = format!("{}\n\n{}", scaling_heading(&scene.name, &base), markdown_heading(&SCALING_COLUMNS));
     for p in &points {
         md += &format!(
             "| {}x{} | {} | {} | {:.3} | {:.3} | {:.2} | {} |\n",
@@ -567,4 +331,43 @@ pub fn run_scaling(
     write_file_atomically(&out.join("scaling.json"), json.as_bytes())?;
     plot_scaling(&scene.name, &points, out)?;
     Ok(md)
+}
+
+/// The line above the scaling table: what every render of the study shared.
+fn scaling_heading(scene: &str, opts: &RenderOptions) -> String {
+    format!(
+        "{scene} with {}, {} planes, {}, seed {}, {} threads",
+        opts.weighting,
+        opts.sampler,
+        pixel_filter(opts.pixel_center, opts.ray_sets()),
+        opts.seed,
+        rayon::current_num_threads()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sweep_needs_a_seed() {
+        let m = check_sweep_seeds(0, &[1024]).unwrap_err();
+        assert!(m.starts_with("--sweep-seeds: ") && !m.contains('\n'), "{m}");
+        assert!(check_sweep_seeds(0, &[]).is_ok() && check_sweep_seeds(1, &[1024]).is_ok());
+    }
+
+    /// The scaling table's heading says what the renders used, not what they once did.
+    #[test]
+    fn the_scaling_heading_comes_from_the_options() {
+        let opts =
+            RenderOptions { seed: 9, pixel_center: true, sampler: Sampler::Independent, ..RenderOptions::default() };
+        let heading = scaling_heading("fog", &opts);
+        assert!(
+            heading
+                .starts_with(&format!("fog with {}, independent planes, pixel-centre rays, seed 9, ", opts.weighting)),
+            "{heading}"
+        );
+        let heading = scaling_heading("fog", &RenderOptions { seed: 3, ..RenderOptions::default() });
+        assert!(heading.contains("whole pixels (box filter, 16 ray sets), seed 3, "), "{heading}");
+    }
 }

@@ -5,24 +5,31 @@
 mod experiments;
 mod page;
 mod pictures;
+mod report;
 mod system;
 
 use anyhow::{Context, Result, anyhow};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use experiments::{TableOptions, run_table};
-use fogplanes::film::{Film, check_image_output, check_writable, write_file_atomically};
+use fogplanes::control::Control;
+use fogplanes::film::{Film, check_writable, write_file_atomically};
 use fogplanes::kernel::Kernel;
-use fogplanes::limits::{check_planes, check_resolution, check_spp, check_threads};
 use fogplanes::metrics::compare;
-use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{Accelerator, RenderOptions, progress_units_per_pass, render, render_for};
+use fogplanes::outputs::{Output, check_outputs};
+use fogplanes::partial::parts::{
+    Merged, merge_parts, read_pilot, save_pilot_part, save_reference_part, save_render_part,
+};
+use fogplanes::partial::render_chunk;
+use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference};
+use fogplanes::render::{Accelerator, RenderOptions, progress_units, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{Estimator, Weighting};
+use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
+use fogplanes::weights::Estimator;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 /// Renders single scattering in fog lit by rectangular lights, with photon planes weighted by
@@ -50,6 +57,17 @@ enum Command {
     Reference(ReferenceArgs),
     /// Compare an image against a reference: SMAPE, MSE, relMSE, largest absolute error.
     Compare(CompareArgs),
+    /// Merge partial files into one image: the plane ranges of a render (`render --plane-range
+    /// A:B --partial part.npz`) or the row bands of a reference (`reference --rows J0:J1
+    /// --partial part.npz`), written by the jobs of a job array.
+    ///
+    /// The parts may come in any order; they must be parts of one image (same scene and
+    /// settings), without overlap or gap. A render's parts are added in the same fixed order as
+    /// `render` adds its chunks, so the image is bit-identical to `render`'s when each part is
+    /// a chunk of 16384 planes (or an aligned power-of-two run of them). Pilot parts of an
+    /// adaptive reference (`reference --rows J0:J1 --pilot-pass`) merge into the .npz that
+    /// `reference --pilot` reads.
+    Merge(MergeArgs),
     /// Render every estimator from the same planes and rays, and write the table, panel and plot.
     ///
     /// Writes table.md, table.json, panel.png, error_vs_time.png (and .svg) and index.html (an
@@ -66,6 +84,25 @@ enum Command {
     /// max_depth 2, no Russian roulette); resolution, samples and seed are its parameters resx,
     /// resy, spp and seed. tests/mitsuba/check_export.py compares it with `reference`.
     Export(ExportArgs),
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The partial files (.npz).
+    #[arg(required = true)]
+    parts: Vec<PathBuf>,
+    /// Output: an image (.exr or .png) for render and reference parts, a .npz for pilot parts.
+    #[arg(long, short, value_name = "OUT")]
+    output: PathBuf,
+    /// Reference parts: also write the per-pixel standard error as an image.
+    #[arg(long, value_name = "PATH")]
+    stderr_image: Option<PathBuf>,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    exposure: Option<f32>,
+    /// No summary line.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 /// The formats `export` writes.
@@ -98,11 +135,11 @@ struct ScalingArgs {
     #[arg(long, short, default_value = Estimator::DEFAULT.name(), value_parser = estimator_parser())]
     estimator: Estimator,
     /// Plane counts, comma separated.
-    #[arg(long, value_delimiter = ',', default_values_t = [10_000u64, 40_000, 160_000, 640_000])]
+    #[arg(long, value_delimiter = ',', default_values_t = settings::SCALING_PLANES)]
     planes: Vec<u64>,
-    /// Resolutions WxH, comma separated.
-    #[arg(long, value_delimiter = ',', value_parser = parse_resolution, default_values = ["160x90", "320x180", "640x360", "1280x720"])]
-    resolutions: Vec<(u32, u32)>,
+    /// Resolutions WxH, comma separated [default: 160x90,320x180,640x360,1280x720].
+    #[arg(long, value_delimiter = ',', value_parser = parse_resolution)]
+    resolutions: Option<Vec<(u32, u32)>>,
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "scaling")]
     out: PathBuf,
@@ -153,25 +190,33 @@ struct RenderArgs {
     spp: Option<u32>,
     /// Render for this many seconds of wall time (the whole command) instead of a fixed plane
     /// count: planes in passes, each extending the set, until the budget is spent.
-    #[arg(long, value_name = "SECONDS", conflicts_with = "planes")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     time_budget: Option<f64>,
     /// Pixel centres instead of whole pixels (the box filter, by default): compare with
     /// `reference --pixel-center`.
     #[arg(long)]
     pixel_center: bool,
-    /// How rays find planes.
-    #[arg(long, default_value = "raster", value_parser = accelerator_parser())]
-    accelerator: Accelerator,
+    /// How rays find planes [default: raster].
+    #[arg(long, value_parser = accelerator_parser())]
+    accelerator: Option<Accelerator>,
     /// The gathering kernel: the widest vector kernel the CPU has (auto), one of them by name,
-    /// or one hit at a time (per-hit); all give bit-identical images.
-    #[arg(long, default_value = "auto", value_parser = kernel_parser())]
-    kernel: Kernel,
+    /// or one hit at a time (per-hit); all give bit-identical images [default: auto].
+    #[arg(long, value_parser = kernel_parser())]
+    kernel: Option<Kernel>,
     /// Output: .exr (linear float) or .png (tone-mapped sRGB). Default: <scene name>.exr here.
-    #[arg(long, short, value_name = "OUT")]
+    #[arg(long, short, value_name = "OUT", conflicts_with = "partial")]
     output: Option<PathBuf>,
-    /// Exposure in stops for PNG output.
-    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
-    exposure: f32,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    exposure: Option<f32>,
+    /// Render only planes A to B (excluded) of the N, for a job array: A and B multiples of
+    /// 16384 (the render's chunks) or N. Needs --partial; `fogplanes merge` adds the parts.
+    #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with = "time_budget")]
+    plane_range: Option<(u64, u64)>,
+    /// Write the unnormalised sums of the planes rendered (all, or --plane-range) to this .npz
+    /// file instead of an image (numpy loads it: `sums` and a JSON `meta`).
+    #[arg(long, value_name = "PART.npz", conflicts_with = "time_budget")]
+    partial: Option<PathBuf>,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -181,10 +226,10 @@ struct ReferenceArgs {
     /// The scene file (TOML).
     scene: PathBuf,
     /// Samples per pixel, on average (see --uniform).
-    #[arg(long, value_name = "N", default_value_t = 1024)]
+    #[arg(long, value_name = "N", default_value_t = settings::REFERENCE_SPP)]
     spp: u32,
     /// Random seed.
-    #[arg(long, short, value_name = "S", default_value_t = 1)]
+    #[arg(long, short, value_name = "S", default_value_t = settings::REFERENCE_SEED)]
     seed: u64,
     /// Sample pixel centres instead of whole pixels (to compare with `render --pixel-center`
     /// and `table --pixel-center`).
@@ -199,9 +244,25 @@ struct ReferenceArgs {
     /// Also write the per-pixel standard error as an image.
     #[arg(long, value_name = "PATH")]
     stderr_image: Option<PathBuf>,
-    /// Exposure in stops for PNG output.
-    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
-    exposure: f32,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    exposure: Option<f32>,
+    /// Render only rows J0 to J1 (excluded), for a job array; needs --partial, and `fogplanes
+    /// merge` assembles the bands. Without --uniform, the bands share one pilot pass: render its
+    /// bands with --pilot-pass, merge them into pilot.npz, then render each band with --pilot
+    /// pilot.npz.
+    #[arg(long, value_name = "J0:J1", value_parser = parse_range, requires = "partial")]
+    rows: Option<(u64, u64)>,
+    /// Write the rows' mean and standard error (or pilot) to this .npz instead of images.
+    #[arg(long, value_name = "PART.npz", conflicts_with_all = ["output", "stderr_image"])]
+    partial: Option<PathBuf>,
+    /// Render the rows of the adaptive reference's pilot pass (its per-pixel standard errors).
+    #[arg(long, requires = "partial", conflicts_with_all = ["uniform", "pilot"])]
+    pilot_pass: bool,
+    /// The adaptive reference's whole pilot pass (a .npz merged from --pilot-pass parts): the
+    /// sample counts come from it instead of a pilot pass of this run's own.
+    #[arg(long, value_name = "PILOT.npz", conflicts_with = "uniform")]
+    pilot: Option<PathBuf>,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -236,19 +297,19 @@ struct TableArgs {
     #[arg(long)]
     pixel_center: bool,
     /// Plane counts of the error-versus-time sweep, comma separated.
-    #[arg(long, value_delimiter = ',', default_values_t = [5120u64, 10240, 20480, 40960, 81920, 163840])]
+    #[arg(long, value_delimiter = ',', default_values_t = settings::TABLE_SWEEP)]
     sweep: Vec<u64>,
     /// Skip the error-versus-time sweep (no plot).
     #[arg(long)]
     no_sweep: bool,
     /// Seeds per plane count in the sweep.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = settings::TABLE_SWEEP_SEEDS)]
     sweep_seeds: u32,
     /// Also render every estimator for this many seconds each and compare at equal time.
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     equal_time: Option<f64>,
     /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
-    #[arg(long, value_delimiter = ',', default_values = ["sobol", "independent"], value_parser = sampler_parser())]
+    #[arg(long, value_delimiter = ',', default_values = settings::TABLE_SAMPLERS.map(|s| s.name()), value_parser = sampler_parser())]
     samplers: Vec<Sampler>,
     /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
     #[arg(long, value_delimiter = ',', value_name = "K")]
@@ -256,9 +317,9 @@ struct TableArgs {
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "report")]
     out: PathBuf,
-    /// Exposure in stops for the panel.
-    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_negative_numbers = true)]
-    exposure: f32,
+    /// Exposure in stops for the panel [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    exposure: Option<f32>,
     #[command(flatten)]
     common: CommonArgs,
 }
@@ -282,7 +343,8 @@ fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
 
 impl From<fogplanes::Error> for Failure {
     fn from(e: fogplanes::Error) -> Self {
-        Failure { code: if e.is_input() { 2 } else { 1 }, error: e.into() }
+        // A setting is named as the command line spells it: `--planes`.
+        Failure { code: if e.is_input() { 2 } else { 1 }, error: anyhow!(e.worded(|s| s.flag())) }
     }
 }
 
@@ -330,7 +392,8 @@ fn film_pixels(scene: &Scene) -> f64 {
 fn main() -> ExitCode {
     STARTED.get_or_init(std::time::Instant::now);
     let cli = Cli::parse();
-    // Ctrl-C: remove any half-written output before leaving, so no truncated file remains.
+    // Ctrl-C, SIGTERM or SIGHUP: remove any half-written output before leaving, so no truncated
+    // file remains.
     let _ = ctrlc::set_handler(|| {
         fogplanes::film::remove_unfinished_files();
         let _ = writeln!(std::io::stderr(), "\ninterrupted: nothing was written");
@@ -340,6 +403,7 @@ fn main() -> ExitCode {
         Command::Render(a) => cmd_render(a),
         Command::Reference(a) => cmd_reference(a),
         Command::Compare(a) => cmd_compare(a),
+        Command::Merge(a) => cmd_merge(a),
         Command::Table(a) => cmd_table(a),
         Command::Scaling(a) => cmd_scaling(a),
         Command::Export(a) => cmd_export(a),
@@ -359,17 +423,32 @@ fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     Ok((parse(w)?, parse(h)?))
 }
 
-/// Loads the scene and applies the shared overrides (resolution, threads).
-fn load_scene(path: &Path, common: &CommonArgs) -> Result<Scene, Failure> {
-    let mut scene = Scene::load(path).map_err(input)?;
-    if let Some((w, h)) = common.resolution {
-        scene = scene.with_resolution(w, h)?;
+/// `A:B` with A < B.
+fn parse_range(s: &str) -> Result<(u64, u64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("expected START:END, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u64>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
+    let (a, b) = (parse(a)?, parse(b)?);
+    if a >= b {
+        return Err(format!("{s:?}: the start must be below the end"));
     }
-    if let Some(t) = common.threads {
-        check_threads(t).map_err(|m| input(anyhow!("--threads: {m}")))?;
+    Ok((a, b))
+}
+
+/// A partial file's name ends in .npz (numpy loads it by that name).
+fn check_partial_output(path: &std::path::Path) -> Result<(), Failure> {
+    if path.extension().and_then(|e| e.to_str()) != Some("npz") {
+        return Err(input(anyhow!("{}: a partial file is a .npz", path.display())));
+    }
+    check_outputs(&[Output::File(path)])?;
+    Ok(())
+}
+
+/// Starts the worker threads the settings ask for (none: rayon's default, every core).
+fn start_threads(threads: Option<usize>) -> Result<(), Failure> {
+    if let Some(t) = threads {
         rayon::ThreadPoolBuilder::new().num_threads(t).build_global().context("cannot start the worker threads")?;
     }
-    Ok(scene)
+    Ok(())
 }
 
 fn progress_bar(quiet: bool, total: u64, what: &str) -> ProgressBar {
@@ -391,56 +470,52 @@ fn default_output(scene: &Scene, suffix: &str) -> PathBuf {
 }
 
 fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
-    let scene = load_scene(&a.scene, &a.common)?;
-    let defaults = RenderOptions::from_scene(&scene);
-    let estimator = a.estimator.unwrap_or(defaults.weighting.estimator);
-    // The scene's K applies only when the scene's estimator is the one rendered.
-    let scene_k = (estimator == defaults.weighting.estimator && estimator.has_orientations())
-        .then_some(defaults.weighting.orientations);
-    let weighting =
-        Weighting::new(estimator, a.orientations.or(scene_k)).map_err(|m| input(anyhow!("--orientations: {m}")))?;
-    let planes = a.planes.unwrap_or(defaults.planes as u64);
-    check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
-    let opts = RenderOptions {
-        planes: planes as usize,
-        weighting,
-        seed: a.seed.unwrap_or(defaults.seed),
-        sampler: a.sampler.unwrap_or(defaults.sampler),
-        spp: a.spp.unwrap_or(defaults.spp),
-        pixel_center: a.pixel_center,
-        accelerator: a.accelerator,
-        kernel: a.kernel,
-    };
-    opts.validate(&scene)?;
-    if let Some(t) = a.time_budget
-        && !(t > 0.0 && t <= 1e6)
-    {
-        return Err(input(anyhow!("--time-budget: must be a positive number of seconds up to 1e6, got {t}")));
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    let r = settings::resolve_render(
+        &scene,
+        &Overrides {
+            estimator: a.estimator,
+            orientations: a.orientations,
+            planes: a.planes,
+            seed: a.seed,
+            sampler: a.sampler,
+            spp: a.spp,
+            pixel_center: a.pixel_center,
+            accelerator: a.accelerator,
+            kernel: a.kernel,
+            time_budget: a.time_budget,
+            resolution: a.common.resolution,
+            threads: a.common.threads,
+            exposure: a.exposure,
+        },
+    )?;
+    let (scene, opts) = (&r.scene, &r.options);
+    if let Some(part) = &a.partial {
+        return render_part(&a, scene, opts, part, r.threads);
     }
-    let output = a.output.clone().unwrap_or_else(|| default_output(&scene, ""));
-    check_image_output(&output)?;
+    let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
+    check_outputs(&[Output::Image(&output)])?;
+    start_threads(r.threads)?;
 
-    let bar = progress_bar(
-        a.common.quiet,
-        progress_units_per_pass(&scene, a.accelerator) * if opts.pixel_center { 1 } else { opts.spp as u64 },
-        weighting.label().as_str(),
-    );
+    let bar =
+        progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes), opts.weighting.label().as_str());
     let cpu = system::cpu_seconds();
-    let (film, stats) = match a.time_budget {
-        None => render(&scene, &opts, &|| bar.inc(1))?,
+    let (film, stats) = match r.time_budget {
+        None => render(scene, opts, Control::with_progress(&|| bar.inc(1)))?,
         Some(seconds) => {
             bar.set_length(u64::MAX);
             // What the command spent before rendering, and what writing the file will take.
-            let reserve = 0.02 + 5e-8 * film_pixels(&scene);
+            let reserve = 0.02 + 5e-8 * film_pixels(scene);
             let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
-            render_for(&scene, &opts, std::time::Duration::from_secs_f64(left.max(0.0)), &|| bar.inc(1))?
+            let budget = std::time::Duration::from_secs_f64(left.max(0.0));
+            render_for(scene, opts, budget, Control::with_progress(&|| bar.inc(1)))?
         }
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
-    film.save(&output, a.exposure)?;
+    film.save(&output, r.exposure)?;
     let mut summary = stats.summary();
-    if a.time_budget.is_some() {
+    if r.time_budget.is_some() {
         summary += &format!(", {} plane passes", stats.plane_passes);
     }
     if let Some(c) = cpu {
@@ -454,26 +529,162 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
-    let scene = load_scene(&a.scene, &a.common)?;
-    check_spp(a.spp).map_err(|m| input(anyhow!("--spp: {m}")))?;
-    let output = a.output.clone().unwrap_or_else(|| default_output(&scene, "_reference"));
-    check_image_output(&output)?;
-    if let Some(p) = &a.stderr_image {
-        check_image_output(p)?;
-    }
-    let opts = ReferenceOptions { spp: a.spp, uniform: a.uniform, seed: a.seed, pixel_center: a.pixel_center };
-    let passes = if a.uniform { 1 } else { 2 };
-    let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
-    let reference = render_reference(&scene, &opts, &|| bar.inc(1));
+/// `render --partial`: planes `--plane-range` (all by default) into a partial file.
+fn render_part(
+    a: &RenderArgs,
+    scene: &Scene,
+    opts: &RenderOptions,
+    part: &std::path::Path,
+    threads: Option<usize>,
+) -> Result<(), Failure> {
+    check_partial_output(part)?;
+    let (start, end) = a.plane_range.unwrap_or((0, opts.planes as u64));
+    let range = start as usize..end as usize;
+    fogplanes::partial::chunk_indices(opts.planes, &range)?;
+    start_threads(threads)?;
+    let units = progress_units(scene, opts, range.clone());
+    let bar = progress_bar(a.common.quiet, units, opts.weighting.label().as_str());
+    let (partial, stats) = render_chunk(scene, opts, range, Control::with_progress(&|| bar.inc(1)))?;
     bar.finish_and_clear();
-    reference.mean.save(&output, a.exposure)?;
+    save_render_part(part, scene, opts, &partial)?;
+    say!("{}", stats.summary());
+    say!("wrote {} (planes {}:{} of {})", part.display(), partial.start, partial.end, partial.planes_total);
+    Ok(())
+}
+
+fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
+    let merged = merge_parts(&a.parts)?;
+    let exposure = settings::exposure(a.exposure)?;
+    match merged {
+        Merged::Render { partial, image, .. } => {
+            if a.stderr_image.is_some() {
+                return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
+            }
+            check_outputs(&[Output::Image(&a.output)])?;
+            image.save(&a.output, exposure)?;
+            if !a.quiet {
+                say!(
+                    "merged {} parts: {} planes, {} hits, {:.3} s of rendering",
+                    a.parts.len(),
+                    partial.planes_total,
+                    partial.hits,
+                    partial.seconds
+                );
+                say!(
+                    "wrote {} ({}x{}, mean {:.6}, max {:.4})",
+                    a.output.display(),
+                    image.width,
+                    image.height,
+                    image.mean(),
+                    image.max()
+                );
+            }
+        }
+        Merged::Reference { mean, stderr, seconds, .. } => {
+            let mut outputs = vec![Output::Image(&a.output)];
+            outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+            check_outputs(&outputs)?;
+            mean.save(&a.output, exposure)?;
+            if let Some(p) = &a.stderr_image {
+                stderr.save(p, exposure)?;
+            }
+            if !a.quiet {
+                say!("merged {} reference bands ({:.3} s of rendering)", a.parts.len(), seconds);
+                say!("wrote {}", a.output.display());
+            }
+        }
+        Merged::Pilot { scene, options, pilot, seconds } => {
+            if a.stderr_image.is_some() {
+                return Err(input(anyhow!("--stderr-image: pilot parts merge into one .npz")));
+            }
+            check_partial_output(&a.output)?;
+            let rows = 0..scene.camera.height;
+            save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
+            if !a.quiet {
+                say!("merged {} pilot bands; wrote {} (for reference --pilot)", a.parts.len(), a.output.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `reference --partial`: rows `--rows` (all by default) into a partial file: the pilot's with
+/// `--pilot-pass`, else the reference's (counts from `--pilot` unless uniform).
+fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std::path::Path) -> Result<(), Failure> {
+    check_partial_output(part)?;
+    let (scene, opts) = (&r.scene, &r.options);
+    let (j0, j1) = a.rows.unwrap_or((0, scene.camera.height as u64));
+    let rows = u32::try_from(j0).unwrap_or(u32::MAX)..u32::try_from(j1).unwrap_or(u32::MAX);
+    start_threads(r.threads)?;
+    let bar = progress_bar(a.common.quiet, rows.len() as u64, "reference");
+    let tick = || bar.inc(1);
+    let control = Control::with_progress(&tick);
+    let start = std::time::Instant::now();
+    if a.pilot_pass {
+        let pilot = reference_pilot_rows(scene, opts, rows.clone(), control)?;
+        bar.finish_and_clear();
+        save_pilot_part(part, scene, opts, rows.clone(), &pilot, start.elapsed().as_secs_f64())?;
+        say!("wrote {} (pilot rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+        return Ok(());
+    }
+    let counts = match (&a.pilot, opts.uniform) {
+        (_, true) => None,
+        (Some(p), false) => Some(reference_counts(opts, &read_pilot(p, scene, opts)?.pixels)),
+        (None, false) if rows.len() as u32 == scene.camera.height => {
+            let pilot = reference_pilot_rows(scene, opts, 0..scene.camera.height, control)?;
+            Some(reference_counts(opts, &pilot.pixels))
+        }
+        (None, false) => {
+            return Err(input(anyhow!(
+                "--rows: the bands of an adaptive reference share one pilot pass: give --pilot PILOT.npz \
+                 (made by `reference --rows J0:J1 --pilot-pass` for each band and `merge`), or --uniform"
+            )));
+        }
+    };
+    let (mean, stderr) = reference_rows(scene, opts, rows.clone(), counts.as_deref(), control)?;
+    bar.finish_and_clear();
+    save_reference_part(part, scene, opts, rows.clone(), (&mean, &stderr), start.elapsed().as_secs_f64())?;
+    say!("wrote {} (rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+    Ok(())
+}
+
+fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    let r = settings::resolve_reference(
+        &scene,
+        &ReferenceOverrides {
+            spp: Some(a.spp),
+            seed: Some(a.seed),
+            pixel_center: a.pixel_center,
+            uniform: a.uniform,
+            resolution: a.common.resolution,
+            threads: a.common.threads,
+            exposure: a.exposure,
+        },
+    )?;
+    if let Some(part) = &a.partial {
+        return reference_part(&a, &r, part);
+    }
+    if a.pilot_pass || a.pilot.is_some() {
+        return Err(input(anyhow!("--pilot and --pilot-pass make partial files: give --partial PART.npz")));
+    }
+    let scene = &r.scene;
+    let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
+    let mut outputs = vec![Output::Image(&output)];
+    outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    check_outputs(&outputs)?;
+    start_threads(r.threads)?;
+    let passes = if r.options.uniform { 1 } else { 2 };
+    let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
+    let reference = render_reference(scene, &r.options, Control::with_progress(&|| bar.inc(1)))?;
+    bar.finish_and_clear();
+    reference.mean.save(&output, r.exposure)?;
     if let Some(p) = &a.stderr_image {
-        reference.stderr.save(p, a.exposure)?;
+        reference.stderr.save(p, r.exposure)?;
     }
     say!(
         "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
-        a.spp,
+        r.options.spp,
         reference.seconds,
         reference.relative_stderr(),
         reference.noise_mse(),
@@ -498,9 +709,31 @@ fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// The files `table` writes into its directory; the plot's only with a sweep.
+const TABLE_FILES: [&str; 3] = ["table.md", "table.json", "index.html"];
+const TABLE_PLOTS: [&str; 2] = ["error_vs_time.png", "error_vs_time.svg"];
+
 fn cmd_table(a: TableArgs) -> Result<(), Failure> {
-    let scene = load_scene(&a.scene, &a.common)?;
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    let r = settings::resolve_table(
+        &scene,
+        &TableOverrides {
+            planes: a.planes,
+            seed: a.seed,
+            pixel_center: a.pixel_center,
+            sweep: Some(if a.no_sweep { Vec::new() } else { a.sweep.clone() }),
+            sweep_seeds: Some(a.sweep_seeds),
+            equal_time: a.equal_time,
+            samplers: Some(a.samplers.clone()),
+            orientations: a.orientations.clone(),
+            resolution: a.common.resolution,
+            threads: a.common.threads,
+            exposure: a.exposure,
+        },
+    )?;
+    let scene = &r.scene;
     let reference = Film::load_exr(&a.reference).map_err(input)?;
+    reference.check_finite("reference").map_err(|e| input(anyhow!("{}: {e}", a.reference.display())))?;
     if (reference.width, reference.height) != (scene.camera.width, scene.camera.height) {
         return Err(input(anyhow!(
             "{}: the reference is {}x{} but the scene renders at {}x{} (use --resolution)",
@@ -520,61 +753,59 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
             scene.camera.height
         )));
     }
-    let planes = a.planes.unwrap_or(scene.render.planes);
-    check_planes(planes).map_err(|m| input(anyhow!("--planes: {m}")))?;
-    for &n in &a.sweep {
-        check_planes(n).map_err(|m| input(anyhow!("--sweep: {m}")))?;
-    }
-    for &k in &a.orientations {
-        Weighting::new(Estimator::SmisExact, Some(k)).map_err(|m| input(anyhow!("--orientations: {m}")))?;
-    }
-    if let Some(t) = a.equal_time
-        && !(t > 0.0 && t <= 1e5)
-    {
-        return Err(input(anyhow!("--equal-time: must be a positive number of seconds up to 1e5, got {t}")));
-    }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
-    check_image_output(&a.out.join("panel.png"))?;
+    // Every file the table writes, checked now: a failure after the renders would lose them.
+    let panel = a.out.join("panel.png");
+    let plots = if r.sweep.is_empty() { &[][..] } else { &TABLE_PLOTS[..] };
+    let files: Vec<PathBuf> = TABLE_FILES.iter().chain(plots).map(|f| a.out.join(f)).collect();
+    let outputs: Vec<Output> =
+        std::iter::once(Output::Image(&panel)).chain(files.iter().map(|p| Output::File(p))).collect();
+    check_outputs(&outputs)?;
+    start_threads(r.threads)?;
     let opts = TableOptions {
-        planes: planes as usize,
-        seed: a.seed.unwrap_or(scene.render.seed),
-        pixel_center: a.pixel_center,
-        sweep: if a.no_sweep { Vec::new() } else { a.sweep.iter().map(|&n| n as usize).collect() },
-        sweep_seeds: a.sweep_seeds,
-        weightings: Weighting::all(&a.orientations),
-        samplers: a.samplers.clone(),
-        equal_time: a.equal_time,
+        planes: r.planes,
+        seed: r.seed,
+        pixel_center: r.pixel_center,
+        sweep: r.sweep.clone(),
+        sweep_seeds: r.sweep_seeds,
+        weightings: r.weightings.clone(),
+        samplers: r.samplers.clone(),
+        equal_time: r.equal_time,
         out: a.out.clone(),
-        exposure: a.exposure,
+        exposure: r.exposure,
         quiet: a.common.quiet,
         reference_path: a.reference.clone(),
     };
-    let table = run_table(&scene, &reference, &opts)?;
+    let table = run_table(scene, &reference, &opts)?;
     say!("{}", table);
     Ok(())
 }
 
+/// The files `scaling` writes into its directory besides its plot's PNG.
+const SCALING_FILES: [&str; 3] = ["scaling.md", "scaling.json", "seconds_vs_hits.svg"];
+
 fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
-    let scene = load_scene(&a.scene, &a.common)?;
-    for &n in &a.planes {
-        check_planes(n).map_err(|m| input(anyhow!("--planes: {m}")))?;
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    if a.common.resolution.is_some() {
+        return Err(input(anyhow!("--resolution: scaling measures the sizes of --resolutions")));
     }
-    for &(w, h) in &a.resolutions {
-        check_resolution(w, h).map_err(|m| input(anyhow!("--resolutions: {m}")))?;
-        let s = scene.with_resolution(w, h)?;
-        for &n in &a.planes {
-            RenderOptions { planes: n as usize, ..RenderOptions::default() }.validate(&s)?;
-        }
-    }
+    let r = settings::resolve_scaling(&ScalingOverrides {
+        estimator: Some(a.estimator),
+        sampler: Some(a.sampler),
+        planes: Some(a.planes.clone()),
+        resolutions: a.resolutions.clone(),
+        threads: a.common.threads,
+    })?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
-    check_image_output(&a.out.join("seconds_vs_hits.png"))?;
-    let weighting = Weighting::new(a.estimator, None).map_err(|m| input(anyhow!(m)))?;
-    let planes: Vec<usize> = a.planes.iter().map(|&n| n as usize).collect();
-    let md = experiments::run_scaling(&scene, weighting, a.sampler, &planes, &a.resolutions, &a.out, a.common.quiet)?;
+    let (plot, files) = (a.out.join("seconds_vs_hits.png"), SCALING_FILES.map(|f| a.out.join(f)));
+    check_outputs(&[&[Output::Image(&plot)][..], &files.each_ref().map(|p| Output::File(p))].concat())?;
+    start_threads(r.threads)?;
+    let md =
+        experiments::run_scaling(&scene, r.weighting, r.sampler, &r.planes, &r.resolutions, &a.out, a.common.quiet)?;
     say!("{md}");
     Ok(())
 }

@@ -1,7 +1,7 @@
 //! The pictures the experiments draw: the image panel with false-colour errors, the
 //! error-versus-time plot and the scaling plot (PNG and SVG, each written whole).
 
-use crate::experiments::{ScalingPoint, Table};
+use crate::report::{ScalingPoint, SweepPoint, Table};
 use anyhow::{Context, Result};
 use fogplanes::film::{Film, save_rgb8_png, write_file_atomically};
 use plotters::coord::ranged1d::Ranged;
@@ -105,9 +105,21 @@ fn plot_error<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow::anyhow!("drawing failed: {e:?}")
 }
 
-/// MSE against time, log-log, one line per estimator, as PNG and SVG. Returns the SVG text.
-pub fn plot_error_vs_time(table: &Table, out: &std::path::Path) -> Result<String> {
-    save_plot(out, "error_vs_time", |a| draw_error_vs_time(table, a), |a| draw_error_vs_time(table, a))
+/// MSE against time, log-log, one line per estimator, as PNG and SVG. Returns the SVG text, or
+/// `None` (and no files) when no sweep point can be shown on log axes
+/// ([`SweepPoint::plottable`]; the table's notes say which were left out).
+pub fn plot_error_vs_time(table: &Table, out: &std::path::Path) -> Result<Option<String>> {
+    let points: Vec<&SweepPoint> = table.sweep.iter().filter(|p| p.plottable()).collect();
+    if points.is_empty() {
+        return Ok(None);
+    }
+    save_plot(
+        out,
+        "error_vs_time",
+        |a| draw_error_vs_time(table, &points, a),
+        |a| draw_error_vs_time(table, &points, a),
+    )
+    .map(Some)
 }
 
 /// A plot as `<stem>.png` and `<stem>.svg` in `out`, each written whole; returns the SVG text.
@@ -172,9 +184,12 @@ where
     Ok(())
 }
 
-fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, plotters::coord::Shift>) -> Result<()> {
+fn draw_error_vs_time<DB: DrawingBackend>(
+    table: &Table,
+    points: &[&SweepPoint],
+    root: DrawingArea<DB, plotters::coord::Shift>,
+) -> Result<()> {
     root.fill(&WHITE).map_err(plot_error)?;
-    let points = &table.sweep;
     let (mut t0, mut t1, mut m0, mut m1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
     for p in points {
         t0 = t0.min(p.total_seconds);
@@ -219,15 +234,20 @@ fn draw_error_vs_time<DB: DrawingBackend>(table: &Table, root: DrawingArea<DB, p
     finish_plot(&mut chart, &root, SeriesLabelPosition::UpperRight)
 }
 
-/// Seconds against hits, log-log, one line per resolution, as PNG and SVG.
+/// Seconds against hits, log-log, one line per resolution, as PNG and SVG (renders timed at
+/// zero seconds, which a log axis cannot show, left out; no files when none is left).
 pub fn plot_scaling(name: &str, points: &[ScalingPoint], out: &std::path::Path) -> Result<()> {
-    save_plot(out, "seconds_vs_hits", |a| draw_scaling(name, points, a), |a| draw_scaling(name, points, a))?;
+    let points: Vec<&ScalingPoint> =
+        points.iter().filter(|p| p.seconds_total.is_finite() && p.seconds_total > 0.0).collect();
+    if !points.is_empty() {
+        save_plot(out, "seconds_vs_hits", |a| draw_scaling(name, &points, a), |a| draw_scaling(name, &points, a))?;
+    }
     Ok(())
 }
 
 fn draw_scaling<DB: DrawingBackend>(
     name: &str,
-    points: &[ScalingPoint],
+    points: &[&ScalingPoint],
     root: DrawingArea<DB, plotters::coord::Shift>,
 ) -> Result<()> {
     root.fill(&WHITE).map_err(plot_error)?;
@@ -251,7 +271,7 @@ fn draw_scaling<DB: DrawingBackend>(
         .draw()
         .map_err(plot_error)?;
     // Slope 1 through the largest render: where a linear cost would put every point.
-    if let Some(big) = points.iter().max_by_key(|p| p.hits) {
+    if let Some(big) = points.iter().copied().max_by_key(|p| p.hits) {
         let per_hit = big.seconds_total / hits(big);
         chart
             .draw_series(LineSeries::new([(h0, h0 * per_hit), (h1, h1 * per_hit)], BLACK.mix(0.5).stroke_width(1)))
@@ -268,4 +288,48 @@ fn draw_scaling<DB: DrawingBackend>(
         draw_series(&mut chart, series, colour, format!("{w}x{h}"))?;
     }
     finish_plot(&mut chart, &root, SeriesLabelPosition::UpperLeft)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::tests::table;
+    use std::time::Duration;
+
+    /// Runs the error-versus-time plot of sweep points (MSE, seconds) into a fresh directory on
+    /// another thread, and fails if it has not returned after a generous time (log axes asked
+    /// to span 0, NaN or infinity used to spin forever).
+    fn plot(name: &str, sweep: &[(f64, f64)]) -> (Option<String>, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("fogplanes-plot-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (t, out) = (table(sweep), dir.clone());
+        let (send, receive) = std::sync::mpsc::channel();
+        std::thread::spawn(move || send.send(plot_error_vs_time(&t, &out).map_err(|e| e.to_string())));
+        let result = receive.recv_timeout(Duration::from_secs(60)).expect("the plot did not return within 60 s");
+        (result.unwrap(), dir)
+    }
+
+    #[test]
+    fn a_sweep_that_a_log_axis_cannot_show_makes_no_plot() {
+        for (name, sweep) in [
+            ("zero", vec![(0.0, 0.5), (0.0, 0.6)]),
+            ("nan", vec![(f64::NAN, 0.5), (f64::NAN, 0.6)]),
+            ("mixed", vec![(0.0, 0.5), (f64::INFINITY, 0.6), (1e-3, 0.0), (f64::NAN, f64::NAN)]),
+        ] {
+            let (svg, dir) = plot(name, &sweep);
+            assert!(svg.is_none(), "{name}");
+            assert!(!dir.join("error_vs_time.png").exists() && !dir.join("error_vs_time.svg").exists(), "{name}");
+            std::fs::remove_dir_all(dir).unwrap();
+        }
+    }
+
+    #[test]
+    fn the_plot_leaves_out_only_the_points_it_cannot_show() {
+        let (svg, dir) = plot("some", &[(1e-3, 0.5), (0.0, 0.6), (5e-4, 1.0), (f64::NAN, 1.2)]);
+        let svg = svg.expect("two points can be shown");
+        // The smis-exact points (MSE 0 and NaN) are left out, and with them their line.
+        assert!(svg.contains("<svg") && svg.contains("unweighted") && !svg.contains("smis-exact"), "{svg}");
+        assert!(dir.join("error_vs_time.png").exists());
+        std::fs::remove_dir_all(dir).unwrap();
+    }
 }

@@ -1,6 +1,7 @@
 //! Every estimator on the benchmark scene at reduced resolution gives only finite,
 //! non-negative pixels.
 
+use fogplanes::control::Control;
 use fogplanes::render::{RenderOptions, render};
 use fogplanes::scene::Scene;
 use fogplanes::weights::Weighting;
@@ -11,7 +12,7 @@ fn every_estimator_gives_finite_non_negative_pixels() {
         Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap().with_resolution(160, 90).unwrap();
     for w in Weighting::all(&[1, 3, 4, 8]) {
         let opts = RenderOptions { planes: 10_240, weighting: w, ..RenderOptions::default() };
-        let (film, stats) = render(&s, &opts, &|| {}).unwrap();
+        let (film, stats) = render(&s, &opts, Control::none()).unwrap();
         assert!(film.all_finite_non_negative(), "{w}: a pixel is negative, NaN or infinite");
         assert!(film.mean() > 0.01 && stats.hits > 1_000_000, "{w}: mean {} hits {}", film.mean(), stats.hits);
         println!("{}: mean {:.5} max {:.3}", w, film.mean(), film.max());

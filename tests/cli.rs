@@ -70,6 +70,11 @@ fn bad_arguments_exit_2() {
         vec!["render", "media_scenes/six_lights.toml", "--estimator", "cmis-exact", "--orientations", "4"],
         vec!["render", "no_such_scene.toml"],
         vec!["compare", "no_such.exr", "other.exr"],
+        vec!["render", "media_scenes/six_lights.toml", "--exposure", "inf"],
+        vec!["table", "media_scenes/six_lights.toml", "--reference", "no.exr", "--sweep-seeds", "0"],
+        vec!["table", "media_scenes/six_lights.toml", "--reference", "no.exr", "--equal-time", "-1"],
+        vec!["table", "media_scenes/six_lights.toml", "--reference", "no.exr", "--samplers", "sobol,sobol"],
+        vec!["scaling", "media_scenes/six_lights.toml", "--resolutions", "0x10"],
     ] {
         let o = fogplanes(&args);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
@@ -170,11 +175,13 @@ fn a_closed_pipe_is_not_a_panic() {
     assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
 }
 
-/// Ctrl-C during a render, with a plane count or on a time budget, leaves neither the output
-/// nor a temporary file, and an existing output keeps its old contents.
+/// Ctrl-C (or SIGTERM) during a render, with a plane count or on a time budget, leaves neither
+/// the output nor a temporary file, and an existing output keeps its old contents.
 #[test]
 fn an_interrupted_render_leaves_no_file() {
-    for how in [["--planes", "200000"], ["--time-budget", "30"]] {
+    for (signal, how) in
+        [("-INT", ["--planes", "200000"]), ("-INT", ["--time-budget", "30"]), ("-TERM", ["--planes", "200000"])]
+    {
         let dir = scratch("sigint");
         let out = dir.join("out.exr");
         std::fs::write(&out, b"old contents").unwrap();
@@ -184,10 +191,10 @@ fn an_interrupted_render_leaves_no_file() {
             .spawn()
             .unwrap();
         std::thread::sleep(std::time::Duration::from_millis(700));
-        let killed = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+        let killed = Command::new("kill").args([signal, &child.id().to_string()]).status().unwrap();
         assert!(killed.success());
         let o = child.wait_with_output().unwrap();
-        assert_eq!(o.status.code(), Some(130), "{how:?}");
+        assert_eq!(o.status.code(), Some(130), "{signal} {how:?}");
         assert_eq!(files_in(&dir), ["out.exr"], "{how:?}");
         assert_eq!(std::fs::read(&out).unwrap(), b"old contents", "{how:?}");
         std::fs::remove_dir_all(&dir).unwrap();
@@ -215,10 +222,198 @@ fn a_render_on_a_time_budget_reports_its_planes_and_passes() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("plane passes") && stdout.contains("planes"), "{stdout}");
     assert_eq!(files_in(&dir), ["out.exr"]);
-    for bad in [vec!["--time-budget", "0"], vec!["--time-budget", "-1"], vec!["--time-budget", "1", "--planes", "100"]]
-    {
+    for (bad, says) in [
+        (vec!["--time-budget", "0"], "--time-budget: must be a positive number of seconds up to 1e6, got 0"),
+        // A negative number parses (as --exposure -1 does), to be refused with one clear line.
+        (vec!["--time-budget", "-1"], "--time-budget: must be a positive number of seconds up to 1e6, got -1"),
+        (
+            vec!["--time-budget", "1", "--planes", "100"],
+            "--planes: a render on a time budget chooses its own plane count",
+        ),
+    ] {
         let o = fogplanes(&[&["render", "media_scenes/six_lights.toml", "--quiet"][..], &bad].concat());
-        assert_eq!(o.status.code(), Some(2), "{bad:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{bad:?}: {err}");
+        assert!(err.starts_with(&format!("error: {says}")) && err.lines().count() == 1, "{bad:?}: {err}");
     }
+    // The scene's plane count is the scene's: no --planes was given, none is named (the table
+    // holds all its planes; a render would hold one chunk of them at a time).
+    let scene = dir.join("many.toml");
+    let text = std::fs::read_to_string("media_scenes/six_lights.toml").unwrap();
+    let planes = 1u64 << 27;
+    std::fs::write(&scene, format!("{}[render]\nplanes = {planes}\n", text.split("[render]").next().unwrap())).unwrap();
+    let o = fogplanes(&[
+        "table",
+        scene.to_str().unwrap(),
+        "--quiet",
+        "--reference",
+        "none.exr",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.starts_with(&format!("error: the scene's render.planes: 640x360 pixels with {planes} planes")),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A small EXR of the scene, rendered at pixel centres (a stand-in reference for `table`).
+fn small_reference(dir: &Path) -> PathBuf {
+    let path = dir.join("ref.exr");
+    let o = fogplanes(&[
+        "render",
+        "media_scenes/six_lights.toml",
+        "--resolution",
+        "32x18",
+        "--planes",
+        "200",
+        "--pixel-center",
+        "--quiet",
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    path
+}
+
+/// A NaN exposure once wrote an all-black PNG with exit code 0.
+#[test]
+fn a_non_finite_exposure_is_refused_before_any_work() {
+    let dir = scratch("exposure");
+    let reference = small_reference(&dir);
+    let (png, report) = (dir.join("x.png"), dir.join("report"));
+    let scene = "media_scenes/six_lights.toml";
+    let small = ["--resolution", "32x18", "--quiet"];
+    for args in [
+        vec!["render", scene, "--planes", "200", "-o", png.to_str().unwrap()],
+        vec!["reference", scene, "--spp", "4", "-o", png.to_str().unwrap()],
+        vec![
+            "table",
+            scene,
+            "--reference",
+            reference.to_str().unwrap(),
+            "--no-sweep",
+            "--out",
+            report.to_str().unwrap(),
+        ],
+    ] {
+        for exposure in ["--exposure=nan", "--exposure=-inf"] {
+            let o = fogplanes(&[&args[..], &small, &[exposure]].concat());
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{args:?} {exposure}: {err}");
+            assert!(err.starts_with("error: --exposure: must be a finite number of stops"), "{err}");
+            assert!(o.stdout.is_empty(), "{args:?}: work was done");
+            assert_eq!(files_in(&dir), ["ref.exr"], "{args:?} {exposure}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Every output is checked before any work: a table whose page cannot be written once
+/// rendered everything and replaced table.md, table.json and panel.png before failing, and a
+/// reference written twice to one file kept only its standard error.
+#[test]
+fn every_output_is_checked_before_any_work() {
+    let dir = scratch("outputs");
+    let reference = small_reference(&dir);
+    let report = dir.join("report");
+    for blocked in ["index.html", "table.md", "table.json", "panel.png", "error_vs_time.png", "error_vs_time.svg"] {
+        let _ = std::fs::remove_dir_all(&report);
+        std::fs::create_dir_all(report.join(blocked)).unwrap();
+        let o = fogplanes(&[
+            "table",
+            "media_scenes/six_lights.toml",
+            "--reference",
+            reference.to_str().unwrap(),
+            "--resolution",
+            "32x18",
+            "--planes",
+            "200",
+            "--sweep",
+            "100,200",
+            "--sweep-seeds",
+            "1",
+            "--samplers",
+            "sobol",
+            "--quiet",
+            "--out",
+            report.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{blocked}: {err}");
+        assert!(err.contains(blocked) && err.contains("is a directory") && err.lines().count() == 1, "{err}");
+        assert!(o.stdout.is_empty(), "{blocked}: the table was rendered");
+        assert_eq!(files_in(&report), [blocked], "{blocked}");
+    }
+
+    let out = dir.join("r.exr");
+    std::fs::write(&out, b"old contents").unwrap();
+    let same = dir.join(".").join("r.exr");
+    for twice in [&out, &same] {
+        let o = fogplanes(&[
+            "reference",
+            "media_scenes/six_lights.toml",
+            "--resolution",
+            "32x18",
+            "--spp",
+            "4",
+            "--quiet",
+            "-o",
+            out.to_str().unwrap(),
+            "--stderr-image",
+            twice.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains("is named twice as an output") && err.lines().count() == 1, "{err}");
+        assert!(o.stdout.is_empty());
+        assert_eq!(std::fs::read(&out).unwrap(), b"old contents");
+    }
+    assert_eq!(files_in(&dir), ["r.exr", "ref.exr", "report"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// SIGTERM while the image is being written removes the temporary file as Ctrl-C does: the
+/// output is either its old contents or the whole new image, and nothing is left beside it.
+#[test]
+fn sigterm_during_a_write_leaves_no_temporary_file() {
+    let dir = scratch("sigterm");
+    let out = dir.join("out.exr");
+    let mut caught = 0;
+    for _ in 0..10 {
+        std::fs::write(&out, b"old contents").unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+            .args(["render", "media_scenes/six_lights.toml", "--resolution", "1024x576", "--planes", "1", "--quiet"])
+            .args(["-o", out.to_str().unwrap()])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Signal the moment the temporary file appears.
+        let mut signalled = false;
+        while child.try_wait().unwrap().is_none() {
+            if files_in(&dir).iter().any(|f| f.ends_with(".tmp")) {
+                let _ = Command::new("kill").args(["-TERM", &child.id().to_string()]).status();
+                signalled = true;
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+        let status = child.wait().unwrap();
+        assert_eq!(files_in(&dir), ["out.exr"], "{status:?}");
+        let whole = std::fs::read(&out).unwrap() == b"old contents" || fogplanes::film::Film::load_exr(&out).is_ok();
+        assert!(whole, "{status:?}: a partial output");
+        if signalled && status.code() == Some(130) {
+            caught += 1;
+        } else {
+            assert_eq!(status.code(), Some(0), "signalled {signalled}");
+        }
+        if caught >= 2 {
+            break;
+        }
+    }
+    assert!(caught >= 1, "never caught a write under way");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1,7 +1,10 @@
 //! Property tests of the scene loader and the renderer on hostile input (proptest, bounded so
-//! that CI runs them in seconds; raise PROPTEST_CASES for a longer fuzzing run):
-//! no input panics, and every scene that loads renders only finite, non-negative pixels.
+//! that CI runs them in seconds; `PROPTEST_CASES=100000 cargo test --release --test all --
+//! fuzz_scene::` fuzzes for longer): no input panics, and every scene that loads renders only
+//! finite, non-negative pixels.
 
+use fogplanes::control::Control;
+use fogplanes::limits::MAX_SCENE_FILE_BYTES;
 use fogplanes::render::{RenderOptions, render};
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
@@ -35,7 +38,17 @@ const NASTY: &[&str] = &[
     "[0, 0, 0]",
 ];
 
+/// `PROPTEST_CASES` if set (a longer run), else `default` (CI). An explicit `cases` in the
+/// config would override the variable.
+fn cases(default: u32) -> u32 {
+    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
 fn mutate(text: &str, edits: &[(usize, u8, usize)]) -> String {
+    String::from_utf8_lossy(&mutate_bytes(text, edits)).into_owned()
+}
+
+fn mutate_bytes(text: &str, edits: &[(usize, u8, usize)]) -> Vec<u8> {
     let mut s: Vec<u8> = text.as_bytes().to_vec();
     for &(pos, kind, arg) in edits {
         if s.is_empty() {
@@ -59,11 +72,11 @@ fn mutate(text: &str, edits: &[(usize, u8, usize)]) -> String {
             _ => s[pos] = (arg % 256) as u8,
         }
     }
-    String::from_utf8_lossy(&s).into_owned()
+    s
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(512), ..ProptestConfig::default() })]
 
     #[test]
     fn mutated_scene_files_never_panic(edits in prop::collection::vec((any::<usize>(), any::<u8>(), any::<usize>()), 1..6)) {
@@ -71,6 +84,35 @@ proptest! {
         match Scene::parse(&text, "fuzz.toml", "fuzz") {
             Ok(scene) => prop_assert!(!scene.lights.is_empty()),
             Err(e) => prop_assert!(e.to_string().starts_with("fuzz.toml")),
+        }
+    }
+
+    /// The same mutations as bytes (not UTF-8 perhaps) in a file read by `Scene::load`, padded
+    /// with a comment to a length either side of the size limit: loads, or fails with one line
+    /// naming the file; never a panic, never more than the limit read.
+    #[test]
+    fn mutated_scene_files_load_or_fail_naming_the_file(
+        edits in prop::collection::vec((any::<usize>(), any::<u8>(), any::<usize>()), 1..6),
+        pad_to in prop_oneof![4 => Just(None), 1 => (MAX_SCENE_FILE_BYTES - 2..=MAX_SCENE_FILE_BYTES + 2).prop_map(Some)],
+    ) {
+        let mut bytes = mutate_bytes(BASE, &edits);
+        if let Some(n) = pad_to {
+            bytes.extend(b"\n#");
+            bytes.resize((n as usize).max(bytes.len()), b'x');
+        }
+        let path = std::env::temp_dir().join(format!("fogplanes-fuzz-scene-{}.toml", std::process::id()));
+        std::fs::write(&path, &bytes).unwrap();
+        let loaded = Scene::load(&path);
+        let _ = std::fs::remove_file(&path);
+        match loaded {
+            Ok(scene) => prop_assert!(bytes.len() as u64 <= MAX_SCENE_FILE_BYTES && !scene.lights.is_empty()),
+            Err(e) => {
+                let e = e.to_string();
+                prop_assert!(e.starts_with(path.to_str().unwrap()) && e.lines().count() == 1, "{}", e);
+                if bytes.len() as u64 > MAX_SCENE_FILE_BYTES {
+                    prop_assert!(e.contains("scene files are limited to"), "{}", e);
+                }
+            }
         }
     }
 }
@@ -110,7 +152,7 @@ fn scene_text(cam: [f64; 6], lights: &[([f64; 9], f64)], sigma: (f64, f64)) -> S
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(96), ..ProptestConfig::default() })]
 
     /// Random valid-looking scenes (lights anywhere, any orientation and size, tiny to large
     /// coefficients, cameras inside and outside the box): loads or fails cleanly, and renders
@@ -141,7 +183,7 @@ proptest! {
                 seed,
                 ..RenderOptions::default()
             };
-            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+            let (film, _) = render(&scene, &opts, Control::none()).unwrap();
             prop_assert!(film.all_finite_non_negative(), "{}", text);
         }
     }

@@ -5,6 +5,7 @@
 //! The default run is sized for CI; `cargo test --release -- --ignored hard_scenes_in_depth`
 //! runs the heavy version (more planes, seeds and pixels) and prints the table for the notes.
 
+use fogplanes::control::Control;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference};
 use fogplanes::render::{RenderOptions, render};
@@ -12,8 +13,7 @@ use fogplanes::scene::Scene;
 use fogplanes::weights::{Estimator, Weighting};
 use std::path::PathBuf;
 
-mod common;
-use common::MeanEstimate;
+use crate::common::MeanEstimate;
 
 fn hard_scenes() -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir("media_scenes/hard")
@@ -43,8 +43,9 @@ fn check(size: &Size) {
         let reference = render_reference(
             &scene,
             &ReferenceOptions { spp: size.reference_spp, uniform: false, seed: 11, pixel_center: true },
-            &|| {},
-        );
+            Control::none(),
+        )
+        .unwrap();
         assert!(reference.mean.all_finite_non_negative(), "{name}: reference");
         let n = 3.0 * reference.mean.pixels.len() as f64;
         let ref_mean = reference.mean.mean();
@@ -61,7 +62,7 @@ fn check(size: &Size) {
                     pixel_center: true,
                     ..RenderOptions::default()
                 };
-                let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+                let (film, _) = render(&scene, &opts, Control::none()).unwrap();
                 if !film.all_finite_non_negative() {
                     failures.push(format!("{name} {estimator} seed {seed}: a pixel is negative, NaN or infinite"));
                 }
@@ -99,9 +100,9 @@ fn hard_scenes_in_depth() {
 fn scaled_scenes_render_the_same_image() {
     let load = |p: &str| Scene::load(std::path::Path::new(p)).unwrap().with_resolution(48, 27).unwrap();
     let opts = RenderOptions { planes: 3000, seed: 4, pixel_center: true, ..RenderOptions::default() };
-    let (base, _) = render(&load("media_scenes/six_lights.toml"), &opts, &|| {}).unwrap();
+    let (base, _) = render(&load("media_scenes/six_lights.toml"), &opts, Control::none()).unwrap();
     for p in ["media_scenes/hard/scaled_1e-3.toml", "media_scenes/hard/scaled_1e4.toml"] {
-        let (img, _) = render(&load(p), &opts, &|| {}).unwrap();
+        let (img, _) = render(&load(p), &opts, Control::none()).unwrap();
         let m = fogplanes::metrics::compare(&img, &base).unwrap();
         assert!(m.smape < 1e-3, "{p}: SMAPE {} against the unscaled scene", m.smape);
     }
@@ -132,7 +133,7 @@ fn rays_in_a_lights_plane_get_nothing() {
         for seed in 0..64 {
             let opts =
                 RenderOptions { planes: 4000, weighting: w, seed, pixel_center: true, ..RenderOptions::default() };
-            let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+            let (film, _) = render(&scene, &opts, Control::none()).unwrap();
             for i in 0..cam.width {
                 assert_eq!(film.get(i, middle), glam::Vec3::ZERO, "{w} seed {seed}: pixel ({i}, {middle}) is lit");
             }

@@ -1,10 +1,10 @@
 //! The reference renderer (docs/mathematics.md section 4) agrees with deterministic quadrature on single pixel
 //! centres within 4 of its own standard errors; and the table command writes all its files.
 
+use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference, scattering_sample};
-use fogplanes::sampling::light_distribution;
 use fogplanes::sampling::{rng_for, unit_f64};
 use fogplanes::scene::Scene;
 use rand::RngCore;
@@ -14,13 +14,12 @@ fn six_lights() -> Scene {
     Scene::load(Path::new("media_scenes/six_lights.toml")).unwrap()
 }
 
-mod common;
-use common::MeanEstimate;
+use crate::common::MeanEstimate;
 
 #[test]
 fn reference_samples_match_quadrature_at_pixel_centres() {
     let scene = six_lights();
-    let lights = light_distribution(&scene);
+    let lights = scene.light_distribution();
     let cam = &scene.camera;
     let mut failures = Vec::new();
     // Pixels in the open fog, beside the red spot, under the ceiling, near the edge-on amber
@@ -58,7 +57,10 @@ fn reference_samples_match_quadrature_at_pixel_centres() {
 fn reference_image_reports_a_standard_error_that_shrinks_with_samples() {
     let scene = six_lights().with_resolution(32, 18).unwrap();
     let opts = |spp| ReferenceOptions { spp, uniform: true, seed: 3, pixel_center: true };
-    let (a, b) = (render_reference(&scene, &opts(64), &|| {}), render_reference(&scene, &opts(1024), &|| {}));
+    let (a, b) = (
+        render_reference(&scene, &opts(64), Control::none()).unwrap(),
+        render_reference(&scene, &opts(1024), Control::none()).unwrap(),
+    );
     assert!(a.mean.all_finite_non_negative() && b.mean.all_finite_non_negative());
     // The standard error falls as 1 / sqrt(spp): a factor 4 for 16x the samples, within 25%.
     let ratio = a.noise_mse().sqrt() / b.noise_mse().sqrt();

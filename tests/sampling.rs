@@ -4,23 +4,11 @@
 
 use fogplanes::photon_plane::{PhotonPlane, sample_planes};
 use fogplanes::sampling::Sampler;
+use fogplanes::sampling::chi_square::{critical, statistic, uniform_statistic};
 use fogplanes::scene::Scene;
 
 fn scene() -> Scene {
     Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap()
-}
-
-/// The chi-square value with `dof` degrees of freedom exceeded with probability 1e-4.
-fn chi_square_critical(dof: usize) -> f64 {
-    let k = dof as f64;
-    let z = 3.719; // standard normal upper 1e-4 quantile
-    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
-}
-
-/// Pearson's statistic of `counts` against expected probabilities.
-fn chi_square(counts: &[u64], probabilities: &[f64]) -> f64 {
-    let n: u64 = counts.iter().sum();
-    counts.iter().zip(probabilities).map(|(&c, &p)| (c as f64 - n as f64 * p).powi(2) / (n as f64 * p)).sum()
 }
 
 fn assert_uniform(name: &str, values: impl Iterator<Item = f64>, bins: usize) {
@@ -29,10 +17,9 @@ fn assert_uniform(name: &str, values: impl Iterator<Item = f64>, bins: usize) {
         assert!((0.0..1.0).contains(&v), "{name}: {v} outside [0, 1)");
         counts[(v * bins as f64) as usize] += 1;
     }
-    let stat = chi_square(&counts, &vec![1.0 / bins as f64; bins]);
-    let critical = chi_square_critical(bins - 1);
-    println!("{name}: chi2 = {stat:.1} (critical {critical:.1})");
-    assert!(stat < critical, "{name}: chi2 = {stat:.1} beyond {critical:.1}");
+    let (stat, limit) = (uniform_statistic(&counts), critical(bins - 1));
+    println!("{name}: chi2 = {stat:.1} (critical {limit:.1})");
+    assert!(stat < limit, "{name}: chi2 = {stat:.1} beyond {limit:.1}");
 }
 
 const N: usize = 400_000;
@@ -48,8 +35,8 @@ fn lights_are_chosen_by_power() {
         for p in &planes {
             counts[p.light] += 1;
         }
-        let stat = chi_square(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
-        assert!(stat < chi_square_critical(s.lights.len() - 1), "{sampler}: chi2 = {stat}, counts {counts:?}");
+        let stat = statistic(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
+        assert!(stat < critical(s.lights.len() - 1), "{sampler}: chi2 = {stat}, counts {counts:?}");
     }
 }
 
@@ -109,8 +96,8 @@ fn the_first_plane_over_scramble_seeds_is_uniform() {
     for p in &firsts {
         counts[p.light] += 1;
     }
-    let stat = chi_square(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
-    assert!(stat < chi_square_critical(s.lights.len() - 1), "first plane: chi2 = {stat}, counts {counts:?}");
+    let stat = statistic(&counts, &powers.iter().map(|p| p / total).collect::<Vec<_>>());
+    assert!(stat < critical(s.lights.len() - 1), "first plane: chi2 = {stat}, counts {counts:?}");
 }
 
 #[test]
@@ -122,5 +109,5 @@ fn the_chi_square_test_rejects_a_wrong_density() {
         let cos = (i as f64 + 0.5) / n as f64; // uniform cos: the uniform-hemisphere density
         counts[((cos * cos) * 64.0) as usize] += 1;
     }
-    assert!(chi_square(&counts, &[1.0 / 64.0; 64]) > chi_square_critical(63));
+    assert!(uniform_statistic(&counts) > critical(63));
 }

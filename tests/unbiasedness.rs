@@ -13,8 +13,7 @@ use fogplanes::scene::Scene;
 use fogplanes::weights::Weighting;
 use glam::DVec3;
 
-mod common;
-use common::{BruteForce, MeanRgb, TWO_LIGHTS};
+use crate::common::{BruteForce, MeanRgb, TWO_LIGHTS};
 
 struct Case {
     name: &'static str,

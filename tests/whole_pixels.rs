@@ -11,21 +11,21 @@
 //!
 //! Fixed seeds throughout; every tolerance is in standard errors measured from the samples.
 
+use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::gather::{CameraRay, GatherContext};
+use fogplanes::partial::{CHUNK_PLANES, chunks, finish, merge_in_canonical_order, render_chunk};
 use fogplanes::photon_plane::sample_plane_range;
-use fogplanes::pixel::{RaySetGather, plane_group, ray_set_of_plane};
+use fogplanes::pixel::{plane_group, ray_set_of_plane, ray_set_rays};
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{RenderOptions, RenderStats, render, render_in_passes};
+use fogplanes::render::{PreparedPlanes, RenderOptions, render, render_in_passes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::Weighting;
 use glam::{DVec3, Vec3};
-use std::sync::atomic::AtomicBool;
 
-mod common;
-use common::{BruteForce, MeanEstimate, MeanRgb, TWO_LIGHTS};
+use crate::common::{BruteForce, MeanEstimate, MeanRgb, TWO_LIGHTS};
 
 /// Two panels crossing each other (the line where they meet is an outline), and a strip reaching
 /// from the far wall to behind the camera (its outline crosses the camera's plane).
@@ -183,7 +183,7 @@ sigma_a = 0.0
             let mut tally = MeanRgb::default();
             for seed in 0..100 {
                 let opts = RenderOptions { planes: 16, seed, ..RenderOptions::default() };
-                let (film, _) = render(&scene, &opts, &|| {}).unwrap();
+                let (film, _) = render(&scene, &opts, Control::none()).unwrap();
                 tally.add(film.get(3, 4));
             }
             for c in 0..3 {
@@ -216,8 +216,12 @@ fn against_reference(
     seeds: u64,
     image: &dyn Fn(u64) -> Film,
 ) -> Vec<String> {
-    let reference =
-        render_reference(scene, &ReferenceOptions { spp: 4096, uniform: false, seed: 17, pixel_center }, &|| {});
+    let reference = render_reference(
+        scene,
+        &ReferenceOptions { spp: 4096, uniform: false, seed: 17, pixel_center },
+        Control::none(),
+    )
+    .unwrap();
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     const BLOCK: usize = 8;
     let blocks_x = w.div_ceil(BLOCK);
@@ -308,7 +312,7 @@ fn whole_pixel_images_match_the_reference() {
         let name = format!("{file}{}", if pixel_center { " (pixel centres)" } else { "" });
         failures.extend(against_reference(&name, &s, pixel_center, 64, &|seed| {
             let opts = RenderOptions { planes: 1500, seed: 40 + seed, pixel_center, ..RenderOptions::default() };
-            render(&s, &opts, &|| {}).unwrap().0
+            render(&s, &opts, Control::none()).unwrap().0
         }));
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -322,43 +326,59 @@ fn a_render_in_passes_matches_the_reference() {
     let failures = against_reference("passes", &s, false, 24, &|seed| {
         let opts = RenderOptions { seed: 70 + seed, ..RenderOptions::default() };
         let mut schedule = [256usize, 256, 512, 3000, 0].into_iter();
-        render_in_passes(&s, &opts, &|| {}, &mut |_, _| schedule.next().unwrap()).unwrap().0
+        render_in_passes(&s, &opts, Control::none(), &mut |_, _| schedule.next().unwrap()).unwrap().0
     });
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// Each plane meets the ray set of its group whatever range is rendered: ranges rendered apart
-/// (unnormalised) and added give the whole render's sums, up to f32 summation order.
+/// Each plane meets the ray set of its group (floor(i K / N)) in whatever chunk it is rendered:
+/// chunks that cut the groups anywhere, rendered apart and merged, give the render bit for bit,
+/// and their sums equal each group gathered alone along its own ray set (made here, apart from
+/// the chunks' code), up to f32 summation order.
 #[test]
 fn plane_ranges_rendered_apart_add_up_to_the_render() {
     let s = scene("media_scenes/six_lights.toml", 48, 27);
-    let opts = RenderOptions { planes: 5000, seed: 9, ..RenderOptions::default() };
-    assert_eq!(ray_set_of_plane(4999, 5000, opts.spp), opts.spp - 1);
+    let planes = 2 * CHUNK_PLANES + 5000;
+    let opts = RenderOptions { planes, seed: 9, ..RenderOptions::default() };
+    assert_eq!(ray_set_of_plane(planes - 1, planes, opts.spp), opts.spp - 1);
+    // The groups (of 2360 or 2361 planes) straddle the chunk boundaries.
+    assert!(chunks(planes).iter().any(|c| (0..opts.spp).any(|k| {
+        let g = plane_group(k, planes, opts.spp);
+        g.start < c.start && c.start < g.end
+    })));
+    let parts: Vec<_> =
+        chunks(planes).into_iter().rev().map(|c| render_chunk(&s, &opts, c, Control::none()).unwrap().0).collect();
+    let merged = merge_in_canonical_order(parts).unwrap();
+    let (film, _) = render(&s, &opts, Control::none()).unwrap();
+    assert_eq!(finish(&s, &opts, &merged).unwrap(), film);
+    // Each group alone, along its ray set.
     let kernel = opts.kernel.resolve().unwrap();
-    let gather = RaySetGather { scene: &s, opts: &opts, kernel, progress: &|| {}, cancel: &AtomicBool::new(false) };
-    let pixels = 48 * 27;
-    let sums_of = |range: std::ops::Range<usize>| {
-        let mut sums = vec![Vec3::ZERO; pixels];
-        gather.gather_range(range, 1, &mut sums, &mut RenderStats::default()).unwrap();
-        sums
-    };
-    let whole = sums_of(0..5000);
-    let mut parts = vec![DVec3::ZERO; pixels];
-    // Chunks that cut groups (5000 planes in 16 groups of 312 or 313) anywhere.
-    for range in [0..1000, 1000..1001, 1001..4096, 4096..5000] {
-        for (p, s) in parts.iter_mut().zip(sums_of(range)) {
-            *p += s.as_dvec3();
-        }
+    let mut groups = vec![DVec3::ZERO; 48 * 27];
+    for k in 0..opts.spp {
+        let prepared = PreparedPlanes::range(
+            &s,
+            plane_group(k, planes, opts.spp),
+            1,
+            opts.seed,
+            opts.sampler,
+            opts.accelerator,
+            Control::none(),
+        )
+        .unwrap();
+        let rays = ray_set_rays(&s, opts.seed, k, false);
+        let mut sums = vec![Vec3::ZERO; groups.len()];
+        prepared.gather(opts.weighting, kernel, &rays, &mut sums, Control::none()).unwrap();
+        groups.iter_mut().zip(&sums).for_each(|(g, s)| *g += s.as_dvec3());
     }
-    let largest = whole.iter().map(|v| v.max_element()).fold(0.0f32, f32::max);
+    let largest = groups.iter().map(|v| v.max_element()).fold(0.0f64, f64::max);
     assert!(largest > 0.0);
-    for (a, b) in parts.iter().zip(&whole) {
-        assert!((*a - b.as_dvec3()).abs().max_element() <= 1e-5 * largest as f64, "{a} vs {b}");
+    for (a, b) in merged.sums.iter().zip(&groups) {
+        assert!((*a - *b).abs().max_element() <= 1e-5 * largest, "{a} vs {b}");
     }
     // The render is those sums over N plus the emission.
-    let (film, _) = render(&s, &opts, &|| {}).unwrap();
     let emission = fogplanes::emission::direct_emission(&s, opts.seed, opts.spp, false);
-    for ((f, w), e) in film.pixels.iter().zip(&whole).zip(&emission) {
-        assert!((*f - (*w / 5000.0 + *e)).abs().max_element() <= 1e-5 * f.max_element().max(1e-3));
+    for ((f, g), e) in film.pixels.iter().zip(&groups).zip(&emission) {
+        let expected = (*g / planes as f64).as_vec3() + *e;
+        assert!((*f - expected).abs().max_element() <= 1e-5 * f.max_element().max(1e-3), "{f} vs {expected}");
     }
 }

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# The comparison page (index.html of `fogplanes table`) in a real browser: renders a small table
-# of the benchmark scene with the release binary, installs playwright-core (npm ci, here), and
-# runs check_page.mjs in headless Chromium: the images decode, the screenshot is not blank, a
-# number key changes the shown image, zoom, pan, exposure, the error view and the table rows
-# work, nothing is fetched and nothing is logged as an error.
+# The comparison page (index.html of `fogplanes table`) in a real browser: checks that the
+# page's script (src/page/viewer.js) parses (`node --check`), renders a small table of the
+# benchmark scene with the release binary, installs playwright-core (npm ci, here), and runs
+# check_page.mjs in headless Chromium: the images decode, the screenshot is not blank, a number
+# key changes the shown image (also one pressed while the images still decode), zoom, pan,
+# exposure, the error view, the table rows and the plot work, nothing is fetched and nothing is
+# logged as an error.
 #
 #   tests/browser/check.sh [--resolution WxH] [--planes N] [--out DIR]
 #   tests/browser/check.sh --page path/to/index.html      (check a page already written)
@@ -24,7 +26,7 @@ while [ $# -gt 0 ]; do
         --planes) planes="$2"; shift 2 ;;
         --out) out="$2"; shift 2 ;;
         --page) page="$2"; shift 2 ;;
-        -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
         *) echo "check.sh: unknown argument $1" >&2; exit 2 ;;
     esac
 done
@@ -39,6 +41,8 @@ skip() {
 }
 chromium="${CHROMIUM:-/usr/bin/chromium}"
 command -v node >/dev/null || skip "node is not installed (apt-get install nodejs npm)"
+node --check "$root/src/page/viewer.js"   # syntax only; runs even where the browser is missing
+echo "node --check src/page/viewer.js: ok" >&2
 command -v npm >/dev/null || skip "npm is not installed (apt-get install npm)"
 [ -x "$chromium" ] || skip "no chromium at $chromium (apt-get install chromium, or set CHROMIUM)"
 node_major="$(node -p 'process.versions.node.split(".")[0]')"

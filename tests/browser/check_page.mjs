@@ -9,7 +9,8 @@
 // images decode (and, when an expected.json lies beside the page, to its values: {"pixels":
 // [{x, y, original, decoded, smape1}]}, one [r, g, b] per image; `fogplanes table` writes
 // none); the screenshot is not blank; a number key changes the shown image (data attribute,
-// label text, canvas pixels); zoom is pixel-exact and the two views pan together; exposure, the
+// label text, canvas pixels), also when pressed (or a button clicked) while the images still
+// decode; zoom is pixel-exact and the two views pan together; exposure, the
 // error view toggle and table rows work; and nothing is fetched and nothing is logged as an
 // error. Exits 1 on any failure.
 
@@ -109,7 +110,7 @@ try {
   }
 
   // ---- Helpers -------------------------------------------------------------------------
-  const canvasHash = (sel) => page.evaluate((sel) => {
+  const canvasHash = (sel, p = page) => p.evaluate((sel) => {
     const c = document.querySelector(sel);
     const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
     let h = 2166136261;
@@ -229,10 +230,57 @@ try {
   await page.click("#results tr.selectable >> nth=2");
   check(await page.getAttribute("#viewer", "data-current") === "3", "clicking a table row selects its estimator");
   if (await page.$("#plot")) {
-    check((await page.$$("#plot svg")).length === 1, "the plot is inlined");
+    const plot = await page.$$eval("#plot img", (imgs) => imgs.length === 1 && {
+      svg: imgs[0].src.startsWith("data:image/svg+xml;base64,"), w: imgs[0].naturalWidth, h: imgs[0].naturalHeight, shown: imgs[0].width,
+    });
+    check(plot && plot.svg && plot.w > 0 && plot.h > 0 && plot.shown > 0, `the plot is an SVG image inside the page (${plot ? `${plot.w}x${plot.h}, shown ${plot.shown} wide` : "no single #plot img"})`);
+    await page.locator("#plot").screenshot({ path: resolve(shotDir, "screenshot-plot.png") });
   } else {
     console.log("      (no plot: a table without a sweep)");
   }
+
+  // ---- Input while the images decode ---------------------------------------------------------
+  // Decoding is held back (createImageBitmap waits for a gate the check opens), so these keys and
+  // clicks surely come before the images are ready; they must take effect once they are.
+  const gated = async () => {
+    const p = await context.newPage();
+    p.on("pageerror", (e) => problems.push("pageerror (while decoding): " + e.message));
+    await p.addInitScript(() => {
+      const decode = window.createImageBitmap.bind(window);
+      let open;
+      const gate = new Promise((resolve) => { open = resolve; });
+      window.openDecodeGate = open;
+      window.createImageBitmap = (...a) => gate.then(() => decode(...a));
+    });
+    await p.goto(pathToFileURL(pagePath).href);
+    return p;
+  };
+  const openGate = async (p) => {
+    await p.evaluate(() => window.openDecodeGate());
+    await p.waitForSelector('#viewer[data-ready="true"], #viewer[data-ready="error"]', { timeout: 60000 });
+    await p.mouse.move(2, 2);
+  };
+  const early = await gated();
+  check(await early.getAttribute("#viewer", "data-ready") === "false", "decoding held back: the page is not ready yet");
+  await early.keyboard.press("3");
+  await openGate(early);
+  const kept = { current: await early.getAttribute("#viewer", "data-current"), label: await early.textContent("#image-label"), hash: await canvasHash(IMG, early) };
+  check(kept.current === "2" && kept.label === labels[2], `key 3 pressed while decoding selects image 2 once ready (data-current=${kept.current}, ${kept.label})`);
+  check((await early.textContent("#error-label")).includes(labels[2]), "the error view follows it");
+  await early.keyboard.press("1");
+  await early.keyboard.press("3");
+  check(kept.hash === await canvasHash(IMG, early), "and shows its pixels, as key 3 pressed after decoding does");
+  await early.close();
+  const clicked = await gated();
+  await clicked.click('.choices button[data-index="4"]');
+  await clicked.keyboard.press("e");
+  await clicked.keyboard.press("m");
+  check(await clicked.getAttribute("#viewer", "data-ready") === "false", "still decoding after a click and two keys");
+  await openGate(clicked);
+  const s = await clicked.evaluate(() => ({ ...fogViewer.state }));
+  check(await clicked.getAttribute("#viewer", "data-current") === "4" && s.errorOf === 4, `a button clicked while decoding selects its image once ready (data-current=${s.current})`);
+  check(s.exposure === 0.5 && s.metric === "relative", `exposure and metric keys pressed while decoding are kept (${s.exposure} EV, ${s.metric})`);
+  await clicked.close();
 
   check(outside.length === 0, `nothing is fetched from outside (${outside.length}${outside.length ? ": " + outside.slice(0, 3).join(", ") : ""})`);
   check(problems.length === 0, `no console errors or warnings${problems.length ? ": " + problems.join(" | ") : ""}`);

@@ -80,14 +80,22 @@ CASES = [
 @pytest.mark.parametrize("kwargs,args", CASES, ids=[str(i) for i in range(len(CASES))])
 def test_render_is_bit_identical_to_the_cli(tmp_path, kwargs, args):
     options = {**SMALL, **kwargs}
-    image = fogplanes.render(SIX_LIGHTS, **options)
+    image, stats = fogplanes.render(SIX_LIGHTS, **options, return_stats=True)
     out = tmp_path / "cli.exr"
     cli_args = ["--resolution", "96x54", "-q", "-o", out, *args]
     if "planes" not in kwargs:
         cli_args += ["--planes", SMALL["planes"]]
-    run_cli("render", SIX_LIGHTS, *cli_args)
+    printed = run_cli("render", SIX_LIGHTS, *cli_args).stdout
     assert image.shape == (54, 96, 3) and image.dtype == np.float32
     assert_bit_identical(image, fogplanes.load_image(out))
+    assert_same_work(printed, stats)
+
+
+def assert_same_work(printed: str, stats: dict) -> None:
+    """The command line's summary line and Python's stats tell of the same resolved render:
+    estimator and K, planes, rays (resolution x spp), hits and tests (everything else)."""
+    work = lambda summary: summary.split(", gather")[0]  # noqa: E731 (the timings differ)
+    assert work(printed.splitlines()[0]) == work(stats["summary"]), (printed, stats["summary"])
 
 
 def test_scene_defaults_apply_as_on_the_command_line(tmp_path):
@@ -97,9 +105,10 @@ def test_scene_defaults_apply_as_on_the_command_line(tmp_path):
     for kwargs, args in [({}, []), ({"estimator": "smis-exact"}, ["-e", "smis-exact"]),
                          ({"estimator": "smis-cosine"}, ["-e", "smis-cosine"])]:
         out = tmp_path / "cli.exr"
-        run_cli("render", path, "--resolution", "64x36", "-q", "-o", out, *args)
+        printed = run_cli("render", path, "--resolution", "64x36", "-q", "-o", out, *args).stdout
         image, stats = fogplanes.render(scene, resolution=(64, 36), return_stats=True, **kwargs)
         assert_bit_identical(image, fogplanes.load_image(out))
+        assert_same_work(printed, stats)
         expected = {(): "smis-cosine-k4", ("smis-exact",): "smis-exact", ("smis-cosine",): "smis-cosine-k4"}
         assert stats["estimator"] == expected[tuple(kwargs.values())]
         assert stats["planes"] == 1500 and stats["rays"] == 2 * 64 * 36
@@ -269,49 +278,114 @@ def test_files_that_cannot_be_opened_raise_os_errors(tmp_path):
     assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*.tmp"))
 
 
+def words(message: str) -> tuple[str, str]:
+    """(the setting's name, what is wrong) of a one-line error."""
+    message = message.removesuffix("\n")
+    assert "\n" not in message, message
+    name, _, rest = message.partition(": ")
+    return name, rest
+
+
 def test_bad_options_raise_value_error_with_the_cli_message(tmp_path):
+    # The same resolution in the core: the same words, the setting named as each front end's
+    # caller wrote it (`--planes` on the command line, `planes=0` here, never a flag).
     cases = [
-        ({"planes": 0}, ["--planes", "0"]),
-        ({"spp": 0}, ["--spp", "0"]),
-        ({"threads": 0}, ["--threads", "0"]),
-        ({"resolution": (0, 10)}, ["--resolution", "0x10"]),
-        ({"estimator": "unweighted", "orientations": 3}, ["-e", "unweighted", "--orientations", "3"]),
-        ({"orientations": 0}, ["--orientations", "0"]),
-        ({"planes": 2**27 + 1}, ["--planes", str(2**27 + 1)]),
-        ({"resolution": (30000, 30000)}, ["--resolution", "30000x30000"]),
+        ({"planes": 0}, ["--planes", "0"], "planes=0"),
+        ({"spp": 0}, ["--spp", "0"], "spp=0"),
+        ({"threads": 0}, ["--threads", "0"], "threads=0"),
+        ({"resolution": (0, 10)}, ["--resolution", "0x10"], "resolution=(0, 10)"),
+        ({"estimator": "unweighted", "orientations": 3}, ["-e", "unweighted", "--orientations", "3"],
+         "orientations=3"),
+        ({"orientations": 0}, ["--orientations", "0"], "orientations=0"),
+        ({"planes": 2**27 + 1}, ["--planes", str(2**27 + 1)], f"planes={2**27 + 1}"),
+        ({"resolution": (30000, 30000)}, ["--resolution", "30000x30000"], "resolution=(30000, 30000)"),
+        ({"time_budget": -1}, ["--time-budget", "-1"], "time_budget=-1"),
+        ({"time_budget": float("nan")}, ["--time-budget", "nan"], "time_budget=nan"),
+        ({"time_budget": 1, "planes": 100}, ["--time-budget", "1", "--planes", "100"], "planes=100"),
     ]
-    for kwargs, args in cases:
+    for kwargs, args, python_name in cases:
         with pytest.raises(ValueError) as caught:
             fogplanes.render(SIX_LIGHTS, **kwargs)
         result = run_cli("render", SIX_LIGHTS, "-q", "-o", tmp_path / "x.exr", *args, check=False)
         assert result.returncode == 2, (kwargs, result.stderr)
-        assert result.stderr == f"error: {caught.value}\n", kwargs
+        assert result.stderr.startswith("error: ") and "--" not in str(caught.value), (result.stderr, caught.value)
+        cli_name, cli_words = words(result.stderr.removeprefix("error: "))
+        assert words(str(caught.value)) == (python_name, cli_words), kwargs
+        assert cli_name == "--" + python_name.split("=")[0].replace("_", "-"), result.stderr
+    assert not list(tmp_path.glob("*.exr"))
+
+
+def test_a_render_on_a_time_budget(tmp_path):
+    start = time.perf_counter()
+    image, stats = fogplanes.render(SIX_LIGHTS, resolution=(64, 36), time_budget=0.3, return_stats=True)
+    seconds = time.perf_counter() - start
+    assert image.shape == (36, 64, 3) and np.all(np.isfinite(image)) and image.mean() > 0
+    assert stats["plane_passes"] >= 1 and stats["planes"] >= 256 and stats["rays"] == 64 * 36
+    assert seconds < 0.3 + 2.0, seconds  # the budget, and the set-up around it
+    # A render of a plane count is one pass.
+    assert fogplanes.render(SIX_LIGHTS, planes=300, resolution=(16, 9), return_stats=True)[1]["plane_passes"] == 1
 
 
 def test_other_bad_arguments():
-    with pytest.raises(ValueError, match=r"^--estimator: unknown estimator \"nope\"; expected one of unweighted"):
+    with pytest.raises(ValueError, match=r"^estimator='nope': unknown estimator \"nope\"; expected one of unweighted"):
         fogplanes.render(SIX_LIGHTS, "nope")
-    with pytest.raises(ValueError, match="^--accelerator: unknown accelerator"):
+    with pytest.raises(ValueError, match="^accelerator='octree': unknown accelerator"):
         fogplanes.render(SIX_LIGHTS, accelerator="octree")
-    with pytest.raises(ValueError, match="^--kernel: unknown kernel"):
+    with pytest.raises(ValueError, match="^kernel='gpu': unknown kernel"):
         fogplanes.render(SIX_LIGHTS, kernel="gpu")
     for name, value in [("planes", -5), ("seed", -1), ("spp", 2**40), ("threads", 2**70), ("orientations", -2)]:
-        with pytest.raises(ValueError, match=f"^--{name}: .* is out of range"):
+        with pytest.raises(ValueError, match=f"^{name}={value}: out of range"):
             fogplanes.render(SIX_LIGHTS, **{name: value})
-    with pytest.raises(ValueError, match="^--spp"):
+    with pytest.raises(ValueError, match=r"^spp=0: samples per pixel must be between 1 and"):
         fogplanes.reference(SIX_LIGHTS, spp=0)
+    with pytest.raises(ValueError, match=r"^resolution=\(0, 4\): each side"):
+        fogplanes.reference(SIX_LIGHTS, resolution=(0, 4))
+    with pytest.raises(ValueError, match=r"^resolution=\(0, 4\): each side"):
+        fogplanes.load_scene(SIX_LIGHTS).with_resolution(0, 4)
     with pytest.raises(TypeError):
         fogplanes.render(SIX_LIGHTS, planes=1.5)
     with pytest.raises(TypeError):
         fogplanes.render(SIX_LIGHTS, resolution=(1, 2, 3))
+    with pytest.raises(TypeError):
+        fogplanes.render(SIX_LIGHTS, time_budget="soon")
     with pytest.raises(TypeError, match="fogplanes.Scene or the path"):
         fogplanes.render(42)
     with pytest.raises(ValueError, match="differ in size"):
         fogplanes.compare(np.zeros((2, 3, 3)), np.zeros((3, 2, 3)))
     with pytest.raises(ValueError, match=r"shape \(height, width, 3\)"):
         fogplanes.compare(np.zeros((2, 3, 4)), np.zeros((2, 3, 4)))
-    with pytest.raises((TypeError, ValueError)):
-        fogplanes.compare(np.zeros((2, 3)), np.zeros((2, 3)))
+    # An array of the wrong dimensions: one clear line, whatever the dtype or container.
+    for image in (np.zeros((2, 3)), [[1.0, 2.0]], np.zeros(5, dtype=np.float16)):
+        shape = np.shape(image)
+        expected = f"image: expected an array of shape (height, width, 3), got {shape}"
+        for call in (lambda: fogplanes.compare(image, image), lambda: fogplanes.save_image("x.exr", image)):
+            with pytest.raises(ValueError) as caught:
+                call()
+            assert str(caught.value) == expected
+
+
+SAVE_HUGE = """
+import resource, sys
+import numpy as np, fogplanes
+# Far less address space than the float32 copy of the array would take (7.9 GB).
+limit = 3 << 30
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+image = np.broadcast_to(np.float64(0), (32769, 20000, 3))
+try:
+    fogplanes.save_image(sys.argv[1], image)
+except ValueError as e:
+    print("ValueError:", e)
+"""
+
+
+def test_save_image_checks_the_shape_before_converting(tmp_path):
+    # Before, the float64 array was converted to float32 first: MemoryError under a limit, and a
+    # real 7.9 GB allocation without one, only to be refused for its size afterwards.
+    result = subprocess.run([sys.executable, "-c", SAVE_HUGE, str(tmp_path / "x.exr")], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("ValueError: image: each side must be between 1 and 32768 pixels"), result.stdout
+    assert not list(tmp_path.iterdir())
 
 
 # -- compare -------------------------------------------------------------------------------------
@@ -372,7 +446,10 @@ def test_the_gil_is_released_while_rendering():
 
 
 INTERRUPTED = """
-import sys, time, fogplanes
+import signal, sys, time, fogplanes
+# A shell that starts this test in the background hands SIGINT down ignored, and Python then
+# installs no KeyboardInterrupt handler: restore it, so the test does not depend on its parent.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 scene = fogplanes.load_scene(sys.argv[1])
 print("rendering", flush=True)
 start = time.perf_counter()
@@ -400,3 +477,21 @@ def test_ctrl_c_stops_a_render_with_keyboard_interrupt():
     assert process.returncode == 0, err
     assert "KeyboardInterrupt after" in out and "rendered again (9, 16, 3)" in out, (out, err)
     assert stopped < 3.0, f"took {stopped:.2f} s to stop"
+
+
+def test_hostile_files_and_non_finite_images_raise_value_error():
+    corpus = ROOT / "tests" / "hostile"
+    # 313 bytes claiming 32768x32768 pixels: refused before anything is allocated (it was 12.9 GB).
+    with pytest.raises(ValueError, match="huge_header_32768.exr: .* it is truncated or crafted$"):
+        fogplanes.load_image(corpus / "huge_header_32768.exr")
+    # An image holding NaN loads, but no metric takes it (an all-NaN image scored SMAPE 0).
+    nan = fogplanes.load_image(corpus / "nan_pixel.exr")
+    good = fogplanes.load_image(corpus / "good_4x3.exr")
+    assert np.isnan(nan[1, 2, 1]) and fogplanes.compare(good, good)["smape"] == 0.0
+    with pytest.raises(ValueError, match=r"^the image holds .*: pixel \(x 2, y 1\) channel G is NaN$"):
+        fogplanes.compare(nan, good)
+    with pytest.raises(ValueError, match=r"^the reference holds .*: pixel \(x 0, y 0\) channel R is inf$"):
+        fogplanes.compare(good, np.full_like(good, np.inf))
+    # The size limit holds for a file whose size says nothing.
+    with pytest.raises(ValueError, match="/dev/zero: the file holds more than 1048576 bytes"):
+        fogplanes.load_scene("/dev/zero")

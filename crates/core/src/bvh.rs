@@ -5,6 +5,8 @@
 //! [`crate::raster`] is the fast path for camera images, this one the baseline it is measured
 //! against (and a second independent path for the hit-equality tests).
 
+use crate::control::Control;
+use crate::error::Result;
 use crate::gather::{CameraRay, GatherContext, GatherStats};
 use crate::medium::Medium;
 use crate::photon_plane::PhotonPlane;
@@ -29,28 +31,32 @@ pub struct PlaneBvh {
 
 impl PlaneBvh {
     /// Builds over the planes' polygons inside the box, relative to `origin` (median split on the
-    /// longest axis of the centroids).
-    pub fn build(planes: &[PhotonPlane], medium: &Medium, origin: DVec3) -> Self {
+    /// longest axis of the centroids). [`crate::Error::Cancelled`] once `control` is cancelled
+    /// (checked every few thousand planes and at every node).
+    pub fn build(planes: &[PhotonPlane], medium: &Medium, origin: DVec3, control: Control) -> Result<Self> {
         let margin = 1e-6 * medium.diagonal();
-        let boxes: Vec<(Vec3, Vec3)> = planes
-            .iter()
-            .map(|p| {
-                let poly = p.polygon_in_box(medium, margin);
-                let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-                for &v in poly.points() {
-                    lo = lo.min(v - origin);
-                    hi = hi.max(v - origin);
-                }
-                // Grow by the f32 rounding of the coordinates.
-                let pad = 1e-5 * (hi - lo).max_element().max(1e-30) + 1e-6 * (lo.abs().max(hi.abs())).max_element();
-                ((lo - pad).as_vec3(), (hi + pad).as_vec3())
-            })
-            .collect();
-        let mut order: Vec<u32> = (0..planes.len() as u32).filter(|&i| boxes[i as usize].0.x.is_finite()).collect();
-        let mut nodes = vec![Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 }];
+        let plane_box = |p: &PhotonPlane| {
+            let poly = p.polygon_in_box(medium, margin);
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for &v in poly.points() {
+                lo = lo.min(v - origin);
+                hi = hi.max(v - origin);
+            }
+            // Grow by the f32 rounding of the coordinates.
+            let pad = 1e-5 * (hi - lo).max_element().max(1e-30) + 1e-6 * (lo.abs().max(hi.abs())).max_element();
+            ((lo - pad).as_vec3(), (hi + pad).as_vec3())
+        };
+        let mut boxes: Vec<(Vec3, Vec3)> = Vec::with_capacity(planes.len());
+        for chunk in planes.chunks(4096) {
+            control.check()?;
+            boxes.extend(chunk.iter().map(plane_box));
+        }
+        let order: Vec<u32> = (0..planes.len() as u32).filter(|&i| boxes[i as usize].0.x.is_finite()).collect();
         let len = order.len();
-        build_node(&mut nodes, 0, &mut order, 0, len, &boxes);
-        PlaneBvh { nodes, order }
+        let nodes = vec![Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 }];
+        let mut builder = Builder { nodes, order, boxes: &boxes, control };
+        builder.node(0, 0, len)?;
+        Ok(PlaneBvh { nodes: builder.nodes, order: builder.order })
     }
 
     /// One ray's estimate, testing only planes whose boxes the ray's segment crosses.
@@ -90,45 +96,51 @@ impl PlaneBvh {
     }
 }
 
-fn build_node(
-    nodes: &mut Vec<Node>,
-    index: usize,
-    order: &mut [u32],
-    start: usize,
-    end: usize,
-    boxes: &[(Vec3, Vec3)],
-) {
-    let items = &mut order[start..end];
-    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    let (mut clo, mut chi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for &i in items.iter() {
-        let (a, b) = boxes[i as usize];
-        lo = lo.min(a);
-        hi = hi.max(b);
-        clo = clo.min(a + b);
-        chi = chi.max(a + b);
+/// The hierarchy under construction.
+struct Builder<'a> {
+    nodes: Vec<Node>,
+    order: Vec<u32>,
+    boxes: &'a [(Vec3, Vec3)],
+    control: Control<'a>,
+}
+
+impl Builder<'_> {
+    /// Fills node `index` with the planes `order[start..end]`, splitting it further if need be.
+    fn node(&mut self, index: usize, start: usize, end: usize) -> Result<()> {
+        self.control.check()?;
+        let boxes = self.boxes;
+        let items = &mut self.order[start..end];
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        let (mut clo, mut chi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for &i in items.iter() {
+            let (a, b) = boxes[i as usize];
+            lo = lo.min(a);
+            hi = hi.max(b);
+            clo = clo.min(a + b);
+            chi = chi.max(a + b);
+        }
+        if items.len() <= LEAF_SIZE || self.nodes.len() > (1 << 30) {
+            self.nodes[index] = Node { min: lo, max: hi, first: start as u32, count: items.len() as u32 };
+            return Ok(());
+        }
+        let extent = chi - clo;
+        let axis = if extent.x >= extent.y && extent.x >= extent.z {
+            0
+        } else if extent.y >= extent.z {
+            1
+        } else {
+            2
+        };
+        let mid = items.len() / 2;
+        items.select_nth_unstable_by(mid, |&i, &j| {
+            let (ci, cj) = (boxes[i as usize].0 + boxes[i as usize].1, boxes[j as usize].0 + boxes[j as usize].1);
+            ci[axis].total_cmp(&cj[axis])
+        });
+        let first = self.nodes.len();
+        self.nodes.push(Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 });
+        self.nodes.push(Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 });
+        self.nodes[index] = Node { min: lo, max: hi, first: first as u32, count: 0 };
+        self.node(first, start, start + mid)?;
+        self.node(first + 1, start + mid, end)
     }
-    if items.len() <= LEAF_SIZE || nodes.len() > (1 << 30) {
-        nodes[index] = Node { min: lo, max: hi, first: start as u32, count: items.len() as u32 };
-        return;
-    }
-    let extent = chi - clo;
-    let axis = if extent.x >= extent.y && extent.x >= extent.z {
-        0
-    } else if extent.y >= extent.z {
-        1
-    } else {
-        2
-    };
-    let mid = items.len() / 2;
-    items.select_nth_unstable_by(mid, |&i, &j| {
-        let (ci, cj) = (boxes[i as usize].0 + boxes[i as usize].1, boxes[j as usize].0 + boxes[j as usize].1);
-        ci[axis].total_cmp(&cj[axis])
-    });
-    let first = nodes.len();
-    nodes.push(Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 });
-    nodes.push(Node { min: Vec3::ZERO, max: Vec3::ZERO, first: 0, count: 0 });
-    nodes[index] = Node { min: lo, max: hi, first: first as u32, count: 0 };
-    build_node(nodes, first, order, start, start + mid, boxes);
-    build_node(nodes, first + 1, order, start + mid, end, boxes);
 }

@@ -1,7 +1,7 @@
 //! The library's errors: what went wrong, typed, so that a caller (the command line, Python)
 //! can tell bad input from a failure of the machine and word both its own way.
 
-use crate::scene::SceneError;
+use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// Everything the library can fail with. Nothing in the library panics on any input.
@@ -10,19 +10,29 @@ pub enum Error {
     /// A scene file that cannot be read or does not describe a valid scene.
     #[error(transparent)]
     Scene(#[from] SceneError),
-    /// A setting out of range, named as the command line spells it (`--planes`, ...).
-    #[error("{option}: {message}")]
-    InvalidOption { option: &'static str, message: String },
+    /// A setting out of range. The setting is named neutrally (each front end words it as its
+    /// user gave it: `--planes` on the command line, `planes=` in Python, see
+    /// [`Error::worded`]); `origin` says whether the caller gave the value or the scene did.
+    #[error("{}: {message}", origin.describe(*setting))]
+    InvalidSetting { setting: Setting, origin: Origin, message: String },
     /// An input file (an image) that cannot be read or used.
     #[error("{}: {message}", path.display())]
     BadInput { path: PathBuf, message: String },
     /// Two images that cannot be compared.
     #[error("the images differ in size: {}x{} against a {}x{} reference", image.0, image.1, reference.0, reference.1)]
     SizeMismatch { image: (u32, u32), reference: (u32, u32) },
+    /// An image holding NaN or infinity where numbers are needed (a metric would hide it).
+    #[error("the {image} holds a value that is not a finite number: {pixel}")]
+    NonFinitePixel { image: &'static str, pixel: NonFinitePixel },
     /// An output that cannot be written (the destination keeps its old contents).
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
-    /// The caller stopped the work (through the flag of [`crate::render::render_cancellable`]).
+    /// Partial renders that do not make up one render (another scene or other settings,
+    /// overlapping or missing plane ranges), or a plane range that is not one of a render's
+    /// chunks.
+    #[error("{0}")]
+    Partial(String),
+    /// The caller stopped the work (through the flag of its [`crate::control::Control`]).
     #[error("cancelled")]
     Cancelled,
 }
@@ -34,8 +44,21 @@ impl Error {
         !matches!(self, Error::Write { .. } | Error::Cancelled)
     }
 
-    pub(crate) fn option(option: &'static str, message: impl Into<String>) -> Self {
-        Error::InvalidOption { option, message: message.into() }
+    /// The error in one line, a setting the caller gave named by `name` (the command line
+    /// passes [`Setting::flag`], Python the keyword with the value it was given); a value
+    /// that came from the scene is named as the scene file names it, whoever words it.
+    pub fn worded(&self, name: impl Fn(Setting) -> String) -> String {
+        match self {
+            Error::InvalidSetting { setting, origin: Origin::Given, message } => {
+                format!("{}: {message}", name(*setting))
+            }
+            e => e.to_string(),
+        }
+    }
+
+    /// A value the caller gave for `setting` is out of range.
+    pub(crate) fn option(setting: Setting, message: impl Into<String>) -> Self {
+        Error::InvalidSetting { setting, origin: Origin::Given, message: message.into() }
     }
 
     pub(crate) fn bad_input(path: &Path, message: impl Into<String>) -> Self {
@@ -48,3 +71,155 @@ impl Error {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A problem with a scene file or with the render settings derived from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneError {
+    pub file: String,
+    /// 1-based line and column, when the problem has a place in the text.
+    pub position: Option<(usize, usize)>,
+    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
+    pub field: String,
+    pub message: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let Some((line, col)) = self.position {
+            write!(f, ":{line}:{col}")?;
+        }
+        if !self.field.is_empty() {
+            write!(f, ": {}", self.field)?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// A setting a user may give, named neutrally; [`Setting::flag`] and [`Setting::keyword`] are
+/// its names on the command line and in Python.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Setting {
+    Estimator,
+    Orientations,
+    Planes,
+    Seed,
+    Sampler,
+    Spp,
+    Accelerator,
+    Kernel,
+    TimeBudget,
+    Resolution,
+    Threads,
+    Exposure,
+    /// The plane counts of the table's error-versus-time sweep.
+    Sweep,
+    SweepSeeds,
+    EqualTime,
+    /// The plane samplers the table measures.
+    Samplers,
+    /// The image sizes a scaling run measures.
+    Resolutions,
+}
+
+impl Setting {
+    pub const ALL: [Setting; 17] = [
+        Setting::Estimator,
+        Setting::Orientations,
+        Setting::Planes,
+        Setting::Seed,
+        Setting::Sampler,
+        Setting::Spp,
+        Setting::Accelerator,
+        Setting::Kernel,
+        Setting::TimeBudget,
+        Setting::Resolution,
+        Setting::Threads,
+        Setting::Exposure,
+        Setting::Sweep,
+        Setting::SweepSeeds,
+        Setting::EqualTime,
+        Setting::Samplers,
+        Setting::Resolutions,
+    ];
+
+    /// The name as a keyword argument (Python): `time_budget`.
+    pub fn keyword(self) -> &'static str {
+        match self {
+            Setting::Estimator => "estimator",
+            Setting::Orientations => "orientations",
+            Setting::Planes => "planes",
+            Setting::Seed => "seed",
+            Setting::Sampler => "sampler",
+            Setting::Spp => "spp",
+            Setting::Accelerator => "accelerator",
+            Setting::Kernel => "kernel",
+            Setting::TimeBudget => "time_budget",
+            Setting::Resolution => "resolution",
+            Setting::Threads => "threads",
+            Setting::Exposure => "exposure",
+            Setting::Sweep => "sweep",
+            Setting::SweepSeeds => "sweep_seeds",
+            Setting::EqualTime => "equal_time",
+            Setting::Samplers => "samplers",
+            Setting::Resolutions => "resolutions",
+        }
+    }
+
+    /// The name as a command-line flag: `--time-budget`.
+    pub fn flag(self) -> String {
+        format!("--{}", self.keyword().replace('_', "-"))
+    }
+
+    /// The field of a scene file that gives the setting's default, if any.
+    pub fn scene_field(self) -> Option<&'static str> {
+        Some(match self {
+            Setting::Estimator => "render.estimator",
+            Setting::Orientations => "render.orientations",
+            Setting::Planes => "render.planes",
+            Setting::Seed => "render.seed",
+            Setting::Sampler => "render.sampler",
+            Setting::Spp => "render.spp",
+            Setting::Resolution => "camera.resolution",
+            _ => return None,
+        })
+    }
+}
+
+/// Where the value of a setting came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Origin {
+    /// The caller gave it (a flag, a keyword argument).
+    Given,
+    /// The scene file gave it (its `[render]` table or its camera).
+    Scene,
+}
+
+impl Origin {
+    /// How an error names a value of `setting` from this origin when no front end words it.
+    pub fn describe(self, setting: Setting) -> String {
+        match (self, setting.scene_field()) {
+            (Origin::Scene, Some(field)) => format!("the scene's {field}"),
+            _ => setting.keyword().to_string(),
+        }
+    }
+}
+
+/// A pixel channel that is not a finite number: where it is and what it holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NonFinitePixel {
+    pub x: u32,
+    pub y: u32,
+    /// 0, 1, 2 for R, G, B.
+    pub channel: usize,
+    pub value: f32,
+}
+
+impl std::fmt::Display for NonFinitePixel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let channel = ["R", "G", "B"][self.channel];
+        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
+    }
+}

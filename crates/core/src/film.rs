@@ -3,7 +3,7 @@
 //! Every file is written to a temporary name beside its destination and renamed over it, so a
 //! destination holds either its old contents or the complete new image, never part of one.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NonFinitePixel, Result};
 use glam::Vec3;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -37,6 +37,24 @@ impl Film {
 
     pub fn all_finite_non_negative(&self) -> bool {
         self.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0)
+    }
+
+    /// The first pixel channel (in row-major order, then R, G, B) that is NaN or infinite.
+    pub fn first_non_finite(&self) -> Option<NonFinitePixel> {
+        let w = self.width.max(1) as usize;
+        self.pixels.iter().enumerate().find_map(|(i, p)| {
+            let channel = (0..3).find(|&c| !p[c].is_finite())?;
+            Some(NonFinitePixel { x: (i % w) as u32, y: (i / w) as u32, channel, value: p[channel] })
+        })
+    }
+
+    /// Refuses an image holding a NaN or infinite value, naming the first one; `image` says
+    /// which image it is ("image", "reference").
+    pub fn check_finite(&self, image: &'static str) -> Result<()> {
+        match self.first_non_finite() {
+            Some(pixel) => Err(Error::NonFinitePixel { image, pixel }),
+            None => Ok(()),
+        }
     }
 }
 
@@ -74,6 +92,8 @@ pub fn check_writable(path: &Path) -> Result<()> {
     if path.is_dir() {
         return Err(Error::bad_input(path, "is a directory"));
     }
+    // Made and removed under the lock of the unfinished files: an interruption never finds it.
+    let _unfinished = unfinished();
     let probe = temporary_path(path);
     std::fs::File::create(&probe)
         .map_err(|e| Error::bad_input(path, format!("cannot write to {}: {e}", dir.display())))?;
@@ -97,42 +117,56 @@ pub fn temporary_path(path: &Path) -> PathBuf {
     parent_dir(path).join(format!(".{name}.{}.{n}.tmp", std::process::id()))
 }
 
-/// Temporary files being written now, for [`remove_unfinished_files`].
+/// Temporary files being written now, for [`remove_unfinished_files`]. A temporary file is
+/// created and registered, and renamed and unregistered, under this lock, which the removal
+/// keeps until the process ends: a file is either registered (and removed) or never made.
 static UNFINISHED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
 
-/// Removes every temporary file still being written (called on interruption): the
-/// destinations keep their old contents.
+fn unfinished() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Removes every temporary file still being written, for a process about to exit on an
+/// interruption (Ctrl-C, SIGTERM): the destinations keep their old contents, and no write can
+/// start or finish after this (they wait for a lock that is never released).
 pub fn remove_unfinished_files() {
-    let list = UNFINISHED.lock().unwrap_or_else(|e| e.into_inner());
+    let list = unfinished();
     for p in list.iter() {
         let _ = std::fs::remove_file(p);
     }
+    std::mem::forget(list);
 }
 
-/// Writes through `write` to a temporary file, then renames it to `path`; on any failure the
-/// temporary file is removed and `path` is untouched.
-pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let tmp = temporary_path(path);
-    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).push(tmp.clone());
-    let result = write(&tmp).and_then(|()| {
+/// Writes through `write` to a new temporary file, then renames it to `path`; on any failure
+/// the temporary file is removed and `path` is untouched.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
+    let (tmp, mut file) = {
+        let mut list = unfinished();
+        let tmp = temporary_path(path);
+        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
+        list.push(tmp.clone());
+        (tmp, file)
+    };
+    let result = write(&mut file).and_then(|()| {
+        // On disk before the rename.
+        file.sync_all().map_err(|e| Error::write(path, format!("cannot write: {e}")))
+    });
+    drop(file);
+    let mut list = unfinished();
+    let result = result.and_then(|()| {
         std::fs::rename(&tmp, path)
             .map_err(|e| Error::write(path, format!("cannot move the finished file into place: {e}")))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner()).retain(|p| p != &tmp);
+    list.retain(|p| p != &tmp);
     result
 }
 
 /// Writes bytes whole or not at all.
 pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomically(path, |tmp| {
-        let fail = |e: std::io::Error| Error::write(path, format!("cannot write: {e}"));
-        let mut f = std::fs::File::create(tmp).map_err(fail)?;
-        f.write_all(bytes).map_err(fail)?;
-        f.sync_all().map_err(fail)
-    })
+    write_atomically(path, |f| f.write_all(bytes).map_err(|e| Error::write(path, format!("cannot write: {e}"))))
 }
 
 /// sRGB encoding of a linear value in [0, 1].
@@ -156,16 +190,17 @@ impl Film {
     }
 
     pub fn save_exr(&self, path: &Path) -> Result<()> {
-        write_atomically(path, |tmp| {
+        use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+        write_atomically(path, |file| {
             let w = self.width as usize;
-            exr::prelude::write_rgb_file(tmp, w, self.height as usize, |x, y| {
+            // What exr::prelude::write_rgb_file writes, into the file already open.
+            let rgb = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
                 let p = self.pixels[y * w + x];
                 (p.x, p.y, p.z)
-            })
-            .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))?;
-            // On disk before the rename, as write_file_atomically does.
-            std::fs::File::open(tmp)
-                .and_then(|f| f.sync_all())
+            });
+            Image::from_channels((w, self.height as usize), rgb)
+                .write()
+                .to_unbuffered(file)
                 .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
         })
     }
@@ -182,27 +217,123 @@ impl Film {
         save_rgb8_png(&self.to_rgb8(exposure), path)
     }
 
-    /// Reads the first RGB(A) layer of an EXR file. Its size is read from the header and
-    /// checked first, so that a small file claiming a huge image is refused, not allocated.
+    /// Reads the first RGB(A) layer of an EXR file.
+    ///
+    /// The header is read and checked first ([`check_exr_headers`]): a small file claiming a
+    /// huge image is refused before any pixel buffer exists. The buffer is then reserved
+    /// fallibly, so that an image the machine cannot hold (under a memory limit) is an input
+    /// error, not an abort.
     pub fn load_exr(path: &Path) -> Result<Film> {
         let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
+        let file = std::fs::metadata(path).map_err(|e| bad(&e))?;
+        if !file.is_file() {
+            return Err(Error::bad_input(path, "not a regular file"));
+        }
         let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
-        for header in meta.headers.iter() {
-            let size = header.layer_size;
-            let side = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-            crate::limits::check_resolution(side(size.width()), side(size.height())).map_err(|m| bad(&m))?;
+        exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
+        check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
+        let unavailable = |size: (usize, usize)| {
+            let gib = (size.0 * size.1 * std::mem::size_of::<Vec3>()) as f64 / (1u64 << 30) as f64;
+            bad(&format!("{}x{} pixels need {gib:.1} GiB, which this machine cannot allocate now", size.0, size.1))
+        };
+        // Probed (and given back) before decoding, which would otherwise run to the file's end
+        // before the failure could be told.
+        if let Some(h) = meta.headers.iter().max_by_key(|h| h.layer_size.area()) {
+            let size = (h.layer_size.width(), h.layer_size.height());
+            Vec::<Vec3>::new().try_reserve_exact(size.0 * size.1).map_err(|_| unavailable(size))?;
         }
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
-            |resolution, _| Film::new(resolution.width() as u32, resolution.height() as u32),
+            |resolution, _| {
+                let n = resolution.width() * resolution.height();
+                // Left empty if the memory is not there: checked after reading.
+                let mut pixels = Vec::new();
+                if pixels.try_reserve_exact(n).is_ok() {
+                    pixels.resize(n, Vec3::ZERO);
+                }
+                Film { width: resolution.width() as u32, height: resolution.height() as u32, pixels }
+            },
             |film: &mut Film, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
                 let w = film.width as usize;
-                film.pixels[pos.y() * w + pos.x()] = Vec3::new(r, g, b);
+                if let Some(p) = film.pixels.get_mut(pos.y() * w + pos.x()) {
+                    *p = Vec3::new(r, g, b);
+                }
             },
         )
-        .map_err(|e| Error::bad_input(path, format!("cannot read as an EXR image: {e}")))?;
-        Ok(image.layer_data.channel_data.pixels)
+        .map_err(|e| bad(&e))?;
+        let film = image.layer_data.channel_data.pixels;
+        let size = (film.width as usize, film.height as usize);
+        if film.pixels.len() != size.0 * size.1 {
+            return Err(unavailable(size));
+        }
+        Ok(film)
     }
+}
+
+/// The most bytes of samples that one byte of a chunk can decode to under `compression`, or
+/// `None` for a codec this reader cannot decode. Each figure is the codec's worst case, so that
+/// no valid file is refused:
+///
+/// - none: 1; RLE: 64 (a run of 128 bytes is coded in 2);
+/// - ZIP, ZIPS: 1032, deflate's limit (a 258-byte match coded in 2 bits);
+/// - PXR24: 1376, deflate of floats kept as 24 bits that decode to 32 (1032 x 4 / 3);
+/// - PIZ: 454, Huffman codes of at least one bit and 8-bit run lengths (255 values of 16 bits
+///   in 9 bits), the wavelet keeping the size;
+/// - B44, B44A: 11 (a flat 4x4 block of halves, 32 bytes, coded in 3);
+/// - DWAA, DWAB: 66048, deflate over a run-length or DC stream that is itself at most 64:1 (one
+///   16-bit DC value per 8x8 block of halves).
+fn exr_max_expansion(compression: exr::compression::Compression) -> Option<u64> {
+    use exr::compression::Compression::*;
+    Some(match compression {
+        Uncompressed => 1,
+        RLE => 64,
+        ZIP1 | ZIP16 => 1032,
+        PXR24 => 1376,
+        PIZ => 454,
+        B44 | B44A => 11,
+        DWAA(_) | DWAB(_) => 66_048,
+        HTJ2K32 | HTJ2K256 => return None,
+    })
+}
+
+/// Checks EXR headers against the size of the file that holds them, before anything is
+/// allocated for pixels: each chunk takes at least 16 bytes (its offset-table entry, its line
+/// or tile number and its size), and the samples at least their uncompressed size over the
+/// codec's worst-case expansion ([`exr_max_expansion`]). A header claiming more than the file
+/// can hold is refused as truncated or crafted. Also refuses what this reader cannot decode
+/// (deep data, HTJ2K) and sizes beyond [`crate::limits::check_resolution`].
+pub fn check_exr_headers(headers: &[exr::meta::header::Header], file_bytes: u64) -> Result<(), String> {
+    let mut needed: u128 = 0;
+    for header in headers {
+        let (w, h) = (header.layer_size.width(), header.layer_size.height());
+        let side = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+        crate::limits::check_resolution(side(w), side(h))?;
+        if header.deep {
+            return Err("deep data is not supported".into());
+        }
+        let ratio =
+            exr_max_expansion(header.compression).ok_or_else(|| format!("{} is not supported", header.compression))?;
+        // Samples of the largest level alone (mip levels and rounding up only add), per
+        // channel as subsampled.
+        let samples: u128 = header
+            .channels
+            .list
+            .iter()
+            .map(|c| {
+                let (sx, sy) = (c.sampling.x().max(1), c.sampling.y().max(1));
+                (w / sx) as u128 * (h / sy) as u128 * c.sample_type.bytes_per_sample() as u128
+            })
+            .sum();
+        needed += 16 * header.chunk_count as u128 + samples.div_ceil(ratio as u128);
+    }
+    if needed > file_bytes as u128 {
+        let size = headers.first().map_or((0, 0), |h| (h.layer_size.width(), h.layer_size.height()));
+        return Err(format!(
+            "the header claims {}x{} pixels, which need at least {needed} bytes, but the file has {file_bytes}: it is truncated or crafted",
+            size.0, size.1
+        ));
+    }
+    Ok(())
 }
 
 /// Encodes a PNG in memory, then writes it whole.

@@ -4,7 +4,7 @@
 //! exponential.
 //!
 //! The per-hit arithmetic is written once, here, branch-free, for L rays at a time:
-//! [`PlaneView::gather_lanes`] runs [`PlaneView::crossing`] (where the ray meets the plane and
+//! [`PlaneJob::gather_lanes`] runs [`PlaneView::crossing`] (where the ray meets the plane and
 //! whether that is a hit), the visibility test of planes another panel can shadow
 //! ([`Occluder::blocks`]), the estimator's D ([`Denominator::denominators`]) and
 //! [`PlaneView::contribution`] (the transmittance and the finite check), each as a loop over the
@@ -109,77 +109,6 @@ impl PlaneView {
         self.occluders_end > self.occluders_start
     }
 
-    /// L rays against the plane: the per-hit arithmetic, once for every path that gathers.
-    /// Adds each lane's contribution (zero where a panel blocks the light path) to `sums`
-    /// unless `CONTRIBUTE` is off, and counts each lane's hits in `hits`.
-    /// `plane` is `weights.prepare(&self.frame)`, `occluders` the plane's shadowing panels.
-    /// `GREY`: one exponential serves the three channels.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub fn gather_lanes<D: Denominator, const L: usize, const GREY: bool, const CONTRIBUTE: bool>(
-        &self,
-        weights: &D,
-        plane: &D::Plane,
-        occluders: &[Occluder],
-        sigma_t: Vec3,
-        rays: &RayLanes<L>,
-        sums: [&mut [f32; L]; 3],
-        hits: &mut [u32; L],
-    ) {
-        let (mut hit, mut det, mut t, mut a, mut r) = ([false; L], [0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
-        for l in 0..L {
-            let c = self.crossing([rays.x[l], rays.y[l], rays.z[l]], rays.t0[l], rays.t1[l]);
-            (hit[l], det[l], t[l], a[l], r[l]) = (c.hit, c.det, c.t, c.a, c.r);
-            hits[l] += c.hit as u32;
-        }
-        // A block without a hit adds nothing (adding +0.0 would not change a sum either).
-        if !CONTRIBUTE || !hit.iter().fold(false, |any, &h| any | h) {
-            return;
-        }
-        let mut lit = hit;
-        for o in occluders {
-            for l in 0..L {
-                lit[l] &= !o.blocks(a[l], r[l]);
-            }
-        }
-        let mut det_perp = [0.0f32; L];
-        let perp = self.normal_perp;
-        for l in 0..L {
-            det_perp[l] = rays.x[l] * perp.x + rays.y[l] * perp.y + rays.z[l] * perp.z;
-        }
-        let mut d = [0.0f32; L];
-        weights.denominators(plane, &HitLanes { det, det_perp, a }, &mut d);
-        let [sr, sg, sb] = sums;
-        for l in 0..L {
-            let [cr, cg, cb] = self.contribution::<GREY>(sigma_t, (t[l] - rays.t0[l]) + r[l], d[l], lit[l]);
-            sr[l] += cr;
-            sg[l] += cg;
-            sb[l] += cb;
-        }
-    }
-
-    /// [`PlaneView::gather_lanes`] with the grey or RGB case of the medium's extinction chosen
-    /// at run time (the vector kernels choose it once per plane instead).
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub fn gather_lanes_in<D: Denominator, const L: usize, const CONTRIBUTE: bool>(
-        &self,
-        weights: &D,
-        plane: &D::Plane,
-        occluders: &[Occluder],
-        extinction: Extinction,
-        rays: &RayLanes<L>,
-        sums: [&mut [f32; L]; 3],
-        hits: &mut [u32; L],
-    ) {
-        let sigma_t = extinction.sigma_t;
-        if extinction.grey {
-            self.gather_lanes::<D, L, true, CONTRIBUTE>(weights, plane, occluders, sigma_t, rays, sums, hits);
-        } else {
-            self.gather_lanes::<D, L, false, CONTRIBUTE>(weights, plane, occluders, sigma_t, rays, sums, hits);
-        }
-    }
-
     /// Where the ray with unit direction `dir` meets the plane, and whether that is a hit: inside
     /// `[t0, t1]`, on the chord (`0 <= a <= width`) and strictly in front of the light (r > 0).
     ///
@@ -218,6 +147,89 @@ impl PlaneView {
         };
         let keep = lit & (d > 0.0) & cr.is_finite() & cg.is_finite() & cb.is_finite();
         [if keep { cr } else { 0.0 }, if keep { cg } else { 0.0 }, if keep { cb } else { 0.0 }]
+    }
+}
+
+/// One plane ready for the per-hit arithmetic: everything it reads that is the same for every
+/// ray, made once per plane (per band, for the raster) by [`GatherContext::job`]. A new
+/// per-plane constant is one field here.
+pub struct PlaneJob<'a, D: Denominator> {
+    pub weights: &'a D,
+    /// `weights.prepare(&view.frame)`: what D needs of the plane.
+    pub prepared: D::Plane,
+    pub view: PlaneView,
+    /// The panels that may shadow the plane (empty for most planes).
+    pub occluders: &'a [Occluder],
+    pub extinction: Extinction,
+}
+
+impl<D: Denominator> Clone for PlaneJob<'_, D> {
+    fn clone(&self) -> Self {
+        PlaneJob { prepared: self.prepared.clone(), ..*self }
+    }
+}
+
+impl<D: Denominator> PlaneJob<'_, D> {
+    /// L rays against the plane: the per-hit arithmetic, once for every path that gathers.
+    /// Adds each lane's contribution (zero where a panel blocks the light path) to `sums`
+    /// unless `CONTRIBUTE` is off, and counts each lane's hits in `hits`.
+    /// `GREY`: one exponential serves the three channels (the caller has checked
+    /// `extinction.grey`).
+    #[inline(always)]
+    pub fn gather_lanes<const L: usize, const GREY: bool, const CONTRIBUTE: bool>(
+        &self,
+        rays: &RayLanes<L>,
+        sums: [&mut [f32; L]; 3],
+        hits: &mut [u32; L],
+    ) {
+        let view = &self.view;
+        let (mut hit, mut det, mut t, mut a, mut r) = ([false; L], [0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
+        for l in 0..L {
+            let c = view.crossing([rays.x[l], rays.y[l], rays.z[l]], rays.t0[l], rays.t1[l]);
+            (hit[l], det[l], t[l], a[l], r[l]) = (c.hit, c.det, c.t, c.a, c.r);
+            hits[l] += c.hit as u32;
+        }
+        // A block without a hit adds nothing (adding +0.0 would not change a sum either).
+        if !CONTRIBUTE || !hit.iter().fold(false, |any, &h| any | h) {
+            return;
+        }
+        let mut lit = hit;
+        for o in self.occluders {
+            for l in 0..L {
+                lit[l] &= !o.blocks(a[l], r[l]);
+            }
+        }
+        let mut det_perp = [0.0f32; L];
+        let perp = view.normal_perp;
+        for l in 0..L {
+            det_perp[l] = rays.x[l] * perp.x + rays.y[l] * perp.y + rays.z[l] * perp.z;
+        }
+        let mut d = [0.0f32; L];
+        self.weights.denominators(&self.prepared, &HitLanes { det, det_perp, a }, &mut d);
+        let sigma_t = self.extinction.sigma_t;
+        let [sr, sg, sb] = sums;
+        for l in 0..L {
+            let [cr, cg, cb] = view.contribution::<GREY>(sigma_t, (t[l] - rays.t0[l]) + r[l], d[l], lit[l]);
+            sr[l] += cr;
+            sg[l] += cg;
+            sb[l] += cb;
+        }
+    }
+
+    /// [`PlaneJob::gather_lanes`] with the grey or RGB case of the medium's extinction chosen
+    /// at run time (the vector kernels choose it once per plane instead).
+    #[inline(always)]
+    pub fn gather_lanes_in<const L: usize, const CONTRIBUTE: bool>(
+        &self,
+        rays: &RayLanes<L>,
+        sums: [&mut [f32; L]; 3],
+        hits: &mut [u32; L],
+    ) {
+        if self.extinction.grey {
+            self.gather_lanes::<L, true, CONTRIBUTE>(rays, sums, hits);
+        } else {
+            self.gather_lanes::<L, false, CONTRIBUTE>(rays, sums, hits);
+        }
     }
 }
 
@@ -372,8 +384,20 @@ impl GatherContext {
         &self.occluders[view.occluders_start as usize..view.occluders_end as usize]
     }
 
+    /// The job of gathering `view` (one of this context's planes) with `weights`.
+    #[inline(always)]
+    pub fn job<'a, D: Denominator>(&'a self, weights: &'a D, view: &PlaneView) -> PlaneJob<'a, D> {
+        PlaneJob {
+            weights,
+            prepared: weights.prepare(&view.frame),
+            view: *view,
+            occluders: self.occluders_of(view),
+            extinction: self.extinction,
+        }
+    }
+
     /// The per-hit path: one ray against one plane. `None` if it misses; otherwise its
-    /// contribution, zero when another panel blocks the light path: [`PlaneView::gather_lanes`]
+    /// contribution, zero when another panel blocks the light path: [`PlaneJob::gather_lanes`]
     /// with one lane.
     #[inline]
     pub fn gather_one<D: Denominator>(&self, weights: &D, view: &PlaneView, ray: &CameraRay) -> Option<Vec3> {
@@ -381,11 +405,8 @@ impl GatherContext {
         if !view.crossing([ray.dir.x, ray.dir.y, ray.dir.z], ray.t0, ray.t1).hit {
             return None;
         }
-        let plane = weights.prepare(&view.frame);
-        let occluders = self.occluders_of(view);
         let (mut r, mut g, mut b, mut hits) = ([0.0f32], [0.0f32], [0.0f32], [0u32]);
-        let sums = [&mut r, &mut g, &mut b];
-        view.gather_lanes_in::<D, 1, true>(weights, &plane, occluders, self.extinction, &rays, sums, &mut hits);
+        self.job(weights, view).gather_lanes_in::<1, true>(&rays, [&mut r, &mut g, &mut b], &mut hits);
         Some(Vec3::new(r[0], g[0], b[0]))
     }
 

@@ -1,6 +1,6 @@
 //! The vector kernels: one plane against its runs of pixels in a band of rows, in blocks of
 //! [`LANES`]. The loop body is the per-hit arithmetic of [`crate::gather`]
-//! ([`PlaneView::gather_lanes`]) and nothing else, written once in `plane_body` and compiled
+//! ([`PlaneJob::gather_lanes`]) and nothing else, written once in `plane_body` and compiled
 //! for each vector width the CPU may have (AVX-512, AVX2 with FMA, the portable baseline),
 //! chosen at run time by [`Kernel`].
 //!
@@ -8,9 +8,8 @@
 //! every operation used is exactly rounded), so every kernel gives bit-identical sums.
 
 use crate::error::{Error, Result};
-use crate::gather::{Occluder, PlaneView, RayLanes};
+use crate::gather::{PlaneJob, RayLanes};
 use crate::weights::Denominator;
-use glam::Vec3;
 use std::fmt;
 use std::str::FromStr;
 
@@ -26,7 +25,7 @@ pub enum Kernel {
     Avx2,
     /// What the compiler makes of the loop for the baseline target (4 lanes with SSE2).
     Portable,
-    /// One pixel at a time ([`PlaneView::gather_lanes`] with one lane): for checking the vector
+    /// One pixel at a time ([`PlaneJob::gather_lanes`] with one lane): for checking the vector
     /// kernels.
     PerHit,
 }
@@ -75,7 +74,7 @@ impl Kernel {
                 Ok([Kernel::Avx512, Kernel::Avx2].into_iter().find(|k| k.is_available()).unwrap_or(Kernel::Portable))
             }
             k if k.is_available() => Ok(k),
-            k => Err(Error::option("--kernel", format!("this CPU cannot run the {k} kernel"))),
+            k => Err(Error::option(crate::error::Setting::Kernel, format!("this CPU cannot run the {k} kernel"))),
         }
     }
 }
@@ -114,6 +113,13 @@ pub struct BandSums<'a> {
     pub b: &'a mut [f32],
 }
 
+/// What a kernel reads and writes of a band of rows: its rays and their sums. A new per-band
+/// input is one field here.
+pub struct Band<'a> {
+    pub rays: BandRays<'a>,
+    pub sums: BandSums<'a>,
+}
+
 /// A run of pixels of one row to test against a plane: `start` and `len` index the band's
 /// arrays, `len` a multiple of [`LANES`].
 #[derive(Clone, Copy, Debug)]
@@ -123,29 +129,22 @@ pub struct Span {
 }
 
 /// One plane against its spans in a band with a vector kernel (`kernel` resolved, not
-/// [`Kernel::PerHit`]): [`PlaneView::gather_lanes`] on each block of [`LANES`] pixels. Adds each
-/// pixel's contribution to `sums` unless `CONTRIBUTE` is off (then only hits are counted).
-/// Returns the hit count.
-#[allow(clippy::too_many_arguments)]
+/// [`Kernel::PerHit`]): [`PlaneJob::gather_lanes`] on each block of [`LANES`] pixels. Adds each
+/// pixel's contribution to the band's sums unless `CONTRIBUTE` is off (then only hits are
+/// counted). Returns the hit count.
 #[inline(always)]
 pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     kernel: Kernel,
-    weights: &D,
-    plane: &D::Plane,
-    view: &PlaneView,
-    occluders: &[Occluder],
-    sigma_t: Vec3,
-    grey: bool,
+    job: &PlaneJob<D>,
     spans: &[Span],
-    rays: &BandRays,
-    sums: &mut BandSums,
+    band: &mut Band,
 ) -> u64 {
     macro_rules! run {
         ($f:ident) => {
-            if grey {
-                $f::<D, true, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, spans, rays, sums)
+            if job.extinction.grey {
+                $f::<D, true, CONTRIBUTE>(job, spans, band)
             } else {
-                $f::<D, false, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, spans, rays, sums)
+                $f::<D, false, CONTRIBUTE>(job, spans, band)
             }
         };
     }
@@ -163,19 +162,13 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
 macro_rules! plane_kernel {
     ($(#[$attr:meta])* $name:ident) => {
         $(#[$attr])*
-        #[allow(clippy::too_many_arguments)]
         #[inline(never)]
         fn $name<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-            weights: &D,
-            plane: &D::Plane,
-            view: &PlaneView,
-            occluders: &[Occluder],
-            sigma_t: Vec3,
+            job: &PlaneJob<D>,
             spans: &[Span],
-            rays: &BandRays,
-            sums: &mut BandSums,
+            band: &mut Band,
         ) -> u64 {
-            plane_body::<D, GREY, CONTRIBUTE>(weights, plane, view, occluders, sigma_t, spans, rays, sums)
+            plane_body::<D, GREY, CONTRIBUTE>(job, spans, band)
         }
     };
 }
@@ -198,20 +191,16 @@ plane_kernel!(
 );
 
 /// The kernel proper: the plane's spans block by block. The plane's constants are loaded once
-/// per plane and band (not per span), and the hits are counted per lane and summed once.
-#[allow(clippy::too_many_arguments)]
+/// per plane and band (a local copy of the job, not per span), and the hits are counted per
+/// lane and summed once.
 #[inline(always)]
 fn plane_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
-    weights: &D,
-    plane: &D::Plane,
-    view: &PlaneView,
-    occluders: &[Occluder],
-    sigma_t: Vec3,
+    job: &PlaneJob<D>,
     spans: &[Span],
-    rays: &BandRays,
-    sums: &mut BandSums,
+    band: &mut Band,
 ) -> u64 {
-    let view = *view;
+    let job = job.clone();
+    let (rays, sums) = (&band.rays, &mut band.sums);
     let lanes = |s: &[f32], i: usize| -> [f32; LANES] { s[i..i + LANES].try_into().unwrap() };
     let mut hits = [0u32; LANES];
     for span in spans {
@@ -229,9 +218,7 @@ fn plane_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
                 (&mut sums.g[i..i + LANES]).try_into().unwrap(),
                 (&mut sums.b[i..i + LANES]).try_into().unwrap(),
             ];
-            view.gather_lanes::<D, LANES, GREY, CONTRIBUTE>(
-                weights, plane, occluders, sigma_t, &block, block_sums, &mut hits,
-            );
+            job.gather_lanes::<LANES, GREY, CONTRIBUTE>(&block, block_sums, &mut hits);
         }
     }
     hits.iter().map(|&h| h as u64).sum()

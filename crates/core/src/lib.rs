@@ -6,28 +6,33 @@
 //! follows is written out in [`mathematics`] (the file `docs/mathematics.md`); "section N" in
 //! the documentation below refers to it, "eq. (N)" to the paper.
 //!
-//! One module per concept:
+//! One module per concept (a directory where a concept has parts):
 //!
 //! | module | concept |
 //! |---|---|
-//! | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] |
+//! | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] and its light choice by power |
 //! | [`limits`] | every range a setting must lie in, checked in one place |
+//! | [`settings`] | what a user may set, resolved once: defaults, overrides, checks |
+//! | [`outputs`] | every output path checked before any work |
 //! | [`camera`] | the pinhole camera and its rays (section 7) |
 //! | [`pixel`] | the pixel: its area, the ray sets and their plane groups (section 8) |
 //! | [`emission`] | direct emission integrated over the pixel (section 8) |
 //! | [`medium`] | the homogeneous medium box: clipping and transmittance |
 //! | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
 //! | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
-//! | [`sampling`] | the plane samplers, random streams, light choice by power, warps |
-//! | [`sobol`] | the Owen-scrambled Sobol sequence (randomised quasi-Monte Carlo) |
+//! | [`sampling`] | the plane samplers, the one hash and its random streams, warps, the chi-square test of samplers |
+//! | [`sampling::sobol`] | the Owen-scrambled Sobol sequence (randomised quasi-Monte Carlo) |
+//! | [`sampling::Kronecker`] | the reference's low-discrepancy sequence (section 4) |
 //! | [`photon_plane`] | photon-plane sampling (section 2) and the clipped plane polygon |
-//! | [`weights`] | the estimators: their registry and their denominators D (sections 2, 3) |
+//! | [`weights`] | the estimators: their registry and dispatch (`mod.rs`), their denominators D (`denominators.rs`, section 2), the closed form of cmis-exact in f64 and f32 (`closed_form.rs`, section 3) |
 //! | [`gather`] | one ray against one plane: hit test and weighted contribution, written once |
 //! | [`kernel`] | the span kernels (AVX-512, AVX2, portable) and the choice between them |
 //! | [`raster`] | the intersection structure: planes rasterised in screen space |
 //! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
 //! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
 //! | [`render`] | the photon-plane renderer and its options |
+//! | [`partial`] | partial renders: canonical chunks of the plane set, their f64 sums, the canonical merge |
+//! | [`control`] | following and stopping a long job: progress callback and cancel flag |
 //! | [`reference`](mod@reference) | the independent reference renderer (section 4) |
 //! | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
@@ -36,6 +41,7 @@
 
 pub mod bvh;
 pub mod camera;
+pub mod control;
 pub mod emission;
 pub mod error;
 pub mod export;
@@ -47,6 +53,8 @@ pub mod limits;
 pub mod medium;
 pub mod metrics;
 pub mod numeric;
+pub mod outputs;
+pub mod partial;
 pub mod photon_plane;
 pub mod pixel;
 pub mod quadrature;
@@ -55,10 +63,12 @@ pub mod reference;
 pub mod render;
 pub mod sampling;
 pub mod scene;
-pub mod sobol;
+pub mod settings;
 pub mod weights;
 
 pub use error::{Error, Result};
+/// The Sobol sequence under its former path: it is a part of [`sampling`] now.
+pub use sampling::sobol;
 
 /// Parses `s` as the member of the closed list `all` whose name it is, or says which names
 /// there are: the `FromStr` of every named choice (estimator, sampler, kernel, accelerator).

@@ -18,6 +18,12 @@ pub const MAX_ORIENTATIONS: u32 = 64;
 pub const MAX_TOTAL_POWER: f64 = 1e30;
 /// The most worker threads.
 pub const MAX_THREADS: usize = 1024;
+/// The longest time budget of one render, in seconds (about 11 days).
+pub const MAX_TIME_BUDGET_SECONDS: f64 = 1e6;
+/// The longest equal-time render of one table entry, in seconds.
+pub const MAX_EQUAL_TIME_SECONDS: f64 = 1e5;
+/// The most seeds per plane count in the table's error-versus-time sweep.
+pub const MAX_SWEEP_SEEDS: u32 = 1000;
 
 /// Memory refused up front: a render that would need more than this is an input error.
 pub const MEMORY_BUDGET_BYTES: u64 = 16 << 30;
@@ -54,6 +60,29 @@ pub fn check_threads(threads: usize) -> Result<(), String> {
     Ok(())
 }
 
+/// A span of wall time in seconds: positive, finite, at most `max`.
+pub fn check_seconds(seconds: f64, max: f64) -> Result<(), String> {
+    if !(seconds > 0.0 && seconds <= max) {
+        return Err(format!("must be a positive number of seconds up to {max:e}, got {seconds}"));
+    }
+    Ok(())
+}
+
+/// An exposure in stops: any finite number (a NaN would turn every pixel black).
+pub fn check_exposure(stops: f32) -> Result<(), String> {
+    if !stops.is_finite() {
+        return Err(format!("must be a finite number of stops, got {stops}"));
+    }
+    Ok(())
+}
+
+pub fn check_sweep_seeds(seeds: u32) -> Result<(), String> {
+    if seeds == 0 || seeds > MAX_SWEEP_SEEDS {
+        return Err(format!("the seeds per plane count must be between 1 and {MAX_SWEEP_SEEDS}, got {seeds}"));
+    }
+    Ok(())
+}
+
 /// Refuses, with the figure, a render that would exhaust memory.
 pub fn check_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
     let bytes = planes
@@ -80,6 +109,14 @@ mod tests {
         assert!(check_spp(MAX_SPP).is_ok() && check_spp(0).is_err());
         assert!(check_resolution(1, MAX_RESOLUTION_SIDE).is_ok() && check_resolution(0, 1).is_err());
         assert!(check_threads(1).is_ok() && check_threads(0).is_err());
+        assert!(check_seconds(1e6, MAX_TIME_BUDGET_SECONDS).is_ok());
+        for bad in [0.0, -1.0, 1.5e6, f64::NAN, f64::INFINITY] {
+            assert!(check_seconds(bad, MAX_TIME_BUDGET_SECONDS).is_err(), "{bad}");
+        }
+        assert!(
+            check_exposure(-3.0).is_ok() && check_exposure(f32::NAN).is_err() && check_exposure(f32::INFINITY).is_err()
+        );
+        assert!(check_sweep_seeds(1).is_ok() && check_sweep_seeds(0).is_err() && check_sweep_seeds(1001).is_err());
         let e = check_memory(32_000, 32_000, 40_960).unwrap_err();
         assert!(e.contains("91.6 GiB"), "{e}");
         assert!(check_memory(640, 360, 640_000).is_ok());

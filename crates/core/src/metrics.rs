@@ -26,7 +26,13 @@ impl ErrorMetrics {
     }
 }
 
-/// Compares `image` against `reference`; they must have the same size.
+/// Compares `image` against `reference`; they must have the same size and hold only finite
+/// values.
+///
+/// A NaN or infinite value is refused ([`Error::NonFinitePixel`], naming the first one, image
+/// before reference), not skipped and not propagated: skipped, an image of nothing but NaN
+/// would score 0 (`f64::max` and a zero-denominator test both pass NaN over); propagated, one
+/// bad pixel would turn every metric into NaN and say nothing of where it is.
 pub fn compare(image: &Film, reference: &Film) -> Result<ErrorMetrics> {
     if (image.width, image.height) != (reference.width, reference.height) {
         return Err(Error::SizeMismatch {
@@ -34,6 +40,8 @@ pub fn compare(image: &Film, reference: &Film) -> Result<ErrorMetrics> {
             reference: (reference.width, reference.height),
         });
     }
+    image.check_finite("image")?;
+    reference.check_finite("reference")?;
     let (mut smape, mut mse, mut rel, mut max) = (0.0, 0.0, 0.0, 0.0f64);
     for (e, r) in image.pixels.iter().zip(&reference.pixels) {
         for c in 0..3 {
@@ -75,5 +83,24 @@ mod tests {
         assert!((m.smape_e2() - 100.0 / 6.0).abs() < 1e-9);
         assert_eq!(compare(&r, &r).unwrap(), ErrorMetrics::default());
         assert!(compare(&r, &film(&[[0.0; 3]])).is_err());
+    }
+
+    /// Skipped, an all-NaN image scored 0 against anything; now the first bad value is named.
+    #[test]
+    fn non_finite_values_are_refused_and_named() {
+        let r = film(&[[1.0, 0.0, 2.0], [0.5, 0.5, 0.5]]);
+        let all_nan = film(&[[f32::NAN; 3]; 2]);
+        let e = compare(&all_nan, &r).unwrap_err();
+        assert!(e.is_input());
+        assert_eq!(
+            e.to_string(),
+            "the image holds a value that is not a finite number: pixel (x 0, y 0) channel R is NaN"
+        );
+        let e = compare(&r, &all_nan).unwrap_err().to_string();
+        assert!(e.starts_with("the reference holds"), "{e}");
+        let one_inf = film(&[[1.0, 0.0, 2.0], [0.5, f32::NEG_INFINITY, 0.5]]);
+        let e = compare(&one_inf, &r).unwrap_err().to_string();
+        assert!(e.ends_with("pixel (x 1, y 0) channel G is -inf"), "{e}");
+        assert!(compare(&r, &one_inf).is_err());
     }
 }

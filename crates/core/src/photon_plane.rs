@@ -9,7 +9,7 @@
 
 use crate::light::{ChordDirection, chord_extent};
 use crate::medium::{Medium, PHASE};
-use crate::sampling::{Discrete, Sampler, cosine_hemisphere, light_distribution};
+use crate::sampling::{Discrete, Sampler, cosine_hemisphere};
 use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -83,7 +83,7 @@ pub fn sample_plane_range(
     seed: u64,
     range: std::ops::Range<usize>,
 ) -> Vec<PhotonPlane> {
-    let lights = light_distribution(scene);
+    let lights = scene.light_distribution();
     (range.start as u64..range.end as u64)
         .into_par_iter()
         .map(|i| sample_plane(scene, &lights, sampler.plane_numbers(seed, i)))

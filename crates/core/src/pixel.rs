@@ -9,18 +9,18 @@
 //! ([`ray_set_of_plane`], [`plane_group`], [`ray_set_position`]). The direct emission is
 //! integrated over the pixel separately ([`crate::emission`]).
 
-use crate::error::{Error, Result};
+use crate::control::Control;
+use crate::error::Result;
 use crate::gather::{CameraRay, GatherStats};
 use crate::kernel::Kernel;
-use crate::render::{PreparedPlanes, Progress, RenderOptions, RenderStats};
-use crate::sampling::mix64;
+use crate::render::PreparedPlanes;
+use crate::sampling::sobol::{nested_uniform_scramble, sobol_u32};
+use crate::sampling::splitmix64;
 use crate::scene::Scene;
-use crate::sobol::{nested_uniform_scramble, sobol_u32};
 use crate::weights::Weighting;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Ray sets per pixel when neither the command line nor the scene says (`--spp`): chosen by
@@ -47,12 +47,12 @@ pub fn plane_group(k: u32, planes: usize, ray_sets: u32) -> Range<usize> {
 
 /// Where ray set `k` crosses pixel `pixel` under `seed`, in `[0, 1)^2` of the pixel: point `k`
 /// of a 2D Sobol (0,2)-sequence under nested uniform (Owen) scrambling of its own per pixel
-/// (hash-based, as the planes', [`crate::sobol`]), at the centre of the 2^-32 cell the 32-bit
+/// (hash-based, as the planes', [`crate::sampling::sobol`]), at the centre of the 2^-32 cell the 32-bit
 /// point names. Every point is uniform over the pixel (whatever `k`), and the first `2^m` points
 /// of a pixel form a (0,m,2)-net: one in each elementary box of area `2^-m` (section 8.1).
 #[inline]
 pub fn ray_set_position(seed: u64, pixel: u64, k: u32) -> (f64, f64) {
-    let scramble = mix64(mix64(seed ^ RAY_SET_STREAM) ^ pixel);
+    let scramble = splitmix64(splitmix64(seed ^ RAY_SET_STREAM) ^ pixel);
     let coordinate = |dim: usize, seed: u32| {
         (nested_uniform_scramble(sobol_u32(k, dim), seed) as f64 + 0.5) * (1.0 / 4_294_967_296.0)
     };
@@ -146,80 +146,6 @@ pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec
         .collect()
 }
 
-/// What gathering with ray sets needs besides the planes: the scene, the settings, the kernel
-/// and the caller's progress and cancel flag.
-pub struct RaySetGather<'a> {
-    pub scene: &'a Scene,
-    pub opts: &'a RenderOptions,
-    /// Resolved ([`Kernel::resolve`]).
-    pub kernel: Kernel,
-    pub progress: Progress<'a>,
-    pub cancel: &'a AtomicBool,
-}
-
-impl RaySetGather<'_> {
-    fn cancelled(&self) -> Result<()> {
-        if self.cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(()) }
-    }
-
-    /// Ray sets per pixel: `opts.spp`, or one at pixel centres (where every set would be the
-    /// same rays).
-    pub fn ray_sets(&self) -> u32 {
-        if self.opts.pixel_center { 1 } else { self.opts.spp.max(1) }
-    }
-
-    /// Gathers planes `range` of the set of `opts.planes`, each with the ray set of its group
-    /// ([`ray_set_of_plane`]), each weighted as one of `weight_total` (`opts.planes` for a
-    /// whole render, 1 for unnormalised sums), adding into `sums` (one per pixel). One group's
-    /// planes exist at a time. The same plane meets the same rays whatever `range`, so ranges
-    /// rendered apart and added give the render of their union (up to f32 summation order).
-    pub fn gather_range(
-        &self,
-        range: Range<usize>,
-        weight_total: usize,
-        sums: &mut [Vec3],
-        stats: &mut RenderStats,
-    ) -> Result<()> {
-        let (planes, ray_sets) = (self.opts.planes, self.ray_sets());
-        for k in 0..ray_sets {
-            let group = plane_group(k, planes, ray_sets);
-            let share = group.start.max(range.start)..group.end.min(range.end);
-            if share.is_empty() {
-                continue;
-            }
-            let t = Instant::now();
-            let rays = ray_set_rays(self.scene, self.opts.seed, k, self.opts.pixel_center);
-            stats.seconds_rays += t.elapsed().as_secs_f64();
-            stats.rays += rays.len() as u64;
-            self.gather_group(share, weight_total, &rays, sums, stats)?;
-        }
-        Ok(())
-    }
-
-    /// Gathers planes `range` (weighted as one of `weight_total`) along `rays` into `sums`.
-    pub fn gather_group(
-        &self,
-        range: Range<usize>,
-        weight_total: usize,
-        rays: &[CameraRay],
-        sums: &mut [Vec3],
-        stats: &mut RenderStats,
-    ) -> Result<()> {
-        let o = self.opts;
-        let prepared = PreparedPlanes::range(self.scene, range, weight_total, o.seed, o.sampler, o.accelerator);
-        self.cancelled()?;
-        let t = Instant::now();
-        let s = prepared.gather_cancellable(o.weighting, self.kernel, rays, sums, self.progress, self.cancel);
-        self.cancelled()?;
-        stats.seconds_gather += t.elapsed().as_secs_f64();
-        stats.seconds_sampling += prepared.seconds_sampling;
-        stats.seconds_build += prepared.seconds_build;
-        stats.hits += s.hits;
-        stats.tests += s.tests;
-        Ok(())
-    }
-}
-
 /// The camera rays of ray sets `0..ray_sets` (one set at pixel centres, which every set
 /// shares), kept for gathering several times: the passes of a render on a time budget (which
 /// makes each set when first needed), the estimators of the table.
@@ -296,7 +222,8 @@ pub struct PixelSettings {
 }
 
 impl PreparedPixels {
-    pub fn new(scene: &Scene, s: PixelSettings) -> Self {
+    /// [`crate::error::Error::Cancelled`] once `control` is cancelled.
+    pub fn new(scene: &Scene, s: PixelSettings, control: Control) -> Result<Self> {
         let start = Instant::now();
         let rays = RaySets::new(scene, s.seed, s.ray_sets, s.pixel_center);
         let ray_sets = if s.pixel_center { 1 } else { s.ray_sets.max(1) };
@@ -304,22 +231,23 @@ impl PreparedPixels {
             .map(|k| (k, plane_group(k, s.planes, ray_sets)))
             .filter(|(_, g)| !g.is_empty())
             .map(|(k, g)| {
-                (k, PreparedPlanes::range(scene, g, s.planes, s.seed, s.sampler, crate::render::Accelerator::Raster))
+                let raster = crate::render::Accelerator::Raster;
+                Ok((k, PreparedPlanes::range(scene, g, s.planes, s.seed, s.sampler, raster, control)?))
             })
-            .collect();
+            .collect::<Result<_>>()?;
         let emission = crate::emission::direct_emission(scene, s.seed, s.ray_sets, s.pixel_center);
-        PreparedPixels { groups, rays, emission, seconds: start.elapsed().as_secs_f64() }
+        Ok(PreparedPixels { groups, rays, emission, seconds: start.elapsed().as_secs_f64() })
     }
 
     /// Every group gathered along its ray set with `weighting`: the scattering sums (one per
     /// pixel, weighted 1/N) and the statistics.
-    pub fn gather(&self, weighting: Weighting, kernel: Kernel) -> (Vec<Vec3>, GatherStats) {
+    pub fn gather(&self, weighting: Weighting, kernel: Kernel, control: Control) -> Result<(Vec<Vec3>, GatherStats)> {
         let mut sums = vec![Vec3::ZERO; self.emission.len()];
         let mut stats = GatherStats::default();
         for (k, prepared) in &self.groups {
-            stats += prepared.gather(weighting, kernel, self.rays.get(*k), &mut sums, &|| {});
+            stats += prepared.gather(weighting, kernel, self.rays.get(*k), &mut sums, control)?;
         }
-        (sums, stats)
+        Ok((sums, stats))
     }
 }
 

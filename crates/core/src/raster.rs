@@ -5,26 +5,42 @@
 //! polygon is projected once, clipped to the image, and binned into horizontal bands of rows.
 //! A band walks its planes in index order; for every row it covers, the conservative span of
 //! pixels whose squares meet the polygon is tested exactly with
-//! [`crate::gather::PlaneView::gather_lanes`]. The exact test decides; the span only has to
+//! [`crate::gather::PlaneJob::gather_lanes`]. The exact test decides; the span only has to
 //! contain every pixel that can hit, whatever the jitter.
 //!
 //! Each pixel's sum runs over planes in index order whatever the thread count, so images are
 //! bit-identical for a seed.
 
 use crate::camera::Camera;
+use crate::control::Control;
 use crate::gather::{CameraRay, GatherContext, GatherStats, RayLanes};
-use crate::kernel::{self, Kernel, LANES, Span};
+use crate::kernel::{self, Band, Kernel, LANES, Span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Rows per band: a band's rays and sums stay in cache while its planes stream by.
 pub const BAND_ROWS: u32 = 8;
 /// Slack in pixels around a projected polygon, far above the rounding of the projection.
 const SPAN_MARGIN: f32 = 1e-2;
+
+/// What one gathering call runs: the planes prepared for rays from the camera, the estimator's
+/// weights and the kernel (resolved, see [`Kernel::resolve`]). A new per-call setting is one
+/// field here.
+pub struct Gathering<'a, D: Denominator> {
+    pub ctx: &'a GatherContext,
+    pub weights: &'a D,
+    pub kernel: Kernel,
+}
+
+impl<D: Denominator> Clone for Gathering<'_, D> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<D: Denominator> Copy for Gathering<'_, D> {}
 
 /// Projected, image-clipped polygons of all planes, binned into bands of rows.
 pub struct ScreenRaster {
@@ -166,41 +182,33 @@ impl ScreenRaster {
         out
     }
 
-    /// Gathers every plane into `out` (one RGB sum per pixel, row-major), for the rays `rays`
-    /// (one per pixel), with `kernel` (resolved), calling
-    /// `on_band` after each band (for progress). Bands not started when `cancel` is set are
-    /// skipped (`out` is then incomplete).
-    #[allow(clippy::too_many_arguments)]
+    /// Gathers every plane into `out` (one RGB sum per pixel, row-major) for the rays `rays`
+    /// (one per pixel), reporting each finished band to `control`. Once `control` is cancelled
+    /// every band stops before its next plane, and `out` is incomplete.
     pub fn gather<D: Denominator>(
         &self,
-        ctx: &GatherContext,
-        weights: &D,
-        kernel: Kernel,
+        with: Gathering<D>,
         rays: &[CameraRay],
         out: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-        cancel: &AtomicBool,
+        control: Control,
     ) -> GatherStats {
-        self.gather_all::<D, true>(ctx, weights, kernel, rays, out, on_band, cancel)
+        self.gather_all::<D, true>(with, rays, out, control)
     }
 
     /// Finds every hit without weighting it (the traversal and intersection work alone, for
     /// measuring its share of the gathering time).
     pub fn count_hits(&self, ctx: &GatherContext, kernel: Kernel, rays: &[CameraRay]) -> GatherStats {
         let mut out = vec![Vec3::ZERO; rays.len()];
-        self.gather_all::<Unweighted, false>(ctx, &Unweighted, kernel, rays, &mut out, &|| {}, &AtomicBool::new(false))
+        let with = Gathering { ctx, weights: &Unweighted, kernel };
+        self.gather_all::<Unweighted, false>(with, rays, &mut out, Control::none())
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn gather_all<D: Denominator, const CONTRIBUTE: bool>(
         &self,
-        ctx: &GatherContext,
-        weights: &D,
-        kernel: Kernel,
+        with: Gathering<D>,
         rays: &[CameraRay],
         out: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-        cancel: &AtomicBool,
+        control: Control,
     ) -> GatherStats {
         let w = self.width as usize;
         let band_pixels = BAND_ROWS as usize * w;
@@ -208,11 +216,10 @@ impl ScreenRaster {
             .zip(rays.par_chunks(band_pixels))
             .enumerate()
             .map(|(band, (sums, rays))| {
-                if cancel.load(Ordering::Relaxed) {
-                    return GatherStats::default();
+                let stats = self.gather_band::<D, CONTRIBUTE>(with, band, rays, sums, control);
+                if !control.is_cancelled() {
+                    control.progress();
                 }
-                let stats = self.gather_band::<D, CONTRIBUTE>(ctx, weights, kernel, band, rays, sums);
-                on_band();
                 stats
             })
             .reduce(GatherStats::default, |mut a, b| {
@@ -221,15 +228,18 @@ impl ScreenRaster {
             })
     }
 
+    /// One band of rows: its planes in index order, each against its spans. The cancel flag is
+    /// read before each plane (a relaxed load, nothing beside a plane's work), so that even a
+    /// band of millions of planes stops within milliseconds.
     fn gather_band<D: Denominator, const CONTRIBUTE: bool>(
         &self,
-        ctx: &GatherContext,
-        weights: &D,
-        kernel: Kernel,
+        with: Gathering<D>,
         band: usize,
         rays: &[CameraRay],
         sums: &mut [Vec3],
+        control: Control,
     ) -> GatherStats {
+        let Gathering { ctx, weights, kernel } = with;
         let w = self.width as usize;
         let first_row = band as u32 * BAND_ROWS;
         let rows = (rays.len() / w) as u32;
@@ -237,13 +247,16 @@ impl ScreenRaster {
         let stride = soa.stride;
         let mut acc = PaddedSums::new(soa.x.len());
         let mut stats = GatherStats::default();
-        let ext = ctx.extinction;
-        let band_rays = kernel::BandRays { x: &soa.x, y: &soa.y, z: &soa.z, t0: &soa.t0, t1: &soa.t1 };
-        let mut band_sums = kernel::BandSums { r: &mut acc.r, g: &mut acc.g, b: &mut acc.b };
+        let mut kernel_band = Band {
+            rays: kernel::BandRays { x: &soa.x, y: &soa.y, z: &soa.z, t0: &soa.t0, t1: &soa.t1 },
+            sums: kernel::BandSums { r: &mut acc.r, g: &mut acc.g, b: &mut acc.b },
+        };
         let mut spans = Vec::with_capacity(BAND_ROWS as usize);
         for &plane in &self.bands[band] {
+            if control.is_cancelled() {
+                return stats;
+            }
             let view = &ctx.views[plane as usize];
-            let occluders = ctx.occluders_of(view);
             spans.clear();
             for (row, span) in (first_row..).zip(self.spans(plane as usize, first_row, rows)) {
                 let Some((first, last)) = span else {
@@ -258,33 +271,23 @@ impl ScreenRaster {
             if spans.is_empty() {
                 continue;
             }
-            let prepared = weights.prepare(&view.frame);
+            let job = ctx.job(weights, view);
             if kernel == Kernel::PerHit {
                 let mut hits = [0u32];
+                let (rays, sums) = (&kernel_band.rays, &mut kernel_band.sums);
                 for k in spans.iter().flat_map(|s| s.start as usize..(s.start + s.len) as usize) {
                     let one =
-                        RayLanes { x: [soa.x[k]], y: [soa.y[k]], z: [soa.z[k]], t0: [soa.t0[k]], t1: [soa.t1[k]] };
+                        RayLanes { x: [rays.x[k]], y: [rays.y[k]], z: [rays.z[k]], t0: [rays.t0[k]], t1: [rays.t1[k]] };
                     let sums = [
-                        std::array::from_mut(&mut band_sums.r[k]),
-                        std::array::from_mut(&mut band_sums.g[k]),
-                        std::array::from_mut(&mut band_sums.b[k]),
+                        std::array::from_mut(&mut sums.r[k]),
+                        std::array::from_mut(&mut sums.g[k]),
+                        std::array::from_mut(&mut sums.b[k]),
                     ];
-                    view.gather_lanes_in::<D, 1, CONTRIBUTE>(weights, &prepared, occluders, ext, &one, sums, &mut hits);
+                    job.gather_lanes_in::<1, CONTRIBUTE>(&one, sums, &mut hits);
                 }
                 stats.hits += hits[0] as u64;
             } else {
-                stats.hits += kernel::gather_plane::<D, CONTRIBUTE>(
-                    kernel,
-                    weights,
-                    &prepared,
-                    view,
-                    occluders,
-                    ext.sigma_t,
-                    ext.grey,
-                    &spans,
-                    &band_rays,
-                    &mut band_sums,
-                );
+                stats.hits += kernel::gather_plane::<D, CONTRIBUTE>(kernel, &job, &spans, &mut kernel_band);
             }
         }
         for (k, s) in sums.iter_mut().enumerate() {

@@ -3,19 +3,20 @@
 //! Per pixel sample: a light chosen by power, a point uniform on it, a distance on the camera
 //! segment by equiangular sampling toward that point (Kulla and Fajardo 2012), and the
 //! integrand of docs/mathematics.md section 1 evaluated with visibility. It shares with the
-//! photon planes only the scene, the medium and the elementary routines of [`crate::sampling`]
-//! (light choice by power, random streams): no plane, chord, weight or gathering code. It
+//! photon planes only the scene (with its light choice by power), the medium and the elementary
+//! routines of [`crate::sampling`] (random streams, its low-discrepancy sequence): no plane,
+//! chord, weight or gathering code. It
 //! measures its own per-pixel standard error.
 
-use crate::error::{Error, Result};
+use crate::control::Control;
+use crate::error::Result;
 use crate::film::Film;
 use crate::medium::PHASE;
-use crate::sampling::{Discrete, rng_for, unit_f64};
+use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rand::RngCore;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 const REFERENCE_STREAM: u64 = 0x2EF_E2E;
 
@@ -89,35 +90,6 @@ pub fn scattering_sample(
 /// Independent replicates per pixel: the standard error comes from their spread.
 pub const REPLICATES: u32 = 16;
 
-/// The additive-recurrence (Kronecker) low-discrepancy sequence of Roberts' generalised golden
-/// ratio in `D` dimensions: x_i = frac(shift + i alpha), alpha_j = phi_D^-(j+1), with phi_D the
-/// positive root of x^(D+1) = x + 1.
-pub struct Kronecker<const D: usize> {
-    alpha: [f64; D],
-}
-
-impl<const D: usize> Kronecker<D> {
-    pub fn new() -> Self {
-        let mut phi = 2.0f64;
-        for _ in 0..60 {
-            phi -= (phi.powi(D as i32 + 1) - phi - 1.0) / ((D as f64 + 1.0) * phi.powi(D as i32) - 1.0);
-        }
-        Kronecker { alpha: std::array::from_fn(|j| phi.powi(-(j as i32 + 1)).fract()) }
-    }
-
-    /// Point `i` of the sequence rotated by `shift` (Cranley-Patterson): uniform in [0, 1)^D
-    /// for a uniform shift, so each replicate is an unbiased estimate.
-    pub fn point(&self, i: u64, shift: &[f64; D]) -> [f64; D] {
-        std::array::from_fn(|j| (shift[j] + (i as f64 * self.alpha[j]).fract()).fract())
-    }
-}
-
-impl<const D: usize> Default for Kronecker<D> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
 /// Renders the reference image with an average of `spp` samples per pixel.
 ///
 /// Its noise is concentrated in few pixels (those that see a light panel or pass close to one,
@@ -128,89 +100,142 @@ impl<const D: usize> Default for Kronecker<D> {
 /// weighs) and at most 64 times the average. The image and its standard
 /// error come from the second pass alone, whose sample counts are fixed before it runs, so
 /// every pixel stays unbiased. `uniform` gives every pixel `spp` samples instead.
-pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, progress: &(dyn Fn() + Sync)) -> ReferenceImage {
-    reference_until(scene, opts, progress, &AtomicBool::new(false))
-}
-
-/// [`render_reference`] that another thread can stop by setting `cancel`: the rows under way
-/// finish, the others are skipped, and the result is [`Error::Cancelled`].
-pub fn render_reference_cancellable(
-    scene: &Scene,
-    opts: &ReferenceOptions,
-    progress: &(dyn Fn() + Sync),
-    cancel: &AtomicBool,
-) -> Result<ReferenceImage> {
-    let image = reference_until(scene, opts, progress, cancel);
-    if cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(image) }
-}
-
-/// The reference, with the rows not started once `cancel` is set left black.
-fn reference_until(
-    scene: &Scene,
-    opts: &ReferenceOptions,
-    progress: &(dyn Fn() + Sync),
-    cancel: &AtomicBool,
-) -> ReferenceImage {
+///
+/// Reports each finished row to `control` (both passes' rows, unless `uniform`); once another
+/// thread cancels it, the work stops before the next pixel and the result is
+/// [`crate::Error::Cancelled`].
+pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, control: Control) -> Result<ReferenceImage> {
     let start = std::time::Instant::now();
-    let pixels = scene.camera.width as usize * scene.camera.height as usize;
-    let (mean, stderr) = if opts.uniform {
-        render_pixels(scene, opts.seed, opts.pixel_center, &vec![opts.spp; pixels], progress, cancel)
+    let all = 0..scene.camera.height;
+    let counts = if opts.uniform {
+        None
     } else {
-        let pilot_spp = (opts.spp / 8).max(REPLICATES);
-        let (_, pilot_se) =
-            render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, &vec![pilot_spp; pixels], progress, cancel);
-        // Standard deviation of one sample, the mean over channels.
-        let sigma: Vec<f64> =
-            pilot_se.pixels.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
-        let total_sigma: f64 = sigma.iter().sum();
-        let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
-        let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
-        // The floor is taken first; the rest goes by need.
-        let budget = (budget - floor * pixels as f64).max(0.0);
-        let counts: Vec<u32> = sigma
-            .iter()
-            .map(|&s| {
-                let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
-                (floor + share).min(cap).round() as u32
-            })
-            .collect();
-        render_pixels(scene, opts.seed, opts.pixel_center, &counts, progress, cancel)
+        let pilot = reference_pilot_rows(scene, opts, all.clone(), control)?;
+        Some(reference_counts(opts, &pilot.pixels))
     };
-    ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() }
+    let (mean, stderr) = reference_rows(scene, opts, all, counts.as_deref(), control)?;
+    Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
+}
+
+/// Samples per pixel of the pilot pass of the adaptive reference.
+fn pilot_spp(opts: &ReferenceOptions) -> u32 {
+    (opts.spp / 8).max(REPLICATES)
+}
+
+/// Rows `rows` of the reference (a band `rows.len()` high): its mean and standard error, with
+/// `counts` samples in each pixel of the whole image (row-major, from [`reference_counts`]) or,
+/// when `None`, `opts.spp` in every pixel (which `opts.uniform` asks for). Each pixel's random
+/// stream is keyed by the seed and the pixel alone, so the bands of an image, rendered anywhere,
+/// are its rows bit for bit.
+pub fn reference_rows(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    counts: Option<&[u32]>,
+    control: Control,
+) -> Result<(Film, Film)> {
+    check_rows(scene, &rows)?;
+    match counts {
+        Some(c) => {
+            let pixels = scene.camera.width as usize * scene.camera.height as usize;
+            if c.len() != pixels {
+                return Err(crate::Error::Partial(format!(
+                    "{} sample counts for an image of {pixels} pixels",
+                    c.len()
+                )));
+            }
+            render_pixels(scene, opts.seed, opts.pixel_center, rows, &|p| c[p], control)
+        }
+        None => render_pixels(scene, opts.seed, opts.pixel_center, rows, &|_| opts.spp, control),
+    }
+}
+
+/// Rows `rows` of the adaptive reference's pilot pass: each pixel's standard error (the
+/// measure of its need that [`reference_counts`] reads).
+pub fn reference_pilot_rows(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    control: Control,
+) -> Result<Film> {
+    check_rows(scene, &rows)?;
+    let spp = pilot_spp(opts);
+    Ok(render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, rows, &|_| spp, control)?.1)
+}
+
+/// The rows `rows` lie in the image and are not empty.
+fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
+    let h = scene.camera.height;
+    if rows.start >= rows.end || rows.end > h {
+        return Err(crate::Error::Partial(format!(
+            "rows {}:{} are not a band of the image's {h} rows (0 <= J0 < J1 <= {h})",
+            rows.start, rows.end
+        )));
+    }
+    Ok(())
+}
+
+/// The adaptive reference's sample count of every pixel from the whole pilot's standard errors
+/// `pilot` (row-major): the allocation described at [`render_reference`].
+pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3]) -> Vec<u32> {
+    let pixels = pilot.len();
+    let pilot_spp = pilot_spp(opts);
+    // Standard deviation of one sample, the mean over channels.
+    let sigma: Vec<f64> = pilot.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
+    let total_sigma: f64 = sigma.iter().sum();
+    let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
+    let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
+    // The floor is taken first; the rest goes by need.
+    let budget = (budget - floor * pixels as f64).max(0.0);
+    sigma
+        .iter()
+        .map(|&s| {
+            let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
+            (floor + share).min(cap).round() as u32
+        })
+        .collect()
 }
 
 /// Seed offset of the pilot pass, so that it shares no samples with the final one.
 const PILOT_SEED: u64 = 0x9_11_07;
 
-/// Renders every pixel with its own sample count, in [`REPLICATES`] independent replicates of
+/// Renders rows `rows` (a band of the image), pixel `p` (row-major in the whole image) with
+/// `spp(p)` samples, in [`REPLICATES`] independent replicates of
 /// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
 /// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
 /// their mean and its standard error comes from their spread, an honest measure of the noise.
+/// The cancel flag is read before each pixel (at most 64 times the average samples, a few
+/// milliseconds).
 fn render_pixels(
     scene: &Scene,
     seed: u64,
     pixel_center: bool,
-    spp: &[u32],
-    progress: &(dyn Fn() + Sync),
-    cancel: &AtomicBool,
-) -> (Film, Film) {
+    rows: std::ops::Range<u32>,
+    spp: &(dyn Fn(usize) -> u32 + Sync),
+    control: Control,
+) -> Result<(Film, Film)> {
     let cam = &scene.camera;
     let w = cam.width as usize;
-    let lights = crate::sampling::light_distribution(scene);
+    let lights = scene.light_distribution();
     let sequence = Kronecker::<6>::new();
-    let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (0..cam.height as usize)
+    let band = rows.len() as u32;
+    let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (rows.start as usize..rows.end as usize)
         .into_par_iter()
         .map(|j| {
-            if cancel.load(Ordering::Relaxed) {
-                return (vec![Vec3::ZERO; w], vec![Vec3::ZERO; w]);
-            }
             let mut means = Vec::with_capacity(w);
             let mut errors = Vec::with_capacity(w);
             for i in 0..w {
+                if control.is_cancelled() {
+                    // The image is discarded: the row's length is all that matters.
+                    means.resize(w, Vec3::ZERO);
+                    errors.resize(w, Vec3::ZERO);
+                    return (means, errors);
+                }
                 let pixel = (j * w + i) as u64;
                 let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
-                let replicates = REPLICATES.min(spp[pixel as usize]).max(1);
-                let per_replicate = spp[pixel as usize].div_ceil(replicates) as u64;
+                let count = spp(pixel as usize);
+                let replicates = REPLICATES.min(count).max(1);
+                let per_replicate = count.div_ceil(replicates) as u64;
                 let centre_dir = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
                 let centre = scene.camera_segment(cam.position, centre_dir);
                 let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
@@ -245,40 +270,46 @@ fn render_pixels(
                         .as_vec3(),
                 );
             }
-            progress();
+            control.progress();
             (means, errors)
         })
         .collect();
-    let mut mean = Film::new(cam.width, cam.height);
-    let mut stderr = Film::new(cam.width, cam.height);
+    control.check()?;
+    let mut mean = Film::new(cam.width, band);
+    let mut stderr = Film::new(cam.width, band);
     for (j, (m, e)) in rows.into_iter().enumerate() {
         mean.pixels[j * w..(j + 1) * w].copy_from_slice(&m);
         stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);
     }
-    (mean, stderr)
+    Ok((mean, stderr))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::AtomicUsize;
+    use crate::error::Error;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
+    /// Cancelled when the first row ends: on one thread no other row runs; on two, the other
+    /// thread's row stops before its next pixel (it may have finished just before the flag).
     #[test]
     fn cancelling_stops_the_reference_after_the_rows_under_way() {
         let scene =
             Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(24, 16).unwrap();
-        let opts = ReferenceOptions { spp: 32, uniform: false, seed: 1, pixel_center: false };
-        let a = render_reference(&scene, &opts, &|| {});
-        let b = render_reference_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();
-        assert_eq!((a.mean, a.stderr), (b.mean, b.stderr));
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-        let (cancel, rows) = (AtomicBool::new(false), AtomicUsize::new(0));
-        let progress = || {
-            rows.fetch_add(1, Ordering::Relaxed);
-            cancel.store(true, Ordering::Relaxed);
-        };
-        let e = pool.install(|| render_reference_cancellable(&scene, &opts, &progress, &cancel)).err().unwrap();
-        assert!(matches!(e, Error::Cancelled) && !e.is_input());
-        assert!(rows.into_inner() <= 2);
+        for uniform in [false, true] {
+            let opts = ReferenceOptions { spp: 32, uniform, seed: 1, pixel_center: false };
+            for threads in [1, 2] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let (cancel, rows) = (AtomicBool::new(false), AtomicUsize::new(0));
+                let progress = || {
+                    rows.fetch_add(1, Ordering::Relaxed);
+                    cancel.store(true, Ordering::Relaxed);
+                };
+                let control = Control::new(&progress, &cancel);
+                let e = pool.install(|| render_reference(&scene, &opts, control)).err().unwrap();
+                assert!(matches!(e, Error::Cancelled) && !e.is_input());
+                assert!(rows.into_inner() <= threads, "{threads} threads, uniform {uniform}");
+            }
+        }
     }
 }

@@ -7,6 +7,8 @@
 //! [`crate::emission`]). The table reuses the steps through [`crate::pixel::PreparedPixels`].
 
 use crate::bvh::PlaneBvh;
+use crate::control::Control;
+use crate::error::Setting;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::gather::GatherStats;
@@ -14,14 +16,13 @@ use crate::gather::{CameraRay, GatherContext};
 use crate::kernel::Kernel;
 use crate::limits::{check_memory, check_planes, check_spp};
 use crate::photon_plane::sample_plane_range;
-use crate::pixel::{PanelFootprints, RaySetGather, RaySets, camera_ray, plane_group, ray_set_position};
-use crate::raster::ScreenRaster;
+use crate::pixel::{PanelFootprints, RaySets, camera_ray, plane_group, ray_set_position};
+use crate::raster::{Gathering, ScreenRaster};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// How camera rays find the planes they hit.
@@ -107,12 +108,20 @@ pub struct PreparedPlanes {
 
 impl PreparedPlanes {
     /// The first `planes` planes of the set made with `seed` and `sampler`.
-    pub fn new(scene: &Scene, planes: usize, seed: u64, sampler: Sampler, accelerator: Accelerator) -> Self {
-        PreparedPlanes::range(scene, 0..planes, planes, seed, sampler, accelerator)
+    pub fn new(
+        scene: &Scene,
+        planes: usize,
+        seed: u64,
+        sampler: Sampler,
+        accelerator: Accelerator,
+        control: Control,
+    ) -> Result<Self> {
+        PreparedPlanes::range(scene, 0..planes, planes, seed, sampler, accelerator, control)
     }
 
     /// Planes `range` of the set, each weighted as one of `planes_total` (1 leaves the
-    /// division by N to the caller, as passes that extend a set do).
+    /// division by N to the caller, as passes that extend a set do). [`Error::Cancelled`] once
+    /// `control` is cancelled (checked after each piece of [`PLANE_CHUNK`] planes).
     pub fn range(
         scene: &Scene,
         range: std::ops::Range<usize>,
@@ -120,7 +129,8 @@ impl PreparedPlanes {
         seed: u64,
         sampler: Sampler,
         accelerator: Accelerator,
-    ) -> Self {
+        control: Control,
+    ) -> Result<Self> {
         let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
@@ -128,6 +138,7 @@ impl PreparedPlanes {
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
         for start in range.clone().step_by(PLANE_CHUNK) {
+            control.check()?;
             let t = Instant::now();
             let chunk = sample_plane_range(scene, sampler, seed, start..(start + PLANE_CHUNK).min(range.end));
             seconds_sampling += t.elapsed().as_secs_f64();
@@ -141,75 +152,70 @@ impl PreparedPlanes {
                 all.extend(chunk);
             }
         }
+        control.check()?;
         let t = Instant::now();
-        let bvh = (accelerator == Accelerator::Bvh).then(|| PlaneBvh::build(&all, &scene.medium, origin));
+        let bvh = match accelerator {
+            Accelerator::Bvh => Some(PlaneBvh::build(&all, &scene.medium, origin, control)?),
+            _ => None,
+        };
         seconds_build += t.elapsed().as_secs_f64();
-        PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build }
+        Ok(PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build })
     }
 
     /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`;
-    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]).
+    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]). Reports each band of rows
+    /// (or chunk of rays) to `control`; once it is cancelled, the work stops before the next
+    /// plane (or ray) and the result is [`Error::Cancelled`], with `sums` incomplete.
     pub fn gather(
         &self,
         weighting: Weighting,
         kernel: Kernel,
         rays: &[CameraRay],
         sums: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-    ) -> GatherStats {
-        self.gather_cancellable(weighting, kernel, rays, sums, on_band, &AtomicBool::new(false))
-    }
-
-    /// [`PreparedPlanes::gather`] that stops early once `cancel` is set: the bands (or chunks
-    /// of rays) not yet started are skipped, so `sums` is incomplete if `cancel` is set after.
-    pub fn gather_cancellable(
-        &self,
-        weighting: Weighting,
-        kernel: Kernel,
-        rays: &[CameraRay],
-        sums: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-        cancel: &AtomicBool,
-    ) -> GatherStats {
+        control: Control,
+    ) -> Result<GatherStats> {
         struct Gather<'a> {
             planes: &'a PreparedPlanes,
             kernel: Kernel,
             rays: &'a [CameraRay],
             sums: &'a mut [Vec3],
-            on_band: &'a (dyn Fn() + Sync),
-            cancel: &'a AtomicBool,
+            control: Control<'a>,
         }
         impl WithDenominator for Gather<'_> {
             type Output = GatherStats;
             fn run<D: Denominator>(self, weights: &D) -> GatherStats {
-                self.planes.gather_with(weights, self.kernel, self.rays, self.sums, self.on_band, self.cancel)
+                let with = Gathering { ctx: &self.planes.context, weights, kernel: self.kernel };
+                self.planes.gather_with(with, self.rays, self.sums, self.control)
             }
         }
-        weighting.dispatch(Gather { planes: self, kernel, rays, sums, on_band, cancel })
+        let stats = weighting.dispatch(Gather { planes: self, kernel, rays, sums, control });
+        control.check()?;
+        Ok(stats)
     }
 
+    /// [`PreparedPlanes::gather`] with the weights chosen (`with.kernel` serves the raster).
     fn gather_with<D: Denominator>(
         &self,
-        weights: &D,
-        kernel: Kernel,
+        with: Gathering<D>,
         rays: &[CameraRay],
         sums: &mut [Vec3],
-        on_band: &(dyn Fn() + Sync),
-        cancel: &AtomicBool,
+        control: Control,
     ) -> GatherStats {
-        let ctx = &self.context;
         if let Some(raster) = &self.raster {
-            return raster.gather(ctx, weights, kernel, rays, sums, on_band, cancel);
+            return raster.gather(with, rays, sums, control);
         }
-        // Per-ray structures: chunks of rays in parallel, one progress unit per chunk.
+        let Gathering { ctx, weights, .. } = with;
+        // Per-ray structures: chunks of rays in parallel, one progress unit per chunk, the
+        // cancel flag read before each ray (against every plane, a brute-force ray is the
+        // longest unit of work: milliseconds at a million planes).
         sums.par_chunks_mut(RAY_CHUNK)
             .zip(rays.par_chunks(RAY_CHUNK))
             .map(|(sums, rays)| {
                 let mut stats = GatherStats::default();
-                if cancel.load(Ordering::Relaxed) {
-                    return stats;
-                }
                 for (sum, ray) in sums.iter_mut().zip(rays) {
+                    if control.is_cancelled() {
+                        return stats;
+                    }
                     let (value, s) = match &self.bvh {
                         Some(bvh) => bvh.gather(ctx, weights, ray),
                         None => {
@@ -220,7 +226,7 @@ impl PreparedPlanes {
                     *sum += value;
                     stats += s;
                 }
-                on_band();
+                control.progress();
                 stats
             })
             .reduce(GatherStats::default, |mut a, b| {
@@ -267,6 +273,12 @@ impl Default for RenderOptions {
 }
 
 impl RenderOptions {
+    /// Ray sets per pixel: `spp`, or one at pixel centres (where every set would be the same
+    /// rays).
+    pub fn ray_sets(&self) -> u32 {
+        if self.pixel_center { 1 } else { self.spp.max(1) }
+    }
+
     /// The scene file's defaults.
     pub fn from_scene(scene: &Scene) -> Self {
         let d = &scene.render;
@@ -283,12 +295,14 @@ impl RenderOptions {
     /// Checks every setting against the scene (the memory budget at its resolution) and the
     /// CPU (the kernel), naming the option at fault.
     pub fn validate(&self, scene: &Scene) -> Result<()> {
-        check_planes(self.planes as u64).map_err(|m| Error::option("--planes", m))?;
-        check_spp(self.spp).map_err(|m| Error::option("--spp", m))?;
+        check_planes(self.planes as u64).map_err(|m| Error::option(Setting::Planes, m))?;
+        check_spp(self.spp).map_err(|m| Error::option(Setting::Spp, m))?;
         Weighting::new(self.weighting.estimator, Some(self.weighting.orientations))
-            .map_err(|m| Error::option("--orientations", m))?;
-        check_memory(scene.camera.width, scene.camera.height, self.planes as u64)
-            .map_err(|m| Error::option("--resolution", m))?;
+            .map_err(|m| Error::option(Setting::Orientations, m))?;
+        // One chunk of planes is held at a time ([`crate::partial`]).
+        let held = self.planes.min(crate::partial::CHUNK_PLANES) as u64;
+        check_memory(scene.camera.width, scene.camera.height, held)
+            .map_err(|m| Error::option(Setting::Resolution, m))?;
         self.kernel.resolve()?;
         Ok(())
     }
@@ -314,6 +328,15 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
+    /// Counts one gathering of `planes` that found `s` in `seconds`.
+    pub fn add_gather(&mut self, planes: &PreparedPlanes, s: GatherStats, seconds: f64) {
+        self.seconds_gather += seconds;
+        self.seconds_sampling += planes.seconds_sampling;
+        self.seconds_build += planes.seconds_build;
+        self.hits += s.hits;
+        self.tests += s.tests;
+    }
+
     pub fn hits_per_ray(&self) -> f64 {
         self.hits as f64 / self.rays.max(1) as f64
     }
@@ -341,9 +364,6 @@ impl RenderStats {
     }
 }
 
-/// A progress callback: called once per finished unit of work (band or row).
-pub type Progress<'a> = &'a (dyn Fn() + Sync);
-
 /// Number of progress units in one pass (for sizing a progress bar).
 pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
     let pixels = scene.camera.width as u64 * scene.camera.height as u64;
@@ -356,46 +376,30 @@ pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
 /// Renders the scene: the mean over each pixel of the direct emission (integrated over the
 /// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
 /// gathered with one of the `spp` ray sets (docs/mathematics.md section 8). Checks the options
-/// first ([`RenderOptions::validate`]).
-pub fn render(scene: &Scene, opts: &RenderOptions, progress: Progress) -> Result<(Film, RenderStats)> {
-    render_cancellable(scene, opts, progress, &AtomicBool::new(false))
-}
-
-/// [`render`] that another thread can stop by setting `cancel`: the work then ends after the
-/// bands of rows (or chunks of rays) under way, and the result is [`Error::Cancelled`].
-/// Unless `cancel` is set, the same image and statistics as [`render`].
-pub fn render_cancellable(
-    scene: &Scene,
-    opts: &RenderOptions,
-    progress: Progress,
-    cancel: &AtomicBool,
-) -> Result<(Film, RenderStats)> {
-    let cancelled = || if cancel.load(Ordering::Relaxed) { Err(Error::Cancelled) } else { Ok(()) };
-    opts.validate(scene)?;
-    let kernel = opts.kernel.resolve()?;
-    cancelled()?;
+/// first ([`RenderOptions::validate`]). Reports each band of rows (or chunk of rays) to
+/// `control`; once another thread cancels it, the work stops within a plane (or a ray) and the
+/// result is [`Error::Cancelled`].
+///
+/// The planes are rendered in the canonical chunks of [`crate::partial`] and added along its
+/// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
+/// bit; only one chunk's planes exist at a time.
+pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
-    let mut stats = RenderStats {
-        estimator: opts.weighting.label(),
-        kernel: kernel.to_string(),
-        planes: opts.planes,
-        plane_passes: 1,
-        ..Default::default()
-    };
-    // Each plane with the ray set of its group, one group's planes at a time (section 8.1).
-    let gather = RaySetGather { scene, opts, kernel, progress, cancel };
-    let mut sums = vec![Vec3::ZERO; scene.camera.width as usize * scene.camera.height as usize];
-    gather.gather_range(0..opts.planes, opts.planes, &mut sums, &mut stats)?;
+    let mut chunks = crate::partial::ChunkRenderer::new(scene, opts, control)?;
+    let partial = chunks.render(0..opts.planes)?;
+    let mut stats = chunks.stats;
     let t = Instant::now();
-    let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
+    let film = crate::partial::finish(scene, opts, &partial)?;
     stats.seconds_rays += t.elapsed().as_secs_f64();
-    // Scattering first, emission after: every accelerator then sums in the same order.
-    let mut film = Film::new(scene.camera.width, scene.camera.height);
-    for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&emission) {
-        *f = *s + *e;
-    }
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+/// Progress units of a render of planes `range` (a union of chunks; `0..opts.planes` for a
+/// whole [`render`]): [`progress_units_per_pass`] for every gathering over the image, one per
+/// piece of every chunk ([`crate::partial::gatherings`]).
+pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: std::ops::Range<usize>) -> u64 {
+    progress_units_per_pass(scene, opts.accelerator) * crate::partial::gatherings(opts.planes, opts.ray_sets(), range)
 }
 
 /// The first pass of a render on a time budget, small so that even the slowest estimator
@@ -413,16 +417,16 @@ const FIRST_PASS_PLANES: usize = 256;
 /// uniform over the pixel, and the estimate is unbiased (docs/mathematics.md section 8.1).
 /// `opts.planes` is ignored. Returns as soon as
 /// `budget` would be exceeded by more work; the caller's own time (loading, writing) is not in
-/// it.
+/// it. `control` as for [`render`]: cancelled, it stops mid-pass.
 pub fn render_for(
     scene: &Scene,
     opts: &RenderOptions,
     budget: std::time::Duration,
-    progress: Progress,
+    control: Control,
 ) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
     let deadline = budget.as_secs_f64();
-    render_in_passes(scene, opts, progress, &mut |done, seconds_per_plane| {
+    render_in_passes(scene, opts, control, &mut |done, seconds_per_plane| {
         if done == 0 {
             return FIRST_PASS_PLANES;
         }
@@ -447,22 +451,22 @@ const MAX_PASS_PLANES: usize = 1 << 20;
 /// the render. The image is the estimate of all the planes gathered, the same set as a render
 /// of that many planes (with one pass of at least 1024 planes per ray set, the same image up to
 /// f32 summation order). The ray sets are made when first needed and kept. `opts.planes` is
-/// ignored.
+/// ignored. `control` as for [`render`]: cancelled, it stops mid-pass (while sampling or
+/// gathering) and no further pass starts.
 pub fn render_in_passes(
     scene: &Scene,
     opts: &RenderOptions,
-    progress: Progress,
+    control: Control,
     next_pass: &mut dyn FnMut(usize, f64) -> usize,
 ) -> Result<(Film, RenderStats)> {
     RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() }.validate(scene)?;
     let kernel = opts.kernel.resolve()?;
     let start = Instant::now();
     let (width, height) = (scene.camera.width, scene.camera.height);
-    let gather = RaySetGather { scene, opts, kernel, progress, cancel: &AtomicBool::new(false) };
-    let ray_sets = gather.ray_sets();
+    let ray_sets = opts.ray_sets();
     // The ray sets are kept for every pass: their memory counts as that many planes'.
     let rays_as_planes = RaySets::bytes(width, height, ray_sets) / crate::limits::BYTES_PER_PLANE;
-    check_memory(width, height, rays_as_planes).map_err(|m| Error::option("--spp", m))?;
+    check_memory(width, height, rays_as_planes).map_err(|m| Error::option(Setting::Spp, m))?;
     let mut sets = RaySets::empty(opts.seed, ray_sets, opts.pixel_center);
     let pixels = width as usize * height as usize;
     let mut stats = RenderStats { estimator: opts.weighting.label(), kernel: kernel.to_string(), ..Default::default() };
@@ -472,11 +476,12 @@ pub fn render_in_passes(
     let mut total = vec![glam::DVec3::ZERO; pixels];
     let (mut done, mut per_plane, mut next_set) = (0usize, 0.0, 0u32);
     loop {
+        control.check()?;
         let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
         if next == 0 {
             break;
         }
-        check_memory(width, height, next as u64 + rays_as_planes).map_err(|m| Error::option("--time-budget", m))?;
+        check_memory(width, height, next as u64 + rays_as_planes).map_err(|m| Error::option(Setting::TimeBudget, m))?;
         let pass_start = Instant::now();
         // The pass's planes split into groups, each gathered along the next ray set in turn
         // (section 8.1): as many groups as ray sets once a pass has MIN_PASS_GROUP planes per
@@ -486,8 +491,12 @@ pub fn render_in_passes(
         let mut sums = vec![Vec3::ZERO; pixels];
         for g in 0..used {
             let group = plane_group(g, next, used);
+            let range = done + group.start..done + group.end;
+            let prepared = PreparedPlanes::range(scene, range, 1, opts.seed, opts.sampler, opts.accelerator, control)?;
             let rays = sets.rays(scene, (next_set + g) % ray_sets);
-            gather.gather_group(done + group.start..done + group.end, 1, rays, &mut sums, &mut stats)?;
+            let t = Instant::now();
+            let s = prepared.gather(opts.weighting, kernel, rays, &mut sums, control)?;
+            stats.add_gather(&prepared, s, t.elapsed().as_secs_f64());
         }
         next_set = (next_set + used) % ray_sets;
         for (t, s) in total.iter_mut().zip(&sums) {
@@ -498,7 +507,7 @@ pub fn render_in_passes(
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
     }
     if done == 0 {
-        return Err(Error::option("--time-budget", "no plane pass was made"));
+        return Err(Error::option(Setting::TimeBudget, "no plane pass was made"));
     }
     (stats.rays, stats.seconds_rays) = (sets.count(), sets.seconds);
     let t = Instant::now();
@@ -517,21 +526,26 @@ pub fn render_in_passes(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::AtomicUsize;
+    use crate::weights::{HitLanes, PlaneFrame, Unweighted};
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    fn small_scene() -> Scene {
+        Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap()
+    }
 
     #[test]
     fn cancelling_stops_a_render_after_the_work_under_way() {
-        let scene =
-            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap();
+        let scene = small_scene();
         let opts = RenderOptions { planes: 3000, spp: 3, ..RenderOptions::default() };
-        // Never set: the same image as `render`.
-        let (a, _) = render(&scene, &opts, &|| {}).unwrap();
-        let (b, _) = render_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(false)).unwrap();
+        // Never set: the same image as without a flag.
+        let (a, _) = render(&scene, &opts, Control::none()).unwrap();
+        let (b, _) = render(&scene, &opts, Control::with_cancel(&AtomicBool::new(false))).unwrap();
         assert_eq!(a, b);
         // Set before: nothing runs.
-        let e = render_cancellable(&scene, &opts, &|| {}, &AtomicBool::new(true)).unwrap_err();
+        let e = render(&scene, &opts, Control::with_cancel(&AtomicBool::new(true))).unwrap_err();
         assert!(matches!(e, Error::Cancelled) && !e.is_input(), "{e}");
-        // Set when the first band (or chunk of rays) ends: at most one more per thread finishes.
+        // Set when the first band (or chunk of rays) ends: the other thread's stops within a
+        // plane (or a ray), and no further unit starts.
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
         for accelerator in Accelerator::ALL {
             let opts = RenderOptions { accelerator, ..opts.clone() };
@@ -540,7 +554,7 @@ mod tests {
                 units.fetch_add(1, Ordering::Relaxed);
                 cancel.store(true, Ordering::Relaxed);
             };
-            let e = pool.install(|| render_cancellable(&scene, &opts, &progress, &cancel)).unwrap_err();
+            let e = pool.install(|| render(&scene, &opts, Control::new(&progress, &cancel))).unwrap_err();
             assert!(matches!(e, Error::Cancelled));
             let per_pass = progress_units_per_pass(&scene, accelerator) as usize;
             assert!(per_pass >= 3, "{accelerator}: {per_pass} units a pass");
@@ -550,5 +564,116 @@ mod tests {
                 units.into_inner()
             );
         }
+    }
+
+    /// The unweighted D, counting the planes prepared (once per plane and band on the raster,
+    /// once per hit on the per-ray paths) and setting `cancel` when the count reaches `after`:
+    /// a flag set in the middle of a band, where no progress is reported.
+    struct CancelAfter<'a> {
+        prepared: AtomicUsize,
+        after: usize,
+        cancel: &'a AtomicBool,
+    }
+
+    impl Denominator for CancelAfter<'_> {
+        type Plane = PlaneFrame;
+        fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+            if self.prepared.fetch_add(1, Ordering::Relaxed) + 1 == self.after {
+                self.cancel.store(true, Ordering::Relaxed);
+            }
+            *f
+        }
+        fn denominators<const L: usize>(&self, p: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+            Unweighted.denominators(p, h, out)
+        }
+    }
+
+    /// Cancelled in the middle of a band, the raster stops before the next plane: each thread
+    /// prepares at most one plane after the flag is set, with every kernel. The per-ray paths
+    /// stop before the next ray: each thread finishes at most the hits of its ray under way.
+    /// Counted in planes prepared, out of the millions a whole pass prepares.
+    #[test]
+    fn cancelling_stops_gathering_within_a_plane_or_a_ray() {
+        let scene = small_scene();
+        let pass = camera_rays(&scene, 1, 0, false);
+        let (planes, after, threads) = (3000, 20, 2);
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        for accelerator in Accelerator::ALL {
+            let prepared =
+                PreparedPlanes::new(&scene, planes, 1, Sampler::default(), accelerator, Control::none()).unwrap();
+            let kernels = if accelerator == Accelerator::Raster { Kernel::available() } else { vec![Kernel::Portable] };
+            for kernel in kernels {
+                let run = |after: usize| {
+                    let cancel = AtomicBool::new(false);
+                    let weights = CancelAfter { prepared: AtomicUsize::new(0), after, cancel: &cancel };
+                    let mut sums = vec![Vec3::ZERO; pass.rays.len()];
+                    let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
+                    let stats = pool
+                        .install(|| prepared.gather_with(with, &pass.rays, &mut sums, Control::with_cancel(&cancel)));
+                    (weights.prepared.into_inner(), stats, cancel.into_inner())
+                };
+                let (whole, whole_stats, set) = run(usize::MAX);
+                assert!(!set && whole > 100 * after, "{accelerator} {kernel}: {whole} planes prepared in a pass");
+                let (done, stats, set) = run(after);
+                assert!(set);
+                let bound = match accelerator {
+                    Accelerator::Raster => after + (threads - 1),
+                    _ => after + threads * planes,
+                };
+                assert!(done <= bound, "{accelerator} {kernel}: {done} planes prepared, at most {bound} expected");
+                // On the raster the ray-plane tests follow the planes (the per-ray paths test
+                // every plane of a ray whether it hits or not).
+                if accelerator == Accelerator::Raster {
+                    assert!(stats.tests < whole_stats.tests / 20, "{kernel}: {stats:?} of {whole_stats:?}");
+                }
+            }
+        }
+    }
+
+    /// A render in passes, and so a render on a time budget, stops in the middle of a pass.
+    #[test]
+    fn cancelling_stops_a_render_in_passes_mid_pass() {
+        let scene = small_scene();
+        let opts = RenderOptions::default();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let progress = || {
+            units.fetch_add(1, Ordering::Relaxed);
+            cancel.store(true, Ordering::Relaxed);
+        };
+        let control = Control::new(&progress, &cancel);
+        // Passes of 4096 planes, each of 12 bands: set after the first band of the first pass.
+        let mut passes = 0;
+        let mut next = |_: usize, _: f64| {
+            passes += 1;
+            4096
+        };
+        let e = pool.install(|| render_in_passes(&scene, &opts, control, &mut next)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled), "{e}");
+        assert_eq!((passes, units.load(Ordering::Relaxed)), (1, 1));
+        // Set between passes: the next pass gathers nothing.
+        let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let count = || {
+            units.fetch_add(1, Ordering::Relaxed);
+        };
+        let mut next = |done: usize, _: f64| {
+            if done > 0 {
+                cancel.store(true, Ordering::Relaxed);
+            }
+            256
+        };
+        let e = render_in_passes(&scene, &opts, Control::new(&count, &cancel), &mut next).unwrap_err();
+        assert!(matches!(e, Error::Cancelled));
+        assert_eq!(units.into_inner() as u64, progress_units_per_pass(&scene, Accelerator::Raster));
+        // On a budget of an hour: the first band ends it.
+        let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+        let progress = || {
+            units.fetch_add(1, Ordering::Relaxed);
+            cancel.store(true, Ordering::Relaxed);
+        };
+        let control = Control::new(&progress, &cancel);
+        let hour = std::time::Duration::from_secs(3600);
+        let e = pool.install(|| render_for(&scene, &opts, hour, control)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled) && units.into_inner() == 1, "{e}");
     }
 }

@@ -7,38 +7,14 @@ use crate::camera::Camera;
 use crate::light::RectLight;
 use crate::limits::{MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_memory, check_planes, check_resolution, check_spp};
 use crate::medium::Medium;
-use crate::sampling::Sampler;
+use crate::sampling::{Discrete, Sampler};
 use crate::weights::{Estimator, Weighting};
 use glam::DVec3;
 use serde::Deserialize;
 use std::fmt;
 use std::path::Path;
 
-/// A problem with a scene file or with the render settings derived from it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SceneError {
-    pub file: String,
-    /// 1-based line and column, when the problem has a place in the text.
-    pub position: Option<(usize, usize)>,
-    /// Dotted path of the field, e.g. `light[2].edge_v`; empty for the file as a whole.
-    pub field: String,
-    pub message: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
-        if let Some((line, col)) = self.position {
-            write!(f, ":{line}:{col}")?;
-        }
-        if !self.field.is_empty() {
-            write!(f, ": {}", self.field)?;
-        }
-        write!(f, ": {}", self.message)
-    }
-}
-
-impl std::error::Error for SceneError {}
+pub use crate::error::SceneError;
 
 /// An RGB triple that may be written as a single number (grey).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -149,6 +125,16 @@ pub struct Scene {
     pub medium: Medium,
     pub lights: Vec<RectLight>,
     pub render: RenderDefaults,
+    /// The text it was parsed from and the file that named it, so that a scene can travel to
+    /// another process as text (Python's pickle); `None` for a scene made from a description.
+    source: Option<std::sync::Arc<SceneSource>>,
+}
+
+/// The TOML text of a scene and the file name its errors cite.
+#[derive(Debug, PartialEq, Eq)]
+pub struct SceneSource {
+    pub text: String,
+    pub file: String,
 }
 
 impl Scene {
@@ -167,7 +153,18 @@ impl Scene {
                 MAX_SCENE_FILE_BYTES
             )));
         }
-        let bytes = std::fs::read(path).map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        use std::io::Read as _;
+        // The size above is the file's word for it: /dev/zero, a pipe or a file growing as it
+        // is read say otherwise. Read one byte past the limit at most and refuse if it came.
+        let mut bytes = Vec::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_SCENE_FILE_BYTES + 1).read_to_end(&mut bytes))
+            .map_err(|e| whole(format!("cannot read the scene file: {e}")))?;
+        if bytes.len() as u64 > MAX_SCENE_FILE_BYTES {
+            return Err(whole(format!(
+                "the file holds more than {MAX_SCENE_FILE_BYTES} bytes; scene files are limited to {MAX_SCENE_FILE_BYTES} bytes"
+            )));
+        }
         let text = String::from_utf8(bytes).map_err(|e| whole(format!("not UTF-8 text ({e})")))?;
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
         Scene::parse(&text, &file, &name)
@@ -176,7 +173,14 @@ impl Scene {
     /// Parses and validates scene text; `file` names it in errors.
     pub fn parse(text: &str, file: &str, name: &str) -> Result<Scene, SceneError> {
         let desc = parse_file(text, file)?;
-        Scene::from_desc(&desc, file, name)
+        let mut scene = Scene::from_desc(&desc, file, name)?;
+        scene.source = Some(std::sync::Arc::new(SceneSource { text: text.to_string(), file: file.to_string() }));
+        Ok(scene)
+    }
+
+    /// The text the scene was parsed from ([`Scene::parse`], [`Scene::load`]), if it was.
+    pub fn source(&self) -> Option<&SceneSource> {
+        self.source.as_deref()
     }
 
     /// Validates a parsed description.
@@ -313,9 +317,11 @@ impl Scene {
             None => Sampler::default(),
         };
         let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp, sampler };
-        check_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
+        // A render holds one chunk of planes at a time ([`crate::partial`]).
+        let held = planes.min(crate::partial::CHUNK_PLANES as u64);
+        check_memory(camera.width, camera.height, held).map_err(|m| err("camera.resolution".into(), m))?;
 
-        Ok(Scene { name: name.to_string(), camera, medium, lights, render })
+        Ok(Scene { name: name.to_string(), camera, medium, lights, render, source: None })
     }
 
     /// The first light panel crossed by the ray `o + t we` with `t` in `(0, t_max)`: its distance
@@ -399,12 +405,16 @@ impl Scene {
             .any(|(k, l)| k != except && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
     }
 
-    /// The same scene seen at another resolution (checked against the memory budget with the
-    /// scene's own plane count; a render checks its own).
+    /// Light choice by power, P_l proportional to A_l luminance(Le_l) (docs/mathematics.md
+    /// section 2, step 1): shared by the photon planes and the reference.
+    pub fn light_distribution(&self) -> Discrete {
+        Discrete::new(&self.lights.iter().map(RectLight::power).collect::<Vec<_>>())
+    }
+
+    /// The same scene seen at another resolution (each side in range; the memory a render
+    /// needs at that size is checked with its own plane count, see [`crate::settings`]).
     pub fn with_resolution(&self, width: u32, height: u32) -> Result<Scene, crate::Error> {
-        let invalid = |m| crate::Error::option("--resolution", m);
-        check_resolution(width, height).map_err(invalid)?;
-        check_memory(width, height, self.render.planes).map_err(invalid)?;
+        check_resolution(width, height).map_err(|m| crate::Error::option(crate::error::Setting::Resolution, m))?;
         let c = &self.camera;
         let mut s = self.clone();
         s.camera = Camera { width, height, ..c.clone() };

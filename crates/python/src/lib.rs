@@ -3,29 +3,33 @@
 //! (height, width, 3) and float32.
 //!
 //! Everything a call can fail with is a Python exception: `ValueError` for bad input, with the
-//! command line's own one-line message (the `Display` of `fogplanes::Error`); `OSError` (or
-//! its subclass `FileNotFoundError`, ...) for a file that cannot be read. Renders run on a worker
+//! command line's one-line message, a setting named as the caller gave it (`planes=0: ...`
+//! where the command line says `--planes: ...`); `OSError` (or its subclass
+//! `FileNotFoundError`, ...) for a file that cannot be read. The settings are resolved by the
+//! core (`fogplanes::settings`), as for the command line: the same defaults, the same checks. Renders run on a worker
 //! thread with the GIL released, while the calling thread watches for signals: Ctrl-C sets the
 //! core's cancel flag and raises `KeyboardInterrupt` once the work under way has stopped.
 
 use fogplanes::Error;
+use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::kernel::Kernel;
-use fogplanes::limits::{check_planes, check_spp, check_threads};
 use fogplanes::metrics::compare as compare_films;
-use fogplanes::reference::{ReferenceOptions, render_reference_cancellable};
-use fogplanes::render::{Accelerator, RenderOptions, RenderStats, render_cancellable};
+use fogplanes::partial::{self, Partial, stable_hash};
+use fogplanes::reference::{self as refs, render_reference};
+use fogplanes::render::{Accelerator, RenderStats, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{Estimator, Weighting};
+use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
+use fogplanes::weights::Estimator;
 use numpy::ndarray::Array3;
-use numpy::{AllowTypeChange, PyArray3, PyArrayLike3};
+use numpy::{AllowTypeChange, PyArray2, PyArray3, PyArrayLike2, PyArrayLike3};
 use pyo3::exceptions::{
     PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyOverflowError, PyPermissionError, PyRuntimeError,
     PyTypeError, PyValueError,
 };
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyTuple};
 use std::io::ErrorKind;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,6 +37,9 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 type Vec3 = (f64, f64, f64);
+
+/// What a pickled scene is rebuilt from: text, name, file, (width, height).
+type SceneParts = (String, String, String, (u32, u32));
 
 /// An image for Python: shape (height, width, 3), float32.
 type Image<'py> = Bound<'py, PyArray3<f32>>;
@@ -44,18 +51,19 @@ fn triple(v: glam::DVec3) -> Vec3 {
 // ---------------------------------------------------------------------------------------------
 // Errors
 
-/// The exception for a library error: `ValueError` for the caller's input, `OSError` otherwise.
-fn py_error(e: Error) -> PyErr {
+/// The exception for a library error, a setting named by `name`: `ValueError` for the
+/// caller's input, `OSError` for a write that failed, `RuntimeError` for cancelled work.
+fn py_error_named(e: Error, name: impl Fn(Setting) -> String) -> PyErr {
     match e {
         Error::Write { .. } => PyOSError::new_err(e.to_string()),
         Error::Cancelled => PyRuntimeError::new_err("the work was cancelled"),
-        e => PyValueError::new_err(e.to_string()),
+        e => PyValueError::new_err(e.worded(name)),
     }
 }
 
-/// `ValueError("{option}: {message}")`, as the command line words a bad option.
-fn invalid(option: &str, message: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(format!("{option}: {message}"))
+/// [`py_error_named`] with settings named by their keyword alone.
+fn py_error(e: Error) -> PyErr {
+    py_error_named(e, |s| s.keyword().to_string())
 }
 
 /// The `OSError` subclass Python raises for an I/O error of this kind.
@@ -84,33 +92,92 @@ fn file_error(path: &Path, message: String) -> PyErr {
 // ---------------------------------------------------------------------------------------------
 // Arguments
 
-/// A non-negative integer argument; a Python int out of range is a `ValueError` naming the
-/// option, anything but an int a `TypeError`.
-fn uint(value: Option<&Bound<'_, PyAny>>, option: &str) -> PyResult<Option<u64>> {
-    let Some(v) = value else { return Ok(None) };
-    match v.extract::<u64>() {
-        Ok(n) => Ok(Some(n)),
-        Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => Err(invalid(option, format!("{v} is out of range"))),
-        Err(e) => Err(PyTypeError::new_err(format!("{option}: expected an integer ({e})"))),
+/// The settings a caller gave, as Python shows them, so that an error names a setting the way
+/// the caller wrote it (`planes=0: ...`), and never a command-line flag.
+#[derive(Default)]
+struct Given {
+    reprs: Vec<(Setting, String)>,
+}
+
+impl Given {
+    /// `keyword=value` of a setting given, the keyword alone of one not given.
+    fn name(&self, setting: Setting) -> String {
+        match self.reprs.iter().rev().find(|(s, _)| *s == setting) {
+            Some((_, repr)) => format!("{}={repr}", setting.keyword()),
+            None => setting.keyword().to_string(),
+        }
     }
-}
 
-/// A `u32` argument (out of range as in [`uint`]).
-fn uint32(value: Option<&Bound<'_, PyAny>>, option: &str) -> PyResult<Option<u32>> {
-    uint(value, option)?
-        .map(|n| u32::try_from(n).map_err(|_| invalid(option, format!("{n} is out of range"))))
-        .transpose()
-}
+    fn error(&self, e: Error) -> PyErr {
+        py_error_named(e, |s| self.name(s))
+    }
 
-/// `(width, height)` of the `resolution` argument.
-fn resolution_arg(value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
-    let Some(v) = value else { return Ok(None) };
-    let (w, h): (Bound<PyAny>, Bound<PyAny>) =
-        v.extract().map_err(|_| PyTypeError::new_err(format!("--resolution: expected (width, height), got {v}")))?;
-    Ok(Some((
-        uint32(Some(&w), "--resolution")?.unwrap_or_default(),
-        uint32(Some(&h), "--resolution")?.unwrap_or_default(),
-    )))
+    fn invalid(&self, setting: Setting, message: impl std::fmt::Display) -> PyErr {
+        PyValueError::new_err(format!("{}: {message}", self.name(setting)))
+    }
+
+    fn note(&mut self, setting: Setting, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.reprs.push((setting, value.repr()?.to_string()));
+        Ok(())
+    }
+
+    /// A non-negative integer: a Python int out of range is a `ValueError` naming the setting,
+    /// anything but an int a `TypeError`.
+    fn uint(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
+        let Some(v) = value else { return Ok(None) };
+        self.note(setting, v)?;
+        match v.extract::<u64>() {
+            Ok(n) => Ok(Some(n)),
+            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
+                Err(self.invalid(setting, "out of range (a non-negative integer below 2**64)"))
+            }
+            Err(e) => Err(PyTypeError::new_err(format!("{}: expected an integer ({e})", setting.keyword()))),
+        }
+    }
+
+    /// A `u32` (out of range as in [`Given::uint`]).
+    fn uint32(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u32>> {
+        self.uint(setting, value)?
+            .map(|n| u32::try_from(n).map_err(|_| self.invalid(setting, "out of range (an integer below 2**32)")))
+            .transpose()
+    }
+
+    /// A number of seconds or stops (a float, or an int).
+    fn float(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<f64>> {
+        let Some(v) = value else { return Ok(None) };
+        self.note(setting, v)?;
+        v.extract::<f64>()
+            .map(Some)
+            .map_err(|e| PyTypeError::new_err(format!("{}: expected a number ({e})", setting.keyword())))
+    }
+
+    /// A name from a closed list (estimator, sampler, ...).
+    fn named<T: std::str::FromStr<Err = String>>(
+        &mut self,
+        setting: Setting,
+        value: Option<&str>,
+    ) -> PyResult<Option<T>> {
+        let Some(v) = value else { return Ok(None) };
+        self.reprs.push((setting, py_str(v)));
+        v.parse().map(Some).map_err(|m| self.invalid(setting, m))
+    }
+
+    /// `(width, height)`.
+    fn resolution(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
+        let Some(v) = value else { return Ok(None) };
+        let (w, h): (Bound<PyAny>, Bound<PyAny>) =
+            v.extract().map_err(|_| PyTypeError::new_err(format!("resolution: expected (width, height), got {v}")))?;
+        let (w, h) = (self.uint32(Setting::Resolution, Some(&w))?, self.uint32(Setting::Resolution, Some(&h))?);
+        self.note(Setting::Resolution, v)?;
+        Ok(w.zip(h))
+    }
+
+    /// A thread count (its range is the core's to check).
+    fn threads(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<usize>> {
+        self.uint(Setting::Threads, value)?
+            .map(|t| usize::try_from(t).map_err(|_| self.invalid(Setting::Threads, "out of range")))
+            .transpose()
+    }
 }
 
 fn load(path: &Path) -> PyResult<Scene> {
@@ -118,29 +185,23 @@ fn load(path: &Path) -> PyResult<Scene> {
 }
 
 /// The scene of a `scene` argument: a `Scene`, or the path of a scene file (str or
-/// os.PathLike), with `resolution` applied.
-fn scene_arg(scene: &Bound<'_, PyAny>, resolution: Option<&Bound<'_, PyAny>>) -> PyResult<Scene> {
-    let scene = if let Ok(s) = scene.cast::<PyScene>() {
-        s.get().inner.clone()
+/// os.PathLike).
+fn scene_arg(scene: &Bound<'_, PyAny>) -> PyResult<Scene> {
+    if let Ok(s) = scene.cast::<PyScene>() {
+        Ok(s.get().inner.clone())
     } else if let Ok(path) = scene.extract::<PathBuf>() {
-        load(&path)?
+        load(&path)
     } else {
-        return Err(PyTypeError::new_err(format!(
+        Err(PyTypeError::new_err(format!(
             "scene: expected a fogplanes.Scene or the path of a scene file, got {}",
             scene.get_type().name()?
-        )));
-    };
-    match resolution_arg(resolution)? {
-        Some((w, h)) => scene.with_resolution(w, h).map_err(py_error),
-        None => Ok(scene),
+        )))
     }
 }
 
-/// The worker pool of the `threads` argument (None: rayon's global pool).
-fn pool_arg(threads: Option<&Bound<'_, PyAny>>) -> PyResult<Option<rayon::ThreadPool>> {
-    let Some(t) = uint(threads, "--threads")? else { return Ok(None) };
-    let t = usize::try_from(t).map_err(|_| invalid("--threads", format!("{t} is out of range")))?;
-    check_threads(t).map_err(|m| invalid("--threads", m))?;
+/// The worker pool of `threads` resolved (None: rayon's global pool).
+fn pool(threads: Option<usize>) -> PyResult<Option<rayon::ThreadPool>> {
+    let Some(t) = threads else { return Ok(None) };
     rayon::ThreadPoolBuilder::new()
         .num_threads(t)
         .thread_name(|i| format!("fogplanes-{i}"))
@@ -149,21 +210,18 @@ fn pool_arg(threads: Option<&Bound<'_, PyAny>>) -> PyResult<Option<rayon::Thread
         .map_err(|e| PyRuntimeError::new_err(format!("cannot start the worker threads: {e}")))
 }
 
-fn named<T: std::str::FromStr<Err = String>>(value: &str, option: &str) -> PyResult<T> {
-    value.parse().map_err(|m| invalid(option, m))
-}
-
 // ---------------------------------------------------------------------------------------------
 // Running work interruptibly
 
 /// Runs `work` on a worker thread (inside `pool` if given) with the GIL released, checking for
 /// signals on this thread every 50 ms. A signal's exception (KeyboardInterrupt for Ctrl-C) sets
 /// the cancel flag, waits for the worker to stop and is raised. A panic becomes RuntimeError.
+/// The work's own error is the library's, for the caller to word.
 fn run_interruptible<T: Send>(
     py: Python<'_>,
     pool: Option<rayon::ThreadPool>,
     work: impl FnOnce(&AtomicBool) -> fogplanes::Result<T> + Send,
-) -> PyResult<T> {
+) -> PyResult<fogplanes::Result<T>> {
     let cancel = AtomicBool::new(false);
     let (tx, rx) = mpsc::channel();
     std::thread::scope(|s| {
@@ -185,7 +243,7 @@ fn run_interruptible<T: Send>(
             let (received, back) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
             rx = back;
             match received {
-                Ok(Ok(result)) => return result.map_err(py_error),
+                Ok(Ok(result)) => return Ok(result),
                 Ok(Err(panic)) => {
                     let what = panic
                         .downcast_ref::<&str>()
@@ -221,20 +279,38 @@ fn film_to_array<'py>(py: Python<'py>, film: &Film) -> Image<'py> {
     PyArray3::from_owned_array(py, array)
 }
 
-fn array_to_film(array: &PyArrayLike3<'_, f32, AllowTypeChange>, what: &str) -> PyResult<Film> {
-    let view = array.as_array();
-    let (h, w, c) = view.dim();
-    let too_large = || PyValueError::new_err(format!("{what}: {h}x{w} pixels is too large"));
-    if c != 3 {
-        return Err(PyValueError::new_err(format!(
-            "{what}: expected an array of shape (height, width, 3), got ({h}, {w}, {c})"
-        )));
+/// The shape of an array as Python writes it: `(2, 3)`, `(5,)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!("({})", shape.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")),
     }
-    let (w32, h32) = (u32::try_from(w).map_err(|_| too_large())?, u32::try_from(h).map_err(|_| too_large())?);
-    // The renderer's own limit on image sides, before anything is allocated (a broadcast
-    // array can claim a huge shape at no cost).
-    fogplanes::limits::check_resolution(w32, h32).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
-    let mut film = Film::new(w32, h32);
+}
+
+/// The image of an array-like argument (any real dtype), its shape checked against the
+/// renderer's limits before anything is converted: a broadcast or float64 array that claims a
+/// huge shape costs nothing until converted to float32.
+fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> {
+    let py = image.py();
+    // Arrays keep their own shape (no copy); nested lists become one to have one.
+    let array = match image.getattr("shape") {
+        Ok(_) => image.clone(),
+        Err(_) => py.import("numpy")?.call_method1("asarray", (image,))?,
+    };
+    let Ok(shape) = array.getattr("shape")?.extract::<Vec<usize>>() else {
+        return Err(PyTypeError::new_err(format!("{what}: expected an array, got {}", image.get_type().name()?)));
+    };
+    let [h, w, 3] = shape[..] else {
+        return Err(PyValueError::new_err(format!(
+            "{what}: expected an array of shape (height, width, 3), got {}",
+            shape_text(&shape)
+        )));
+    };
+    let side = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    fogplanes::limits::check_resolution(side(w), side(h)).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
+    let array: PyArrayLike3<'_, f32, AllowTypeChange> = array.extract()?;
+    let view = array.as_array();
+    let mut film = Film::new(w as u32, h as u32);
     for ((y, x), p) in (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).zip(film.pixels.iter_mut()) {
         *p = glam::Vec3::new(view[[y, x, 0]], view[[y, x, 1]], view[[y, x, 2]]);
     }
@@ -246,6 +322,7 @@ fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Bound<'py, PyDi
     d.set_item("estimator", &s.estimator)?;
     d.set_item("kernel", &s.kernel)?;
     d.set_item("planes", s.planes)?;
+    d.set_item("plane_passes", s.plane_passes)?;
     d.set_item("rays", s.rays)?;
     d.set_item("hits", s.hits)?;
     d.set_item("tests", s.tests)?;
@@ -406,11 +483,51 @@ impl PyScene {
         Scene::parse(text, file, name).map(|inner| PyScene { inner }).map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
+    /// The scene made from its text, name, file and resolution: what a pickled scene is
+    /// rebuilt with (`__reduce__`).
+    #[staticmethod]
+    fn _from_parts(text: &str, name: &str, file: &str, resolution: (u32, u32)) -> PyResult<Self> {
+        let scene = Scene::parse(text, file, name).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        scene.with_resolution(resolution.0, resolution.1).map(|inner| PyScene { inner }).map_err(py_error)
+    }
+
+    /// Pickles as its text, name, file and resolution (not a pointer): a scene travels to
+    /// another process (a Dask worker) and is rebuilt there, identical.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, SceneParts)> {
+        let s = &slf.get().inner;
+        let source = s.source().ok_or_else(|| PyValueError::new_err("this scene has no text to pickle"))?;
+        let make = slf.get_type().getattr("_from_parts")?;
+        Ok((make, (source.text.clone(), s.name.clone(), source.file.clone(), (s.camera.width, s.camera.height))))
+    }
+
+    /// A stable token (32 hex digits, the same in every process and run): a hash of the
+    /// scene's text, name, file and resolution, for Dask's task keys.
+    fn __dask_tokenize__(&self) -> String {
+        let s = &self.inner;
+        let (text, file) = s.source().map_or(("", ""), |src| (src.text.as_str(), src.file.as_str()));
+        let resolution = format!("{}x{}", s.camera.width, s.camera.height);
+        stable_hash(&[text.as_bytes(), s.name.as_bytes(), file.as_bytes(), resolution.as_bytes()])
+    }
+
+    /// The TOML text the scene was made from.
+    #[getter]
+    fn source(&self) -> String {
+        self.inner.source().map(|s| s.text.clone()).unwrap_or_default()
+    }
+
+    /// The file name the scene's errors cite (`<string>` for from_toml's default).
+    #[getter]
+    fn file(&self) -> String {
+        self.inner.source().map(|s| s.file.clone()).unwrap_or_default()
+    }
+
     /// The same scene at another resolution.
     fn with_resolution(&self, width: &Bound<'_, PyAny>, height: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let w = uint32(Some(width), "--resolution")?.unwrap_or_default();
-        let h = uint32(Some(height), "--resolution")?.unwrap_or_default();
-        self.inner.with_resolution(w, h).map(|inner| PyScene { inner }).map_err(py_error)
+        let mut given = Given::default();
+        let w = given.uint32(Setting::Resolution, Some(width))?.unwrap_or_default();
+        let h = given.uint32(Setting::Resolution, Some(height))?.unwrap_or_default();
+        given.reprs.push((Setting::Resolution, format!("({w}, {h})")));
+        self.inner.with_resolution(w, h).map(|inner| PyScene { inner }).map_err(|e| given.error(e))
     }
 
     /// The file stem (or the name given to from_toml).
@@ -508,22 +625,26 @@ fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// Renders a scene with photon planes: the image, shape (height, width, 3), float32.
 ///
 /// The arguments are those of `fogplanes render`, and None takes the scene's [render]
-/// default exactly as the command line does: `estimator` (the scene's, else smis-exact),
-/// `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent"; the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
-/// estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
-/// in a pool of that many threads (None: all cores); the image depends on the seed alone.
-/// Pixels are whole: the mean over each pixel's square (box filter), with `spp` camera samples
-/// per pixel (the scene's, else 16) sharing the planes; `pixel_center=True` takes the centres.
-/// The image is bit-identical to the EXR that `fogplanes render` writes for the same
+/// default exactly as the command line does (both resolve them in the core): `estimator` (the
+/// scene's, else smis-exact), `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent";
+/// the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
+/// estimator is the one rendered). `resolution` is (width, height). Pixels are whole: the mean
+/// over each pixel's square (box filter), with `spp` camera samples per pixel (the scene's, else
+/// 16) sharing the planes; `pixel_center=True` takes the centres. `time_budget` renders for
+/// that many seconds instead of a plane count: planes in passes, each extending the set (the
+/// stats give "planes" and "plane_passes"). `threads` runs the render in a pool of that many
+/// threads (None: all cores); the image depends on the seed alone. The image is bit-identical
+/// to the EXR that `fogplanes render` writes for the same
 /// arguments. With `return_stats=True`, returns (image, stats).
 ///
-/// Raises ValueError for bad input (the command line's message), OSError for a scene file
-/// that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+/// Raises ValueError for bad input (the command line's message, the setting named as given
+/// here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
+/// on Ctrl-C. The GIL is released while rendering.
 #[pyfunction]
 #[pyo3(signature = (
     scene, estimator = None, planes = None, seed = None, spp = None, pixel_center = false,
     resolution = None, orientations = None, threads = None, accelerator = "raster",
-    kernel = "auto", return_stats = false, sampler = None
+    kernel = "auto", return_stats = false, sampler = None, time_budget = None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
@@ -541,41 +662,33 @@ fn render<'py>(
     kernel: &str,
     return_stats: bool,
     sampler: Option<&str>,
+    time_budget: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    // The order of src/main.rs `cmd_render`: scene and its overrides, then the options.
-    let scene = scene_arg(scene, resolution)?;
-    let pool = pool_arg(threads)?;
-    let estimator = estimator.map(|e| named::<Estimator>(e, "--estimator")).transpose()?;
-    let accelerator = named::<Accelerator>(accelerator, "--accelerator")?;
-    let kernel = named::<Kernel>(kernel, "--kernel")?;
-    let sampler = sampler.map(|s| named::<Sampler>(s, "--sampler")).transpose()?;
-    let orientations = uint32(orientations, "--orientations")?;
-    let planes = uint(planes, "--planes")?;
-    let seed = uint(seed, "--seed")?;
-    let spp = uint32(spp, "--spp")?;
-
-    let defaults = RenderOptions::from_scene(&scene);
-    let estimator = estimator.unwrap_or(defaults.weighting.estimator);
-    // The scene's K applies only when the scene's estimator is the one rendered.
-    let scene_k = (estimator == defaults.weighting.estimator && estimator.has_orientations())
-        .then_some(defaults.weighting.orientations);
-    let weighting = Weighting::new(estimator, orientations.or(scene_k)).map_err(|m| invalid("--orientations", m))?;
-    let planes = planes.unwrap_or(defaults.planes as u64);
-    check_planes(planes).map_err(|m| invalid("--planes", m))?;
-    let planes = usize::try_from(planes).map_err(|_| invalid("--planes", format!("{planes} is out of range")))?;
-    let opts = RenderOptions {
-        planes,
-        weighting,
-        seed: seed.unwrap_or(defaults.seed),
-        sampler: sampler.unwrap_or(defaults.sampler),
-        spp: spp.unwrap_or(defaults.spp),
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = Overrides {
+        estimator: given.named::<Estimator>(Setting::Estimator, estimator)?,
+        orientations: given.uint32(Setting::Orientations, orientations)?,
+        planes: given.uint(Setting::Planes, planes)?,
+        seed: given.uint(Setting::Seed, seed)?,
+        sampler: given.named::<Sampler>(Setting::Sampler, sampler)?,
+        spp: given.uint32(Setting::Spp, spp)?,
         pixel_center,
-        accelerator,
-        kernel,
+        accelerator: given.named::<Accelerator>(Setting::Accelerator, Some(accelerator))?,
+        kernel: given.named::<Kernel>(Setting::Kernel, Some(kernel))?,
+        time_budget: given.float(Setting::TimeBudget, time_budget)?,
+        resolution: given.resolution(resolution)?,
+        threads: given.threads(threads)?,
+        exposure: None,
     };
-    opts.validate(&scene).map_err(py_error)?;
-
-    let (film, stats) = run_interruptible(py, pool, |cancel| render_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
+    let (film, stats) = run_interruptible(py, pool(r.threads)?, |cancel| match r.time_budget {
+        None => fogplanes::render::render(&r.scene, &r.options, Control::with_cancel(cancel)),
+        Some(seconds) => {
+            render_for(&r.scene, &r.options, Duration::from_secs_f64(seconds), Control::with_cancel(cancel))
+        }
+    })?
+    .map_err(|e| given.error(e))?;
     let image = film_to_array(py, &film).into_any();
     if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
 }
@@ -600,13 +713,11 @@ fn reference<'py>(
     uniform: bool,
     threads: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Image<'py>, Image<'py>)> {
-    let scene = scene_arg(scene, resolution)?;
-    let pool = pool_arg(threads)?;
-    let spp = uint32(spp, "--spp")?.unwrap_or(1024);
-    check_spp(spp).map_err(|m| invalid("--spp", m))?;
-    let seed = uint(seed, "--seed")?.unwrap_or(1);
-    let opts = ReferenceOptions { spp, uniform, seed, pixel_center };
-    let image = run_interruptible(py, pool, |cancel| render_reference_cancellable(&scene, &opts, &|| {}, cancel))?;
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
+    let image = run_interruptible(py, pool(r.threads)?, |cancel| {
+        render_reference(&r.scene, &r.options, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
     Ok((film_to_array(py, &image.mean), film_to_array(py, &image.stderr)))
 }
 
@@ -617,11 +728,11 @@ fn reference<'py>(
 #[pyfunction]
 fn compare<'py>(
     py: Python<'py>,
-    image: PyArrayLike3<'py, f32, AllowTypeChange>,
-    reference: PyArrayLike3<'py, f32, AllowTypeChange>,
+    image: &Bound<'py, PyAny>,
+    reference: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let image = array_to_film(&image, "image")?;
-    let reference = array_to_film(&reference, "reference")?;
+    let image = image_arg(image, "image")?;
+    let reference = image_arg(reference, "reference")?;
     let m = compare_films(&image, &reference).map_err(py_error)?;
     let d = PyDict::new(py);
     d.set_item("smape", m.smape)?;
@@ -642,19 +753,412 @@ fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<'py>> {
 /// Writes an array (height, width, 3) as .exr (linear float32) or .png (tone-mapped sRGB by
 /// `exposure` stops), whole or not at all, as the command line writes its images.
 #[pyfunction]
-#[pyo3(signature = (path, image, exposure = 0.0))]
+#[pyo3(signature = (path, image, exposure = None))]
+#[pyo3(text_signature = "(path, image, exposure=0.0)")]
 fn save_image(
     py: Python<'_>,
     path: PathBuf,
-    image: PyArrayLike3<'_, f32, AllowTypeChange>,
-    exposure: f32,
+    image: &Bound<'_, PyAny>,
+    exposure: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<()> {
-    if !exposure.is_finite() {
-        return Err(PyValueError::new_err(format!("exposure must be a finite number of stops, got {exposure}")));
-    }
-    let film = array_to_film(&image, "image")?;
-    fogplanes::film::check_image_output(&path).map_err(py_error)?;
+    let mut given = Given::default();
+    let exposure = given.float(Setting::Exposure, exposure)?;
+    let exposure = settings::exposure(exposure.map(|e| e as f32)).map_err(|e| given.error(e))?;
+    let film = image_arg(image, "image")?;
+    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)]).map_err(py_error)?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Renders in chunks, references in row bands (the cluster layer, fogplanes.distributed)
+
+/// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names.
+fn render_overrides(kwargs: Option<&Bound<'_, PyDict>>, given: &mut Given) -> PyResult<Overrides> {
+    let mut o = Overrides::default();
+    let Some(kwargs) = kwargs else { return Ok(o) };
+    for (key, value) in kwargs.iter() {
+        let key: String = key.extract()?;
+        let value = (!value.is_none()).then_some(value);
+        let text =
+            |v: &Option<Bound<'_, PyAny>>| -> PyResult<Option<String>> { v.as_ref().map(|v| v.extract()).transpose() };
+        match key.as_str() {
+            "estimator" => o.estimator = given.named(Setting::Estimator, text(&value)?.as_deref())?,
+            "orientations" => o.orientations = given.uint32(Setting::Orientations, value.as_ref())?,
+            "planes" => o.planes = given.uint(Setting::Planes, value.as_ref())?,
+            "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
+            "sampler" => o.sampler = given.named(Setting::Sampler, text(&value)?.as_deref())?,
+            "spp" => o.spp = given.uint32(Setting::Spp, value.as_ref())?,
+            "pixel_center" => o.pixel_center = value.map(|v| v.is_truthy()).transpose()?.unwrap_or(false),
+            "accelerator" => o.accelerator = given.named(Setting::Accelerator, text(&value)?.as_deref())?,
+            "kernel" => o.kernel = given.named(Setting::Kernel, text(&value)?.as_deref())?,
+            "resolution" => o.resolution = given.resolution(value.as_ref())?,
+            "threads" => o.threads = given.threads(value.as_ref())?,
+            "time_budget" if value.is_some() => {
+                return Err(PyValueError::new_err(
+                    "time_budget: a render in chunks has a plane count; give planes= instead",
+                ));
+            }
+            "time_budget" => {}
+            other => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{other}'"))),
+        }
+    }
+    Ok(o)
+}
+
+/// The render `scene` and `**kwargs` describe, resolved as `render` resolves it.
+fn resolve_chunked(
+    scene: &Bound<'_, PyAny>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(settings::ResolvedRender, Given)> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = render_overrides(kwargs, &mut given)?;
+    let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
+    Ok((r, given))
+}
+
+/// The plan of a render in chunks: its resolved settings (the keyword arguments of `render`),
+/// `planes` N, `chunk_planes` (a fixed power of two), `chunks` (the (start, end) plane ranges,
+/// in order, covering 0..N), `fingerprint` (the scene and every setting that changes the
+/// image) and `shape` (height, width, 3). Raises ValueError as `render` does.
+#[pyfunction]
+#[pyo3(signature = (scene, **kwargs))]
+fn plan_render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let (scene, o) = (&r.scene, &r.options);
+    o.validate(scene).map_err(|e| given.error(e))?;
+    let d = PyDict::new(py);
+    d.set_item("planes", o.planes)?;
+    d.set_item("chunk_planes", partial::CHUNK_PLANES)?;
+    let chunks: Vec<(usize, usize)> = partial::chunks(o.planes).into_iter().map(|c| (c.start, c.end)).collect();
+    d.set_item("chunks", chunks)?;
+    d.set_item("fingerprint", partial::fingerprint(scene, o))?;
+    d.set_item("shape", (scene.camera.height, scene.camera.width, 3))?;
+    d.set_item("estimator", o.weighting.estimator.name())?;
+    d.set_item("orientations", o.weighting.orientations)?;
+    d.set_item("seed", o.seed)?;
+    d.set_item("sampler", o.sampler.name())?;
+    d.set_item("spp", o.spp)?;
+    d.set_item("pixel_center", o.pixel_center)?;
+    d.set_item("accelerator", o.accelerator.name())?;
+    d.set_item("kernel", o.kernel.name())?;
+    d.set_item("resolution", (scene.camera.width, scene.camera.height))?;
+    d.set_item("threads", r.threads)?;
+    Ok(d)
+}
+
+/// A partial render: the unnormalised sums of planes `start` to `end` (excluded) of a render of
+/// `planes_total`, float64 (height, width, 3). Picklable; `a + b` adds adjacent partials of one
+/// render (`combine`); `merge_partials` adds many in the canonical order.
+#[pyclass(frozen, module = "fogplanes", name = "Partial")]
+struct PyPartial {
+    inner: Partial,
+}
+
+#[pymethods]
+impl PyPartial {
+    /// The sums, float64 (height, width, 3) (a copy).
+    #[getter]
+    fn sums<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
+        let p = &self.inner;
+        let flat: Vec<f64> = p.sums.iter().flat_map(|s| s.to_array()).collect();
+        let array = Array3::from_shape_vec((p.height as usize, p.width as usize, 3), flat)
+            .unwrap_or_else(|_| Array3::zeros((p.height as usize, p.width as usize, 3)));
+        PyArray3::from_owned_array(py, array)
+    }
+    #[getter]
+    fn start(&self) -> usize {
+        self.inner.start
+    }
+    #[getter]
+    fn end(&self) -> usize {
+        self.inner.end
+    }
+    #[getter]
+    fn planes_total(&self) -> usize {
+        self.inner.planes_total
+    }
+    #[getter]
+    fn fingerprint(&self) -> &str {
+        &self.inner.fingerprint
+    }
+    #[getter]
+    fn hits(&self) -> u64 {
+        self.inner.hits
+    }
+    /// Seconds spent rendering it (added up over merged partials).
+    #[getter]
+    fn seconds(&self) -> f64 {
+        self.inner.seconds
+    }
+    /// (height, width, 3).
+    #[getter]
+    fn shape(&self) -> (u32, u32, u32) {
+        (self.inner.height, self.inner.width, 3)
+    }
+
+    fn __add__(&self, other: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+        let other =
+            other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
+        partial::combine(&self.inner, &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+    }
+
+    /// Rebuilds a pickled partial.
+    #[staticmethod]
+    #[allow(clippy::too_many_arguments)]
+    fn _from_state(
+        width: u32,
+        height: u32,
+        sums: &[u8],
+        start: usize,
+        end: usize,
+        planes_total: usize,
+        fingerprint: String,
+        hits: u64,
+        seconds: f64,
+    ) -> PyResult<Self> {
+        let pixels = width as usize * height as usize;
+        if sums.len() != pixels * 24 || start >= end || end > planes_total {
+            return Err(PyValueError::new_err("not the state of a fogplanes.Partial"));
+        }
+        let values: Vec<f64> =
+            sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
+        let sums = values.chunks_exact(3).map(|c| glam::DVec3::new(c[0], c[1], c[2])).collect();
+        Ok(PyPartial { inner: Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds } })
+    }
+
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let p = &slf.get().inner;
+        let bytes: Vec<u8> = p.sums.iter().flat_map(|s| s.to_array()).flat_map(f64::to_le_bytes).collect();
+        let args = (
+            p.width,
+            p.height,
+            PyBytes::new(py, &bytes),
+            p.start,
+            p.end,
+            p.planes_total,
+            p.fingerprint.clone(),
+            p.hits,
+            p.seconds,
+        )
+            .into_pyobject(py)?;
+        Ok((slf.get_type().getattr("_from_state")?, args))
+    }
+
+    fn __repr__(&self) -> String {
+        let p = &self.inner;
+        format!(
+            "Partial(planes {}:{} of {}, {}x{}, {} hits)",
+            p.start, p.end, p.planes_total, p.width, p.height, p.hits
+        )
+    }
+}
+
+/// Renders planes `chunk` = (start, end) of the render `**kwargs` describe (the keyword
+/// arguments of `render`): one of `plan_render`'s chunks or a union of consecutive ones. Each
+/// plane meets exactly what it meets in a whole render. The GIL is released; Ctrl-C cancels.
+#[pyfunction]
+#[pyo3(signature = (scene, chunk, **kwargs))]
+fn render_chunk(
+    py: Python<'_>,
+    scene: &Bound<'_, PyAny>,
+    chunk: (usize, usize),
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PyPartial> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let (p, _) = run_interruptible(py, pool(r.threads)?, |cancel| {
+        partial::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok(PyPartial { inner: p })
+}
+
+/// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in
+/// float64. ValueError for partials of different renders, overlapping or not adjacent.
+#[pyfunction]
+fn combine(a: &Bound<'_, PyPartial>, b: &Bound<'_, PyPartial>) -> PyResult<PyPartial> {
+    partial::combine(&a.get().inner, &b.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+}
+
+/// Merges partials (any order) into one covering their union, added in the canonical order that
+/// `render` uses: with the plan's chunks, the bits of `render`. ValueError for partials of
+/// different renders, overlaps and gaps.
+#[pyfunction]
+fn merge_partials(py: Python<'_>, parts: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+    let mut all = Vec::new();
+    for p in parts.try_iter()? {
+        let p = p?;
+        let p = p.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("parts: expected Partial objects"))?;
+        all.push(p.get().inner.clone());
+    }
+    py.detach(|| partial::merge_in_canonical_order(all)).map(|inner| PyPartial { inner }).map_err(py_error)
+}
+
+/// The image (float32, (height, width, 3)) of a render from the partial of all its planes:
+/// divided by N, plus the direct emission (computed here). `**kwargs` are the render's, as
+/// given to `plan_render`. ValueError if the partial is of another render or does not cover
+/// 0..N. With `return_stats=True`: (image, stats).
+#[pyfunction]
+#[pyo3(signature = (scene, partial, return_stats = false, **kwargs))]
+fn finish_render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    partial: &Bound<'py, PyPartial>,
+    return_stats: bool,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let p = &partial.get().inner;
+    let film = run_interruptible(py, pool(r.threads)?, |_| partial::finish(&r.scene, &r.options, p))?
+        .map_err(|e| given.error(e))?;
+    let image = film_to_array(py, &film).into_any();
+    if !return_stats {
+        return Ok(image);
+    }
+    let o = &r.options;
+    let stats = RenderStats {
+        estimator: o.weighting.label(),
+        kernel: o.kernel.resolve().map(|k| k.to_string()).unwrap_or_default(),
+        planes: o.planes,
+        plane_passes: 1,
+        rays: film.pixels.len() as u64 * o.ray_sets() as u64,
+        hits: p.hits,
+        seconds_total: p.seconds,
+        ..Default::default()
+    };
+    Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any())
+}
+
+/// The reference resolved from the arguments of `reference`.
+#[allow(clippy::too_many_arguments)]
+fn resolve_reference_args(
+    scene: &Bound<'_, PyAny>,
+    spp: Option<&Bound<'_, PyAny>>,
+    seed: Option<&Bound<'_, PyAny>>,
+    pixel_center: bool,
+    uniform: bool,
+    resolution: Option<&Bound<'_, PyAny>>,
+    threads: Option<&Bound<'_, PyAny>>,
+) -> PyResult<(settings::ResolvedReference, Given)> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let overrides = ReferenceOverrides {
+        spp: given.uint32(Setting::Spp, spp)?,
+        seed: given.uint(Setting::Seed, seed)?,
+        pixel_center,
+        uniform,
+        resolution: given.resolution(resolution)?,
+        threads: given.threads(threads)?,
+        exposure: None,
+    };
+    let r = settings::resolve_reference(&scene, &overrides).map_err(|e| given.error(e))?;
+    Ok((r, given))
+}
+
+/// Rows `rows` = (j0, j1) of the reference: (mean, stderr), float32 (j1 - j0, width, 3),
+/// bit-identical to those rows of `reference(...)` with the same arguments. The adaptive
+/// reference (`uniform=False`) needs `counts`, the per-pixel sample counts from
+/// `reference_counts` (uint32 (height, width)).
+#[pyfunction]
+#[pyo3(signature = (scene, rows, spp = None, seed = None, pixel_center = false, uniform = false, counts = None, resolution = None, threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_rows<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    rows: (u32, u32),
+    spp: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    uniform: bool,
+    counts: Option<&Bound<'py, PyAny>>,
+    resolution: Option<&Bound<'py, PyAny>>,
+    threads: Option<&Bound<'py, PyAny>>,
+) -> PyResult<(Image<'py>, Image<'py>)> {
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
+    let (w, h) = (r.scene.camera.width as usize, r.scene.camera.height as usize);
+    let counts: Option<Vec<u32>> = match (counts, uniform) {
+        (None, false) => {
+            return Err(PyValueError::new_err(
+                "counts: the adaptive reference in rows needs the per-pixel counts (reference_counts), or uniform=True",
+            ));
+        }
+        (Some(_), true) => return Err(PyValueError::new_err("counts: a uniform reference takes no counts")),
+        (None, true) => None,
+        (Some(c), false) => {
+            let c: PyArrayLike2<'_, u32, AllowTypeChange> = c.extract()?;
+            let view = c.as_array();
+            if view.shape() != [h, w] {
+                return Err(PyValueError::new_err(format!(
+                    "counts: expected shape ({h}, {w}), got {}",
+                    shape_text(view.shape())
+                )));
+            }
+            Some(view.iter().copied().collect())
+        }
+    };
+    let (mean, stderr) = run_interruptible(py, pool(r.threads)?, |cancel| {
+        refs::reference_rows(&r.scene, &r.options, rows.0..rows.1, counts.as_deref(), Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok((film_to_array(py, &mean), film_to_array(py, &stderr)))
+}
+
+/// Rows `rows` = (j0, j1) of the adaptive reference's pilot pass: each pixel's standard error,
+/// float32 (j1 - j0, width, 3). The whole pilot (the rows stacked) goes to `reference_counts`.
+#[pyfunction]
+#[pyo3(signature = (scene, rows, spp = None, seed = None, pixel_center = false, resolution = None, threads = None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_pilot_rows<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    rows: (u32, u32),
+    spp: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    resolution: Option<&Bound<'py, PyAny>>,
+    threads: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Image<'py>> {
+    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, false, resolution, threads)?;
+    let pilot = run_interruptible(py, pool(r.threads)?, |cancel| {
+        refs::reference_pilot_rows(&r.scene, &r.options, rows.0..rows.1, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok(film_to_array(py, &pilot))
+}
+
+/// The adaptive reference's per-pixel sample counts, uint32 (height, width), from its whole
+/// pilot (float32 (height, width, 3): `reference_pilot_rows` of every row, stacked), by the
+/// core code `reference` uses.
+#[pyfunction]
+#[pyo3(signature = (scene, pilot, spp = None, seed = None, pixel_center = false, resolution = None))]
+#[allow(clippy::too_many_arguments)]
+fn reference_counts<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    pilot: &Bound<'py, PyAny>,
+    spp: Option<&Bound<'py, PyAny>>,
+    seed: Option<&Bound<'py, PyAny>>,
+    pixel_center: bool,
+    resolution: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<u32>>> {
+    let (r, _) = resolve_reference_args(scene, spp, seed, pixel_center, false, resolution, None)?;
+    let pilot = image_arg(pilot, "pilot")?;
+    let (w, h) = (r.scene.camera.width, r.scene.camera.height);
+    if (pilot.width, pilot.height) != (w, h) {
+        return Err(PyValueError::new_err(format!(
+            "pilot: expected shape ({h}, {w}, 3), the whole image, got ({}, {}, 3)",
+            pilot.height, pilot.width
+        )));
+    }
+    let counts = refs::reference_counts(&r.options, &pilot.pixels);
+    let array = numpy::ndarray::Array2::from_shape_vec((h as usize, w as usize), counts)
+        .unwrap_or_else(|_| numpy::ndarray::Array2::zeros((h as usize, w as usize)));
+    Ok(PyArray2::from_owned_array(py, array))
 }
 
 #[pymodule]
@@ -670,6 +1174,15 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compare, m)?)?;
     m.add_function(wrap_pyfunction!(load_image, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
+    m.add_class::<PyPartial>()?;
+    m.add_function(wrap_pyfunction!(plan_render, m)?)?;
+    m.add_function(wrap_pyfunction!(render_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(combine, m)?)?;
+    m.add_function(wrap_pyfunction!(merge_partials, m)?)?;
+    m.add_function(wrap_pyfunction!(finish_render, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_pilot_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(reference_counts, m)?)?;
     m.add("ESTIMATORS", PyTuple::new(m.py(), Estimator::names())?)?;
     m.add("KERNELS", PyTuple::new(m.py(), Kernel::ALL.iter().map(|k| k.name()))?)?;
     m.add("SAMPLERS", PyTuple::new(m.py(), Sampler::ALL.iter().map(|s| s.name()))?)?;

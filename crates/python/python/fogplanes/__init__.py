@@ -10,7 +10,8 @@ Images are numpy arrays of shape (height, width, 3), float32, linear RGB.
     >>> ref, err = fogplanes.reference(scene, spp=256, resolution=(160, 90))
     >>> fogplanes.compare(image, ref)["mse"]  # doctest: +SKIP
 
-Bad input raises ValueError with the command line's message; a file that cannot be opened
+Bad input raises ValueError with the command line's message, the setting named as given here
+(`planes=0: ...` where the command line says `--planes: ...`); a file that cannot be opened
 raises OSError (FileNotFoundError, ...). Ctrl-C stops a render with KeyboardInterrupt.
 """
 
@@ -22,14 +23,23 @@ from ._fogplanes import (
     Camera,
     Light,
     Medium,
+    Partial,
     RenderDefaults,
     Scene,
     __version__,
+    combine,
     compare,
+    finish_render,
     load_image,
     load_scene,
+    merge_partials,
+    plan_render,
     reference,
+    reference_counts,
+    reference_pilot_rows,
+    reference_rows,
     render,
+    render_chunk,
     save_image,
 )
 
@@ -41,13 +51,31 @@ __all__ = [
     "Camera",
     "Light",
     "Medium",
+    "Partial",
     "RenderDefaults",
     "Scene",
     "__version__",
+    "combine",
     "compare",
+    "finish_render",
     "load_image",
     "load_scene",
+    "merge_partials",
+    "plan_render",
     "reference",
+    "reference_counts",
+    "reference_pilot_rows",
+    "reference_rows",
     "render",
+    "render_chunk",
     "save_image",
 ]
+
+
+def __getattr__(name: str):
+    # `fogplanes.distributed` (Dask) is imported on first use: `import fogplanes` needs no Dask.
+    if name == "distributed":
+        import importlib
+
+        return importlib.import_module(".distributed", __name__)
+    raise AttributeError(f"module 'fogplanes' has no attribute {name!r}")

@@ -108,6 +108,18 @@ class Scene:
         """
     def with_resolution(self, width: int, height: int) -> Scene:
         """The same scene at another resolution."""
+    @staticmethod
+    def _from_parts(text: str, name: str, file: str, resolution: tuple[int, int]) -> Scene:
+        """The scene rebuilt from its text, name, file and resolution (unpickling)."""
+    def __reduce__(self) -> tuple[object, tuple[str, str, str, tuple[int, int]]]: ...
+    def __dask_tokenize__(self) -> str:
+        """A stable token: 32 hex digits hashing text, name, file and resolution."""
+    @property
+    def source(self) -> str:
+        """The TOML text the scene was made from."""
+    @property
+    def file(self) -> str:
+        """The file name its errors cite."""
     @property
     def name(self) -> str:
         """The file stem (or the name given to from_toml)."""
@@ -131,6 +143,8 @@ class RenderStats(TypedDict):
     estimator: str
     kernel: str
     planes: int
+    #: 1, or the passes of a render on a time budget.
+    plane_passes: int
     rays: int
     hits: int
     tests: int
@@ -170,23 +184,27 @@ def render(
     kernel: str = "auto",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
+    time_budget: float | None = None,
 ) -> Image:
     """Renders a scene with photon planes: the image, shape (height, width, 3), float32.
 
     The arguments are those of `fogplanes render`, and None takes the scene's [render]
-    default exactly as the command line does: `estimator` (the scene's, else smis-exact),
-    `planes`, `seed`, `spp`, and `orientations` (the scene's K applies only when the scene's
-    estimator is the one rendered). `resolution` is (width, height). `threads` runs the render
-    in a pool of that many threads (None: all cores); the image depends on the seed alone.
-    Pixels are whole: the mean over each pixel's square (box filter), with `spp` camera samples
-    per pixel (the scene's, else 16) sharing the planes; `pixel_center=True` takes the centres.
-    The image is bit-identical to the EXR that `fogplanes render` writes for the same
-    arguments. `sampler` is where the planes' random numbers come from: "sobol"
-    (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol). With
+    default exactly as the command line does (both resolve them in the core): `estimator`
+    (the scene's, else smis-exact), `planes`, `seed`, `spp`, and `orientations` (the scene's K
+    applies only when the scene's estimator is the one rendered). `resolution` is (width,
+    height). Pixels are whole: the mean over each pixel's square (box filter), with `spp` camera
+    samples per pixel (the scene's, else 16) sharing the planes; `pixel_center=True` takes the
+    centres. `time_budget` renders for that many seconds instead of a plane count: planes in
+    passes, each extending the set (the stats give "planes" and "plane_passes"). `threads` runs
+    the render in a pool of that many threads (None: all cores); the image depends on the seed
+    alone. The image is bit-identical to the EXR that `fogplanes render` writes for the same
+    arguments. `sampler` is where the planes' random numbers come from: "sobol" (randomised
+    quasi-Monte Carlo) or "independent" (None: the scene's, else sobol). With
     `return_stats=True`, returns (image, stats).
 
-    Raises ValueError for bad input (the command line's message), OSError for a scene file
-    that cannot be opened, KeyboardInterrupt on Ctrl-C. The GIL is released while rendering.
+    Raises ValueError for bad input (the command line's message, the setting named as given
+    here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
+    on Ctrl-C. The GIL is released while rendering.
     """
 
 @overload
@@ -205,6 +223,7 @@ def render(
     *,
     return_stats: Literal[True],
     sampler: str | None = None,
+    time_budget: float | None = None,
 ) -> tuple[Image, RenderStats]: ...
 
 def reference(
@@ -235,4 +254,111 @@ def load_image(path: PathLike) -> Image:
 
 def save_image(path: PathLike, image: npt.ArrayLike, exposure: float = 0.0) -> None:
     """Writes an image (height, width, 3) as .exr (linear float32) or .png (sRGB, tone-mapped
-    by `exposure` stops), whole or not at all."""
+    by `exposure` stops), whole or not at all. The shape is checked before any conversion."""
+
+# Renders in chunks and references in row bands (the cluster layer: fogplanes.distributed).
+# `**render_kwargs` are the keyword arguments of `render` (not time_budget, not return_stats).
+
+class RenderPlan(TypedDict):
+    planes: int
+    #: A fixed power of two (16384): never depends on the workers or on `planes`.
+    chunk_planes: int
+    #: (start, end) plane ranges covering 0..planes in order.
+    chunks: list[tuple[int, int]]
+    #: The scene and every setting that changes the image (not threads, not kernel).
+    fingerprint: str
+    shape: tuple[int, int, int]
+    estimator: str
+    orientations: int
+    seed: int
+    sampler: str
+    spp: int
+    pixel_center: bool
+    accelerator: str
+    kernel: str
+    resolution: tuple[int, int]
+    threads: int | None
+
+class Partial:
+    """The unnormalised float64 sums of planes start..end of a render. Picklable; `a + b`
+    adds adjacent partials of one render (ValueError otherwise)."""
+
+    @property
+    def sums(self) -> npt.NDArray[np.float64]:
+        """(height, width, 3), float64 (a copy)."""
+    @property
+    def start(self) -> int: ...
+    @property
+    def end(self) -> int: ...
+    @property
+    def planes_total(self) -> int: ...
+    @property
+    def fingerprint(self) -> str: ...
+    @property
+    def hits(self) -> int: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def shape(self) -> tuple[int, int, int]: ...
+    def __add__(self, other: Partial) -> Partial: ...
+
+def plan_render(scene: Scene | PathLike, **render_kwargs: object) -> RenderPlan:
+    """The resolved settings of a render in chunks, its chunks and fingerprint."""
+
+def render_chunk(scene: Scene | PathLike, chunk: tuple[int, int], **render_kwargs: object) -> Partial:
+    """Renders a plan's chunk (or a union of consecutive ones). GIL released; Ctrl-C cancels."""
+
+def combine(a: Partial, b: Partial) -> Partial:
+    """a + b for adjacent partials of one render (a.end == b.start)."""
+
+def merge_partials(parts: list[Partial]) -> Partial:
+    """Partials in any order merged in the canonical order: with the plan's chunks, the bits of
+    `render`. ValueError for different renders, overlaps and gaps."""
+
+@overload
+def finish_render(
+    scene: Scene | PathLike, partial: Partial, return_stats: Literal[False] = False, **render_kwargs: object
+) -> Image: ...
+@overload
+def finish_render(
+    scene: Scene | PathLike, partial: Partial, return_stats: Literal[True], **render_kwargs: object
+) -> tuple[Image, RenderStats]: ...
+def finish_render(
+    scene: Scene | PathLike, partial: Partial, return_stats: bool = False, **render_kwargs: object
+) -> Image | tuple[Image, RenderStats]:
+    """The image from the partial of all planes: divided by N, plus the direct emission."""
+
+def reference_rows(
+    scene: Scene | PathLike,
+    rows: tuple[int, int],
+    spp: int | None = None,
+    seed: int | None = None,
+    pixel_center: bool = False,
+    uniform: bool = False,
+    counts: npt.ArrayLike | None = None,
+    resolution: tuple[int, int] | None = None,
+    threads: int | None = None,
+) -> tuple[Image, Image]:
+    """Rows j0..j1 of `reference(...)`: (mean, stderr), bit-identical. The adaptive reference
+    (uniform=False) needs `counts` from `reference_counts`."""
+
+def reference_pilot_rows(
+    scene: Scene | PathLike,
+    rows: tuple[int, int],
+    spp: int | None = None,
+    seed: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    threads: int | None = None,
+) -> Image:
+    """Rows j0..j1 of the adaptive reference's pilot pass (per-pixel standard errors)."""
+
+def reference_counts(
+    scene: Scene | PathLike,
+    pilot: npt.ArrayLike,
+    spp: int | None = None,
+    seed: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+) -> npt.NDArray[np.uint32]:
+    """Per-pixel sample counts (height, width) from the whole pilot (height, width, 3)."""

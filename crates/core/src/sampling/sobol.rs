@@ -17,7 +17,10 @@
 //!   constants of N. Vegdahl ("Building a Better LK Hash", 2021).
 //!
 //! Everything is 32-bit: indices are `u32`, points are `u32` fixed-point
-//! fractions, converted by [`to_unit_f64`].
+//! fractions, converted by `to_unit_f64`. What the renderer uses is
+//! [`SobolSampler::point`]; the rest are its parts.
+
+use super::hash::{splitmix64, splitmix64_finalizer};
 
 /// Number of Sobol' dimensions provided (dimension indices are `0..16`).
 pub const MAX_DIMENSIONS: usize = 16;
@@ -86,7 +89,7 @@ const fn build_matrices() -> [[u32; 32]; MAX_DIMENSIONS] {
 
 /// Sobol' generator matrices, one row of 32 direction numbers per dimension,
 /// evaluated at compile time.
-pub const SOBOL_MATRICES: [[u32; 32]; MAX_DIMENSIONS] = build_matrices();
+const SOBOL_MATRICES: [[u32; 32]; MAX_DIMENSIONS] = build_matrices();
 
 /// Unscrambled Sobol' point `index` in dimension `dim` as a 32-bit fraction
 /// (the point is `result / 2^32`). Natural (not Gray-code) order, so the
@@ -94,7 +97,7 @@ pub const SOBOL_MATRICES: [[u32; 32]; MAX_DIMENSIONS] = build_matrices();
 ///
 /// Panics if `dim >= MAX_DIMENSIONS`.
 #[inline]
-pub fn sobol_u32(index: u32, dim: usize) -> u32 {
+pub(crate) fn sobol_u32(index: u32, dim: usize) -> u32 {
     let matrix = &SOBOL_MATRICES[dim];
     let mut bits = index;
     let mut result = 0u32;
@@ -127,27 +130,18 @@ fn laine_karras_permutation(mut x: u32, seed: u32) -> u32 {
 /// seeds. Applied to an *index* it permutes every aligned block of `2^m`
 /// indices onto an aligned block of `2^m` indices (Burley's shuffling).
 #[inline]
-pub fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
+pub(crate) fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
     laine_karras_permutation(x.reverse_bits(), seed).reverse_bits()
 }
 
-const GOLDEN: u64 = 0x9e37_79b9_7f4a_7c15;
 /// Seed tag for the index shuffle; distinct from every dimension number.
 const SHUFFLE_TAG: u32 = u32::MAX;
 
-/// SplitMix64 finaliser (a bijective 64-bit mixer).
-#[inline]
-fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
 /// Derives a well-mixed 32-bit seed from `(seed, tag)`; injective before
-/// truncation because `mix64` is a bijection.
+/// truncation because [`splitmix64`] is a bijection.
 #[inline]
 fn hash_seed(seed: u32, tag: u32) -> u32 {
-    (mix64((((seed as u64) << 32) | tag as u64).wrapping_add(GOLDEN)) >> 32) as u32
+    (splitmix64(((seed as u64) << 32) | tag as u64) >> 32) as u32
 }
 
 /// Owen-scrambled Sobol' point: dimension `dim` is scrambled with its own
@@ -156,25 +150,15 @@ fn hash_seed(seed: u32, tag: u32) -> u32 {
 /// Caveat: for a fixed `index`, the same dimension under two seeds is a
 /// bijective function of the same raw value, so the *index-by-index*
 /// sequences of two seeds are strongly correlated (|r| typically 0.5-0.9).
-/// Each seed on its own is a valid randomisation; use
-/// [`shuffled_owen_sobol`] if values from different seeds are combined into
-/// one point.
+/// Each seed on its own is a valid randomisation; [`SobolSampler::point`]
+/// shuffles the index first, which decorrelates seeds.
 #[inline]
-pub fn owen_sobol(index: u32, dim: usize, seed: u32) -> u32 {
+fn owen_sobol(index: u32, dim: usize, seed: u32) -> u32 {
     nested_uniform_scramble(sobol_u32(index, dim), hash_seed(seed, dim as u32))
 }
 
-/// Owen-scrambled Sobol' point with the index nested-uniform-scrambled first
-/// (Burley 2020, section 4). The index shuffle depends on `seed` only, not
-/// on `dim`, so the dimensions of one seed keep their joint net structure;
-/// each prefix of `2^m` indices maps to an aligned block of `2^m` Sobol'
-/// points, which is again a net. Different seeds give decorrelated
-/// sequences, which is what "padding" (independent 2D pairs) needs.
-#[inline]
-pub fn shuffled_owen_sobol(index: u32, dim: usize, seed: u32) -> u32 {
-    owen_sobol(shuffle_index(index, seed), dim, seed)
-}
-
+/// The index nested-uniform-scrambled (Burley 2020, section 4): each prefix
+/// of `2^m` indices maps to an aligned block of `2^m` indices.
 #[inline]
 fn shuffle_index(index: u32, seed: u32) -> u32 {
     nested_uniform_scramble(index, hash_seed(seed, SHUFFLE_TAG))
@@ -184,13 +168,12 @@ fn shuffle_index(index: u32, seed: u32) -> u32 {
 /// `[0, 1)` (the largest value is `1 - 2^-32`). No jitter is added below the
 /// 32-bit resolution; note that rounding the result to `f32` can give 1.0.
 #[inline]
-pub fn to_unit_f64(x: u32) -> f64 {
+fn to_unit_f64(x: u32) -> f64 {
     x as f64 * (1.0 / 4_294_967_296.0)
 }
 
-/// Convenience sampler: one 64-bit seed per independent randomisation
-/// (e.g. per render pass or per thread), mixed into 32-bit stream seeds
-/// with the SplitMix64 finaliser.
+/// The sampler: one 64-bit seed per independent randomisation (per plane
+/// set), mixed into the 32-bit seed of its scrambling.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SobolSampler {
     seed: u64,
@@ -201,49 +184,39 @@ impl SobolSampler {
         Self { seed }
     }
 
-    pub const fn seed(&self) -> u64 {
-        self.seed
-    }
-
-    /// 32-bit seed of stream `stream` (0: [`Self::point`], 1 + p: pair p).
+    /// The 32-bit seed of the scrambling and the index shuffle.
     #[inline]
-    fn stream_seed(&self, stream: u64) -> u32 {
-        (mix64(mix64(self.seed).wrapping_add(stream.wrapping_add(1).wrapping_mul(GOLDEN))) >> 32) as u32
+    fn scramble_seed(&self) -> u32 {
+        (splitmix64(splitmix64_finalizer(self.seed)) >> 32) as u32
     }
 
     /// Point `index` of a `D`-dimensional shuffled Owen-scrambled Sobol'
-    /// sequence (`D <= 16`, checked at compile time). The first `2^m`
-    /// indices form a scrambled (t,m,D)-net.
+    /// sequence (`D <= 16`, checked at compile time). The index shuffle
+    /// depends on the seed only, not on the dimension, so the dimensions keep
+    /// their joint net structure: the first `2^m` indices form a scrambled
+    /// (t,m,D)-net, and different seeds give decorrelated sequences.
     pub fn point<const D: usize>(&self, index: u32) -> [f64; D] {
         const { assert!(D <= MAX_DIMENSIONS, "SobolSampler::point supports at most 16 dimensions") };
-        let seed = self.stream_seed(0);
+        let seed = self.scramble_seed();
         let shuffled = shuffle_index(index, seed);
         std::array::from_fn(|d| to_unit_f64(owen_sobol(shuffled, d, seed)))
-    }
-
-    /// 2D pair number `pair` of sample `index`, "padded" as in pbrt-v4's
-    /// PaddedSobolSampler: Sobol' dimensions 0 and 1 (a (0,2)-sequence) with
-    /// an index shuffle and scramble of their own, so distinct pairs are
-    /// mutually decorrelated while each pair is a well-stratified 2D net.
-    #[inline]
-    pub fn padded_pair(&self, index: u32, pair: u32) -> (f64, f64) {
-        let seed = self.stream_seed(1 + pair as u64);
-        let shuffled = shuffle_index(index, seed);
-        (to_unit_f64(owen_sobol(shuffled, 0, seed)), to_unit_f64(owen_sobol(shuffled, 1, seed)))
-    }
-
-    /// `pairs` padded 2D pairs of sample `index` (see [`Self::padded_pair`]).
-    pub fn padded_pairs(&self, index: u32, pairs: usize) -> Vec<(f64, f64)> {
-        (0..pairs as u32).map(|p| self.padded_pair(index, p)).collect()
     }
 }
 
 #[cfg(test)]
 #[allow(clippy::needless_range_loop)]
 mod tests {
+    use super::super::chi_square;
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
+
+    /// What [`SobolSampler::point`] computes in dimension `dim` for the
+    /// scramble seed `seed`, as a 32-bit fraction: the Owen-scrambled point
+    /// of the shuffled index.
+    fn shuffled_owen_sobol(index: u32, dim: usize, seed: u32) -> u32 {
+        owen_sobol(shuffle_index(index, seed), dim, seed)
+    }
 
     /// The `bits` most significant bits of `x` (0 if `bits == 0`).
     fn top(x: u32, bits: u32) -> u32 {
@@ -298,16 +271,6 @@ mod tests {
         }
         sxy / (sxx * syy).sqrt()
     }
-
-    fn chi_square(counts: &[u64]) -> f64 {
-        let n: u64 = counts.iter().sum();
-        let e = n as f64 / counts.len() as f64;
-        counts.iter().map(|&c| (c as f64 - e).powi(2) / e).sum()
-    }
-
-    /// Chi-square critical value, 63 degrees of freedom, p = 1e-4
-    /// (Wilson-Hilferty approximation: 113.6).
-    const CHI2_63_P1E4: f64 = 113.6;
 
     #[test]
     fn direction_numbers_match_reference_recurrence() {
@@ -434,16 +397,16 @@ mod tests {
             // Scrambling must actually move the points.
             assert!(owen.iter().zip(&raw).filter(|(a, b)| a == b).count() < 16);
         }
-        // The padded pairs of the sampler are (0,m,2)-nets as well.
-        let s = SobolSampler::new(3);
-        for pair in 0..3 {
+        // The sampler's points are (0,m,2)-nets in dimensions 0 and 1 as well.
+        for seed in 0..3 {
+            let s = SobolSampler::new(seed);
             let pts: Vec<(u32, u32)> = (0..1u32 << 12)
                 .map(|i| {
-                    let (x, y) = s.padded_pair(i, pair);
+                    let [x, y] = s.point::<2>(i);
                     ((x * 4_294_967_296.0) as u32, (y * 4_294_967_296.0) as u32)
                 })
                 .collect();
-            assert!(is_tm2_net(&pts, 12, 0), "padded pair {pair}");
+            assert!(is_tm2_net(&pts, 12, 0), "sampler seed {seed}");
         }
     }
 
@@ -529,8 +492,8 @@ mod tests {
                 for i in 0..n {
                     c[top(owen_sobol(i, d, 1234), 6) as usize] += 1;
                 }
-                let chi2 = chi_square(&c);
-                assert!(chi2 < CHI2_63_P1E4, "dim {d} n {n} chi2 {chi2}");
+                let chi2 = chi_square::uniform_statistic(&c);
+                assert!(chi2 < chi_square::critical(63), "dim {d} n {n} chi2 {chi2}");
                 if n == 1 << 16 {
                     assert_eq!(chi2, 0.0);
                 }
@@ -545,9 +508,9 @@ mod tests {
                 for s in 0..1u32 << 16 {
                     c[top(owen_sobol(index, d, s), 6) as usize] += 1;
                 }
-                let chi2 = chi_square(&c);
+                let chi2 = chi_square::uniform_statistic(&c);
                 worst = worst.max(chi2);
-                assert!(chi2 < CHI2_63_P1E4, "dim {d} index {index} chi2 over seeds {chi2}");
+                assert!(chi2 < chi_square::critical(63), "dim {d} index {index} chi2 over seeds {chi2}");
             }
         }
         println!("worst chi2 over seeds (63 dof): {worst:.1}");
@@ -572,12 +535,6 @@ mod tests {
                 let same = xa.iter().zip(&xb).filter(|(x, y)| x == y).count();
                 assert!(same < 4, "{same} identical values");
             }
-            // Padded pairs of one sampler are mutually decorrelated too.
-            let p0: Vec<f64> = (0..n).map(|i| a.padded_pair(i, 0).0).collect();
-            let p1: Vec<f64> = (0..n).map(|i| a.padded_pair(i, 1).0).collect();
-            let r = pearson(&p0, &p1);
-            worst = worst.max(r.abs());
-            assert!(r.abs() < bound, "padded pairs r = {r}");
         }
         println!("worst |r| * sqrt(n) = {:.2} (bound 4)", worst * (n as f64).sqrt());
     }
@@ -586,7 +543,7 @@ mod tests {
     fn unshuffled_owen_same_dim_is_correlated_across_seeds() {
         // Documents the caveat on `owen_sobol`: without the index shuffle two
         // seeds scramble the same raw value, so index-by-index values are
-        // strongly (anti)correlated. This is why padding needs shuffling.
+        // strongly (anti)correlated. This is why the sampler shuffles.
         let n = 4096u32;
         let mut rng = Pcg64::seed_from_u64(5);
         let mut min_abs: f64 = 1.0;
@@ -610,9 +567,7 @@ mod tests {
                     assert!((0.0..1.0).contains(&u));
                 }
             }
-            for u in
-                s.point::<16>(index).into_iter().chain(s.padded_pairs(index, 3).into_iter().flat_map(|(x, y)| [x, y]))
-            {
+            for u in s.point::<16>(index) {
                 assert!((0.0..1.0).contains(&u), "{u}");
             }
         }
@@ -649,16 +604,6 @@ mod tests {
             let smp = SobolSampler::new(s);
             (0..n).map(|i| f2(&smp.point::<2>(i))).sum::<f64>() / n as f64
         });
-        let pad = rmse(exact2, |s| {
-            let smp = SobolSampler::new(s);
-            (0..n)
-                .map(|i| {
-                    let (x, y) = smp.padded_pair(i, 2);
-                    f2(&[x, y])
-                })
-                .sum::<f64>()
-                / n as f64
-        });
         let mc = rmse(exact2, |s| {
             let mut rng = Pcg64::seed_from_u64(s);
             (0..n).map(|_| f2(&[rng.random(), rng.random()])).sum::<f64>() / n as f64
@@ -676,18 +621,18 @@ mod tests {
             (0..n).map(|_| f6(&std::array::from_fn(|_| rng.random()))).sum::<f64>() / n as f64
         });
         println!(
-            "2D RMSE: owen-sobol {qmc:.3e}, padded pair {pad:.3e}, random {mc:.3e} (x{:.0}); 6D: {qmc6:.3e} vs {mc6:.3e} (x{:.0})",
+            "2D RMSE: owen-sobol {qmc:.3e}, random {mc:.3e} (x{:.0}); 6D: {qmc6:.3e} vs {mc6:.3e} (x{:.0})",
             mc / qmc,
             mc6 / qmc6
         );
-        assert!(mc / qmc >= 10.0 && mc / pad >= 10.0);
+        assert!(mc / qmc >= 10.0);
         assert!(mc6 / qmc6 >= 10.0);
     }
 
     #[test]
     fn sampler_is_consistent_and_deterministic() {
         let s = SobolSampler::new(0xfeed);
-        let seed = s.stream_seed(0);
+        let seed = s.scramble_seed();
         for i in [0u32, 1, 2, 1000, 123_456] {
             let p = s.point::<16>(i);
             for d in 0..16 {
@@ -695,11 +640,7 @@ mod tests {
             }
             assert_eq!(p, SobolSampler::new(0xfeed).point::<16>(i));
             assert_eq!(&p[..6], &s.point::<6>(i)[..]);
-            let pairs = s.padded_pairs(i, 4);
-            assert_eq!(pairs.len(), 4);
-            assert_eq!(pairs[3], s.padded_pair(i, 3));
         }
         assert_ne!(s.point::<2>(5), SobolSampler::new(0xfeee).point::<2>(5));
-        assert_ne!(s.padded_pair(5, 0), s.padded_pair(5, 1));
     }
 }

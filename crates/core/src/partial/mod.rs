@@ -1,0 +1,485 @@
+//! Partial renders: canonical chunks of the plane set, their f64 sums, and the canonical merge.
+//!
+//! The photon-plane estimate is linear in its planes: the image of N planes is the direct
+//! emission plus `(1/N) sum_i c_i`, where `c_i` is what plane `i` adds to a pixel (its
+//! contribution gathered along the camera rays it meets, section 2.3). So any split of the index
+//! range `0..N` can be rendered apart and the sums added. To make the result independent of who
+//! renders what, every split is made of the same pieces and added in the same order:
+//!
+//! - the **canonical chunks**: `0..C, C..2C, ...` with `C` = [`CHUNK_PLANES`], a fixed power of
+//!   two that depends on nothing (not on the workers, not on N); the last chunk is shorter;
+//! - a chunk's sum is gathered in f32 (as a whole render gathers), each plane weighted 1, and
+//!   kept as f64 ([`Partial`]);
+//! - chunks are added in f64 along the **canonical tree** over chunk indices:
+//!   `node(a..b) = node(a..m) + node(m..b)`, `m = a +` the largest power of two below `b - a`
+//!   (pairs 0+1, 2+3, ..., then pairs of pairs, an odd one carried up); [`merge_in_canonical_order`];
+//! - the whole is divided by `N` in f64, rounded to f32 once, and the direct emission added
+//!   once ([`finish`]).
+//!
+//! [`crate::render::render`] itself is exactly these steps, so a render spread over machines is
+//! bit-identical to a render on one, whatever the number of workers, the retries and the order
+//! in which chunks complete.
+//!
+//! Each plane meets in its chunk exactly what it meets in a whole render: its sampler point
+//! (the index in one sequence), its orientations, and the camera rays of its ray set (that of
+//! its group of planes, docs/mathematics.md section 8.1, which depends on its index, N and the
+//! ray set count alone). The one function that gathers a plane range is
+//! [`ChunkRenderer::gather_planes`].
+
+pub mod file;
+pub mod parts;
+
+use crate::control::Control;
+use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::gather::CameraRay;
+use crate::kernel::Kernel;
+use crate::limits::{BYTES_PER_PIXEL, BYTES_PER_PLANE, MEMORY_BUDGET_BYTES};
+use crate::pixel::{plane_group, ray_set_rays};
+use crate::render::{PreparedPlanes, RenderOptions, RenderStats};
+use crate::scene::Scene;
+use glam::{DVec3, Vec3};
+use std::ops::Range;
+use std::time::Instant;
+
+/// Planes per canonical chunk: a power of two, fixed (it never depends on the number of
+/// workers or of planes), small enough that one chunk is a task of a fraction of a second at
+/// 640x360 and holds little memory, large enough that the per-chunk costs (one pass over the
+/// image's bands, the f64 conversion) stay near 1% of a render.
+pub const CHUNK_PLANES: usize = 16_384;
+
+/// The canonical chunks of a set of `planes` planes, in order.
+pub fn chunks(planes: usize) -> Vec<Range<usize>> {
+    (0..planes).step_by(CHUNK_PLANES).map(|s| s..(s + CHUNK_PLANES).min(planes)).collect()
+}
+
+/// The canonical chunks' indices that `range` covers, if it is a union of consecutive ones.
+pub fn chunk_indices(planes: usize, range: &Range<usize>) -> Result<Range<usize>> {
+    let n = planes.div_ceil(CHUNK_PLANES);
+    let on_boundary = |p: usize| p.is_multiple_of(CHUNK_PLANES) || p == planes;
+    if range.start >= range.end || range.end > planes || !on_boundary(range.start) || !on_boundary(range.end) {
+        return Err(Error::Partial(format!(
+            "the plane range {}:{} is not a union of the render's chunks (of {CHUNK_PLANES} planes, from 0 to {planes})",
+            range.start, range.end
+        )));
+    }
+    Ok(range.start / CHUNK_PLANES..range.end.div_ceil(CHUNK_PLANES).min(n))
+}
+
+/// A stable 128-bit hash of `bytes` (FNV-1a): the same in every process, run and machine, as
+/// 32 hex digits. It names contents (scenes, settings), it does not guard against forgery.
+pub fn stable_hash(parts: &[&[u8]]) -> String {
+    const OFFSET: u128 = 0x6c62_272e_07bb_0142_62b8_2175_6295_c58d;
+    const PRIME: u128 = 0x0000_0000_0100_0000_0000_0000_0000_013b;
+    let mut h = OFFSET;
+    for part in parts {
+        // Each part's length first, so that ("ab", "c") and ("a", "bc") differ.
+        for &b in (part.len() as u64).to_le_bytes().iter().chain(part.iter()) {
+            h ^= b as u128;
+            h = h.wrapping_mul(PRIME);
+        }
+    }
+    format!("{h:032x}")
+}
+
+/// What identifies an image: the scene's geometry, medium, lights and camera (its name and
+/// file do not change the image), every setting that changes the image (not the kernel, which
+/// gives bit-identical images, nor the thread count), and the library's version.
+pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
+    let description = format!(
+        "fogplanes {} | {:?} | {:?} | {:?} | planes {} | {} | seed {} | sampler {} | spp {} | centre {} | {}",
+        env!("CARGO_PKG_VERSION"),
+        scene.camera,
+        scene.medium,
+        scene.lights,
+        opts.planes,
+        opts.weighting.label(),
+        opts.seed,
+        opts.sampler,
+        opts.spp,
+        opts.pixel_center,
+        opts.accelerator,
+    );
+    stable_hash(&[description.as_bytes()])
+}
+
+/// The unnormalised sum of a plane range's contributions to every pixel: planes `start..end`
+/// of a render of `planes_total`, each gathered with the rays it meets in that render, each
+/// weighted 1 (each plane gathered with its ray set, so every pixel sums one estimate per plane).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Partial {
+    pub width: u32,
+    pub height: u32,
+    /// One per pixel, row-major.
+    pub sums: Vec<DVec3>,
+    pub start: usize,
+    pub end: usize,
+    pub planes_total: usize,
+    /// [`fingerprint`] of the render the range belongs to.
+    pub fingerprint: String,
+    /// Ray-plane hits found.
+    pub hits: u64,
+    /// Wall-clock seconds spent rendering it (added up over merged parts).
+    pub seconds: f64,
+}
+
+impl Partial {
+    fn describe(&self) -> String {
+        format!("planes {}:{}", self.start, self.end)
+    }
+}
+
+/// Refuses two partials of different renders or sizes.
+fn check_same_render(a: &Partial, b: &Partial) -> Result<()> {
+    if a.fingerprint != b.fingerprint || a.planes_total != b.planes_total {
+        return Err(Error::Partial(format!(
+            "{} and {} belong to different renders (another scene or other settings)",
+            a.describe(),
+            b.describe()
+        )));
+    }
+    if (a.width, a.height) != (b.width, b.height) || a.sums.len() != b.sums.len() {
+        return Err(Error::Partial(format!("{} and {} differ in size", a.describe(), b.describe())));
+    }
+    Ok(())
+}
+
+/// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in f64.
+pub fn combine(a: &Partial, b: &Partial) -> Result<Partial> {
+    check_same_render(a, b)?;
+    if a.end != b.start {
+        let how = if a.end > b.start { "overlap" } else { "leave a gap" };
+        return Err(Error::Partial(format!("{} and {} are not adjacent: they {how}", a.describe(), b.describe())));
+    }
+    let sums = a.sums.iter().zip(&b.sums).map(|(x, y)| *x + *y).collect();
+    Ok(Partial { sums, end: b.end, hits: a.hits + b.hits, seconds: a.seconds + b.seconds, ..a.clone() })
+}
+
+/// The largest power of two strictly below `n` (n >= 2): where the canonical tree splits.
+fn split(n: usize) -> usize {
+    1 << (usize::BITS - 1 - (n - 1).leading_zeros())
+}
+
+/// Merges partials given in any order into one covering their union, adding along the
+/// canonical tree over chunk indices (module docs). Refuses parts of different renders or
+/// sizes, overlapping parts, gaps and parts that do not reach `0` or `N`, naming them, before
+/// adding anything. Parts that are nodes of the tree (a single chunk, or what [`render_chunk`]
+/// made of a node's chunks) give the bits of a whole render; where a part straddles a split of
+/// the tree, the parts under that node are added left to right instead (equal within f64
+/// rounding).
+pub fn merge_in_canonical_order(mut parts: Vec<Partial>) -> Result<Partial> {
+    if parts.is_empty() {
+        return Err(Error::Partial("no partial renders to merge".into()));
+    }
+    parts.sort_by_key(|p| (p.start, p.end));
+    let (first, last) = (&parts[0], &parts[parts.len() - 1]);
+    if first.start != 0 {
+        return Err(Error::Partial(format!("planes 0:{} are missing", first.start)));
+    }
+    for w in parts.windows(2) {
+        check_same_render(&w[0], &w[1])?;
+        if w[0].end < w[1].start {
+            return Err(Error::Partial(format!("planes {}:{} are missing", w[0].end, w[1].start)));
+        }
+        if w[0].end > w[1].start {
+            return Err(Error::Partial(format!("{} and {} overlap", w[0].describe(), w[1].describe())));
+        }
+    }
+    if last.end != last.planes_total {
+        return Err(Error::Partial(format!("planes {}:{} are missing", last.end, last.planes_total)));
+    }
+    let n = last.planes_total.div_ceil(CHUNK_PLANES);
+    let mut parts = parts.into_iter().map(Some).collect::<Vec<_>>();
+    merge_node(&mut parts, 0..n)
+}
+
+/// The canonical node over chunks `range` from the `parts` (sorted, adjacent, covering it)
+/// that lie in it, taking them.
+fn merge_node(parts: &mut [Option<Partial>], range: Range<usize>) -> Result<Partial> {
+    let (lo, hi) = (range.start * CHUNK_PLANES, range.end * CHUNK_PLANES);
+    let inside: Vec<usize> =
+        (0..parts.len()).filter(|&i| parts[i].as_ref().is_some_and(|p| p.start >= lo && p.start < hi)).collect();
+    if let [i] = inside[..] {
+        return Ok(parts[i].take().expect("present"));
+    }
+    let m = range.start + split(range.len().max(2));
+    let straddles = inside
+        .iter()
+        .any(|&i| parts[i].as_ref().is_some_and(|p| p.start < m * CHUNK_PLANES && p.end > m * CHUNK_PLANES));
+    if range.len() >= 2 && !straddles {
+        let left = merge_node(parts, range.start..m)?;
+        let right = merge_node(parts, m..range.end)?;
+        return combine(&left, &right);
+    }
+    let mut taken = inside.iter().filter_map(|&i| parts[i].take());
+    let first = taken.next().ok_or_else(|| Error::Partial("no partial renders to merge".into()))?;
+    taken.try_fold(first, |a, b| combine(&a, &b))
+}
+
+/// Bytes a chunked render holds besides its chunk's planes: per pixel, the f32 sums of the
+/// chunk and, along the canonical tree, one f64 sum per level (at most `depth + 1`).
+fn check_chunk_memory(scene: &Scene, chunks: usize) -> Result<()> {
+    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
+    let depth = usize::BITS - chunks.max(1).leading_zeros();
+    let bytes = (CHUNK_PLANES as u64 * BYTES_PER_PLANE)
+        .saturating_add(pixels.saturating_mul(BYTES_PER_PIXEL + 24 * (depth as u64 + 1)));
+    if bytes > MEMORY_BUDGET_BYTES {
+        return Err(Error::option(
+            crate::settings::Setting::Resolution,
+            format!(
+                "{}x{} pixels in {chunks} chunks would need about {:.1} GiB; the limit is {} GiB",
+                scene.camera.width,
+                scene.camera.height,
+                bytes as f64 / (1u64 << 30) as f64,
+                MEMORY_BUDGET_BYTES >> 30
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Ray sets kept between chunks up to this many bytes (beyond, each chunk makes those it needs
+/// again: the same rays, a little more time).
+const RAY_CACHE_BYTES: usize = 256 << 20;
+
+/// The pieces a set of `planes` splits into for gathering: the canonical chunks cut further
+/// where a group of planes with its own ray set ends ([`crate::pixel::plane_group`]), in plane
+/// order, each with its ray set. Each is one gathering over the image.
+pub fn pieces(planes: usize, ray_sets: u32, range: Range<usize>) -> impl Iterator<Item = (u32, Range<usize>)> {
+    (0..ray_sets).filter_map(move |k| {
+        let group = plane_group(k, planes, ray_sets);
+        let share = group.start.max(range.start)..group.end.min(range.end);
+        (!share.is_empty()).then_some((k, share))
+    })
+}
+
+/// Gatherings over the image that planes `range` of a render of `planes` planes with
+/// `ray_sets` ray sets make: one per piece of every chunk they cover (for sizing a progress
+/// bar).
+pub fn gatherings(planes: usize, ray_sets: u32, range: Range<usize>) -> u64 {
+    chunks(planes)
+        .into_iter()
+        .filter(|c| c.start >= range.start && c.end <= range.end)
+        .map(|c| pieces(planes, ray_sets, c).count() as u64)
+        .sum()
+}
+
+/// Renders chunks of one render: the scene, the settings, the kernel, the camera rays of the
+/// ray sets (made once if they fit [`RAY_CACHE_BYTES`]).
+pub struct ChunkRenderer<'a> {
+    scene: &'a Scene,
+    opts: &'a RenderOptions,
+    kernel: Kernel,
+    control: Control<'a>,
+    fingerprint: String,
+    rays: Vec<Option<Vec<CameraRay>>>,
+    keep_rays: bool,
+    pub stats: RenderStats,
+}
+
+impl<'a> ChunkRenderer<'a> {
+    /// Checks the options ([`RenderOptions::validate`]).
+    pub fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>) -> Result<Self> {
+        opts.validate(scene)?;
+        let kernel = opts.kernel.resolve()?;
+        let pixels = scene.camera.width as usize * scene.camera.height as usize;
+        let ray_sets = opts.ray_sets();
+        let ray_bytes = pixels.saturating_mul(std::mem::size_of::<CameraRay>()).saturating_mul(ray_sets as usize);
+        Ok(ChunkRenderer {
+            scene,
+            opts,
+            kernel,
+            control,
+            fingerprint: fingerprint(scene, opts),
+            rays: vec![None; ray_sets as usize],
+            keep_rays: ray_bytes <= RAY_CACHE_BYTES,
+            stats: RenderStats {
+                estimator: opts.weighting.label(),
+                kernel: kernel.to_string(),
+                planes: opts.planes,
+                plane_passes: 1,
+                ..Default::default()
+            },
+        })
+    }
+
+    /// The rays of ray set `k`, taken from the cache or made ([`ChunkRenderer::put_back`]
+    /// returns them).
+    fn take_rays(&mut self, k: u32) -> Vec<CameraRay> {
+        if let Some(r) = self.rays[k as usize].take() {
+            return r;
+        }
+        let t = Instant::now();
+        let rays = ray_set_rays(self.scene, self.opts.seed, k, self.opts.pixel_center);
+        self.stats.seconds_rays += t.elapsed().as_secs_f64();
+        self.stats.rays += rays.len() as u64;
+        rays
+    }
+
+    fn put_back(&mut self, k: u32, rays: Vec<CameraRay>) {
+        if self.keep_rays {
+            self.rays[k as usize] = Some(rays);
+        }
+    }
+
+    /// Gathers planes `range` of the render, each weighted 1 and each with the ray set it meets
+    /// in a whole render (that of its group, [`crate::pixel::ray_set_of_plane`]), adding into
+    /// `sums`: the one place that gathers a plane range. One piece's planes exist at a time.
+    fn gather_planes(&mut self, range: Range<usize>, sums: &mut [Vec3]) -> Result<()> {
+        let o = self.opts;
+        for (k, piece) in pieces(o.planes, o.ray_sets(), range) {
+            let prepared = PreparedPlanes::range(self.scene, piece, 1, o.seed, o.sampler, o.accelerator, self.control)?;
+            let rays = self.take_rays(k);
+            let t = Instant::now();
+            let s = prepared.gather(o.weighting, self.kernel, &rays, sums, self.control);
+            self.put_back(k, rays);
+            self.stats.add_gather(&prepared, s?, t.elapsed().as_secs_f64());
+        }
+        Ok(())
+    }
+
+    /// The partial of canonical chunk `c`.
+    fn chunk(&mut self, c: usize) -> Result<Partial> {
+        let start = Instant::now();
+        let hits = self.stats.hits;
+        let range = c * CHUNK_PLANES..((c + 1) * CHUNK_PLANES).min(self.opts.planes);
+        let cam = &self.scene.camera;
+        let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
+        self.gather_planes(range.clone(), &mut sums)?;
+        Ok(Partial {
+            width: cam.width,
+            height: cam.height,
+            sums: sums.iter().map(|s| s.as_dvec3()).collect(),
+            start: range.start,
+            end: range.end,
+            planes_total: self.opts.planes,
+            fingerprint: self.fingerprint.clone(),
+            hits: self.stats.hits - hits,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The canonical node over chunks `range` (module docs): left subtree, right subtree, added.
+    fn node(&mut self, range: Range<usize>) -> Result<Partial> {
+        if range.len() == 1 {
+            return self.chunk(range.start);
+        }
+        let m = range.start + split(range.len());
+        let left = self.node(range.start..m)?;
+        let right = self.node(m..range.end)?;
+        combine(&left, &right)
+    }
+
+    /// The partial of planes `range`, a union of consecutive canonical chunks, added along the
+    /// canonical tree restricted to them (a node of the whole tree when the range is one).
+    pub fn render(&mut self, range: Range<usize>) -> Result<Partial> {
+        let chunks = chunk_indices(self.opts.planes, &range)?;
+        check_chunk_memory(self.scene, chunks.len())?;
+        self.control.check()?;
+        self.node(chunks)
+    }
+}
+
+/// Whether chunks `range` form a node of the canonical tree over `n` chunks.
+pub fn is_canonical_node(range: &Range<usize>, n: usize) -> bool {
+    let mut node = 0..n;
+    loop {
+        if node == *range {
+            return true;
+        }
+        if node.len() < 2 {
+            return false;
+        }
+        let m = node.start + split(node.len());
+        node = if range.end <= m {
+            node.start..m
+        } else if range.start >= m {
+            m..node.end
+        } else {
+            return false;
+        };
+    }
+}
+
+/// Renders planes `range` of the render `opts` describes (a union of consecutive canonical
+/// chunks) into a [`Partial`], with what it measured. `control` as for [`crate::render::render`].
+pub fn render_chunk(
+    scene: &Scene,
+    opts: &RenderOptions,
+    range: Range<usize>,
+    control: Control,
+) -> Result<(Partial, RenderStats)> {
+    let start = Instant::now();
+    let mut r = ChunkRenderer::new(scene, opts, control)?;
+    let partial = r.render(range)?;
+    let mut stats = r.stats;
+    stats.planes = partial.end - partial.start;
+    stats.seconds_total = start.elapsed().as_secs_f64();
+    Ok((partial, stats))
+}
+
+/// The image of a render from the partial of all its planes: the sums divided by N in f64,
+/// rounded to f32 once, plus the direct emission over each pixel (computed here,
+/// [`crate::emission::direct_emission`]). Refuses a
+/// partial of another render or one that does not cover `0..N`.
+pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<Film> {
+    if partial.fingerprint != fingerprint(scene, opts) {
+        return Err(Error::Partial(format!(
+            "{} belong to another render (another scene or other settings) than the one to finish",
+            partial.describe()
+        )));
+    }
+    if partial.start != 0 || partial.end != opts.planes || partial.planes_total != opts.planes {
+        return Err(Error::Partial(format!(
+            "{} do not cover the render's {} planes (0:{})",
+            partial.describe(),
+            opts.planes,
+            opts.planes
+        )));
+    }
+    let cam = &scene.camera;
+    if (partial.width, partial.height) != (cam.width, cam.height) {
+        return Err(Error::Partial(format!(
+            "the partial is {}x{}, the render {}x{}",
+            partial.width, partial.height, cam.width, cam.height
+        )));
+    }
+    let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
+    let n = opts.planes as f64;
+    let mut film = Film::new(cam.width, cam.height);
+    for ((f, s), e) in film.pixels.iter_mut().zip(&partial.sums).zip(&emission) {
+        *f = (*s / n).as_vec3() + *e;
+    }
+    Ok(film)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_canonical_tree_splits_at_the_largest_power_of_two_below() {
+        assert_eq!([2, 3, 4, 5, 8, 9, 16, 17].map(split), [1, 2, 2, 4, 4, 8, 8, 16]);
+        assert!(is_canonical_node(&(0..4), 7) && is_canonical_node(&(4..6), 7) && is_canonical_node(&(6..7), 7));
+        assert!(!is_canonical_node(&(0..3), 7) && !is_canonical_node(&(1..3), 7) && !is_canonical_node(&(4..7), 8));
+        assert!(is_canonical_node(&(4..7), 7) && is_canonical_node(&(0..7), 7));
+    }
+
+    #[test]
+    fn chunks_cover_the_planes_in_order() {
+        assert_eq!(chunks(40_960), vec![0..16_384, 16_384..32_768, 32_768..40_960]);
+        assert_eq!(chunks(5), vec![0..5]);
+        assert_eq!(chunk_indices(40_960, &(16_384..40_960)).unwrap(), 1..3);
+        for bad in [0..0, 1..16_384, 0..40_961, 16_384..20_000] {
+            assert!(chunk_indices(40_960, &bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn the_stable_hash_is_fnv_1a() {
+        // FNV-1a 128 of the empty string is its offset basis; lengths are hashed first here.
+        assert_eq!(stable_hash(&[]), "6c62272e07bb014262b821756295c58d");
+        assert_ne!(stable_hash(&[b"ab", b"c"]), stable_hash(&[b"a", b"bc"]));
+        assert_eq!(stable_hash(&[b"x"]), stable_hash(&[b"x"]));
+    }
+}

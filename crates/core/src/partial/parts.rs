@@ -1,0 +1,347 @@
+//! Partial files of renders and references: written by the jobs of a job array, read and
+//! merged into one image (the command line's `render --plane-range`, `reference --rows` and
+//! `merge`). The format is [`super::file`]'s.
+
+use super::file::{self, Array, PartKind, PartMeta, ReferenceRecord, RenderRecord, SceneRecord};
+use super::{Partial, fingerprint, stable_hash};
+use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::reference::ReferenceOptions;
+use crate::render::RenderOptions;
+use crate::scene::Scene;
+use crate::weights::Weighting;
+use glam::{DVec3, Vec3};
+use std::path::{Path, PathBuf};
+
+/// The scene as a part records it: its text (a scene made otherwise cannot travel).
+fn scene_record(scene: &Scene) -> Result<SceneRecord> {
+    let source = scene.source().ok_or_else(|| {
+        Error::Partial("the scene was not made from a scene file or text, so no part can carry it".into())
+    })?;
+    Ok(SceneRecord {
+        name: scene.name.clone(),
+        file: source.file.clone(),
+        text: source.text.clone(),
+        resolution: [scene.camera.width, scene.camera.height],
+    })
+}
+
+/// The scene a part records, remade.
+fn scene_of(r: &SceneRecord) -> Result<Scene> {
+    Scene::parse(&r.text, &r.file, &r.name)?.with_resolution(r.resolution[0], r.resolution[1])
+}
+
+fn render_record(o: &RenderOptions) -> RenderRecord {
+    RenderRecord {
+        planes: o.planes,
+        estimator: o.weighting.estimator.name().into(),
+        orientations: o.weighting.orientations,
+        seed: o.seed,
+        sampler: o.sampler.name().into(),
+        spp: o.spp,
+        pixel_center: o.pixel_center,
+        accelerator: o.accelerator.name().into(),
+        kernel: o.kernel.name().into(),
+    }
+}
+
+fn options_of(r: &RenderRecord) -> std::result::Result<RenderOptions, String> {
+    Ok(RenderOptions {
+        planes: r.planes,
+        weighting: Weighting::new(r.estimator.parse()?, Some(r.orientations))?,
+        seed: r.seed,
+        sampler: r.sampler.parse()?,
+        spp: r.spp,
+        pixel_center: r.pixel_center,
+        accelerator: r.accelerator.parse()?,
+        kernel: r.kernel.parse()?,
+    })
+}
+
+/// Identifies a reference image (`pilot`: its pilot pass): the scene's content and every
+/// setting that changes it.
+pub fn reference_fingerprint(scene: &Scene, o: &ReferenceOptions, pilot: bool) -> String {
+    let what = if pilot {
+        "pilot"
+    } else if o.uniform {
+        "uniform"
+    } else {
+        "adaptive"
+    };
+    let description = format!(
+        "fogplanes {} reference {what} | {:?} | {:?} | {:?} | spp {} | seed {} | centre {}",
+        env!("CARGO_PKG_VERSION"),
+        scene.camera,
+        scene.medium,
+        scene.lights,
+        o.spp,
+        o.seed,
+        o.pixel_center
+    );
+    stable_hash(&[description.as_bytes()])
+}
+
+fn meta_of(kind: PartKind, fingerprint: String, scene: &Scene, range: (usize, usize, usize)) -> Result<PartMeta> {
+    Ok(PartMeta {
+        format: file::FORMAT.into(),
+        version: file::VERSION,
+        fogplanes: env!("CARGO_PKG_VERSION").into(),
+        kind,
+        fingerprint,
+        scene: scene_record(scene)?,
+        start: range.0,
+        end: range.1,
+        total: range.2,
+        hits: 0,
+        seconds: 0.0,
+        render: None,
+        reference: None,
+    })
+}
+
+fn meta_array(meta: &PartMeta) -> Array {
+    Array::text("meta", &serde_json::to_string(meta).expect("plain data serialises"))
+}
+
+fn pixel_shape(rows: usize, width: u32) -> Vec<usize> {
+    vec![rows, width as usize, 3]
+}
+
+fn f32s(film: &Film) -> impl Iterator<Item = f32> + '_ {
+    film.pixels.iter().flat_map(|p| p.to_array())
+}
+
+/// Writes the partial of a render of `scene` with `opts`.
+pub fn save_render_part(path: &Path, scene: &Scene, opts: &RenderOptions, p: &Partial) -> Result<()> {
+    let mut meta = meta_of(PartKind::Render, p.fingerprint.clone(), scene, (p.start, p.end, p.planes_total))?;
+    (meta.hits, meta.seconds, meta.render) = (p.hits, p.seconds, Some(render_record(opts)));
+    let sums = Array::f64s("sums", pixel_shape(p.height as usize, p.width), p.sums.iter().flat_map(|s| s.to_array()));
+    file::write_npz(path, &[meta_array(&meta), sums])
+}
+
+/// Writes rows `rows` of a reference (`mean` and `stderr` are the band).
+pub fn save_reference_part(
+    path: &Path,
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    (mean, stderr): (&Film, &Film),
+    seconds: f64,
+) -> Result<()> {
+    save_band(path, PartKind::Reference, scene, opts, rows, &[("mean", mean), ("stderr", stderr)], seconds)
+}
+
+/// Writes rows `rows` of an adaptive reference's pilot pass (the whole image when they are all
+/// its rows: what `reference --pilot` reads).
+pub fn save_pilot_part(
+    path: &Path,
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    pilot: &Film,
+    seconds: f64,
+) -> Result<()> {
+    save_band(path, PartKind::Pilot, scene, opts, rows, &[("pilot", pilot)], seconds)
+}
+
+/// Writes the `films` of a band of rows of a reference or its pilot.
+fn save_band(
+    path: &Path,
+    kind: PartKind,
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    rows: std::ops::Range<u32>,
+    films: &[(&str, &Film)],
+    seconds: f64,
+) -> Result<()> {
+    let range = (rows.start as usize, rows.end as usize, scene.camera.height as usize);
+    let fingerprint = reference_fingerprint(scene, opts, kind == PartKind::Pilot);
+    let mut meta = meta_of(kind, fingerprint, scene, range)?;
+    (meta.seconds, meta.reference) = (seconds, Some(reference_record(opts)));
+    let shape = pixel_shape(rows.len(), scene.camera.width);
+    let mut arrays = vec![meta_array(&meta)];
+    arrays.extend(films.iter().map(|(name, film)| Array::f32s(name, shape.clone(), f32s(film))));
+    file::write_npz(path, &arrays)
+}
+
+fn reference_record(o: &ReferenceOptions) -> ReferenceRecord {
+    ReferenceRecord { spp: o.spp, seed: o.seed, pixel_center: o.pixel_center, uniform: o.uniform }
+}
+
+fn reference_options_of(r: &ReferenceRecord) -> ReferenceOptions {
+    ReferenceOptions { spp: r.spp, seed: r.seed, pixel_center: r.pixel_center, uniform: r.uniform }
+}
+
+/// A part read back.
+pub struct Part {
+    pub path: PathBuf,
+    pub meta: PartMeta,
+    pub arrays: Vec<Array>,
+}
+
+impl Part {
+    fn bad(&self, message: impl std::fmt::Display) -> Error {
+        Error::bad_input(&self.path, message.to_string())
+    }
+
+    fn film(&self, name: &str) -> Result<Film> {
+        let (w, rows) = (self.meta.scene.resolution[0], (self.meta.end - self.meta.start) as u32);
+        let values = file::entry(&self.arrays, name)
+            .and_then(|a| a.as_f32s(&pixel_shape(rows as usize, w)))
+            .map_err(|m| self.bad(m))?;
+        let mut film = Film::new(w, rows);
+        film.pixels = values.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        Ok(film)
+    }
+
+    /// The render partial it holds.
+    fn partial(&self) -> Result<Partial> {
+        let m = &self.meta;
+        let [w, h] = m.scene.resolution;
+        let sums = file::entry(&self.arrays, "sums")
+            .and_then(|a| a.as_f64s(&pixel_shape(h as usize, w)))
+            .map_err(|e| self.bad(e))?;
+        Ok(Partial {
+            width: w,
+            height: h,
+            sums: sums.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect(),
+            start: m.start,
+            end: m.end,
+            planes_total: m.total,
+            fingerprint: m.fingerprint.clone(),
+            hits: m.hits,
+            seconds: m.seconds,
+        })
+    }
+}
+
+/// Reads a part written by this module.
+pub fn read_part(path: &Path) -> Result<Part> {
+    let arrays = file::read_npz(path)?;
+    let meta = file::meta(&arrays).map_err(|m| Error::bad_input(path, m))?;
+    Ok(Part { path: path.to_path_buf(), meta, arrays })
+}
+
+/// What parts merge into.
+pub enum Merged {
+    /// A whole render: its image, the scene, the settings and the merged sums.
+    Render { scene: Scene, options: RenderOptions, partial: Partial, image: Film },
+    /// A whole reference: mean and standard error.
+    Reference { scene: Scene, options: ReferenceOptions, mean: Film, stderr: Film, seconds: f64 },
+    /// A whole pilot pass.
+    Pilot { scene: Scene, options: ReferenceOptions, pilot: Film, seconds: f64 },
+}
+
+/// Reads and merges parts of one render (plane ranges) or one reference or pilot (row bands),
+/// given in any order: refuses parts of different kinds, scenes or settings, overlapping
+/// ranges and gaps, each with one line naming the files.
+pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
+    let parts = paths.iter().map(|p| read_part(p)).collect::<Result<Vec<_>>>()?;
+    let first = parts.first().ok_or_else(|| Error::Partial("no parts to merge".into()))?;
+    for p in &parts[1..] {
+        if p.meta.kind != first.meta.kind
+            || p.meta.fingerprint != first.meta.fingerprint
+            || p.meta.total != first.meta.total
+        {
+            return Err(Error::Partial(format!(
+                "{} and {} are parts of different images (another scene, other settings or another kind)",
+                first.path.display(),
+                p.path.display()
+            )));
+        }
+    }
+    let scene = scene_of(&first.meta.scene).map_err(|e| first.bad(format!("its scene: {e}")))?;
+    match first.meta.kind {
+        PartKind::Render => {
+            let record = first.meta.render.as_ref().ok_or_else(|| first.bad("no render settings"))?;
+            let options = options_of(record).map_err(|m| first.bad(m))?;
+            if fingerprint(&scene, &options) != first.meta.fingerprint {
+                return Err(
+                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
+                );
+            }
+            let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
+            let partial = super::merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
+            let image = super::finish(&scene, &options, &partial)?;
+            Ok(Merged::Render { scene, options, partial, image })
+        }
+        kind => {
+            let record = first.meta.reference.as_ref().ok_or_else(|| first.bad("no reference settings"))?;
+            let options = reference_options_of(record);
+            let pilot = kind == PartKind::Pilot;
+            if reference_fingerprint(&scene, &options, pilot) != first.meta.fingerprint {
+                return Err(
+                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
+                );
+            }
+            if first.meta.total != scene.camera.height as usize {
+                return Err(first.bad("its rows do not match its scene's resolution"));
+            }
+            let mut order: Vec<&Part> = parts.iter().collect();
+            order.sort_by_key(|p| (p.meta.start, p.meta.end));
+            let mut next = 0;
+            for p in &order {
+                if p.meta.start > next {
+                    return Err(Error::Partial(format!("rows {next}:{} are missing", p.meta.start)));
+                }
+                if p.meta.start < next {
+                    return Err(Error::Partial(format!(
+                        "{} overlaps another part (rows {}:{})",
+                        p.path.display(),
+                        p.meta.start,
+                        p.meta.end
+                    )));
+                }
+                next = p.meta.end;
+            }
+            if next != first.meta.total {
+                return Err(Error::Partial(format!("rows {next}:{} are missing", first.meta.total)));
+            }
+            let seconds = parts.iter().map(|p| p.meta.seconds).sum();
+            let stack = |name: &str| -> Result<Film> {
+                let mut film = Film::new(scene.camera.width, scene.camera.height);
+                film.pixels.clear();
+                for p in &order {
+                    film.pixels.extend(p.film(name)?.pixels);
+                }
+                Ok(film)
+            };
+            if pilot {
+                Ok(Merged::Pilot { pilot: stack("pilot")?, scene, options, seconds })
+            } else {
+                Ok(Merged::Reference { mean: stack("mean")?, stderr: stack("stderr")?, scene, options, seconds })
+            }
+        }
+    }
+}
+
+/// A merge error of render parts, with the files that hold the planes it names.
+fn named(parts: &[Part], e: Error) -> Error {
+    match e {
+        Error::Partial(m) => {
+            let files: Vec<String> = parts
+                .iter()
+                .filter(|p| m.contains(&format!("planes {}:{}", p.meta.start, p.meta.end)))
+                .map(|p| p.path.display().to_string())
+                .collect();
+            if files.is_empty() { Error::Partial(m) } else { Error::Partial(format!("{m} ({})", files.join(", "))) }
+        }
+        e => e,
+    }
+}
+
+/// The whole pilot of an adaptive reference read from `path` (a merged pilot file), checked
+/// against the reference it is for.
+pub fn read_pilot(path: &Path, scene: &Scene, opts: &ReferenceOptions) -> Result<Film> {
+    let part = read_part(path)?;
+    if part.meta.kind != PartKind::Pilot || part.meta.fingerprint != reference_fingerprint(scene, opts, true) {
+        return Err(part.bad("not the pilot pass of this reference (another scene or other settings)"));
+    }
+    if part.meta.start != 0 || part.meta.end != part.meta.total {
+        return Err(part.bad(format!(
+            "holds pilot rows {}:{} only: merge the pilot's row parts first (fogplanes merge)",
+            part.meta.start, part.meta.end
+        )));
+    }
+    part.film("pilot")
+}

@@ -1,0 +1,589 @@
+//! What a user may set, resolved once: the scene's `[render]` defaults, the library's defaults
+//! and the caller's overrides become checked options, here and nowhere else.
+//!
+//! Each command has its overrides (plain data: `None` takes the default) and its resolution
+//! ([`resolve_render`], [`resolve_reference`], [`resolve_table`], [`resolve_scaling`]), which
+//! applies the defaults, the rule that the scene's K belongs to the scene's estimator, and every
+//! range check of [`crate::limits`]. The command line, the Python module and any other front
+//! end fill in the overrides from their arguments, call the resolution and word its errors
+//! ([`Error::worded`]): a setting is a closed [`Setting`], named `--planes` on the command line
+//! and `planes=` in Python, and a value the scene gave is named as the scene file names it.
+
+use crate::error::{Error, Result};
+pub use crate::error::{Origin, Setting};
+use crate::kernel::Kernel;
+use crate::limits::{
+    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes, check_resolution,
+    check_seconds, check_spp, check_sweep_seeds, check_threads,
+};
+use crate::partial::CHUNK_PLANES;
+use crate::reference::ReferenceOptions;
+use crate::render::{Accelerator, RenderOptions};
+use crate::sampling::Sampler;
+use crate::scene::Scene;
+use crate::weights::{Estimator, Weighting};
+
+fn origin<T>(given: &Option<T>) -> Origin {
+    if given.is_some() { Origin::Given } else { Origin::Scene }
+}
+
+fn invalid(setting: Setting, origin: Origin) -> impl FnOnce(String) -> Error {
+    move |message| Error::InvalidSetting { setting, origin, message }
+}
+
+fn from_caller(setting: Setting) -> impl FnOnce(String) -> Error {
+    invalid(setting, Origin::Given)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shared by every command
+
+/// The scene at the resolution asked for (its own when `None`): each side in range. The memory
+/// a render needs at that size is checked by the command's resolution, which knows its planes.
+fn scene_at(scene: &Scene, resolution: Option<(u32, u32)>) -> Result<Scene> {
+    match resolution {
+        Some((w, h)) => scene.with_resolution(w, h),
+        None => Ok(scene.clone()),
+    }
+}
+
+/// `planes` planes at the scene's resolution fit the memory budget; an excess is blamed on the
+/// resolution if the caller gave it, else on the plane count's `setting` and origin.
+fn check_fits(scene: &Scene, planes: u64, resolution: Origin, planes_from: (Setting, Origin)) -> Result<()> {
+    let (setting, origin) = if resolution == Origin::Given { (Setting::Resolution, resolution) } else { planes_from };
+    check_memory(scene.camera.width, scene.camera.height, planes).map_err(invalid(setting, origin))
+}
+
+fn threads(threads: Option<usize>) -> Result<Option<usize>> {
+    if let Some(t) = threads {
+        check_threads(t).map_err(from_caller(Setting::Threads))?;
+    }
+    Ok(threads)
+}
+
+/// The exposure in stops (0 if not given): finite, since a NaN turns every pixel black.
+pub fn exposure(stops: Option<f32>) -> Result<f32> {
+    let stops = stops.unwrap_or(0.0);
+    check_exposure(stops).map_err(from_caller(Setting::Exposure))?;
+    Ok(stops)
+}
+
+/// `estimator` with `orientations` K: the caller's K, else the scene's when the scene's
+/// estimator is the one rendered (a K belongs to its estimator), else the default.
+fn weighting(scene: &Scene, estimator: Option<Estimator>, orientations: Option<u32>) -> Result<Weighting> {
+    let defaults = scene.render.weighting;
+    let estimator = estimator.unwrap_or(defaults.estimator);
+    let scene_k = (estimator == defaults.estimator && estimator.has_orientations()).then_some(defaults.orientations);
+    if let Some(k) = orientations {
+        check_orientations(estimator, k)?;
+    }
+    Weighting::new(estimator, orientations.or(scene_k)).map_err(invalid(Setting::Orientations, origin(&orientations)))
+}
+
+/// A K the caller gave applies to `estimator` (K = 2 is every estimator's default, so it
+/// always does) and lies in range.
+fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
+    if !estimator.has_orientations() && k != 2 {
+        let with: Vec<_> = Estimator::ALL.iter().filter(|e| e.has_orientations()).map(|e| e.name()).collect();
+        return Err(Error::option(
+            Setting::Orientations,
+            format!("the number of orientations applies to {} only, not to {estimator}", with.join(" and ")),
+        ));
+    }
+    Weighting::new(estimator, Some(k)).map(|_| ()).map_err(from_caller(Setting::Orientations))
+}
+
+// ---------------------------------------------------------------------------------------------
+// render
+
+/// What a caller may set for a photon-plane render (`fogplanes render`, Python `render`). `None`
+/// takes the scene's `[render]` default, else the library's ([`RenderOptions::default`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Overrides {
+    pub estimator: Option<Estimator>,
+    /// Stratified orientations K of smis-cosine and smis-exact.
+    pub orientations: Option<u32>,
+    pub planes: Option<u64>,
+    pub seed: Option<u64>,
+    pub sampler: Option<Sampler>,
+    pub spp: Option<u32>,
+    pub pixel_center: bool,
+    pub accelerator: Option<Accelerator>,
+    pub kernel: Option<Kernel>,
+    /// Render in plane passes for this many seconds instead of a plane count.
+    pub time_budget: Option<f64>,
+    /// (width, height), overriding the scene's camera.
+    pub resolution: Option<(u32, u32)>,
+    /// Worker threads (`None`: every core).
+    pub threads: Option<usize>,
+    /// Stops of exposure for a PNG.
+    pub exposure: Option<f32>,
+}
+
+/// A render resolved: every value checked, nothing left to default.
+#[derive(Clone, Debug)]
+pub struct ResolvedRender {
+    /// The scene at the resolution to render.
+    pub scene: Scene,
+    /// The options; `options.planes` is the scene's or the caller's, unused on a time budget.
+    pub options: RenderOptions,
+    /// Seconds of a render in plane passes ([`crate::render::render_for`]), if one was asked.
+    pub time_budget: Option<f64>,
+    pub exposure: f32,
+    pub threads: Option<usize>,
+}
+
+/// Resolves a photon-plane render: the scene's `[render]` defaults where `given` has none,
+/// its K only for its own estimator, and every check a render would make (ranges, memory at
+/// the resolution, the kernel on this CPU).
+pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender> {
+    let scene = scene_at(scene, given.resolution)?;
+    let defaults = RenderOptions::from_scene(&scene);
+    let weighting = weighting(&scene, given.estimator, given.orientations)?;
+    let planes = given.planes.unwrap_or(defaults.planes as u64);
+    check_planes(planes).map_err(invalid(Setting::Planes, origin(&given.planes)))?;
+    let spp = given.spp.unwrap_or(defaults.spp);
+    check_spp(spp).map_err(invalid(Setting::Spp, origin(&given.spp)))?;
+    if let Some(seconds) = given.time_budget {
+        check_seconds(seconds, MAX_TIME_BUDGET_SECONDS).map_err(from_caller(Setting::TimeBudget))?;
+        if given.planes.is_some() {
+            return Err(Error::option(
+                Setting::Planes,
+                "a render on a time budget chooses its own plane count: give one or the other",
+            ));
+        }
+    }
+    // A render holds one chunk's planes at a time ([`crate::partial`]), so what can exceed the
+    // memory is the image: the resolution is at fault, the caller's or the scene's. A render on
+    // a time budget sizes its passes to fit (each checks its own memory).
+    let held = if given.time_budget.is_some() { 1 } else { planes.min(CHUNK_PLANES as u64) };
+    check_fits(&scene, held, origin(&given.resolution), (Setting::Resolution, Origin::Scene))?;
+    let kernel = given.kernel.unwrap_or(defaults.kernel);
+    kernel.resolve()?;
+    let options = RenderOptions {
+        planes: planes as usize,
+        weighting,
+        seed: given.seed.unwrap_or(defaults.seed),
+        sampler: given.sampler.unwrap_or(defaults.sampler),
+        spp,
+        pixel_center: given.pixel_center,
+        accelerator: given.accelerator.unwrap_or(defaults.accelerator),
+        kernel,
+    };
+    Ok(ResolvedRender {
+        scene,
+        options,
+        time_budget: given.time_budget,
+        exposure: exposure(given.exposure)?,
+        threads: threads(given.threads)?,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// reference
+
+/// The reference's samples per pixel when the caller gives none.
+pub const REFERENCE_SPP: u32 = 1024;
+/// The reference's seed when the caller gives none.
+pub const REFERENCE_SEED: u64 = 1;
+
+/// What a caller may set for the independent reference (`fogplanes reference`, Python
+/// `reference`). `None` takes [`REFERENCE_SPP`], [`REFERENCE_SEED`], the scene's resolution.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReferenceOverrides {
+    /// Samples per pixel, on average.
+    pub spp: Option<u32>,
+    pub seed: Option<u64>,
+    pub pixel_center: bool,
+    /// The same number of samples in every pixel.
+    pub uniform: bool,
+    pub resolution: Option<(u32, u32)>,
+    pub threads: Option<usize>,
+    pub exposure: Option<f32>,
+}
+
+/// A reference render resolved.
+#[derive(Clone, Debug)]
+pub struct ResolvedReference {
+    pub scene: Scene,
+    pub options: ReferenceOptions,
+    pub exposure: f32,
+    pub threads: Option<usize>,
+}
+
+pub fn resolve_reference(scene: &Scene, given: &ReferenceOverrides) -> Result<ResolvedReference> {
+    let scene = scene_at(scene, given.resolution)?;
+    let spp = given.spp.unwrap_or(REFERENCE_SPP);
+    check_spp(spp).map_err(from_caller(Setting::Spp))?;
+    // The reference holds no planes, only its pixels.
+    check_fits(&scene, 0, origin(&given.resolution), (Setting::Resolution, Origin::Scene))?;
+    Ok(ResolvedReference {
+        scene,
+        options: ReferenceOptions {
+            spp,
+            uniform: given.uniform,
+            seed: given.seed.unwrap_or(REFERENCE_SEED),
+            pixel_center: given.pixel_center,
+        },
+        exposure: exposure(given.exposure)?,
+        threads: threads(given.threads)?,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// table
+
+/// The table's error-versus-time sweep when the caller gives none: plane counts.
+pub const TABLE_SWEEP: [u64; 6] = [5120, 10240, 20480, 40960, 81920, 163_840];
+/// Seeds per plane count of the sweep when the caller gives none.
+pub const TABLE_SWEEP_SEEDS: u32 = 3;
+/// The samplers the table measures when the caller gives none.
+pub const TABLE_SAMPLERS: [Sampler; 2] = [Sampler::Sobol, Sampler::Independent];
+
+/// What a caller may set for the estimator table (`fogplanes table`). `None` takes the scene's
+/// planes and seed and the defaults above.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TableOverrides {
+    pub planes: Option<u64>,
+    pub seed: Option<u64>,
+    /// Pixel centres instead of whole pixels (the box filter); the reference must match.
+    pub pixel_center: bool,
+    /// Plane counts of the sweep (`Some(vec![])`: no sweep).
+    pub sweep: Option<Vec<u64>>,
+    pub sweep_seeds: Option<u32>,
+    /// Seconds of each render at equal time (none: no equal-time comparison).
+    pub equal_time: Option<f64>,
+    pub samplers: Option<Vec<Sampler>>,
+    /// Extra K of smis-cosine and smis-exact besides 2.
+    pub orientations: Vec<u32>,
+    pub resolution: Option<(u32, u32)>,
+    pub threads: Option<usize>,
+    pub exposure: Option<f32>,
+}
+
+/// The table resolved.
+#[derive(Clone, Debug)]
+pub struct ResolvedTable {
+    pub scene: Scene,
+    pub planes: usize,
+    pub seed: u64,
+    pub pixel_center: bool,
+    /// Plane counts of the sweep (empty: no sweep).
+    pub sweep: Vec<usize>,
+    pub sweep_seeds: u32,
+    /// Every weighting of the table, the baseline among them.
+    pub weightings: Vec<Weighting>,
+    pub samplers: Vec<Sampler>,
+    pub equal_time: Option<f64>,
+    pub exposure: f32,
+    pub threads: Option<usize>,
+}
+
+pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTable> {
+    let scene = scene_at(scene, given.resolution)?;
+    let resolution = origin(&given.resolution);
+    let planes = given.planes.unwrap_or(scene.render.planes);
+    check_planes(planes).map_err(invalid(Setting::Planes, origin(&given.planes)))?;
+    check_fits(&scene, planes, resolution, (Setting::Planes, origin(&given.planes)))?;
+    let sweep = given.sweep.clone().unwrap_or_else(|| TABLE_SWEEP.to_vec());
+    for &n in &sweep {
+        check_planes(n).map_err(from_caller(Setting::Sweep))?;
+        check_fits(&scene, n, resolution, (Setting::Sweep, origin(&given.sweep)))?;
+    }
+    let sweep_seeds = given.sweep_seeds.unwrap_or(TABLE_SWEEP_SEEDS);
+    check_sweep_seeds(sweep_seeds).map_err(from_caller(Setting::SweepSeeds))?;
+    if let Some(seconds) = given.equal_time {
+        check_seconds(seconds, MAX_EQUAL_TIME_SECONDS).map_err(from_caller(Setting::EqualTime))?;
+    }
+    let samplers = given.samplers.clone().unwrap_or_else(|| TABLE_SAMPLERS.to_vec());
+    if samplers.is_empty() {
+        return Err(Error::option(Setting::Samplers, "the table needs at least one sampler"));
+    }
+    if let Some((_, s)) = samplers.iter().enumerate().find(|(i, s)| samplers[..*i].contains(s)) {
+        return Err(Error::option(Setting::Samplers, format!("{s} is named twice")));
+    }
+    for &k in &given.orientations {
+        check_orientations(Estimator::SmisExact, k)?;
+    }
+    Ok(ResolvedTable {
+        planes: planes as usize,
+        seed: given.seed.unwrap_or(scene.render.seed),
+        pixel_center: given.pixel_center,
+        sweep: sweep.iter().map(|&n| n as usize).collect(),
+        sweep_seeds,
+        weightings: Weighting::all(&given.orientations),
+        samplers,
+        equal_time: given.equal_time,
+        exposure: exposure(given.exposure)?,
+        threads: threads(given.threads)?,
+        scene,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// scaling
+
+/// The plane counts a scaling run measures when the caller gives none.
+pub const SCALING_PLANES: [u64; 4] = [10_000, 40_000, 160_000, 640_000];
+/// The image sizes a scaling run measures when the caller gives none.
+pub const SCALING_RESOLUTIONS: [(u32, u32); 4] = [(160, 90), (320, 180), (640, 360), (1280, 720)];
+
+/// What a caller may set for a scaling run (`fogplanes scaling`). `None` takes the library's
+/// default estimator and sampler (not the scene's) and the grids above.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ScalingOverrides {
+    pub estimator: Option<Estimator>,
+    pub sampler: Option<Sampler>,
+    pub planes: Option<Vec<u64>>,
+    pub resolutions: Option<Vec<(u32, u32)>>,
+    pub threads: Option<usize>,
+}
+
+/// A scaling run resolved.
+#[derive(Clone, Debug)]
+pub struct ResolvedScaling {
+    pub weighting: Weighting,
+    pub sampler: Sampler,
+    pub planes: Vec<usize>,
+    pub resolutions: Vec<(u32, u32)>,
+    pub threads: Option<usize>,
+}
+
+pub fn resolve_scaling(given: &ScalingOverrides) -> Result<ResolvedScaling> {
+    let planes = given.planes.clone().unwrap_or_else(|| SCALING_PLANES.to_vec());
+    for &n in &planes {
+        check_planes(n).map_err(from_caller(Setting::Planes))?;
+    }
+    let resolutions = given.resolutions.clone().unwrap_or_else(|| SCALING_RESOLUTIONS.to_vec());
+    for &(w, h) in &resolutions {
+        check_resolution(w, h).map_err(from_caller(Setting::Resolutions))?;
+        for &n in &planes {
+            check_memory(w, h, n).map_err(from_caller(Setting::Resolutions))?;
+        }
+    }
+    Ok(ResolvedScaling {
+        weighting: Weighting::new(given.estimator.unwrap_or(Estimator::DEFAULT), None)
+            .map_err(from_caller(Setting::Estimator))?,
+        sampler: given.sampler.unwrap_or_default(),
+        planes: planes.iter().map(|&n| n as usize).collect(),
+        resolutions,
+        threads: threads(given.threads)?,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::limits::{MAX_PLANES, MAX_RESOLUTION_SIDE};
+    use crate::scene::tests::MINIMAL;
+
+    fn scene(render: &str) -> Scene {
+        Scene::parse(&format!("{MINIMAL}\n[render]\n{render}"), "test.toml", "test").unwrap()
+    }
+
+    /// The setting, origin and message of an error that must be an invalid setting.
+    fn refused(e: Error) -> (Setting, Origin, String) {
+        match e {
+            Error::InvalidSetting { setting, origin, message } => (setting, origin, message),
+            e => panic!("not an invalid setting: {e}"),
+        }
+    }
+
+    #[test]
+    fn nothing_given_takes_the_scenes_render_table_and_the_librarys_defaults() {
+        let s = scene(
+            "estimator = \"smis-cosine\"\norientations = 4\nplanes = 1500\nseed = 3\nspp = 2\nsampler = \"independent\"\n",
+        );
+        let r = resolve_render(&s, &Overrides::default()).unwrap();
+        let expected = RenderOptions {
+            planes: 1500,
+            weighting: Weighting { estimator: Estimator::SmisCosine, orientations: 4 },
+            seed: 3,
+            sampler: Sampler::Independent,
+            spp: 2,
+            ..RenderOptions::default()
+        };
+        assert_eq!(r.options, expected);
+        assert_eq!((r.time_budget, r.exposure, r.threads), (None, 0.0, None));
+        assert_eq!((r.scene.camera.width, r.scene.camera.height), (32, 16));
+        r.options.validate(&r.scene).unwrap();
+        // Everything given replaces the scene's.
+        let given = Overrides {
+            estimator: Some(Estimator::CmisExact),
+            orientations: None,
+            planes: Some(7),
+            seed: Some(9),
+            sampler: Some(Sampler::Sobol),
+            spp: Some(5),
+            pixel_center: true,
+            accelerator: Some(Accelerator::Bvh),
+            kernel: Some(Kernel::PerHit),
+            time_budget: None,
+            resolution: Some((8, 4)),
+            threads: Some(3),
+            exposure: Some(-1.5),
+        };
+        let r = resolve_render(&s, &given).unwrap();
+        let expected = RenderOptions {
+            planes: 7,
+            weighting: Weighting { estimator: Estimator::CmisExact, orientations: 2 },
+            seed: 9,
+            sampler: Sampler::Sobol,
+            spp: 5,
+            pixel_center: true,
+            accelerator: Accelerator::Bvh,
+            kernel: Kernel::PerHit,
+        };
+        assert_eq!(r.options, expected);
+        assert_eq!((r.exposure, r.threads), (-1.5, Some(3)));
+        assert_eq!((r.scene.camera.width, r.scene.camera.height), (8, 4));
+    }
+
+    /// The scene's K belongs to the scene's estimator: over every estimator of the scene and of
+    /// the caller, with and without a K given.
+    #[test]
+    fn the_scenes_k_applies_to_its_own_estimator_only() {
+        for scene_estimator in Estimator::ALL {
+            let k = if scene_estimator.has_orientations() { 5 } else { 2 };
+            let s = scene(&format!("estimator = \"{scene_estimator}\"\norientations = {k}\n"));
+            for estimator in [None].into_iter().chain(Estimator::ALL.map(Some)) {
+                for orientations in [None, Some(2), Some(3)] {
+                    let given = Overrides { estimator, orientations, ..Overrides::default() };
+                    let rendered = estimator.unwrap_or(scene_estimator);
+                    let expected = match orientations {
+                        Some(3) if !rendered.has_orientations() => None,
+                        Some(k) => Some(k),
+                        None if rendered == scene_estimator => Some(k),
+                        None => Some(2),
+                    };
+                    let got = resolve_render(&s, &given).map(|r| r.options.weighting);
+                    match expected {
+                        Some(k) => assert_eq!(got.unwrap(), Weighting { estimator: rendered, orientations: k }),
+                        None => {
+                            let (setting, origin, message) = refused(got.unwrap_err());
+                            assert_eq!((setting, origin), (Setting::Orientations, Origin::Given));
+                            assert!(message.contains("applies to smis-cosine and smis-exact only"), "{message}");
+                            assert!(!message.contains("--"), "{message}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_value_out_of_range_names_its_setting() {
+        let s = scene("");
+        let cases: Vec<(Overrides, Setting)> = vec![
+            (Overrides { planes: Some(0), ..Default::default() }, Setting::Planes),
+            (Overrides { planes: Some(MAX_PLANES + 1), ..Default::default() }, Setting::Planes),
+            (Overrides { spp: Some(0), ..Default::default() }, Setting::Spp),
+            (Overrides { orientations: Some(0), ..Default::default() }, Setting::Orientations),
+            (Overrides { orientations: Some(65), ..Default::default() }, Setting::Orientations),
+            (Overrides { resolution: Some((0, 10)), ..Default::default() }, Setting::Resolution),
+            (Overrides { resolution: Some((MAX_RESOLUTION_SIDE + 1, 1)), ..Default::default() }, Setting::Resolution),
+            // The memory budget at the size given, with the scene's planes.
+            (Overrides { resolution: Some((30_000, 30_000)), ..Default::default() }, Setting::Resolution),
+            (Overrides { threads: Some(0), ..Default::default() }, Setting::Threads),
+            (Overrides { exposure: Some(f32::NAN), ..Default::default() }, Setting::Exposure),
+            (Overrides { exposure: Some(f32::NEG_INFINITY), ..Default::default() }, Setting::Exposure),
+            (Overrides { time_budget: Some(-1.0), ..Default::default() }, Setting::TimeBudget),
+            (Overrides { time_budget: Some(0.0), ..Default::default() }, Setting::TimeBudget),
+            (Overrides { time_budget: Some(f64::NAN), ..Default::default() }, Setting::TimeBudget),
+            (Overrides { time_budget: Some(2e6), ..Default::default() }, Setting::TimeBudget),
+            (Overrides { time_budget: Some(1.0), planes: Some(100), ..Default::default() }, Setting::Planes),
+        ];
+        for (given, setting) in cases {
+            let e = resolve_render(&s, &given).unwrap_err();
+            assert!(e.is_input(), "{given:?}");
+            let worded = e.worded(|s| s.flag());
+            let (got, origin, message) = refused(e);
+            assert_eq!((got, origin), (setting, Origin::Given), "{given:?}: {message}");
+            assert_eq!(worded, format!("{}: {message}", setting.flag()));
+            assert!(!message.contains("--"), "{message}");
+        }
+    }
+
+    /// A value the scene gave is blamed on the scene, whoever asked: no flag the user never
+    /// typed (a scene's spp once read "--spp: ..." in an error about a time budget).
+    #[test]
+    fn a_value_from_the_scene_is_named_as_the_scene_names_it() {
+        // The table holds all its planes; a render holds one chunk of them at a time.
+        let s = scene(&format!("planes = {MAX_PLANES}\n"));
+        assert_eq!(resolve_render(&s, &Overrides::default()).unwrap().options.planes, MAX_PLANES as usize);
+        let e = resolve_table(&s, &TableOverrides::default()).unwrap_err();
+        let line = e.worded(|s| s.flag());
+        let says = format!("32x16 pixels with {MAX_PLANES} planes would need about 64.0 GiB; the limit is 16 GiB");
+        assert_eq!(line, format!("the scene's render.planes: {says}"));
+        assert_eq!(e.worded(|s| format!("{}=", s.keyword())), line);
+        assert_eq!(e.to_string(), line);
+        // Given, the same value is the caller's.
+        let e = resolve_table(&s, &TableOverrides { planes: Some(MAX_PLANES), ..Default::default() }).unwrap_err();
+        assert_eq!(e.worded(|s| s.flag()), format!("--planes: {says}"));
+        assert_eq!(e.to_string(), format!("planes: {says}"));
+    }
+
+    #[test]
+    fn names_are_spelled_for_each_front_end() {
+        for setting in Setting::ALL {
+            let (flag, keyword) = (setting.flag(), setting.keyword());
+            assert!(flag.starts_with("--") && !flag.contains('_') && !keyword.contains('-'), "{flag} {keyword}");
+            assert_eq!(flag[2..].replace('-', "_"), keyword);
+        }
+        assert_eq!(Setting::TimeBudget.flag(), "--time-budget");
+        assert_eq!(Setting::TimeBudget.keyword(), "time_budget");
+    }
+
+    #[test]
+    fn the_reference_table_and_scaling_resolve_their_own_defaults_and_ranges() {
+        let s = scene("planes = 1234\nseed = 7\n");
+        let r = resolve_reference(&s, &ReferenceOverrides::default()).unwrap();
+        assert_eq!((r.options.spp, r.options.seed, r.options.uniform, r.options.pixel_center), (1024, 1, false, false));
+        for (given, setting) in [
+            (ReferenceOverrides { spp: Some(0), ..Default::default() }, Setting::Spp),
+            (ReferenceOverrides { exposure: Some(f32::NAN), ..Default::default() }, Setting::Exposure),
+            (ReferenceOverrides { resolution: Some((32_000, 32_000)), ..Default::default() }, Setting::Resolution),
+        ] {
+            assert_eq!(refused(resolve_reference(&s, &given).unwrap_err()).0, setting, "{given:?}");
+        }
+
+        let t = resolve_table(&s, &TableOverrides::default()).unwrap();
+        assert_eq!((t.planes, t.seed, t.pixel_center, t.sweep_seeds), (1234, 7, false, 3));
+        assert_eq!(t.sweep, TABLE_SWEEP.map(|n| n as usize));
+        assert_eq!((t.samplers, t.weightings), (TABLE_SAMPLERS.to_vec(), Weighting::all(&[])));
+        for (given, setting) in [
+            (TableOverrides { planes: Some(0), ..Default::default() }, Setting::Planes),
+            (TableOverrides { sweep: Some(vec![100, 0]), ..Default::default() }, Setting::Sweep),
+            (TableOverrides { sweep_seeds: Some(0), ..Default::default() }, Setting::SweepSeeds),
+            (TableOverrides { equal_time: Some(-1.0), ..Default::default() }, Setting::EqualTime),
+            (TableOverrides { equal_time: Some(f64::INFINITY), ..Default::default() }, Setting::EqualTime),
+            (TableOverrides { samplers: Some(vec![]), ..Default::default() }, Setting::Samplers),
+            (
+                TableOverrides { samplers: Some(vec![Sampler::Sobol, Sampler::Sobol]), ..Default::default() },
+                Setting::Samplers,
+            ),
+            (TableOverrides { orientations: vec![3, 0], ..Default::default() }, Setting::Orientations),
+            (TableOverrides { exposure: Some(f32::NAN), ..Default::default() }, Setting::Exposure),
+        ] {
+            assert_eq!(refused(resolve_table(&s, &given).unwrap_err()).0, setting, "{given:?}");
+        }
+        // No sweep at all is a choice, not an error.
+        let t = resolve_table(&s, &TableOverrides { sweep: Some(vec![]), ..Default::default() }).unwrap();
+        assert!(t.sweep.is_empty());
+
+        let c = resolve_scaling(&ScalingOverrides::default()).unwrap();
+        assert_eq!((c.weighting, c.sampler), (Weighting::default(), Sampler::Sobol));
+        assert_eq!((c.planes.len(), c.resolutions), (SCALING_PLANES.len(), SCALING_RESOLUTIONS.to_vec()));
+        for (given, setting) in [
+            (ScalingOverrides { planes: Some(vec![0]), ..Default::default() }, Setting::Planes),
+            (ScalingOverrides { resolutions: Some(vec![(0, 1)]), ..Default::default() }, Setting::Resolutions),
+            (
+                ScalingOverrides { resolutions: Some(vec![(30_000, 30_000)]), ..Default::default() },
+                Setting::Resolutions,
+            ),
+            (ScalingOverrides { threads: Some(0), ..Default::default() }, Setting::Threads),
+        ] {
+            assert_eq!(refused(resolve_scaling(&given).unwrap_err()).0, setting, "{given:?}");
+        }
+    }
+}

@@ -1,0 +1,402 @@
+"""Renders, references and sweeps on a Dask cluster, bit-identical to one machine's.
+
+Needs Dask distributed (`pip install .[dask]`); `import fogplanes` alone never imports it.
+
+    >>> import fogplanes, fogplanes.distributed
+    >>> scene = fogplanes.load_scene("media_scenes/six_lights.toml")
+    >>> image = fogplanes.distributed.render(scene, planes=10_000_000)  # doctest: +SKIP
+
+Every function takes `client=None`: then it starts a `LocalCluster` of `workers` processes on
+this machine (bound to 127.0.0.1) and closes it afterwards. Pass a
+`distributed.Client` to use a cluster you started yourself: a scheduler address
+(`Client("tcp://host:8786")`) or a batch queue (dask-jobqueue's `SLURMCluster`); the README's
+section "On a cluster" shows all three.
+
+How a render is spread (why the image does not depend on the cluster):
+
+- The planes 0..N are cut into the core's canonical chunks (`plan_render`: a fixed power of
+  two of planes, never derived from the number of workers). A task renders a block of chunks
+  into a `Partial`: the chunks' unnormalised f64 sums. Plane i is the same plane wherever it
+  is rendered (point i of the seed's scrambled Sobol sequence).
+- Partials are added on the workers along the core's canonical binary tree over chunk indices
+  (`_canonical_tree`; the same tree `fogplanes.render` uses), one task per node, and the last
+  task divides by N and adds the direct emission (`finish_render`). Only the image reaches the
+  client. The sums, and so the image, are the same bits for any number of workers, any order
+  of completion and any retry or lost worker: equal to `fogplanes.render`'s.
+- Tasks are submitted depth-first and the client keeps no future but the last one, so the
+  scheduler frees each partial once its parent has added it: at most the tree's frontier is
+  alive (about log2(tasks) + one per worker). Mind the size: a partial is height x width x 3
+  f64, 5.5 MB at 640x360 and about 200 MB at 3840x2160 (4K), on the worker that holds it.
+- Task keys are derived from the scene's Dask token, the render's fingerprint and the plane
+  range, so resubmitting the same work while its results are held reuses them; each task is
+  retried `retries` times if it raises, and a task lost with its worker is rerun by Dask.
+
+Threads: run one worker process per node with one Dask thread, and let each render use the
+node's cores (`threads`). Dask sets OMP_NUM_THREADS for its workers but not rayon's thread
+count, so a worker with k Dask threads whose renders each used every core would run k x cores
+threads. `threads=None` gives each render the cores of its node divided by the Dask threads
+there (the smallest over the nodes), and the local cluster also sets RAYON_NUM_THREADS.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import Any
+
+import numpy as np
+
+from . import _fogplanes as native
+
+try:
+    from dask.base import tokenize
+    from distributed import Client, Future, LocalCluster
+    from distributed.diagnostics.progressbar import TextProgressBar
+except ImportError as e:  # pragma: no cover - exercised only without Dask
+    raise ImportError(
+        "fogplanes.distributed needs Dask distributed: pip install 'fogplanes[dask]' "
+        "(or `pip install .[dask]` in the repository)"
+    ) from e
+
+__all__ = ["render", "render_future", "reference", "table", "local_client"]
+
+#: Reference rows per task (a band); any split gives the same bits.
+BAND_ROWS = 16
+#: How many leaf tasks per Dask thread the automatic block size aims at (load balance).
+TASKS_PER_SLOT = 8
+
+
+# -- The cluster ---------------------------------------------------------------------------------
+
+
+def _cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _threads_per_task(client: Client) -> tuple[int, int]:
+    """(threads per render, Dask threads in the cluster): each node's cores over its Dask
+    threads, the smallest over the nodes, so that no node runs more render threads than cores."""
+    workers = client.scheduler_info(n_workers=-1)["workers"]
+    if not workers:
+        raise ValueError("the Dask cluster has no workers")
+    cores = client.run(_cores)
+    slots_by_host: dict[str, int] = {}
+    cores_by_host: dict[str, int] = {}
+    for address, info in workers.items():
+        host = info.get("host", address)
+        slots_by_host[host] = slots_by_host.get(host, 0) + int(info["nthreads"])
+        cores_by_host[host] = max(cores_by_host.get(host, 1), int(cores.get(address, 1)))
+    threads = min(max(1, cores_by_host[h] // slots_by_host[h]) for h in slots_by_host)
+    return threads, sum(slots_by_host.values())
+
+
+def _check_layout(workers: int, threads: int | None) -> None:
+    if not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers={workers!r}: must be an integer of at least 1")
+    if threads is not None and (not isinstance(threads, int) or threads < 1):
+        raise ValueError(f"threads={threads!r}: must be an integer of at least 1, or None")
+
+
+@contextlib.contextmanager
+def local_client(workers: int = 1, threads: int | None = None) -> Iterator[Client]:
+    """A `LocalCluster` of `workers` processes, one Dask thread each, on 127.0.0.1 (the
+    dashboard, if bokeh is installed, on a free port: `client.dashboard_link`), and its client;
+    both closed on exit. Each worker's rayon pool gets `threads` (default: this machine's
+    cores over `workers`) through RAYON_NUM_THREADS."""
+    _check_layout(workers, threads)
+    threads = threads or max(1, _cores() // workers)
+    cluster = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",  # a free port (its HTTP server runs even without the dashboard)
+        env={"RAYON_NUM_THREADS": str(threads)},
+    )
+    try:
+        with Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+@contextlib.contextmanager
+def _session(client: Client | None, workers: int, threads: int | None) -> Iterator[tuple[Client, int, int]]:
+    """(client, threads per render, Dask threads): the given client, or a local cluster."""
+    if client is not None:
+        auto, slots = _threads_per_task(client)
+        yield client, threads or auto, slots
+        return
+    with local_client(workers, threads) as own:
+        auto, slots = _threads_per_task(own)
+        yield own, threads or auto, slots
+
+
+class _StderrProgressBar(TextProgressBar):
+    """Dask's text progress bar on stderr (stdout stays the caller's), labelled."""
+
+    def __init__(self, keys: Sequence[Any], label: str, **kwargs: Any) -> None:
+        self.label = label
+        super().__init__(keys, **kwargs)
+
+    def _draw_bar(self, remaining: int, all: int, **kwargs: Any) -> None:  # noqa: A002 (Dask's name)
+        frac = (1 - remaining / all) if all else 1.0
+        bar = "#" * int(self.width * frac)
+        sys.stderr.write(
+            f"\r{self.label} [{bar:<{self.width}}] {all - remaining}/{all} tasks"
+            f" | {self.elapsed:.1f} s"
+        )
+        sys.stderr.flush()
+
+    def _draw_stop(self, **kwargs: Any) -> None:
+        sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _wait(future: Future, progress: bool, label: str) -> Any:
+    """The future's result, with a progress bar over it and every task it depends on. On
+    any exception here (KeyboardInterrupt included) the work is cancelled."""
+    try:
+        if progress:
+            _StderrProgressBar([future], label)
+        return future.result()
+    except BaseException:
+        future.cancel()
+        raise
+
+
+# -- Renders -------------------------------------------------------------------------------------
+
+
+def _canonical_tree(first: int, last: int, block: int, leaf: Callable[[int, int], Any],
+                    node: Callable[[Any, Any, int, int], Any]) -> Any:
+    """Builds the core's canonical tree over chunk indices first..last (post-order: a node is
+    made after its two children), with leaves of at most `block` chunks:
+
+        node(a..b) = node(a..m) + node(m..b),  m = a + the largest power of two below b - a
+
+    `block` must be a power of two: then every leaf is itself a node of the tree over single
+    chunks (an aligned block, or the tail: `render_chunk` sums a block in the same tree), so
+    the sums are the tree's bits."""
+    if last - first <= block:
+        return leaf(first, last)
+    half = 1 << ((last - first - 1).bit_length() - 1)
+    middle = first + half
+    left = _canonical_tree(first, middle, block, leaf, node)
+    right = _canonical_tree(middle, last, block, leaf, node)
+    return node(left, right, first, last)
+
+
+def _auto_block(chunks: int, slots: int) -> int:
+    """The largest power of two of chunks per task that leaves TASKS_PER_SLOT tasks per Dask
+    thread (at least one chunk)."""
+    target = max(1, chunks // (TASKS_PER_SLOT * max(1, slots)))
+    return 1 << (target.bit_length() - 1)
+
+
+def _render_block(scene: native.Scene, planes: tuple[int, int], threads: int,
+                  kwargs: dict[str, Any]) -> native.Partial:
+    return native.render_chunk(scene, planes, threads=threads, **kwargs)
+
+
+def _add(left: native.Partial, right: native.Partial) -> native.Partial:
+    # Two adjacent subtrees, checked (one render, left.end == right.start) and added in f64.
+    return native.combine(left, right)
+
+
+def _finish(scene: native.Scene, partial: native.Partial, kwargs: dict[str, Any],
+            return_stats: bool) -> Any:
+    return native.finish_render(scene, partial, return_stats=return_stats, **kwargs)
+
+
+def _render_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+    if "threads" in kwargs:
+        raise ValueError("threads is an argument of fogplanes.distributed.render itself")
+    return {k: v for k, v in kwargs.items() if v is not None}
+
+
+def render_future(scene: native.Scene, client: Client, *, threads: int, slots: int = 1,
+                  retries: int = 2, chunks_per_task: int | None = None,
+                  return_stats: bool = False, **render_kwargs: Any) -> Future:
+    """Submits a render to `client` and returns the future of its image (or (image, stats)):
+    the tasks of `render` without waiting. `threads` is each task's render threads, `slots`
+    the Dask threads of the cluster (for the automatic `chunks_per_task`)."""
+    kwargs = _render_kwargs(render_kwargs)
+    plan = native.plan_render(scene, **kwargs)
+    chunks = plan["chunks"]
+    block = chunks_per_task or _auto_block(len(chunks), slots)
+    if block < 1 or block & (block - 1):
+        raise ValueError(f"chunks_per_task={block}: must be a power of two")
+    stem = f"{tokenize(scene)}-{plan['fingerprint']}"
+
+    def leaf(a: int, b: int) -> Future:
+        planes = (chunks[a][0], chunks[b - 1][1])
+        return client.submit(_render_block, scene, planes, threads, kwargs, retries=retries,
+                             key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}")
+
+    def node(left: Future, right: Future, a: int, b: int) -> Future:
+        return client.submit(_add, left, right, retries=retries,
+                             key=f"fogplanes-add-{stem}-{chunks[a][0]}-{chunks[b - 1][1]}")
+
+    # The children's futures are dropped as the recursion returns: the scheduler keeps each
+    # partial only until its parent has added it.
+    total = _canonical_tree(0, len(chunks), block, leaf, node)
+    return client.submit(_finish, scene, total, kwargs, return_stats, retries=retries,
+                         key=f"fogplanes-finish-{stem}-{int(return_stats)}")
+
+
+def render(scene: native.Scene, estimator: str | None = None, *, client: Client | None = None,
+           workers: int = 1, threads: int | None = None, progress: bool = True,
+           retries: int = 2, chunks_per_task: int | None = None, return_stats: bool = False,
+           **render_kwargs: Any) -> Any:
+    """Renders like `fogplanes.render(scene, estimator, **render_kwargs)`, on a Dask cluster:
+    the same image, bit for bit, whatever the cluster.
+
+    `client`: a `distributed.Client`; None starts a local cluster of `workers` processes for
+    this call. `threads`: render threads per task (None: each node's cores over its Dask
+    threads). `progress`: a text progress bar on stderr. `retries`: how many times a task that
+    raises is retried. `chunks_per_task`: canonical chunks rendered by one task, a power of
+    two (None: enough tasks for TASKS_PER_SLOT per Dask thread). The other arguments are
+    `fogplanes.render`'s (`time_budget` excepted: a distributed render has a plane count).
+    Bad arguments raise ValueError before any cluster starts."""
+    kwargs = dict(render_kwargs, estimator=estimator)
+    native.plan_render(scene, **_render_kwargs(kwargs))  # the errors before any cluster
+    _check_layout(workers, threads)
+    with _session(client, workers, threads) as (c, per_task, slots):
+        future = render_future(scene, c, threads=per_task, slots=slots, retries=retries,
+                               chunks_per_task=chunks_per_task, return_stats=return_stats,
+                               **kwargs)
+        return _wait(future, progress, "fogplanes render")
+
+
+# -- References ----------------------------------------------------------------------------------
+
+
+def _bands(height: int, rows: int) -> list[tuple[int, int]]:
+    return [(j, min(j + rows, height)) for j in range(0, height, rows)]
+
+
+def _pilot_band(scene: native.Scene, rows: tuple[int, int], threads: int,
+                kwargs: dict[str, Any]) -> np.ndarray:
+    return native.reference_pilot_rows(scene, rows, threads=threads, **kwargs)
+
+
+def _counts(scene: native.Scene, kwargs: dict[str, Any], *pilot: np.ndarray) -> np.ndarray:
+    return native.reference_counts(scene, np.concatenate(pilot, axis=0), **kwargs)
+
+
+def _reference_band(scene: native.Scene, rows: tuple[int, int], threads: int,
+                    kwargs: dict[str, Any], counts: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    return native.reference_rows(scene, rows, threads=threads, counts=counts, **kwargs)
+
+
+def _stack(*bands: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    return (np.concatenate([b[0] for b in bands], axis=0),
+            np.concatenate([b[1] for b in bands], axis=0))
+
+
+def reference(scene: native.Scene, spp: int | None = None, *, pixel_center: bool = False,
+              resolution: tuple[int, int] | None = None, seed: int | None = None,
+              uniform: bool = False, client: Client | None = None, workers: int = 1,
+              threads: int | None = None, progress: bool = True, retries: int = 2,
+              band_rows: int = BAND_ROWS) -> tuple[np.ndarray, np.ndarray]:
+    """Renders like `fogplanes.reference(...)`, on a Dask cluster, in bands of `band_rows`
+    rows: (image, per-pixel standard error), the same bits as one machine's (each pixel's
+    random stream is keyed by the seed and the pixel). The adaptive mode (the default) runs
+    the pilot in bands, the per-pixel counts in one task (the core's code), then the final
+    bands. `client`, `workers`, `threads`, `progress`, `retries` as in `render`."""
+    if band_rows < 1:
+        raise ValueError(f"band_rows={band_rows}: must be at least 1")
+    _check_layout(workers, threads)
+    kwargs = {k: v for k, v in dict(spp=spp, resolution=resolution, seed=seed).items() if v is not None}
+    kwargs["pixel_center"] = pixel_center
+    # The errors before any cluster, by the core's checks: the settings on one pixel (its pilot
+    # costs milliseconds), the resolution on the scene.
+    native.reference_pilot_rows(scene, (0, 1), **dict(kwargs, resolution=(1, 1)))
+    height = (scene.with_resolution(*resolution) if resolution else scene).resolution[1]
+    bands = _bands(height, band_rows)
+    stem = f"{tokenize(scene)}-{tokenize(kwargs, uniform)}"
+    with _session(client, workers, threads) as (c, per_task, _):
+        counts = None
+        if not uniform:
+            pilot = [c.submit(_pilot_band, scene, rows, per_task, kwargs, retries=retries,
+                              key=f"fogplanes-pilot-{stem}-{rows[0]}-{rows[1]}") for rows in bands]
+            counts = c.submit(_counts, scene, kwargs, *pilot, retries=retries,
+                              key=f"fogplanes-counts-{stem}")
+            del pilot
+        final = dict(kwargs, uniform=uniform)
+        parts = [c.submit(_reference_band, scene, rows, per_task, final, counts, retries=retries,
+                          key=f"fogplanes-reference-{stem}-{rows[0]}-{rows[1]}") for rows in bands]
+        del counts
+        whole = c.submit(_stack, *parts, retries=retries, key=f"fogplanes-stack-{stem}")
+        del parts
+        return _wait(whole, progress, "fogplanes reference")
+
+
+# -- Sweeps --------------------------------------------------------------------------------------
+
+
+def _row(scene: native.Scene, ref: np.ndarray, estimator: str, planes: int | None,
+         seed: int | None, threads: int, kwargs: dict[str, Any]) -> dict[str, Any]:
+    image, stats = native.render(scene, estimator, planes=planes, seed=seed, threads=threads,
+                                 return_stats=True, **kwargs)
+    metrics = native.compare(image, ref)
+    return {
+        "estimator": stats["estimator"],
+        "planes": stats["planes"],
+        "seed": seed,
+        **{k: metrics[k] for k in ("smape", "mse", "rel_mse", "max_abs")},
+        "hits": stats["hits"],
+        "seconds": stats["seconds_total"],
+    }
+
+
+def _listed(value: Any, default: Iterable[Any]) -> list[Any]:
+    if value is None:
+        return list(default)
+    if isinstance(value, (str, int)):
+        return [value]
+    return list(value)
+
+
+def table(scene: native.Scene, reference: Any, estimators: str | Iterable[str] | None = None,
+          planes: int | Iterable[int] | None = None, seeds: int | Iterable[int] | None = None, *,
+          client: Client | None = None, workers: int = 1, threads: int | None = None,
+          progress: bool = True, retries: int = 2, **render_kwargs: Any) -> list[dict[str, Any]]:
+    """A sweep as tasks: one `fogplanes.render` per estimator x planes x seed (in that order),
+    each compared with `reference` on its worker by `fogplanes.compare`; only the numbers come
+    back, one dict per render: estimator, planes, seed, smape, mse, rel_mse, max_abs, hits,
+    seconds (the render's wall time on its worker). The reference (an image, a path, or the
+    (image, stderr) pair of `reference`) is sent to every worker once. `estimators` default to
+    every estimator, `planes` and `seeds` to the scene's; the other keyword arguments are
+    `fogplanes.render`'s. `client`, `workers`, `threads`, `progress`, `retries` as in
+    `render`."""
+    if isinstance(reference, tuple):
+        reference = reference[0]
+    if isinstance(reference, (str, os.PathLike)):
+        reference = native.load_image(reference)
+    ref = np.asarray(reference)
+    kwargs = _render_kwargs(render_kwargs)
+    runs = [(e, n, s) for e in _listed(estimators, native.ESTIMATORS)
+            for n in _listed(planes, [None]) for s in _listed(seeds, [None])]
+    for e, n, s in runs:  # every setting checked before any cluster
+        native.plan_render(scene, estimator=e, planes=n, seed=s, **kwargs)
+    _check_layout(workers, threads)
+    stem = tokenize(scene, ref, kwargs)
+    with _session(client, workers, threads) as (c, per_task, _):
+        shared_ref = c.scatter(ref, broadcast=True, hash=True)
+        rows = [c.submit(_row, scene, shared_ref, e, n, s, per_task, kwargs, retries=retries,
+                         key=f"fogplanes-table-{stem}-{e}-{n}-{s}") for e, n, s in runs]
+        try:
+            if progress:
+                _StderrProgressBar(rows, "fogplanes table")
+            return c.gather(rows)
+        except BaseException:
+            c.cancel(rows)
+            raise

@@ -1,0 +1,199 @@
+"""Tests of `fogplanes.distributed` on a local Dask cluster: 2 worker processes of 1 thread each,
+on 127.0.0.1, no dashboard. CI installs Dask (.ci/requirements.txt); without it every test
+here is reported SKIPPED with the reason.
+
+The images must be the same bits as one machine's: for any number of workers, chunks per
+task, completion order and lost worker.
+"""
+
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip(
+    "distributed",
+    reason="SKIPPED LOUDLY: Dask distributed is not installed (pip install .[dask]); "
+    "fogplanes.distributed is untested here",
+)
+
+from dask.base import tokenize  # noqa: E402 (after the skip)
+from distributed import Client, LocalCluster  # noqa: E402
+
+import fogplanes  # noqa: E402
+import fogplanes.distributed as fd  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SIX_LIGHTS = ROOT / "media_scenes" / "six_lights.toml"
+
+
+def bits(a: np.ndarray) -> np.ndarray:
+    assert a.dtype == np.float32
+    return np.ascontiguousarray(a).view(np.uint32)
+
+
+def assert_bit_identical(a: np.ndarray, b: np.ndarray) -> None:
+    assert a.shape == b.shape and a.dtype == b.dtype == np.float32
+    assert np.array_equal(bits(a), bits(b)), f"{np.count_nonzero(bits(a) != bits(b))} values differ"
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return fogplanes.load_scene(SIX_LIGHTS)
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0", env={"RAYON_NUM_THREADS": "1"})
+    with Client(cluster) as c:
+        yield c
+    cluster.close()
+
+
+def chunk_planes(scene) -> int:
+    return fogplanes.plan_render(scene, planes=1)["chunk_planes"]
+
+
+def local_merge(scene, **kwargs) -> np.ndarray:
+    """The canonical chunks rendered here one by one, merged (given in reverse: the merge
+    sorts them) and finished."""
+    plan = fogplanes.plan_render(scene, **kwargs)
+    parts = [fogplanes.render_chunk(scene, chunk, **kwargs) for chunk in plan["chunks"]]
+    return fogplanes.finish_render(scene, fogplanes.merge_partials(parts[::-1]), **kwargs)
+
+
+# -- Renders -------------------------------------------------------------------------------------
+
+def test_import_fogplanes_does_not_import_dask():
+    code = ("import sys, fogplanes; assert 'dask' not in sys.modules and 'distributed' not in sys.modules; "
+            "fogplanes.distributed; assert 'distributed' in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+@pytest.mark.parametrize("settings", [
+    dict(estimator="smis-exact", spp=2, pixel_center=False),
+    dict(estimator="unweighted", sampler="independent", seed=7, pixel_center=True),
+], ids=["smis-exact-spp2", "unweighted-independent"])
+def test_render_is_the_same_bits_for_1_and_2_workers_as_the_local_merge_and_render(client, scene, settings):
+    # Six canonical chunks, the last one short: a ragged tree.
+    kwargs = dict(settings, resolution=(64, 36), planes=5 * chunk_planes(scene) + 1234)
+    two = [fd.render(scene, client=client, threads=1, chunks_per_task=block, progress=False, **kwargs)
+           for block in (1, 2, 4)]
+    one = fd.render(scene, workers=1, threads=1, progress=False, **kwargs)  # its own LocalCluster
+    for image in (*two[1:], one, local_merge(scene, **kwargs), fogplanes.render(scene, **kwargs)):
+        assert_bit_identical(two[0], image)
+    assert np.all(np.isfinite(one)) and one.mean() > 0
+
+
+def test_a_worker_killed_mid_render_changes_no_bit(client, scene):
+    kwargs = dict(resolution=(64, 36), planes=32 * chunk_planes(scene))
+    future = fd.render_future(scene, client, threads=1, chunks_per_task=1, **kwargs)
+    deadline = time.monotonic() + 60
+    while True:  # until a worker holds a partial
+        held = {w: keys for w, keys in client.has_what().items() if keys}
+        if held or time.monotonic() > deadline:
+            break
+        time.sleep(0.01)
+    assert held and not future.done(), "the render ended before a worker could be killed: make it longer"
+    victim = max(held, key=lambda w: len(held[w]))
+    pids = client.run(os.getpid)
+    os.kill(pids[victim], signal.SIGKILL)
+    image = future.result(timeout=120)
+    assert_bit_identical(image, fogplanes.render(scene, threads=2, **kwargs))
+    client.wait_for_workers(2, timeout=60)  # the nanny restarted it
+    assert pids[victim] not in client.run(os.getpid).values()
+
+
+def test_a_pickled_scene_renders_identically(client, scene):
+    small = scene.with_resolution(48, 27)
+    copy = pickle.loads(pickle.dumps(small))
+    assert tokenize(copy) == tokenize(small) != tokenize(scene)
+    kwargs = dict(planes=chunk_planes(scene) + 5)
+    image = fd.render(copy, client=client, threads=1, progress=False, **kwargs)
+    assert image.shape == (27, 48, 3)
+    assert_bit_identical(image, fogplanes.render(small, **kwargs))
+    assert_bit_identical(image, fogplanes.render(copy, **kwargs))
+
+
+def test_task_keys_are_stable_and_name_the_work(client, scene):
+    kwargs = dict(resolution=(32, 18), planes=3000)
+    a = fd.render_future(scene, client, threads=1, **kwargs)
+    b = fd.render_future(pickle.loads(pickle.dumps(scene)), client, threads=1, kernel="portable", **kwargs)
+    c = fd.render_future(scene, client, threads=1, **dict(kwargs, seed=2))
+    assert a.key == b.key != c.key  # the kernel changes no bit, the seed does
+    assert_bit_identical(a.result(), b.result())
+
+
+def test_the_progress_bar_is_on_stderr(client, scene, capfd):
+    fd.render(scene, client=client, threads=1, resolution=(32, 18), planes=2 * chunk_planes(scene) + 1)
+    out, err = capfd.readouterr()
+    # 3 chunks (one per task: too few for more), 2 additions and the finish.
+    assert out == "" and "fogplanes render [" in err and "6/6 tasks" in err
+
+
+def test_merge_refuses_mismatched_parts(scene):
+    kwargs = dict(resolution=(32, 18), planes=2 * chunk_planes(scene))
+    first, second = fogplanes.plan_render(scene, **kwargs)["chunks"]
+    a = fogplanes.render_chunk(scene, first, **kwargs)
+    b = fogplanes.render_chunk(scene, second, **kwargs)
+    other_seed = fogplanes.render_chunk(scene, second, **dict(kwargs, seed=2))
+    with pytest.raises(ValueError):
+        fogplanes.merge_partials([a, other_seed])  # another render's part
+    with pytest.raises(ValueError):
+        fogplanes.merge_partials([a, a])  # overlapping ranges
+    with pytest.raises(ValueError):
+        fogplanes.finish_render(scene, a, **kwargs)  # planes missing
+    with pytest.raises(ValueError):
+        fd._add(b, a)  # not adjacent in this order
+    whole = fogplanes.finish_render(scene, fogplanes.merge_partials([b, a]), **kwargs)
+    assert_bit_identical(whole, fogplanes.render(scene, **kwargs))
+
+
+def test_bad_arguments_raise_value_error_before_any_cluster(scene):
+    start = time.monotonic()
+    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0), dict(threads=0),
+                   dict(workers=0)):
+        with pytest.raises(ValueError):
+            fd.render(scene, progress=False, **kwargs)
+    with pytest.raises(ValueError):
+        fd.render(scene, chunks_per_task=3, client=None, planes=10, progress=False)
+    for kwargs in (dict(spp=0), dict(resolution=(0, 5)), dict(seed=-1), dict(band_rows=0)):
+        with pytest.raises(ValueError):
+            fd.reference(scene, progress=False, **kwargs)
+    with pytest.raises(ValueError):
+        fd.table(scene, np.zeros((360, 640, 3), np.float32), estimators=["smis-exact", "nope"], progress=False)
+    assert time.monotonic() - start < 5, "a cluster was started for bad arguments"
+
+
+# -- References and sweeps -----------------------------------------------------------------------
+
+@pytest.mark.parametrize("uniform", [False, True], ids=["adaptive", "uniform"])
+def test_reference_is_the_same_bits_as_one_machines(client, scene, uniform):
+    kwargs = dict(spp=32, resolution=(48, 27), seed=5, uniform=uniform, pixel_center=uniform)
+    mean, stderr = fd.reference(scene, client=client, threads=1, band_rows=5, progress=False, **kwargs)
+    one_mean, one_stderr = fogplanes.reference(scene, **kwargs)
+    assert_bit_identical(mean, one_mean)
+    assert_bit_identical(stderr, one_stderr)
+    assert np.all(stderr > 0)
+
+
+def test_table_computes_the_metrics_on_the_workers(client, scene):
+    size = dict(resolution=(48, 27), pixel_center=True)
+    ref, _ = fogplanes.reference(scene, spp=64, **size)
+    rows = fd.table(scene, ref, estimators=["unweighted", "smis-exact"], planes=[500, 1000], seeds=[1, 2],
+                    client=client, threads=1, progress=False, **size)
+    assert [(r["estimator"], r["planes"], r["seed"]) for r in rows] == [
+        (e, n, s) for e in ("unweighted", "smis-exact") for n in (500, 1000) for s in (1, 2)]
+    for r in rows:
+        expected = fogplanes.compare(fogplanes.render(scene, r["estimator"], planes=r["planes"], seed=r["seed"],
+                                                      **size), ref)
+        assert {k: r[k] for k in ("smape", "mse", "rel_mse", "max_abs")} == {
+            k: expected[k] for k in ("smape", "mse", "rel_mse", "max_abs")}
+        assert r["hits"] > 0 and r["seconds"] >= 0
