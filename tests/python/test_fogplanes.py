@@ -320,7 +320,9 @@ def test_a_render_on_a_time_budget(tmp_path):
     image, stats = fogplanes.render(SIX_LIGHTS, resolution=(64, 36), time_budget=0.3, return_stats=True)
     seconds = time.perf_counter() - start
     assert image.shape == (36, 64, 3) and np.all(np.isfinite(image)) and image.mean() > 0
-    assert stats["plane_passes"] >= 1 and stats["planes"] >= 256 and stats["rays"] == 64 * 36
+    assert stats["plane_passes"] >= 1 and stats["planes"] >= 256
+    # The ray sets made: small passes use fewer than the 16.
+    assert stats["rays"] % (64 * 36) == 0 and 64 * 36 <= stats["rays"] <= 16 * 64 * 36, stats["rays"]
     assert seconds < 0.3 + 2.0, seconds  # the budget, and the set-up around it
     # A render of a plane count is one pass.
     assert fogplanes.render(SIX_LIGHTS, planes=300, resolution=(16, 9), return_stats=True)[1]["plane_passes"] == 1
