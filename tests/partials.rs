@@ -31,12 +31,16 @@ fn order(n: usize, k: usize) -> Vec<usize> {
 }
 
 /// Six chunks (the last short) rendered one by one, merged in several completion orders, and
-/// aligned runs of chunks rendered together: every merge is the render's image, bit for bit.
+/// aligned runs of chunks rendered together: every merge is the render's image, bit for bit;
+/// with 16 ray sets (the default, whose plane groups straddle the chunks), with one, and at
+/// pixel centres.
 #[test]
 fn chunks_merged_in_any_order_equal_the_whole_render_bit_for_bit() {
     let s = scene(40, 24);
-    for (planes, spp) in [(5 * CHUNK_PLANES + 1000, 1), (CHUNK_PLANES + 77, 2)] {
-        let o = RenderOptions { planes, spp, seed: 5, ..RenderOptions::default() };
+    for (planes, spp, pixel_center) in
+        [(5 * CHUNK_PLANES + 1000, 16, false), (CHUNK_PLANES + 77, 1, false), (CHUNK_PLANES + 77, 16, true)]
+    {
+        let o = RenderOptions { planes, spp, seed: 5, pixel_center, ..RenderOptions::default() };
         let (whole, stats) = render(&s, &o, Control::none()).unwrap();
         let parts: Vec<Partial> = chunks(planes).into_iter().map(|c| chunk(&s, &o, c)).collect();
         assert_eq!(parts.iter().map(|p| p.hits).sum::<u64>(), stats.hits);
