@@ -1,5 +1,6 @@
 //! Criterion benchmarks: plane sampling, structure build, gathering per estimator, and the
-//! per-hit cost of each weighting. `cargo bench` runs them all; `cargo bench -- weight` one group.
+//! per-hit cost of each weighting. `cargo bench -p fogplanes-bench` runs them all; `cargo bench -p
+//! fogplanes-bench -- weight` one group.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use fogplanes::control::Control;
@@ -16,7 +17,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 fn scene() -> Scene {
-    Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap()
+    Scene::load(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../media_scenes/six_lights.toml"))).unwrap()
 }
 
 fn planes_and_structure(c: &mut Criterion) {

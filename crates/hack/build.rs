@@ -1,0 +1,3 @@
+//! Empty: cargo resolves the build dependencies (Cargo.toml) only for a package that has a
+//! build script.
+fn main() {}
