@@ -5,7 +5,7 @@
 //! mean square of its standard-error image, which every MSE against it includes.
 //!
 //! ```text
-//! cargo run --release -p fogplanes --example glow_mse -- SCENE WxH REF.exr REF_STDERR.exr IMAGE.exr...
+//! cargo run --release -p fogplanes-bench --example glow_mse -- SCENE WxH REF.exr REF_STDERR.exr IMAGE.exr...
 //! ```
 
 use fogplanes::film::Film;

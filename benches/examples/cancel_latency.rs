@@ -1,6 +1,6 @@
 //! How long a render takes to stop once cancelled: sets the flag from another thread after a
 //! delay and prints the time from setting it to the render's return (a measurement, not a
-//! test). `cargo run --release -p fogplanes --example cancel_latency -- SCENE [PLANES]`.
+//! test). `cargo run --release -p fogplanes-bench --example cancel_latency -- SCENE [PLANES]`.
 
 use fogplanes::control::Control;
 use fogplanes::reference::{ReferenceOptions, render_reference};
