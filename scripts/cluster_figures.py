@@ -16,7 +16,7 @@ printed as Markdown tables:
                              included) and with its own cluster (started, used and closed,
                              as a user calls it without a client: wall seconds), in turn,
                              medians; the differences are the cluster's overhead.
-  reference SPP [RUNS]       samples per CPU second of the reference (uniform, 640x360), and
+  reference SPP [RUNS]       samples per CPU second of the reference (uniform, whole pixels, 640x360), and
                              what that gives for a 65,536-spp 1280x720 reference on 16 nodes
                              of CORES cores (environment variable, default 32).
 
@@ -81,7 +81,7 @@ def cluster(workers, threads):
 
 def throughput(planes, runs):
     scene = fogplanes.load_scene(SCENE)
-    kwargs = dict(planes=planes, pixel_center=True)
+    kwargs = dict(planes=planes)  # whole pixels, 16 ray sets (the default)
     layouts = {"1 process x 1 thread": (1, 1), "2 processes x 1 thread": (2, 1),
                "1 process x 2 threads": (1, 2)}
     clusters = {name: cluster(*layout) for name, layout in layouts.items()}
@@ -100,7 +100,7 @@ def throughput(planes, runs):
             client.close()
             local.close()
     print(f"{before} before, {load()} after")
-    print(f"| {planes:,} planes, 640x360, median of {runs} | wall s | planes/s | CPU s | planes per CPU s |")
+    print(f"| {planes:,} planes, 640x360, whole pixels, median of {runs} | wall s | planes/s | CPU s | planes per CPU s |")
     print("|---|---:|---:|---:|---:|")
     for name, (wall, cpu) in medians.items():
         print(f"| {name} | {wall:.2f} | {planes / wall:,.0f} | {cpu:.2f} | {planes / cpu:,.0f} |")
@@ -113,7 +113,7 @@ def check(image, expected):
 
 def overhead(planes, runs):
     scene = fogplanes.load_scene(SCENE)
-    kwargs = dict(planes=planes, pixel_center=True)
+    kwargs = dict(planes=planes)  # whole pixels, 16 ray sets (the default)
     expected = fogplanes.render(scene, threads=2, **kwargs)
     local, client = cluster(1, 2)
     try:
@@ -138,14 +138,14 @@ def reference(spp, runs):
     scene = fogplanes.load_scene(SCENE)
     width, height = scene.resolution
     cpu = statistics.median(
-        timed(lambda: fogplanes.reference(scene, spp=spp, uniform=True, pixel_center=True))[1]
+        timed(lambda: fogplanes.reference(scene, spp=spp, uniform=True))[1]
         for _ in range(runs))
     per_core = spp * width * height / cpu
     node_cores = int(os.environ.get("CORES", "32"))
     target = 65536 * 1280 * 720
     one = target / per_core / node_cores
     print(f"reference: {spp} spp at {width}x{height}, uniform, {cpu:.2f} CPU s: {per_core:.3e} samples per "
-          f"CPU second ({load()})")
+          f"CPU second, whole pixels ({load()})")
     print(f"65,536 spp at 1280x720 = {target:.3e} samples: {one / 3600:.2f} h on one node of {node_cores} "
           f"cores, {one / 16 / 60:.1f} min on 16 such nodes (ideal; the bands are independent)")
 
