@@ -352,6 +352,16 @@ def test_other_bad_arguments():
         fogplanes.render(SIX_LIGHTS, time_budget="soon")
     with pytest.raises(TypeError, match="fogplanes.Scene or the path"):
         fogplanes.render(42)
+    # Keyword arguments are parsed by one parser per kind: a misspelt one is a TypeError, as in
+    # any Python function, and help() still lists every keyword.
+    with pytest.raises(TypeError, match="unexpected keyword argument 'plane'"):
+        fogplanes.render(SIX_LIGHTS, plane=100)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'planes'"):
+        fogplanes.reference(SIX_LIGHTS, planes=100)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'uniform'"):
+        fogplanes.reference_counts(SIX_LIGHTS, np.zeros((360, 640, 3)), uniform=True)
+    assert "time_budget=None" in fogplanes.render.__text_signature__
+    assert "uniform=False" in fogplanes.reference.__text_signature__
     with pytest.raises(ValueError, match="differ in size"):
         fogplanes.compare(np.zeros((2, 3, 3)), np.zeros((3, 2, 3)))
     with pytest.raises(ValueError, match=r"shape \(height, width, 3\)"):

@@ -641,46 +641,20 @@ fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
 /// on Ctrl-C. The GIL is released while rendering.
 #[pyfunction]
-#[pyo3(signature = (
-    scene, estimator = None, planes = None, seed = None, spp = None, pixel_center = false,
-    resolution = None, orientations = None, threads = None, accelerator = "raster",
-    kernel = "auto", return_stats = false, sampler = None, time_budget = None
-))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, estimator = None, **kwargs))]
+#[pyo3(text_signature = "(scene, estimator=None, planes=None, seed=None, spp=None, pixel_center=False, \
+    resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', return_stats=False, \
+    sampler=None, time_budget=None)")]
 fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     estimator: Option<&str>,
-    planes: Option<&Bound<'py, PyAny>>,
-    seed: Option<&Bound<'py, PyAny>>,
-    spp: Option<&Bound<'py, PyAny>>,
-    pixel_center: bool,
-    resolution: Option<&Bound<'py, PyAny>>,
-    orientations: Option<&Bound<'py, PyAny>>,
-    threads: Option<&Bound<'py, PyAny>>,
-    accelerator: &str,
-    kernel: &str,
-    return_stats: bool,
-    sampler: Option<&str>,
-    time_budget: Option<&Bound<'py, PyAny>>,
+    kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let scene = scene_arg(scene)?;
     let mut given = Given::default();
-    let overrides = Overrides {
-        estimator: given.named::<Estimator>(Setting::Estimator, estimator)?,
-        orientations: given.uint32(Setting::Orientations, orientations)?,
-        planes: given.uint(Setting::Planes, planes)?,
-        seed: given.uint(Setting::Seed, seed)?,
-        sampler: given.named::<Sampler>(Setting::Sampler, sampler)?,
-        spp: given.uint32(Setting::Spp, spp)?,
-        pixel_center,
-        accelerator: given.named::<Accelerator>(Setting::Accelerator, Some(accelerator))?,
-        kernel: given.named::<Kernel>(Setting::Kernel, Some(kernel))?,
-        time_budget: given.float(Setting::TimeBudget, time_budget)?,
-        resolution: given.resolution(resolution)?,
-        threads: given.threads(threads)?,
-        exposure: None,
-    };
+    let (mut overrides, return_stats) = render_overrides(kwargs, &mut given, Front::Render)?;
+    overrides.estimator = given.named::<Estimator>(Setting::Estimator, estimator)?.or(overrides.estimator);
     let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
     let (film, stats) = run_interruptible(py, pool(r.threads)?, |cancel| match r.time_budget {
         None => fogplanes::render::render(&r.scene, &r.options, Control::with_cancel(cancel)),
@@ -700,20 +674,15 @@ fn render<'py>(
 /// `pixel_center` to compare with `render(..., pixel_center=True)`. Ctrl-C stops it with
 /// KeyboardInterrupt.
 #[pyfunction]
-#[pyo3(signature = (scene, spp = None, pixel_center = false, resolution = None, seed = None, uniform = false, threads = None))]
+#[pyo3(signature = (scene, spp = None, **kwargs))]
 #[pyo3(text_signature = "(scene, spp=1024, pixel_center=False, resolution=None, seed=1, uniform=False, threads=None)")]
-#[allow(clippy::too_many_arguments)]
 fn reference<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     spp: Option<&Bound<'py, PyAny>>,
-    pixel_center: bool,
-    resolution: Option<&Bound<'py, PyAny>>,
-    seed: Option<&Bound<'py, PyAny>>,
-    uniform: bool,
-    threads: Option<&Bound<'py, PyAny>>,
+    kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Image<'py>, Image<'py>)> {
-    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
+    let (r, given) = resolve_reference_args(scene, spp, kwargs, &REFERENCE_KEYWORDS)?;
     let image = run_interruptible(py, pool(r.threads)?, |cancel| {
         render_reference(&r.scene, &r.options, Control::with_cancel(cancel))
     })?
@@ -772,10 +741,29 @@ fn save_image(
 // ---------------------------------------------------------------------------------------------
 // Renders in chunks, references in row bands (the cluster layer, fogplanes.distributed)
 
-/// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names.
-fn render_overrides(kwargs: Option<&Bound<'_, PyDict>>, given: &mut Given) -> PyResult<Overrides> {
-    let mut o = Overrides::default();
-    let Some(kwargs) = kwargs else { return Ok(o) };
+/// Which function's keyword arguments [`render_overrides`] parses.
+#[derive(Clone, Copy, PartialEq)]
+enum Front {
+    /// `render`: also `time_budget` and `return_stats`.
+    Render,
+    /// The chunked functions (`plan_render`, `render_chunk`, `finish_render`): a plane count.
+    Chunks,
+}
+
+/// A keyword argument that is a flag (None: false).
+fn flag(value: &Option<Bound<'_, PyAny>>) -> PyResult<bool> {
+    Ok(value.as_ref().map(|v| v.extract()).transpose()?.unwrap_or(false))
+}
+
+/// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names,
+/// parsed in one place for every function that takes them; and `return_stats` (`render` only).
+fn render_overrides(
+    kwargs: Option<&Bound<'_, PyDict>>,
+    given: &mut Given,
+    front: Front,
+) -> PyResult<(Overrides, bool)> {
+    let (mut o, mut return_stats) = (Overrides::default(), false);
+    let Some(kwargs) = kwargs else { return Ok((o, return_stats)) };
     for (key, value) in kwargs.iter() {
         let key: String = key.extract()?;
         let value = (!value.is_none()).then_some(value);
@@ -788,11 +776,15 @@ fn render_overrides(kwargs: Option<&Bound<'_, PyDict>>, given: &mut Given) -> Py
             "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
             "sampler" => o.sampler = given.named(Setting::Sampler, text(&value)?.as_deref())?,
             "spp" => o.spp = given.uint32(Setting::Spp, value.as_ref())?,
-            "pixel_center" => o.pixel_center = value.map(|v| v.is_truthy()).transpose()?.unwrap_or(false),
+            "pixel_center" => o.pixel_center = flag(&value)?,
             "accelerator" => o.accelerator = given.named(Setting::Accelerator, text(&value)?.as_deref())?,
             "kernel" => o.kernel = given.named(Setting::Kernel, text(&value)?.as_deref())?,
             "resolution" => o.resolution = given.resolution(value.as_ref())?,
             "threads" => o.threads = given.threads(value.as_ref())?,
+            "time_budget" if front == Front::Render => {
+                o.time_budget = given.float(Setting::TimeBudget, value.as_ref())?;
+            }
+            "return_stats" if front == Front::Render => return_stats = flag(&value)?,
             "time_budget" if value.is_some() => {
                 return Err(PyValueError::new_err(
                     "time_budget: a render in chunks has a plane count; give planes= instead",
@@ -802,7 +794,7 @@ fn render_overrides(kwargs: Option<&Bound<'_, PyDict>>, given: &mut Given) -> Py
             other => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{other}'"))),
         }
     }
-    Ok(o)
+    Ok((o, return_stats))
 }
 
 /// The render `scene` and `**kwargs` describe, resolved as `render` resolves it.
@@ -812,7 +804,7 @@ fn resolve_chunked(
 ) -> PyResult<(settings::ResolvedRender, Given)> {
     let scene = scene_arg(scene)?;
     let mut given = Given::default();
-    let overrides = render_overrides(kwargs, &mut given)?;
+    let (overrides, _) = render_overrides(kwargs, &mut given, Front::Chunks)?;
     let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
     Ok((r, given))
 }
@@ -907,23 +899,25 @@ impl PyPartial {
         partial::combine(&self.inner, &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
     }
 
-    /// Rebuilds a pickled partial.
+    /// Rebuilds a pickled partial from its state, the tuple `__reduce__` gives: (width, height,
+    /// sums as little-endian f64 bytes, start, end, planes_total, fingerprint, hits, seconds).
     #[staticmethod]
-    #[allow(clippy::too_many_arguments)]
-    fn _from_state(
-        width: u32,
-        height: u32,
-        sums: &[u8],
-        start: usize,
-        end: usize,
-        planes_total: usize,
-        fingerprint: String,
-        hits: u64,
-        seconds: f64,
-    ) -> PyResult<Self> {
+    fn _from_state(state: &Bound<'_, PyTuple>) -> PyResult<Self> {
+        let not_a_state = || PyValueError::new_err("not the state of a fogplanes.Partial");
+        if state.len() != 9 {
+            return Err(not_a_state());
+        }
+        let item = |k: usize| state.get_item(k);
+        let (width, height): (u32, u32) = (item(0)?.extract()?, item(1)?.extract()?);
+        let sums = item(2)?;
+        let sums = sums.cast::<PyBytes>().map_err(|_| not_a_state())?.as_bytes();
+        let (start, end, planes_total): (usize, usize, usize) =
+            (item(3)?.extract()?, item(4)?.extract()?, item(5)?.extract()?);
+        let (fingerprint, hits, seconds): (String, u64, f64) =
+            (item(6)?.extract()?, item(7)?.extract()?, item(8)?.extract()?);
         let pixels = width as usize * height as usize;
         if sums.len() != pixels * 24 || start >= end || end > planes_total {
-            return Err(PyValueError::new_err("not the state of a fogplanes.Partial"));
+            return Err(not_a_state());
         }
         let values: Vec<f64> =
             sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
@@ -947,7 +941,7 @@ impl PyPartial {
             p.seconds,
         )
             .into_pyobject(py)?;
-        Ok((slf.get_type().getattr("_from_state")?, args))
+        Ok((slf.get_type().getattr("_from_state")?, PyTuple::new(py, [args])?))
     }
 
     fn __repr__(&self) -> String {
@@ -1034,29 +1028,36 @@ fn finish_render<'py>(
     Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any())
 }
 
-/// The reference resolved from the arguments of `reference`.
-#[allow(clippy::too_many_arguments)]
+/// The keyword arguments of `reference` (and of `reference_rows`, with `counts`).
+const REFERENCE_KEYWORDS: [&str; 5] = ["pixel_center", "resolution", "seed", "uniform", "threads"];
+
+/// The reference resolved from `spp` and the keyword arguments of `reference`, by the same
+/// names, parsed in one place for every function that takes them; `accepted` are the keywords
+/// the caller takes (besides `spp`).
 fn resolve_reference_args(
     scene: &Bound<'_, PyAny>,
     spp: Option<&Bound<'_, PyAny>>,
-    seed: Option<&Bound<'_, PyAny>>,
-    pixel_center: bool,
-    uniform: bool,
-    resolution: Option<&Bound<'_, PyAny>>,
-    threads: Option<&Bound<'_, PyAny>>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+    accepted: &[&str],
 ) -> PyResult<(settings::ResolvedReference, Given)> {
     let scene = scene_arg(scene)?;
     let mut given = Given::default();
-    let overrides = ReferenceOverrides {
-        spp: given.uint32(Setting::Spp, spp)?,
-        seed: given.uint(Setting::Seed, seed)?,
-        pixel_center,
-        uniform,
-        resolution: given.resolution(resolution)?,
-        threads: given.threads(threads)?,
-        exposure: None,
-    };
-    let r = settings::resolve_reference(&scene, &overrides).map_err(|e| given.error(e))?;
+    let mut o = ReferenceOverrides { spp: given.uint32(Setting::Spp, spp)?, ..ReferenceOverrides::default() };
+    for (key, value) in kwargs.into_iter().flat_map(|k| k.iter()) {
+        let key: String = key.extract()?;
+        if !accepted.contains(&key.as_str()) {
+            return Err(PyTypeError::new_err(format!("unexpected keyword argument '{key}'")));
+        }
+        let value = (!value.is_none()).then_some(value);
+        match key.as_str() {
+            "pixel_center" => o.pixel_center = flag(&value)?,
+            "uniform" => o.uniform = flag(&value)?,
+            "resolution" => o.resolution = given.resolution(value.as_ref())?,
+            "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
+            _ => o.threads = given.threads(value.as_ref())?,
+        }
+    }
+    let r = settings::resolve_reference(&scene, &o).map_err(|e| given.error(e))?;
     Ok((r, given))
 }
 
@@ -1065,21 +1066,19 @@ fn resolve_reference_args(
 /// reference (`uniform=False`) needs `counts`, the per-pixel sample counts from
 /// `reference_counts` (uint32 (height, width)).
 #[pyfunction]
-#[pyo3(signature = (scene, rows, spp = None, seed = None, pixel_center = false, uniform = false, counts = None, resolution = None, threads = None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, rows, spp = None, counts = None, **kwargs))]
+#[pyo3(text_signature = "(scene, rows, spp=None, seed=None, pixel_center=False, uniform=False, counts=None, \
+    resolution=None, threads=None)")]
 fn reference_rows<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     rows: (u32, u32),
     spp: Option<&Bound<'py, PyAny>>,
-    seed: Option<&Bound<'py, PyAny>>,
-    pixel_center: bool,
-    uniform: bool,
     counts: Option<&Bound<'py, PyAny>>,
-    resolution: Option<&Bound<'py, PyAny>>,
-    threads: Option<&Bound<'py, PyAny>>,
+    kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<(Image<'py>, Image<'py>)> {
-    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, uniform, resolution, threads)?;
+    let (r, given) = resolve_reference_args(scene, spp, kwargs, &REFERENCE_KEYWORDS)?;
+    let uniform = r.options.uniform;
     let (w, h) = (r.scene.camera.width as usize, r.scene.camera.height as usize);
     let counts: Option<Vec<u32>> = match (counts, uniform) {
         (None, false) => {
@@ -1111,19 +1110,16 @@ fn reference_rows<'py>(
 /// Rows `rows` = (j0, j1) of the adaptive reference's pilot pass: each pixel's standard error,
 /// float32 (j1 - j0, width, 3). The whole pilot (the rows stacked) goes to `reference_counts`.
 #[pyfunction]
-#[pyo3(signature = (scene, rows, spp = None, seed = None, pixel_center = false, resolution = None, threads = None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, rows, spp = None, **kwargs))]
+#[pyo3(text_signature = "(scene, rows, spp=None, seed=None, pixel_center=False, resolution=None, threads=None)")]
 fn reference_pilot_rows<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     rows: (u32, u32),
     spp: Option<&Bound<'py, PyAny>>,
-    seed: Option<&Bound<'py, PyAny>>,
-    pixel_center: bool,
-    resolution: Option<&Bound<'py, PyAny>>,
-    threads: Option<&Bound<'py, PyAny>>,
+    kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Image<'py>> {
-    let (r, given) = resolve_reference_args(scene, spp, seed, pixel_center, false, resolution, threads)?;
+    let (r, given) = resolve_reference_args(scene, spp, kwargs, &["seed", "pixel_center", "resolution", "threads"])?;
     let pilot = run_interruptible(py, pool(r.threads)?, |cancel| {
         refs::reference_pilot_rows(&r.scene, &r.options, rows.0..rows.1, Control::with_cancel(cancel))
     })?
@@ -1135,18 +1131,16 @@ fn reference_pilot_rows<'py>(
 /// pilot (float32 (height, width, 3): `reference_pilot_rows` of every row, stacked), by the
 /// core code `reference` uses.
 #[pyfunction]
-#[pyo3(signature = (scene, pilot, spp = None, seed = None, pixel_center = false, resolution = None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, pilot, spp = None, **kwargs))]
+#[pyo3(text_signature = "(scene, pilot, spp=None, seed=None, pixel_center=False, resolution=None)")]
 fn reference_counts<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     pilot: &Bound<'py, PyAny>,
     spp: Option<&Bound<'py, PyAny>>,
-    seed: Option<&Bound<'py, PyAny>>,
-    pixel_center: bool,
-    resolution: Option<&Bound<'py, PyAny>>,
+    kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyArray2<u32>>> {
-    let (r, _) = resolve_reference_args(scene, spp, seed, pixel_center, false, resolution, None)?;
+    let (r, _) = resolve_reference_args(scene, spp, kwargs, &["seed", "pixel_center", "resolution"])?;
     let pilot = image_arg(pilot, "pilot")?;
     let (w, h) = (r.scene.camera.width, r.scene.camera.height);
     if (pilot.width, pilot.height) != (w, h) {
