@@ -12,6 +12,7 @@ use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::Weighting;
 use glam::DVec3;
+use rayon::prelude::*;
 
 use crate::common::{BruteForce, MeanRgb, TWO_LIGHTS};
 
@@ -43,12 +44,19 @@ fn run(sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usi
         let (t0, t1) = scene.camera_segment(case.origin, we).0.expect("the ray crosses the medium");
         let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
         let truth = single_scattering(&scene, case.origin, we, 1e-7);
+        // Batches in parallel (the test's tail then uses every core), tallied in batch order.
+        let estimates: Vec<Vec<_>> = (0..batches)
+            .into_par_iter()
+            .map(|batch| {
+                let planes = sample_planes(&scene, sampler, batch_size, 1000 + batch);
+                let ctx = GatherContext::new(&scene, &planes, case.origin);
+                weightings.iter().map(|w| w.dispatch(BruteForce { ctx: &ctx, ray: &ray })).collect()
+            })
+            .collect();
         let mut tallies = vec![MeanRgb::default(); weightings.len()];
-        for batch in 0..batches {
-            let planes = sample_planes(&scene, sampler, batch_size, 1000 + batch);
-            let ctx = GatherContext::new(&scene, &planes, case.origin);
-            for (tally, w) in tallies.iter_mut().zip(weightings) {
-                tally.add(w.dispatch(BruteForce { ctx: &ctx, ray: &ray }));
+        for batch in estimates {
+            for (tally, estimate) in tallies.iter_mut().zip(batch) {
+                tally.add(estimate);
             }
         }
         for (tally, w) in tallies.iter().zip(weightings) {
