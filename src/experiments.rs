@@ -14,7 +14,7 @@ use crate::report::{
     pixel_filter,
 };
 use crate::system::{cpu_seconds, peak_memory_bytes};
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use fogplanes::control::Control;
 use fogplanes::film::{Film, write_file_atomically};
 use fogplanes::kernel::Kernel;
@@ -23,40 +23,18 @@ use fogplanes::pixel::{DEFAULT_RAY_SETS, PixelSettings, PreparedPixels};
 use fogplanes::render::{RenderOptions, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
+use fogplanes::settings::ResolvedTable;
 use fogplanes::weights::{Estimator, Weighting};
 use std::path::PathBuf;
 use std::time::Instant;
 
-pub struct TableOptions {
-    pub planes: usize,
-    pub seed: u64,
-    pub pixel_center: bool,
-    /// Plane counts of the error-versus-time sweep (empty: no sweep).
-    pub sweep: Vec<usize>,
-    /// Seeds per plane count of the sweep: at least one when there is a sweep
-    /// ([`check_sweep_seeds`]).
-    pub sweep_seeds: u32,
-    /// The weightings of the table, the baseline ([`Estimator::BASELINE`]) among them.
-    pub weightings: Vec<Weighting>,
-    /// The plane samplers; every weighting is measured with each.
-    pub samplers: Vec<Sampler>,
-    /// Seconds of each render at equal time (none: no equal-time comparison).
-    pub equal_time: Option<f64>,
+/// What `table` needs besides its settings: the settings as [`settings::resolve_table`]
+/// resolved and checked them (the scene among them), where to write, and how loudly.
+pub struct TableOptions<'a> {
+    pub settings: &'a ResolvedTable,
     pub out: PathBuf,
-    pub exposure: f32,
     pub quiet: bool,
     pub reference_path: PathBuf,
-}
-
-/// Refuses a sweep without seeds, whose points would hold no measurement: the command line
-/// calls it with the other checks of its input, before any work.
-pub fn check_sweep_seeds(sweep_seeds: u32, sweep: &[usize]) -> Result<(), String> {
-    if sweep_seeds == 0 && !sweep.is_empty() {
-        return Err("--sweep-seeds: the error-versus-time sweep needs at least one seed per plane count (or \
-                    --no-sweep), got 0"
-            .to_string());
-    }
-    Ok(())
 }
 
 /// Renders every entry for `budget` seconds (the table's pixel filter and seed) and
@@ -69,14 +47,14 @@ fn equal_time(
     log: &dyn Fn(String),
 ) -> Result<Vec<EqualTimeRow>> {
     let mut rows = Vec::new();
-    for &sampler in &opts.samplers {
-        for &weighting in &opts.weightings {
+    for &sampler in &opts.settings.samplers {
+        for &weighting in &opts.settings.weightings {
             let entry = Entry { weighting, sampler };
             let options = RenderOptions {
                 weighting,
                 sampler,
-                seed: opts.seed,
-                pixel_center: opts.pixel_center,
+                seed: opts.settings.seed,
+                pixel_center: opts.settings.pixel_center,
                 ..RenderOptions::default()
             };
             let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), Control::none())?;
@@ -139,18 +117,28 @@ fn measure(
 
 /// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg and
 /// index.html (the comparison page, [`crate::page`]).
-pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result<String> {
-    if let Err(m) = check_sweep_seeds(opts.sweep_seeds, &opts.sweep) {
-        bail!(m);
-    }
-    let weightings = &opts.weightings;
+pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
+    let scene = &opts.settings.scene;
+    let weightings = &opts.settings.weightings;
     let log = |s: String| {
         if !opts.quiet {
             eprintln!("{s}");
         }
     };
-    log(format!("table: {} estimators x {} samplers, {} planes", weightings.len(), opts.samplers.len(), opts.planes));
-    let results = measure(scene, weightings, &opts.samplers, opts.planes, opts.seed, opts.pixel_center);
+    log(format!(
+        "table: {} estimators x {} samplers, {} planes",
+        weightings.len(),
+        opts.settings.samplers.len(),
+        opts.settings.planes
+    ));
+    let results = measure(
+        scene,
+        weightings,
+        &opts.settings.samplers,
+        opts.settings.planes,
+        opts.settings.seed,
+        opts.settings.pixel_center,
+    );
     let mut rows = Vec::new();
     for r in &results {
         let (m, stats, gather) = (compare(&r.film, reference)?, r.stats, r.gather_seconds);
@@ -159,7 +147,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
             estimator: r.entry.label(),
             weighting: r.entry.weighting.label(),
             sampler: r.entry.sampler.to_string(),
-            planes: opts.planes,
+            planes: opts.settings.planes,
             hits: stats.hits,
             tests_per_hit: stats.tests as f64 / stats.hits.max(1) as f64,
             gather_ns_per_hit: 1e9 * gather / stats.hits.max(1) as f64,
@@ -181,7 +169,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         rows.iter().find(|r| r.weighting == weighting && r.sampler == sampler.name()).cloned()
     };
     let base = find(Estimator::BASELINE.name(), Sampler::Independent)
-        .or_else(|| find(Estimator::BASELINE.name(), opts.samplers[0]))
+        .or_else(|| find(Estimator::BASELINE.name(), opts.settings.samplers[0]))
         .context("the table needs its baseline estimator")?;
     let independent: Vec<Option<Row>> = rows.iter().map(|r| find(&r.weighting, Sampler::Independent)).collect();
     for (r, ind) in rows.iter_mut().zip(independent) {
@@ -193,22 +181,29 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
     }
 
     let mut sweep = Vec::new();
-    for &n in &opts.sweep {
+    for &n in &opts.settings.sweep {
         let mut acc: Vec<(f64, f64, f64, f64)> = vec![(0.0, 0.0, 0.0, 0.0); results.len()];
-        for s in 0..opts.sweep_seeds {
-            let seed = opts.seed.wrapping_add(1000).wrapping_add(s as u64);
-            for (a, r) in acc.iter_mut().zip(measure(scene, weightings, &opts.samplers, n, seed, opts.pixel_center)) {
+        for s in 0..opts.settings.sweep_seeds {
+            let seed = opts.settings.seed.wrapping_add(1000).wrapping_add(s as u64);
+            for (a, r) in acc.iter_mut().zip(measure(
+                scene,
+                weightings,
+                &opts.settings.samplers,
+                n,
+                seed,
+                opts.settings.pixel_center,
+            )) {
                 let m = compare(&r.film, reference)?;
                 let g = r.gather_seconds;
                 *a = (a.0 + m.mse, a.1 + m.smape, a.2 + g, a.3 + r.shared_seconds + g);
             }
         }
-        let k = opts.sweep_seeds as f64;
+        let k = opts.settings.sweep_seeds as f64;
         for (r, a) in results.iter().zip(&acc) {
             sweep.push(SweepPoint {
                 estimator: r.entry.label(),
                 planes: n,
-                seeds: opts.sweep_seeds,
+                seeds: opts.settings.sweep_seeds,
                 mse: a.0 / k,
                 smape: a.1 / k,
                 gather_seconds: a.2 / k,
@@ -218,7 +213,7 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         log(format!("sweep: {n} planes done"));
     }
 
-    let equal_time = match opts.equal_time {
+    let equal_time = match opts.settings.equal_time {
         Some(budget) => equal_time(scene, reference, opts, budget, &log)?,
         None => Vec::new(),
     };
@@ -227,9 +222,9 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
         scene: scene.name.clone(),
         reference: opts.reference_path.display().to_string(),
         resolution: [scene.camera.width, scene.camera.height],
-        pixel_center: opts.pixel_center,
-        filter: pixel_filter(opts.pixel_center, DEFAULT_RAY_SETS),
-        seed: opts.seed,
+        pixel_center: opts.settings.pixel_center,
+        filter: pixel_filter(opts.settings.pixel_center, DEFAULT_RAY_SETS),
+        seed: opts.settings.seed,
         shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
         sweep,
@@ -242,10 +237,10 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
     // The panel shows the default sampler's images (the other's look alike at this size).
     let images: Vec<(String, &Film)> = results
         .iter()
-        .filter(|r| r.entry.sampler == opts.samplers[0])
+        .filter(|r| r.entry.sampler == opts.settings.samplers[0])
         .map(|r| (r.entry.weighting.label(), &r.film))
         .collect();
-    save_panel(&images, reference, opts.exposure, &opts.out.join("panel.png"))?;
+    save_panel(&images, reference, opts.settings.exposure, &opts.out.join("panel.png"))?;
     let svg = plot_error_vs_time(&table, &opts.out)?;
 
     // The comparison page: the reference and every entry's image, the table, the plot.
@@ -254,11 +249,11 @@ pub fn run_table(scene: &Scene, reference: &Film, opts: &TableOptions) -> Result
     let reference_pixels = pixels(reference);
     // The images of the first sampler's planes, as in the panel (a page of every sampler's
     // would be twice the size for pictures that look alike); the table has every row.
-    let shown: Vec<&Measured> = results.iter().filter(|r| r.entry.sampler == opts.samplers[0]).collect();
+    let shown: Vec<&Measured> = results.iter().filter(|r| r.entry.sampler == opts.settings.samplers[0]).collect();
     let labels: Vec<String> = shown.iter().map(|r| r.entry.label()).collect();
     let estimator_pixels: Vec<Vec<[f32; 3]>> = shown.iter().map(|r| pixels(&r.film)).collect();
     let (title, table_html, notes) =
-        (format!("fogplanes: {} estimators", table.scene), table.html(), table.notes(opts.planes));
+        (format!("fogplanes: {} estimators", table.scene), table.html(), table.notes(opts.settings.planes));
     let page = comparison_page(&PageInput {
         title: &title,
         reference: PageImage { label: "reference", width, height, pixels: &reference_pixels },
@@ -348,13 +343,6 @@ fn scaling_heading(scene: &str, opts: &RenderOptions) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_sweep_needs_a_seed() {
-        let m = check_sweep_seeds(0, &[1024]).unwrap_err();
-        assert!(m.starts_with("--sweep-seeds: ") && !m.contains('\n'), "{m}");
-        assert!(check_sweep_seeds(0, &[]).is_ok() && check_sweep_seeds(1, &[1024]).is_ok());
-    }
 
     /// The scaling table's heading says what the renders used, not what they once did.
     #[test]

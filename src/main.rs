@@ -764,21 +764,9 @@ fn cmd_table(a: TableArgs) -> Result<(), Failure> {
         std::iter::once(Output::Image(&panel)).chain(files.iter().map(|p| Output::File(p))).collect();
     check_outputs(&outputs)?;
     start_threads(r.threads)?;
-    let opts = TableOptions {
-        planes: r.planes,
-        seed: r.seed,
-        pixel_center: r.pixel_center,
-        sweep: r.sweep.clone(),
-        sweep_seeds: r.sweep_seeds,
-        weightings: r.weightings.clone(),
-        samplers: r.samplers.clone(),
-        equal_time: r.equal_time,
-        out: a.out.clone(),
-        exposure: r.exposure,
-        quiet: a.common.quiet,
-        reference_path: a.reference.clone(),
-    };
-    let table = run_table(scene, &reference, &opts)?;
+    let opts =
+        TableOptions { settings: &r, out: a.out.clone(), quiet: a.common.quiet, reference_path: a.reference.clone() };
+    let table = run_table(&reference, &opts)?;
     say!("{}", table);
     Ok(())
 }
