@@ -7,8 +7,9 @@ use fogplanes::control::Control;
 use fogplanes::gather::GatherContext;
 use fogplanes::kernel::Kernel;
 use fogplanes::photon_plane::sample_planes;
+use fogplanes::pixel::ray_set_rays;
 use fogplanes::raster::ScreenRaster;
-use fogplanes::render::{Accelerator, PreparedPlanes, camera_rays};
+use fogplanes::render::{Accelerator, PreparedPlanes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Denominator, HitLocal, PlaneFrame, Weighting, WithDenominator};
@@ -39,19 +40,19 @@ fn gathering(c: &mut Criterion) {
     let s = scene().with_resolution(160, 90).unwrap();
     let prepared =
         PreparedPlanes::new(&s, 40_960, 1, Sampler::default(), Accelerator::Raster, Control::none()).unwrap();
-    let pass = camera_rays(&s, 1, 0, false);
-    let mut sums = vec![Vec3::ZERO; pass.rays.len()];
+    let rays = ray_set_rays(&s, 1, 0, false);
+    let mut sums = vec![Vec3::ZERO; rays.len()];
     let kernel = Kernel::Auto.resolve().unwrap();
-    let hits = prepared.gather(Weighting::default(), kernel, &pass.rays, &mut sums, Control::none()).unwrap().hits;
+    let hits = prepared.gather(Weighting::default(), kernel, &rays, &mut sums, Control::none()).unwrap().hits;
     let mut g = c.benchmark_group("gather 160x90, 40960 planes");
     g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
     let raster = prepared.raster.as_ref().unwrap();
     g.bench_function("intersections only", |b| {
-        b.iter(|| raster.count_hits(&prepared.context, kernel, black_box(&pass.rays)))
+        b.iter(|| raster.count_hits(&prepared.context, kernel, black_box(&rays)))
     });
     for w in Weighting::all(&[4]) {
         g.bench_function(BenchmarkId::from_parameter(w.label()), |b| {
-            b.iter(|| prepared.gather(w, kernel, &pass.rays, black_box(&mut sums), Control::none()))
+            b.iter(|| prepared.gather(w, kernel, &rays, black_box(&mut sums), Control::none()))
         });
     }
     g.finish();
@@ -62,9 +63,9 @@ fn sample_hits(n: usize) -> Vec<(PlaneFrame, HitLocal)> {
     let s = scene().with_resolution(32, 18).unwrap();
     let planes = sample_planes(&s, Sampler::default(), 40_960, 2);
     let ctx = GatherContext::new(&s, &planes, s.camera.position);
-    let pass = camera_rays(&s, 2, 0, false);
+    let rays = ray_set_rays(&s, 2, 0, false);
     let mut out = Vec::with_capacity(n);
-    'rays: for ray in &pass.rays {
+    'rays: for ray in &rays {
         for v in &ctx.views {
             let h = v.crossing(ray.dir.to_array(), ray.t0, ray.t1);
             if h.hit {

@@ -5,7 +5,7 @@
 
 use fogplanes::gather::GatherContext;
 use fogplanes::photon_plane::sample_planes;
-use fogplanes::render::camera_rays;
+use fogplanes::pixel::ray_set_rays;
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{CmisExact, Denominator, HitLocal, cmis_exact_mean};
@@ -15,9 +15,9 @@ fn cmis_exact_in_f32_matches_f64_on_the_benchmark_hits() {
     let s = Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap().with_resolution(32, 18).unwrap();
     let planes = sample_planes(&s, Sampler::default(), 40_960, 3);
     let ctx = GatherContext::new(&s, &planes, s.camera.position);
-    let pass = camera_rays(&s, 3, 0, false);
+    let rays = ray_set_rays(&s, 3, 0, false);
     let mut errors = Vec::new();
-    for ray in &pass.rays {
+    for ray in &rays {
         for v in &ctx.views {
             let c = v.crossing(ray.dir.to_array(), ray.t0, ray.t1);
             if !c.hit {

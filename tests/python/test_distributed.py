@@ -12,7 +12,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,18 +28,7 @@ from distributed import Client, LocalCluster  # noqa: E402
 import fogplanes  # noqa: E402
 import fogplanes.distributed as fd  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
-SIX_LIGHTS = ROOT / "media_scenes" / "six_lights.toml"
-
-
-def bits(a: np.ndarray) -> np.ndarray:
-    assert a.dtype == np.float32
-    return np.ascontiguousarray(a).view(np.uint32)
-
-
-def assert_bit_identical(a: np.ndarray, b: np.ndarray) -> None:
-    assert a.shape == b.shape and a.dtype == b.dtype == np.float32
-    assert np.array_equal(bits(a), bits(b)), f"{np.count_nonzero(bits(a) != bits(b))} values differ"
+from helpers import SIX_LIGHTS, assert_bit_identical  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -20,9 +20,8 @@ import numpy as np
 import pytest
 
 import fogplanes
+from helpers import ROOT, SIX_LIGHTS, assert_bit_identical
 
-ROOT = Path(__file__).resolve().parents[2]
-SIX_LIGHTS = ROOT / "media_scenes" / "six_lights.toml"
 BAD_SCENES = sorted((ROOT / "tests" / "bad_scenes").glob("*.toml"))
 SMALL = dict(resolution=(96, 54), planes=2048)
 
@@ -39,17 +38,6 @@ def run_cli(*args, check=True) -> subprocess.CompletedProcess:
     if check and result.returncode != 0:
         raise AssertionError(f"fogplanes {' '.join(map(str, args))} failed: {result.stderr}")
     return result
-
-
-def bits(a: np.ndarray) -> np.ndarray:
-    """The float32 bit patterns, so that equality is exact (-0.0 differs from 0.0, NaN == NaN)."""
-    assert a.dtype == np.float32
-    return np.ascontiguousarray(a).view(np.uint32)
-
-
-def assert_bit_identical(a: np.ndarray, b: np.ndarray) -> None:
-    assert a.shape == b.shape and a.dtype == b.dtype == np.float32
-    assert np.array_equal(bits(a), bits(b)), f"{np.count_nonzero(bits(a) != bits(b))} values differ"
 
 
 def write_scene(tmp_path: Path, render_table: str, name: str = "scene") -> Path:

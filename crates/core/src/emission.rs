@@ -169,16 +169,16 @@ fn covered(scene: &Scene, l: usize, region: &Polygon<DVec2>, jitter: &mut Jitter
 /// (Shirley and Chiu): `(1 - sqrt r) A + sqrt r (1 - v) B + sqrt r v C`.
 fn point_in_region(region: &Polygon<DVec2>, u: f64, v: f64) -> DVec2 {
     let p = region.points();
-    let areas: Vec<f64> = (1..p.len() - 1).map(|k| 0.5 * (p[k] - p[0]).perp_dot(p[k + 1] - p[0]).abs()).collect();
-    let total: f64 = areas.iter().sum();
-    let mut target = u * total;
-    let mut k = 0;
-    while k + 1 < areas.len() && target >= areas[k] {
-        target -= areas[k];
+    let fan = |k: usize| 0.5 * (p[k] - p[0]).perp_dot(p[k + 1] - p[0]).abs();
+    let last = p.len() - 2;
+    let mut target = u * (1..=last).map(fan).sum::<f64>();
+    let mut k = 1;
+    while k < last && target >= fan(k) {
+        target -= fan(k);
         k += 1;
     }
-    let r = (target / areas[k].max(f64::MIN_POSITIVE)).clamp(0.0, 1.0).sqrt();
-    p[0] * (1.0 - r) + p[k + 1] * (r * (1.0 - v)) + p[k + 2] * (r * v)
+    let r = (target / fan(k).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0).sqrt();
+    p[0] * (1.0 - r) + p[k] * (r * (1.0 - v)) + p[k + 1] * (r * v)
 }
 
 /// Each panel's projection on the image when it lies wholly in front of the camera (a convex

@@ -120,16 +120,17 @@ impl PanelFootprints {
 
 /// The camera ray along unit `we` with its segment in the medium (an empty one, `t0 > t1`,
 /// when there is none).
-pub fn camera_ray(we: DVec3, segment: Option<(f64, f64)>) -> CameraRay {
+fn camera_ray(we: DVec3, segment: Option<(f64, f64)>) -> CameraRay {
     match segment {
         Some((t0, t1)) => CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 },
         None => CameraRay { dir: we.as_vec3(), t0: 1.0, t1: 0.0 },
     }
 }
 
-/// The rays of ray set `k` alone, without the emission along them: the rays of
-/// [`crate::render::camera_rays`], for the gathering (the emission comes from
-/// [`crate::emission`]).
+/// The camera rays of ray set `k` (docs/mathematics.md section 8.1): one per pixel, at the set's
+/// position in the pixel ([`ray_set_position`]) or through its centre, each with its segment in
+/// the medium before the first light panel (only the panels that can cover the pixel are
+/// tested: the same answer, sooner). The emission seen directly comes from [`crate::emission`].
 pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec<CameraRay> {
     let cam = &scene.camera;
     let w = cam.width as usize;

@@ -1,7 +1,7 @@
 //! The photon-plane renderer: camera rays, direct emission, planes, gathering.
 //!
 //! A render is three steps: sample the planes and build the intersection structure
-//! ([`PreparedPlanes`]), make the camera rays of a ray set ([`camera_rays`]), and gather them
+//! ([`PreparedPlanes`]), make the camera rays of a ray set ([`crate::pixel::ray_set_rays`]), and gather them
 //! with one weighting ([`PreparedPlanes::gather`]); each group of planes goes with its own ray
 //! set, and the direct emission is integrated over the pixel apart ([`crate::pixel`],
 //! [`crate::emission`]). The table reuses the steps through [`crate::pixel::PreparedPixels`].
@@ -16,7 +16,7 @@ use crate::gather::{CameraRay, GatherContext};
 use crate::kernel::Kernel;
 use crate::limits::{check_memory, check_planes, check_spp};
 use crate::photon_plane::sample_plane_range;
-use crate::pixel::{PanelFootprints, RaySets, camera_ray, plane_group, ray_set_position};
+use crate::pixel::{RaySets, plane_group};
 use crate::raster::{Gathering, ScreenRaster};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
@@ -60,35 +60,6 @@ impl std::str::FromStr for Accelerator {
     fn from_str(s: &str) -> Result<Self, String> {
         crate::parse_name("accelerator", s, &Accelerator::ALL, Accelerator::name)
     }
-}
-
-/// Camera rays of one pass with the emission seen directly along them.
-pub struct PassRays {
-    pub rays: Vec<CameraRay>,
-    pub emission: Vec<Vec3>,
-}
-
-/// The rays of ray set `pass` (docs/mathematics.md section 8.1): one per pixel, at the set's
-/// position in the pixel ([`crate::pixel::ray_set_position`] of seed, pixel and set), or
-/// through pixel centres. Along each, the segment inside the medium before the first light
-/// panel, and the attenuated emission of that panel when its front faces the camera (only the
-/// panels that can cover the pixel are tested: the same answer, sooner).
-pub fn camera_rays(scene: &Scene, seed: u64, pass: u32, pixel_center: bool) -> PassRays {
-    let cam = &scene.camera;
-    let (w, h) = (cam.width as usize, cam.height as usize);
-    let footprints = PanelFootprints::new(scene);
-    let (rays, emission): (Vec<CameraRay>, Vec<Vec3>) = (0..w * h)
-        .into_par_iter()
-        .map(|k| {
-            let (i, j) = ((k % w) as f64, (k / w) as f64);
-            let (sx, sy) = if pixel_center { (0.5, 0.5) } else { ray_set_position(seed, k as u64, pass) };
-            let we = cam.direction(i + sx, j + sy).normalize();
-            let lights = footprints.over((k % w) as u32, (k / w) as u32);
-            let (segment, emitted) = scene.camera_segment_among(cam.position, we, lights);
-            (camera_ray(we, segment), emitted.as_vec3())
-        })
-        .unzip();
-    PassRays { rays, emission }
 }
 
 /// Planes made in pieces of this many, so that the sampled planes never all exist at once:
@@ -595,7 +566,7 @@ mod tests {
     #[test]
     fn cancelling_stops_gathering_within_a_plane_or_a_ray() {
         let scene = small_scene();
-        let pass = camera_rays(&scene, 1, 0, false);
+        let rays = crate::pixel::ray_set_rays(&scene, 1, 0, false);
         let (planes, after, threads) = (3000, 20, 2);
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         for accelerator in Accelerator::ALL {
@@ -606,10 +577,10 @@ mod tests {
                 let run = |after: usize| {
                     let cancel = AtomicBool::new(false);
                     let weights = CancelAfter { prepared: AtomicUsize::new(0), after, cancel: &cancel };
-                    let mut sums = vec![Vec3::ZERO; pass.rays.len()];
+                    let mut sums = vec![Vec3::ZERO; rays.len()];
                     let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
-                    let stats = pool
-                        .install(|| prepared.gather_with(with, &pass.rays, &mut sums, Control::with_cancel(&cancel)));
+                    let stats =
+                        pool.install(|| prepared.gather_with(with, &rays, &mut sums, Control::with_cancel(&cancel)));
                     (weights.prepared.into_inner(), stats, cancel.into_inner())
                 };
                 let (whole, whole_stats, set) = run(usize::MAX);

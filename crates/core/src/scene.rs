@@ -355,17 +355,7 @@ impl Scene {
     /// first light panel (None if empty), and the attenuated emission of that panel when its
     /// front faces the ray (docs/mathematics.md section 1, the direct term).
     pub fn camera_segment(&self, o: DVec3, we: DVec3) -> (Option<(f64, f64)>, DVec3) {
-        self.camera_segment_among(o, we, 0..self.lights.len())
-    }
-
-    /// [`Scene::camera_segment`] testing only the panels `lights` (ascending indices).
-    pub fn camera_segment_among(
-        &self,
-        o: DVec3,
-        we: DVec3,
-        lights: impl IntoIterator<Item = usize>,
-    ) -> (Option<(f64, f64)>, DVec3) {
-        let (t_surface, emission) = self.first_surface(o, we, lights);
+        let (t_surface, emission) = self.first_surface(o, we, 0..self.lights.len());
         (self.segment_before(o, we, t_surface), emission)
     }
 

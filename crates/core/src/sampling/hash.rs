@@ -32,12 +32,6 @@ pub fn unit_f64(bits: u64) -> f64 {
     (bits >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
-/// The jitter (sx, sy) in [0, 1)^2 of pixel sample `pixel` in pass `pass`.
-pub fn pixel_jitter(seed: u64, pass: u32, pixel: u64) -> (f64, f64) {
-    let h = splitmix64(splitmix64(seed ^ 0x5EED_F0C5) ^ splitmix64(((pass as u64) << 40) ^ pixel));
-    (unit_f64(h), unit_f64(splitmix64(h)))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -54,13 +48,5 @@ mod tests {
             out
         };
         assert_eq!([next(), next(), next()], [0xE220_A839_7B1D_CDAF, 0x6E78_9E6A_A1B9_65F4, 0x06C4_5D18_8009_454F]);
-    }
-
-    #[test]
-    fn jitter_is_a_pure_function_of_its_inputs() {
-        assert_eq!(pixel_jitter(1, 0, 5), pixel_jitter(1, 0, 5));
-        assert_ne!(pixel_jitter(1, 0, 5), pixel_jitter(1, 1, 5));
-        let (x, y) = pixel_jitter(9, 3, 77);
-        assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
     }
 }
