@@ -55,19 +55,27 @@ pub struct PlaneView {
     pub occluders_end: u32,
 }
 
-/// L camera rays, lane by lane: unit directions and segments `[t0, t1]`.
+/// L camera rays, lane by lane: unit directions and segments `[t0, t1]`, borrowed where they
+/// lie (the band's arrays in the vector kernels), not copied per block.
 #[derive(Clone, Copy, Debug)]
-pub struct RayLanes<const L: usize> {
-    pub x: [f32; L],
-    pub y: [f32; L],
-    pub z: [f32; L],
-    pub t0: [f32; L],
-    pub t1: [f32; L],
+pub struct RayLanes<'a, const L: usize> {
+    pub x: &'a [f32; L],
+    pub y: &'a [f32; L],
+    pub z: &'a [f32; L],
+    pub t0: &'a [f32; L],
+    pub t1: &'a [f32; L],
 }
 
-impl RayLanes<1> {
-    pub fn one(ray: &CameraRay) -> Self {
-        RayLanes { x: [ray.dir.x], y: [ray.dir.y], z: [ray.dir.z], t0: [ray.t0], t1: [ray.t1] }
+impl<'a> RayLanes<'a, 1> {
+    pub fn one(ray: &'a CameraRay) -> Self {
+        use std::array::from_ref;
+        RayLanes {
+            x: from_ref(&ray.dir.x),
+            y: from_ref(&ray.dir.y),
+            z: from_ref(&ray.dir.z),
+            t0: from_ref(&ray.t0),
+            t1: from_ref(&ray.t1),
+        }
     }
 }
 
@@ -178,7 +186,7 @@ impl<D: Denominator> PlaneJob<'_, D> {
     #[inline(always)]
     pub fn gather_lanes<const L: usize, const GREY: bool, const CONTRIBUTE: bool>(
         &self,
-        rays: &RayLanes<L>,
+        rays: &RayLanes<'_, L>,
         sums: [&mut [f32; L]; 3],
         hits: &mut [u32; L],
     ) {
@@ -221,7 +229,7 @@ impl<D: Denominator> PlaneJob<'_, D> {
     #[inline(always)]
     pub fn gather_lanes_in<const L: usize, const CONTRIBUTE: bool>(
         &self,
-        rays: &RayLanes<L>,
+        rays: &RayLanes<'_, L>,
         sums: [&mut [f32; L]; 3],
         hits: &mut [u32; L],
     ) {

@@ -201,7 +201,9 @@ fn plane_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
 ) -> u64 {
     let job = job.clone();
     let (rays, sums) = (&band.rays, &mut band.sums);
-    let lanes = |s: &[f32], i: usize| -> [f32; LANES] { s[i..i + LANES].try_into().unwrap() };
+    fn lanes(s: &[f32], i: usize) -> &[f32; LANES] {
+        s[i..i + LANES].try_into().unwrap()
+    }
     let mut hits = [0u32; LANES];
     for span in spans {
         let (start, end) = (span.start as usize, (span.start + span.len) as usize);

@@ -276,8 +276,13 @@ impl ScreenRaster {
                 let mut hits = [0u32];
                 let (rays, sums) = (&kernel_band.rays, &mut kernel_band.sums);
                 for k in spans.iter().flat_map(|s| s.start as usize..(s.start + s.len) as usize) {
-                    let one =
-                        RayLanes { x: [rays.x[k]], y: [rays.y[k]], z: [rays.z[k]], t0: [rays.t0[k]], t1: [rays.t1[k]] };
+                    let one = RayLanes {
+                        x: std::array::from_ref(&rays.x[k]),
+                        y: std::array::from_ref(&rays.y[k]),
+                        z: std::array::from_ref(&rays.z[k]),
+                        t0: std::array::from_ref(&rays.t0[k]),
+                        t1: std::array::from_ref(&rays.t1[k]),
+                    };
                     let sums = [
                         std::array::from_mut(&mut sums.r[k]),
                         std::array::from_mut(&mut sums.g[k]),
