@@ -238,10 +238,6 @@ fn check_chunk_memory(scene: &Scene, chunks: usize) -> Result<()> {
     Ok(())
 }
 
-/// Ray sets kept between chunks up to this many bytes (beyond, each chunk makes those it needs
-/// again: the same rays, a little more time).
-const RAY_CACHE_BYTES: usize = 256 << 20;
-
 /// The pieces a set of `planes` splits into for gathering: the canonical chunks cut further
 /// where a group of planes with its own ray set ends ([`crate::pixel::plane_group`]), in plane
 /// order, each with its ray set. Each is one gathering over the image.
@@ -264,16 +260,17 @@ pub fn gatherings(planes: usize, ray_sets: u32, range: Range<usize>) -> u64 {
         .sum()
 }
 
-/// Renders chunks of one render: the scene, the settings, the kernel, the camera rays of the
-/// ray sets (made once if they fit [`RAY_CACHE_BYTES`]).
+/// Renders chunks of one render: the scene, the settings, the kernel, and the camera rays of
+/// the last ray set used. Chunks are rendered in plane order and a ray set serves one group of
+/// consecutive planes, so a set is needed again only by the next piece, across a chunk's end:
+/// keeping the last one makes each set once, in the memory of one.
 pub struct ChunkRenderer<'a> {
     scene: &'a Scene,
     opts: &'a RenderOptions,
     kernel: Kernel,
     control: Control<'a>,
     fingerprint: String,
-    rays: Vec<Option<Vec<CameraRay>>>,
-    keep_rays: bool,
+    last_rays: Option<(u32, Vec<CameraRay>)>,
     pub stats: RenderStats,
 }
 
@@ -282,17 +279,13 @@ impl<'a> ChunkRenderer<'a> {
     pub fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>) -> Result<Self> {
         opts.validate(scene)?;
         let kernel = opts.kernel.resolve()?;
-        let pixels = scene.camera.width as usize * scene.camera.height as usize;
-        let ray_sets = opts.ray_sets();
-        let ray_bytes = pixels.saturating_mul(std::mem::size_of::<CameraRay>()).saturating_mul(ray_sets as usize);
         Ok(ChunkRenderer {
             scene,
             opts,
             kernel,
             control,
             fingerprint: fingerprint(scene, opts),
-            rays: vec![None; ray_sets as usize],
-            keep_rays: ray_bytes <= RAY_CACHE_BYTES,
+            last_rays: None,
             stats: RenderStats {
                 estimator: opts.weighting.label(),
                 kernel: kernel.to_string(),
@@ -303,23 +296,16 @@ impl<'a> ChunkRenderer<'a> {
         })
     }
 
-    /// The rays of ray set `k`, taken from the cache or made ([`ChunkRenderer::put_back`]
-    /// returns them).
-    fn take_rays(&mut self, k: u32) -> Vec<CameraRay> {
-        if let Some(r) = self.rays[k as usize].take() {
-            return r;
+    /// The rays of ray set `k`: the last set's if it is `k`, else made now (and kept).
+    fn rays(&mut self, k: u32) -> &[CameraRay] {
+        if self.last_rays.as_ref().is_none_or(|(last, _)| *last != k) {
+            let t = Instant::now();
+            let rays = ray_set_rays(self.scene, self.opts.seed, k, self.opts.pixel_center);
+            self.stats.seconds_rays += t.elapsed().as_secs_f64();
+            self.stats.rays += rays.len() as u64;
+            self.last_rays = Some((k, rays));
         }
-        let t = Instant::now();
-        let rays = ray_set_rays(self.scene, self.opts.seed, k, self.opts.pixel_center);
-        self.stats.seconds_rays += t.elapsed().as_secs_f64();
-        self.stats.rays += rays.len() as u64;
-        rays
-    }
-
-    fn put_back(&mut self, k: u32, rays: Vec<CameraRay>) {
-        if self.keep_rays {
-            self.rays[k as usize] = Some(rays);
-        }
+        self.last_rays.as_ref().map_or(&[], |(_, rays)| rays)
     }
 
     /// Gathers planes `range` of the render, each weighted 1 and each with the ray set it meets
@@ -329,10 +315,10 @@ impl<'a> ChunkRenderer<'a> {
         let o = self.opts;
         for (k, piece) in pieces(o.planes, o.ray_sets(), range) {
             let prepared = PreparedPlanes::range(self.scene, piece, 1, o.seed, o.sampler, o.accelerator, self.control)?;
-            let rays = self.take_rays(k);
+            let (kernel, control) = (self.kernel, self.control);
+            let rays = self.rays(k);
             let t = Instant::now();
-            let s = prepared.gather(o.weighting, self.kernel, &rays, sums, self.control);
-            self.put_back(k, rays);
+            let s = prepared.gather(o.weighting, kernel, rays, sums, control);
             self.stats.add_gather(&prepared, s?, t.elapsed().as_secs_f64());
         }
         Ok(())
