@@ -10,7 +10,7 @@
 
 use crate::camera::Camera;
 use crate::light::RectLight;
-use crate::photon_plane::Polygon;
+use crate::photon_plane::{Polygon, clip_segment};
 use crate::pixel::{PanelFootprints, ray_set_position};
 use crate::sampling::{rng_for, unit_f64};
 use crate::scene::Scene;
@@ -295,29 +295,6 @@ fn project_segment(cam: &Camera, a: DVec3, b: DVec3, near: f64) -> Option<(DVec2
     clip_segment(p, q, DVec2::splat(-1.0), grown)
 }
 
-/// The part of the segment `p`-`q` inside the box `[lo, hi]` (Liang and Barsky), if any.
-fn clip_segment(p: DVec2, q: DVec2, lo: DVec2, hi: DVec2) -> Option<(DVec2, DVec2)> {
-    let d = q - p;
-    let (mut s0, mut s1) = (0.0f64, 1.0f64);
-    for axis in 0..2 {
-        for (num, den) in [(p[axis] - lo[axis], -d[axis]), (hi[axis] - p[axis], d[axis])] {
-            if den == 0.0 {
-                if num < 0.0 {
-                    return None;
-                }
-            } else {
-                let s = num / den;
-                if den < 0.0 {
-                    s0 = s0.max(s);
-                } else {
-                    s1 = s1.min(s);
-                }
-            }
-        }
-    }
-    (s0 <= s1).then(|| (p + d * s0, p + d * s1))
-}
-
 /// Marks every pixel whose square (grown by [`MARGIN`]) the image segment `p`-`q` meets.
 fn mark_segment(marked: &mut [bool], width: u32, height: u32, p: DVec2, q: DVec2) {
     let d = q - p;
@@ -440,14 +417,6 @@ mod tests {
         let mut m = vec![false; 60];
         mark_segment(&mut m, w, h, DVec2::new(-5.0, 20.0), DVec2::new(-1.0, 30.0));
         assert!(m.iter().all(|&x| !x));
-    }
-
-    #[test]
-    fn clipping_keeps_the_inside() {
-        let (lo, hi) = (DVec2::ZERO, DVec2::new(2.0, 1.0));
-        let (a, b) = clip_segment(DVec2::new(-1.0, 0.5), DVec2::new(3.0, 0.5), lo, hi).unwrap();
-        assert_eq!((a, b), (DVec2::new(0.0, 0.5), DVec2::new(2.0, 0.5)));
-        assert!(clip_segment(DVec2::new(-1.0, 2.0), DVec2::new(3.0, 2.0), lo, hi).is_none());
     }
 
     #[test]

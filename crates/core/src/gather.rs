@@ -19,10 +19,10 @@
 
 use crate::light::RectLight;
 use crate::numeric::exp_f32;
-use crate::photon_plane::PhotonPlane;
+use crate::photon_plane::{PhotonPlane, clip_segment};
 use crate::scene::Scene;
 use crate::weights::{Denominator, HitLanes, PlaneFrame};
-use glam::{DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 
 /// A camera ray: unit direction (f32, origin at the camera) and its segment `[t0, t1]` inside
 /// the medium before the first light panel (empty, `t0 > t1`, when there is none).
@@ -494,23 +494,8 @@ fn segment_meets_rectangle(points: &[(f64, f64)], w: f64, h: f64, m: f64) -> boo
         .copied()
         .max_by(|p, q| (p.0 - a.0).hypot(p.1 - a.1).total_cmp(&(q.0 - a.0).hypot(q.1 - a.1)))
         .unwrap_or(a);
-    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-    let (mut t0, mut t1) = (0.0f64, 1.0f64);
-    for (p, q) in [(-dx, a.0 + m), (dx, w + m - a.0), (-dy, a.1 + m), (dy, h + m - a.1)] {
-        if p == 0.0 {
-            if q < 0.0 {
-                return false;
-            }
-        } else {
-            let r = q / p;
-            if p < 0.0 {
-                t0 = t0.max(r);
-            } else {
-                t1 = t1.min(r);
-            }
-        }
-    }
-    t0 <= t1
+    let (a, b) = (DVec2::new(a.0, a.1), DVec2::new(b.0, b.1));
+    clip_segment(a, b, DVec2::splat(-m), DVec2::new(w + m, h + m)).is_some()
 }
 
 #[cfg(test)]

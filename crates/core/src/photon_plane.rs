@@ -11,7 +11,7 @@ use crate::light::{ChordDirection, chord_extent};
 use crate::medium::{Medium, PHASE};
 use crate::sampling::{Discrete, Sampler, cosine_hemisphere};
 use crate::scene::Scene;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -130,6 +130,29 @@ impl<T: Copy + Default> Polygon<T> {
     }
 }
 
+/// The part of the segment `p`-`q` inside the box `[lo, hi]` (Liang and Barsky), if any.
+pub fn clip_segment(p: DVec2, q: DVec2, lo: DVec2, hi: DVec2) -> Option<(DVec2, DVec2)> {
+    let d = q - p;
+    let (mut s0, mut s1) = (0.0f64, 1.0f64);
+    for axis in 0..2 {
+        for (num, den) in [(p[axis] - lo[axis], -d[axis]), (hi[axis] - p[axis], d[axis])] {
+            if den == 0.0 {
+                if num < 0.0 {
+                    return None;
+                }
+            } else {
+                let s = num / den;
+                if den < 0.0 {
+                    s0 = s0.max(s);
+                } else {
+                    s1 = s1.min(s);
+                }
+            }
+        }
+    }
+    (s0 <= s1).then(|| (p + d * s0, p + d * s1))
+}
+
 impl PhotonPlane {
     /// The plane's polygon inside the medium box grown by `margin` on every side: the chord
     /// swept along wl as far as the box diagonal, clipped by the six faces.
@@ -155,6 +178,14 @@ impl PhotonPlane {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn segment_clipping_keeps_the_inside() {
+        let (lo, hi) = (DVec2::ZERO, DVec2::new(2.0, 1.0));
+        let (a, b) = clip_segment(DVec2::new(-1.0, 0.5), DVec2::new(3.0, 0.5), lo, hi).unwrap();
+        assert_eq!((a, b), (DVec2::new(0.0, 0.5), DVec2::new(2.0, 0.5)));
+        assert!(clip_segment(DVec2::new(-1.0, 2.0), DVec2::new(3.0, 2.0), lo, hi).is_none());
+    }
 
     fn scene() -> Scene {
         let text = include_str!("../../../media_scenes/six_lights.toml");
