@@ -33,8 +33,8 @@ const MARGIN: f64 = 1e-3;
 /// transmittances, which vary by about a thousandth across a pixel of the benchmark).
 const SAMPLES_GRID: u32 = 4;
 
-/// Below this fraction of a pixel, a panel's projection is taken not to meet it: the emission
-/// it could add is below the f32 rounding of the pixel.
+/// Below this fraction of a pixel, a panel's projection is taken not to meet it (section 8.2):
+/// a bias of at most `1e-9 max Le` in that pixel.
 const TINY_AREA: f64 = 1e-9;
 
 /// The direct emission of every pixel: the mean of `E` over the pixel (section 8.2), or `E` at
