@@ -3,13 +3,14 @@
 //! fogplanes-bench -- weight` one group.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use fogplanes::accel::{Accelerator, PreparedPlanes};
 use fogplanes::control::Control;
 use fogplanes::gather::GatherContext;
 use fogplanes::kernel::Kernel;
+use fogplanes::photon_plane::PlaneSet;
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::pixel::ray_set_rays;
 use fogplanes::raster::ScreenRaster;
-use fogplanes::render::{Accelerator, PreparedPlanes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::weights::{Denominator, HitLocal, PlaneFrame, Weighting, WithDenominator};
@@ -38,17 +39,23 @@ fn planes_and_structure(c: &mut Criterion) {
 
 fn gathering(c: &mut Criterion) {
     let s = scene().with_resolution(160, 90).unwrap();
-    let prepared =
-        PreparedPlanes::new(&s, 40_960, 1, Sampler::default(), Accelerator::Raster, Control::none()).unwrap();
+    let prepared = PreparedPlanes::new(
+        &s,
+        PlaneSet { sampler: Sampler::default(), seed: 1 },
+        0..40_960,
+        Accelerator::Raster,
+        Control::none(),
+    )
+    .unwrap();
     let rays = ray_set_rays(&s, 1, 0, false);
     let mut sums = vec![Vec3::ZERO; rays.len()];
     let kernel = Kernel::Auto.resolve().unwrap();
     let hits = prepared.gather(Weighting::default(), kernel, &rays, &mut sums, Control::none()).unwrap().hits;
     let mut g = c.benchmark_group("gather 160x90, 40960 planes");
     g.sample_size(10).measurement_time(Duration::from_secs(4)).throughput(Throughput::Elements(hits));
-    let raster = prepared.raster.as_ref().unwrap();
+    let raster = prepared.raster().unwrap();
     g.bench_function("intersections only", |b| {
-        b.iter(|| raster.count_hits(&prepared.context, kernel, black_box(&rays)))
+        b.iter(|| raster.count_hits(prepared.context(), kernel, black_box(&rays)))
     });
     for w in Weighting::all(&[4]) {
         g.bench_function(BenchmarkId::from_parameter(w.label()), |b| {

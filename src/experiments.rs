@@ -16,15 +16,16 @@ use crate::report::{
 use crate::system::{cpu_seconds, peak_memory_bytes};
 use anyhow::{Context, Result};
 use fogplanes::control::Control;
+use fogplanes::emission::direct_emission;
 use fogplanes::film::{Film, write_file_atomically};
-use fogplanes::kernel::Kernel;
+use fogplanes::gather::GatherStats;
 use fogplanes::metrics::compare;
-use fogplanes::pixel::{DEFAULT_RAY_SETS, PixelSettings, PreparedPixels};
-use fogplanes::render::{RenderOptions, render, render_for};
+use fogplanes::options::RenderOptions;
+use fogplanes::render::{ChunkRenderer, render, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
-use fogplanes::settings::ResolvedTable;
-use fogplanes::weights::{Estimator, Weighting};
+use fogplanes::settings::{ResolvedScaling, ResolvedTable};
+use fogplanes::weights::Estimator;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -50,13 +51,7 @@ fn equal_time(
     for &sampler in &opts.settings.samplers {
         for &weighting in &opts.settings.weightings {
             let entry = Entry { weighting, sampler };
-            let options = RenderOptions {
-                weighting,
-                sampler,
-                seed: opts.settings.seed,
-                pixel_center: opts.settings.pixel_center,
-                ..RenderOptions::default()
-            };
+            let options = opts.settings.render_options(weighting, sampler, opts.settings.planes, opts.settings.seed);
             let (film, st) = render_for(scene, &options, std::time::Duration::from_secs_f64(budget), Control::none())?;
             let metrics = compare(&film, reference)?;
             log(format!("equal time: {} {} planes in {:.2} s", entry.label(), st.planes, st.seconds_total));
@@ -85,34 +80,29 @@ fn equal_time(
     Ok(rows)
 }
 
-/// One measurement: every weighting over the plane set of each sampler.
-fn measure(
-    scene: &Scene,
-    weightings: &[Weighting],
-    samplers: &[Sampler],
-    planes: usize,
-    seed: u64,
-    pixel_center: bool,
-) -> Vec<Measured> {
-    let kernel = Kernel::Auto.resolve().expect("auto always resolves");
+/// One measurement: every weighting over the plane set of each sampler, the same planes along
+/// the same rays as `render` (the same bits as its image), prepared once per sampler.
+fn measure(settings: &ResolvedTable, planes: usize, seed: u64) -> Result<Vec<Measured>> {
+    let scene = &settings.scene;
     let mut out = Vec::new();
-    for &sampler in samplers {
-        // The render's whole pixels (or pixel centres): its ray sets, plane groups and emission.
-        let settings = PixelSettings { planes, ray_sets: DEFAULT_RAY_SETS, seed, sampler, pixel_center };
-        let prepared = PreparedPixels::new(scene, settings, Control::none()).expect("never cancelled");
-        let shared_seconds = prepared.seconds;
-        for &weighting in weightings {
+    for &sampler in &settings.samplers {
+        let t = Instant::now();
+        let opts = settings.render_options(settings.weightings[0], sampler, planes, seed);
+        let mut prepared = ChunkRenderer::prepared(scene, &opts, Control::none())?;
+        let emission = direct_emission(scene, seed, opts.spp(), opts.pixel_center());
+        let shared_seconds = t.elapsed().as_secs_f64();
+        for &weighting in &settings.weightings {
+            let before = prepared.stats().clone();
             let t = Instant::now();
-            let (sums, stats) = prepared.gather(weighting, kernel, Control::none()).expect("never cancelled");
+            let partial = prepared.render_with(weighting, 0..planes)?;
+            let film = Film::finish(scene.camera.width, scene.camera.height, &partial.sums, planes, &emission);
             let gather_seconds = t.elapsed().as_secs_f64();
-            let mut film = Film::new(scene.camera.width, scene.camera.height);
-            for ((f, s), e) in film.pixels.iter_mut().zip(&sums).zip(&prepared.emission) {
-                *f = *s + *e;
-            }
+            let after = prepared.stats();
+            let stats = GatherStats { tests: after.tests - before.tests, hits: after.hits - before.hits };
             out.push(Measured { entry: Entry { weighting, sampler }, film, stats, gather_seconds, shared_seconds });
         }
     }
-    out
+    Ok(out)
 }
 
 /// Renders, measures and writes table.md, table.json, panel.png, error_vs_time.png/.svg and
@@ -131,14 +121,7 @@ pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
         opts.settings.samplers.len(),
         opts.settings.planes
     ));
-    let results = measure(
-        scene,
-        weightings,
-        &opts.settings.samplers,
-        opts.settings.planes,
-        opts.settings.seed,
-        opts.settings.pixel_center,
-    );
+    let results = measure(opts.settings, opts.settings.planes, opts.settings.seed)?;
     let mut rows = Vec::new();
     for r in &results {
         let (m, stats, gather) = (compare(&r.film, reference)?, r.stats, r.gather_seconds);
@@ -185,14 +168,7 @@ pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
         let mut acc: Vec<(f64, f64, f64, f64)> = vec![(0.0, 0.0, 0.0, 0.0); results.len()];
         for s in 0..opts.settings.sweep_seeds {
             let seed = opts.settings.seed.wrapping_add(1000).wrapping_add(s as u64);
-            for (a, r) in acc.iter_mut().zip(measure(
-                scene,
-                weightings,
-                &opts.settings.samplers,
-                n,
-                seed,
-                opts.settings.pixel_center,
-            )) {
+            for (a, r) in acc.iter_mut().zip(measure(opts.settings, n, seed)?) {
                 let m = compare(&r.film, reference)?;
                 let g = r.gather_seconds;
                 *a = (a.0 + m.mse, a.1 + m.smape, a.2 + g, a.3 + r.shared_seconds + g);
@@ -223,7 +199,7 @@ pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
         reference: opts.reference_path.display().to_string(),
         resolution: [scene.camera.width, scene.camera.height],
         pixel_center: opts.settings.pixel_center,
-        filter: pixel_filter(opts.settings.pixel_center, DEFAULT_RAY_SETS),
+        filter: pixel_filter(opts.settings.pixel_center, opts.settings.spp),
         seed: opts.settings.seed,
         shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
@@ -274,21 +250,13 @@ pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
 /// Renders over a grid of plane counts and resolutions, and writes scaling.json, scaling.md and
 /// seconds_vs_hits.png/.svg (log-log, one line per resolution): whether time grows linearly
 /// with the number of hits.
-pub fn run_scaling(
-    scene: &Scene,
-    weighting: Weighting,
-    sampler: Sampler,
-    planes: &[usize],
-    resolutions: &[(u32, u32)],
-    out: &std::path::Path,
-    quiet: bool,
-) -> Result<String> {
-    let base = RenderOptions { weighting, sampler, ..RenderOptions::default() };
+pub fn run_scaling(scene: &Scene, study: &ResolvedScaling, out: &std::path::Path, quiet: bool) -> Result<String> {
+    let base = study.render_options(study.planes[0]);
     let mut points = Vec::new();
-    for &(w, h) in resolutions {
+    for &(w, h) in &study.resolutions {
         let s = scene.with_resolution(w, h)?;
-        for &n in planes {
-            let opts = RenderOptions { planes: n, ..base.clone() };
+        for &n in &study.planes {
+            let opts = study.render_options(n);
             let cpu = cpu_seconds();
             let (_, st) = render(&s, &opts, Control::none())?;
             let cpu = cpu.zip(cpu_seconds()).map(|(a, b)| b - a);
@@ -332,10 +300,10 @@ pub fn run_scaling(
 fn scaling_heading(scene: &str, opts: &RenderOptions) -> String {
     format!(
         "{scene} with {}, {} planes, {}, seed {}, {} threads",
-        opts.weighting,
-        opts.sampler,
-        pixel_filter(opts.pixel_center, opts.ray_sets()),
-        opts.seed,
+        opts.weighting(),
+        opts.sampler(),
+        pixel_filter(opts.pixel_center(), opts.ray_sets()),
+        opts.seed(),
         rayon::current_num_threads()
     )
 }
@@ -347,15 +315,24 @@ mod tests {
     /// The scaling table's heading says what the renders used, not what they once did.
     #[test]
     fn the_scaling_heading_comes_from_the_options() {
-        let opts =
-            RenderOptions { seed: 9, pixel_center: true, sampler: Sampler::Independent, ..RenderOptions::default() };
+        let scene = Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap();
+        let given = fogplanes::settings::Overrides {
+            seed: Some(9),
+            pixel_center: true,
+            sampler: Some(Sampler::Independent),
+            ..Default::default()
+        };
+        let opts = given.resolve(&scene).unwrap().options;
         let heading = scaling_heading("fog", &opts);
         assert!(
-            heading
-                .starts_with(&format!("fog with {}, independent planes, pixel-centre rays, seed 9, ", opts.weighting)),
+            heading.starts_with(&format!(
+                "fog with {}, independent planes, pixel-centre rays, seed 9, ",
+                opts.weighting()
+            )),
             "{heading}"
         );
-        let heading = scaling_heading("fog", &RenderOptions { seed: 3, ..RenderOptions::default() });
+        let given = fogplanes::settings::Overrides { seed: Some(3), ..Default::default() };
+        let heading = scaling_heading("fog", &given.resolve(&scene).unwrap().options);
         assert!(heading.contains("whole pixels (box filter, 16 ray sets), seed 3, "), "{heading}");
     }
 }

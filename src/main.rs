@@ -12,17 +12,17 @@ use anyhow::{Context, Result, anyhow};
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use experiments::{TableOptions, run_table};
+use fogplanes::accel::Accelerator;
 use fogplanes::control::Control;
 use fogplanes::film::{Film, check_writable, write_file_atomically};
 use fogplanes::kernel::Kernel;
+use fogplanes::merge::{Merged, merge_parts};
 use fogplanes::metrics::compare;
+use fogplanes::options::RenderOptions;
 use fogplanes::outputs::{Output, check_outputs};
-use fogplanes::partial::parts::{
-    Merged, merge_parts, read_pilot, save_pilot_part, save_reference_part, save_render_part,
-};
-use fogplanes::partial::render_chunk;
+use fogplanes::partial::parts::{read_pilot, save_pilot_part, save_reference_part, save_render_part};
 use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference};
-use fogplanes::render::{Accelerator, RenderOptions, progress_units, render, render_for};
+use fogplanes::render::{progress_units, render, render_chunk, render_for};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
@@ -498,7 +498,7 @@ fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     start_threads(r.threads)?;
 
     let bar =
-        progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes), opts.weighting.label().as_str());
+        progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes()), opts.weighting().label().as_str());
     let cpu = system::cpu_seconds();
     let (film, stats) = match r.time_budget {
         None => render(scene, opts, Control::with_progress(&|| bar.inc(1)))?,
@@ -538,12 +538,12 @@ fn render_part(
     threads: Option<usize>,
 ) -> Result<(), Failure> {
     check_partial_output(part)?;
-    let (start, end) = a.plane_range.unwrap_or((0, opts.planes as u64));
+    let (start, end) = a.plane_range.unwrap_or((0, opts.planes() as u64));
     let range = start as usize..end as usize;
-    fogplanes::partial::chunk_indices(opts.planes, &range)?;
+    fogplanes::partial::chunk_indices(opts.planes(), &range)?;
     start_threads(threads)?;
     let units = progress_units(scene, opts, range.clone());
-    let bar = progress_bar(a.common.quiet, units, opts.weighting.label().as_str());
+    let bar = progress_bar(a.common.quiet, units, opts.weighting().label().as_str());
     let (partial, stats) = render_chunk(scene, opts, range, Control::with_progress(&|| bar.inc(1)))?;
     bar.finish_and_clear();
     save_render_part(part, scene, opts, &partial)?;
@@ -792,8 +792,7 @@ fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
     let (plot, files) = (a.out.join("seconds_vs_hits.png"), SCALING_FILES.map(|f| a.out.join(f)));
     check_outputs(&[&[Output::Image(&plot)][..], &files.each_ref().map(|p| Output::File(p))].concat())?;
     start_threads(r.threads)?;
-    let md =
-        experiments::run_scaling(&scene, r.weighting, r.sampler, &r.planes, &r.resolutions, &a.out, a.common.quiet)?;
+    let md = experiments::run_scaling(&scene, &r, &a.out, a.common.quiet)?;
     say!("{md}");
     Ok(())
 }

@@ -3,11 +3,13 @@
 //! fuzz_scene::` fuzzes for longer): no input panics, and every scene that loads renders only
 //! finite, non-negative pixels.
 
+use crate::common::options;
 use fogplanes::control::Control;
 use fogplanes::limits::MAX_SCENE_FILE_BYTES;
-use fogplanes::render::{RenderOptions, render};
+use fogplanes::render::render;
 use fogplanes::scene::Scene;
-use fogplanes::weights::{Estimator, Weighting};
+use fogplanes::settings::Overrides;
+use fogplanes::weights::Estimator;
 use proptest::prelude::*;
 
 const BASE: &str = include_str!("../media_scenes/six_lights.toml");
@@ -177,12 +179,13 @@ proptest! {
             prop_assert!(e.to_string().starts_with("random.toml"));
         }
         if let Ok(scene) = loaded {
-            let opts = RenderOptions {
-                planes: 300,
-                weighting: Weighting::new(Estimator::ALL[estimator], None).unwrap(),
-                seed,
-                ..RenderOptions::default()
+            let given = Overrides {
+                planes: Some(300),
+                estimator: Some(Estimator::ALL[estimator]),
+                seed: Some(seed),
+                ..Overrides::default()
             };
+            let opts = options(&scene, given);
             let (film, _) = render(&scene, &opts, Control::none()).unwrap();
             prop_assert!(film.all_finite_non_negative(), "{}", text);
         }

@@ -5,11 +5,13 @@
 //! The default run is sized for CI; `cargo test --release -- --ignored hard_scenes_in_depth`
 //! runs the heavy version (more planes, seeds and pixels) and prints the table for the notes.
 
+use crate::common::options;
 use fogplanes::control::Control;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{RenderOptions, render};
+use fogplanes::render::render;
 use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
 use fogplanes::weights::{Estimator, Weighting};
 use std::path::PathBuf;
 
@@ -55,13 +57,17 @@ fn check(size: &Size) {
             let weighting = Weighting::new(estimator, None).unwrap();
             let (mut image_mean, mut largest) = (MeanEstimate::default(), 0.0f32);
             for seed in 0..size.seeds {
-                let opts = RenderOptions {
-                    planes: size.planes,
-                    weighting,
-                    seed: 100 + seed,
-                    pixel_center: true,
-                    ..RenderOptions::default()
-                };
+                let opts = options(
+                    &scene,
+                    Overrides {
+                        planes: Some(size.planes as u64),
+                        estimator: Some(weighting.estimator),
+                        orientations: Some(weighting.orientations),
+                        seed: Some(100 + seed),
+                        pixel_center: true,
+                        ..Overrides::default()
+                    },
+                );
                 let (film, _) = render(&scene, &opts, Control::none()).unwrap();
                 if !film.all_finite_non_negative() {
                     failures.push(format!("{name} {estimator} seed {seed}: a pixel is negative, NaN or infinite"));
@@ -99,8 +105,10 @@ fn hard_scenes_in_depth() {
 #[test]
 fn scaled_scenes_render_the_same_image() {
     let load = |p: &str| Scene::load(std::path::Path::new(p)).unwrap().with_resolution(48, 27).unwrap();
-    let opts = RenderOptions { planes: 3000, seed: 4, pixel_center: true, ..RenderOptions::default() };
-    let (base, _) = render(&load("media_scenes/six_lights.toml"), &opts, Control::none()).unwrap();
+    let six = load("media_scenes/six_lights.toml");
+    let opts =
+        options(&six, Overrides { planes: Some(3000), seed: Some(4), pixel_center: true, ..Overrides::default() });
+    let (base, _) = render(&six, &opts, Control::none()).unwrap();
     for p in ["media_scenes/hard/scaled_1e-3.toml", "media_scenes/hard/scaled_1e4.toml"] {
         let (img, _) = render(&load(p), &opts, Control::none()).unwrap();
         let m = fogplanes::metrics::compare(&img, &base).unwrap();
@@ -131,8 +139,17 @@ fn rays_in_a_lights_plane_get_nothing() {
     for w in Weighting::all(&[4]) {
         let mut estimate = [MeanEstimate::default(); 3];
         for seed in 0..64 {
-            let opts =
-                RenderOptions { planes: 4000, weighting: w, seed, pixel_center: true, ..RenderOptions::default() };
+            let opts = options(
+                &scene,
+                Overrides {
+                    planes: Some(4000),
+                    estimator: Some(w.estimator),
+                    orientations: Some(w.orientations),
+                    seed: Some(seed),
+                    pixel_center: true,
+                    ..Overrides::default()
+                },
+            );
             let (film, _) = render(&scene, &opts, Control::none()).unwrap();
             for i in 0..cam.width {
                 assert_eq!(film.get(i, middle), glam::Vec3::ZERO, "{w} seed {seed}: pixel ({i}, {middle}) is lit");

@@ -2,14 +2,19 @@
 //! merged in any order give the whole render bit for bit, merges refuse parts that do not make
 //! one image, reference bands give the whole reference, and the command line round-trips.
 
+use crate::common::options;
 use fogplanes::control::Control;
 use fogplanes::film::Film;
-use fogplanes::partial::{CHUNK_PLANES, Partial, chunks, combine, finish, merge_in_canonical_order, render_chunk};
+use fogplanes::limits::CHUNK_PLANES;
+use fogplanes::options::RenderOptions;
+use fogplanes::partial::{Partial, chunks, combine, finish, merge_in_canonical_order};
 use fogplanes::reference::{
     ReferenceOptions, reference_counts, reference_pilot_rows, reference_rows, render_reference,
 };
-use fogplanes::render::{RenderOptions, render};
+use fogplanes::render::render;
+use fogplanes::render::render_chunk;
 use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
@@ -40,7 +45,16 @@ fn chunks_merged_in_any_order_equal_the_whole_render_bit_for_bit() {
     for (planes, spp, pixel_center) in
         [(5 * CHUNK_PLANES + 1000, 16, false), (CHUNK_PLANES + 77, 1, false), (CHUNK_PLANES + 77, 16, true)]
     {
-        let o = RenderOptions { planes, spp, seed: 5, pixel_center, ..RenderOptions::default() };
+        let o = options(
+            &s,
+            Overrides {
+                planes: Some(planes as u64),
+                spp: Some(spp),
+                seed: Some(5),
+                pixel_center: pixel_center,
+                ..Overrides::default()
+            },
+        );
         let (whole, stats) = render(&s, &o, Control::none()).unwrap();
         // Each ray set is made once, though its group of planes may straddle two chunks.
         assert_eq!(stats.rays, 40 * 24 * o.ray_sets() as u64);
@@ -74,11 +88,15 @@ fn chunks_merged_in_any_order_equal_the_whole_render_bit_for_bit() {
 fn merges_refuse_parts_that_do_not_make_one_render() {
     let s = scene(16, 9);
     let planes = 2 * CHUNK_PLANES + 10;
-    let o = RenderOptions { planes, seed: 2, ..RenderOptions::default() };
+    let o = options(&s, Overrides { planes: Some(planes as u64), seed: Some(2), ..Overrides::default() });
     let c: Vec<Partial> = chunks(planes).into_iter().map(|r| chunk(&s, &o, r)).collect();
     let message = |parts: Vec<Partial>| merge_in_canonical_order(parts).unwrap_err().to_string();
     // Another seed: another render.
-    let other = chunk(&s, &RenderOptions { seed: 3, ..o.clone() }, 2 * CHUNK_PLANES..planes);
+    let other = chunk(
+        &s,
+        &options(&s, Overrides { planes: Some(planes as u64), seed: Some(3), ..Overrides::default() }),
+        2 * CHUNK_PLANES..planes,
+    );
     let m = message(vec![c[0].clone(), c[1].clone(), other.clone()]);
     assert!(m.contains("different renders"), "{m}");
     assert!(combine(&c[1], &other).unwrap_err().to_string().contains("different renders"));
@@ -98,7 +116,14 @@ fn merges_refuse_parts_that_do_not_make_one_render() {
     // Finishing: all planes, of this render.
     assert!(finish(&s, &o, &c[0]).unwrap_err().to_string().contains("do not cover"));
     let all = merge_in_canonical_order(c.clone()).unwrap();
-    assert!(finish(&s, &RenderOptions { seed: 3, ..o.clone() }, &all).is_err());
+    assert!(
+        finish(
+            &s,
+            &options(&s, Overrides { planes: Some(planes as u64), seed: Some(3), ..Overrides::default() }),
+            &all
+        )
+        .is_err()
+    );
     // A range that is not the chunks'.
     for bad in [1..CHUNK_PLANES, 0..planes + 1, 5..5] {
         let e = render_chunk(&s, &o, bad.clone(), Control::none()).unwrap_err();

@@ -3,19 +3,32 @@
 //! bit-identical images for every estimator and K; the BVH the same hits; images do not depend
 //! on the thread count.
 
+use crate::common::options;
+use fogplanes::accel::Accelerator;
 use fogplanes::control::Control;
 use fogplanes::kernel::Kernel;
-use fogplanes::render::{Accelerator, RenderOptions, render, render_in_passes};
+use fogplanes::options::RenderOptions;
+use fogplanes::render::{render, render_in_passes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
 use fogplanes::weights::{Estimator, Weighting};
 
 fn scene(file: &str, w: u32, h: u32) -> Scene {
     Scene::load(std::path::Path::new(file)).unwrap().with_resolution(w, h).unwrap()
 }
 
-fn options(weighting: Weighting, accelerator: Accelerator, kernel: Kernel, planes: usize) -> RenderOptions {
-    RenderOptions { planes, weighting, seed: 5, accelerator, kernel, ..RenderOptions::default() }
+fn with(s: &Scene, weighting: Weighting, accelerator: Accelerator, kernel: Kernel, planes: usize) -> RenderOptions {
+    let given = Overrides {
+        planes: Some(planes as u64),
+        estimator: Some(weighting.estimator),
+        orientations: Some(weighting.orientations),
+        seed: Some(5),
+        accelerator: Some(accelerator),
+        kernel: Some(kernel),
+        ..Overrides::default()
+    };
+    options(s, given)
 }
 
 /// Every estimator and K through every kernel path: the six-light scene (grey, with planes that
@@ -29,10 +42,10 @@ fn every_kernel_gives_bit_identical_images() {
         let s = scene(file, 64, 36);
         for w in Weighting::all(&[1, 3, 4, 8]) {
             let (reference, rs) =
-                render(&s, &options(w, Accelerator::BruteForce, Kernel::Auto, 1500), Control::none()).unwrap();
+                render(&s, &with(&s, w, Accelerator::BruteForce, Kernel::Auto, 1500), Control::none()).unwrap();
             assert!(rs.hits > 10_000, "{file} {w}: {} hits", rs.hits);
             for &k in &kernels {
-                let (image, st) = render(&s, &options(w, Accelerator::Raster, k, 1500), Control::none()).unwrap();
+                let (image, st) = render(&s, &with(&s, w, Accelerator::Raster, k, 1500), Control::none()).unwrap();
                 assert_eq!(st.hits, rs.hits, "{file} {w} {k}: hit counts differ");
                 assert!(image.pixels == reference.pixels, "{file} {w} {k}: the image differs from brute force");
             }
@@ -44,7 +57,7 @@ fn every_kernel_gives_bit_identical_images() {
 fn a_kernel_the_cpu_lacks_is_a_clear_error() {
     let s = scene("media_scenes/six_lights.toml", 16, 9);
     for k in Kernel::ALL.into_iter().filter(|k| !k.is_available()) {
-        let e = render(&s, &options(Weighting::default(), Accelerator::Raster, k, 100), Control::none()).unwrap_err();
+        let e = Overrides { kernel: Some(k), ..Overrides::default() }.resolve(&s).unwrap_err();
         // Named neutrally by the library, as each front end spells it by them.
         assert!(e.to_string().starts_with("kernel: this CPU cannot run"), "{e}");
         assert!(e.worded(|s| s.flag()).starts_with("--kernel: "), "{e}");
@@ -55,8 +68,8 @@ fn a_kernel_the_cpu_lacks_is_a_clear_error() {
 fn bvh_finds_the_same_hits() {
     let s = scene("media_scenes/six_lights.toml", 64, 36);
     let w = Weighting::default();
-    let (bvh, bs) = render(&s, &options(w, Accelerator::Bvh, Kernel::Auto, 2000), Control::none()).unwrap();
-    let (slow, ss) = render(&s, &options(w, Accelerator::BruteForce, Kernel::Auto, 2000), Control::none()).unwrap();
+    let (bvh, bs) = render(&s, &with(&s, w, Accelerator::Bvh, Kernel::Auto, 2000), Control::none()).unwrap();
+    let (slow, ss) = render(&s, &with(&s, w, Accelerator::BruteForce, Kernel::Auto, 2000), Control::none()).unwrap();
     assert_eq!(bs.hits, ss.hits);
     assert!(bs.tests < ss.tests / 2, "the BVH should prune: {} tests against {}", bs.tests, ss.tests);
     // Same hits in another order: equal up to float summation order.
@@ -68,7 +81,7 @@ fn bvh_finds_the_same_hits() {
 #[test]
 fn images_do_not_depend_on_the_thread_count() {
     let s = scene("media_scenes/six_lights.toml", 96, 54);
-    let opts = options(Weighting::default(), Accelerator::Raster, Kernel::Auto, 4000);
+    let opts = with(&s, Weighting::default(), Accelerator::Raster, Kernel::Auto, 4000);
     let render_with = |threads| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| render(&s, &opts, Control::none()).unwrap().0)
@@ -91,9 +104,10 @@ fn raster_matches_brute_force_in_the_hard_camera_placements() {
         let s = scene(&format!("media_scenes/hard/{file}.toml"), 48, 31);
         for e in [Estimator::Unweighted, Estimator::SmisExact] {
             let w = Weighting::new(e, None).unwrap();
-            let (fast, fs) = render(&s, &options(w, Accelerator::Raster, Kernel::Auto, 2000), Control::none()).unwrap();
+            let (fast, fs) =
+                render(&s, &with(&s, w, Accelerator::Raster, Kernel::Auto, 2000), Control::none()).unwrap();
             let (slow, ss) =
-                render(&s, &options(w, Accelerator::BruteForce, Kernel::Auto, 2000), Control::none()).unwrap();
+                render(&s, &with(&s, w, Accelerator::BruteForce, Kernel::Auto, 2000), Control::none()).unwrap();
             assert_eq!(fs.hits, ss.hits, "{file} {e}: hit counts differ");
             assert!(fast.pixels == slow.pixels, "{file} {e}: images differ");
         }
@@ -109,12 +123,15 @@ fn a_render_in_passes_is_the_render_of_its_planes() {
     let s = scene("media_scenes/six_lights.toml", 64, 36);
     for sampler in Sampler::ALL {
         for (spp, schedule) in [(1, vec![256usize, 256, 512, 1000, 0]), (16, vec![16_400, 0])] {
-            let opts = RenderOptions { seed: 3, sampler, spp, ..RenderOptions::default() };
+            let opts = Overrides { seed: Some(3), sampler: Some(sampler), spp: Some(spp), ..Overrides::default() };
             let mut pass = schedule.iter();
-            let (passes, ps) = render_in_passes(&s, &opts, Control::none(), &mut |_, _| *pass.next().unwrap()).unwrap();
+            let (passes, ps) =
+                render_in_passes(&s, &options(&s, opts.clone()), Control::none(), &mut |_, _| *pass.next().unwrap())
+                    .unwrap();
             let planes = schedule.iter().sum();
             assert_eq!((ps.planes, ps.plane_passes), (planes, schedule.len() as u32 - 1));
-            let (fixed, fs) = render(&s, &RenderOptions { planes, ..opts }, Control::none()).unwrap();
+            let (fixed, fs) =
+                render(&s, &options(&s, Overrides { planes: Some(planes as u64), ..opts }), Control::none()).unwrap();
             assert_eq!(ps.hits, fs.hits, "{sampler}");
             for (a, b) in passes.pixels.iter().zip(&fixed.pixels) {
                 assert!((*a - *b).abs().max_element() <= 1e-5 * b.max_element() + 1e-9, "{sampler}: {a} vs {b}");

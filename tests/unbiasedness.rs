@@ -5,7 +5,8 @@
 //! The ground truth (`fogplanes::quadrature::single_scattering`) shares only the scene
 //! description with the estimators.
 
-use fogplanes::gather::{CameraRay, GatherContext};
+use fogplanes::camera::CameraRay;
+use fogplanes::gather::GatherContext;
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::sampling::Sampler;

@@ -11,17 +11,22 @@
 //!
 //! Fixed seeds throughout; every tolerance is in standard errors measured from the samples.
 
+use crate::common::options;
+use fogplanes::accel::PreparedPlanes;
+use fogplanes::camera::CameraRay;
 use fogplanes::control::Control;
 use fogplanes::film::Film;
-use fogplanes::gather::{CameraRay, GatherContext};
-use fogplanes::partial::{CHUNK_PLANES, chunks, finish, merge_in_canonical_order, render_chunk};
+use fogplanes::gather::GatherContext;
+use fogplanes::limits::CHUNK_PLANES;
+use fogplanes::partial::{chunks, finish, merge_in_canonical_order};
 use fogplanes::photon_plane::sample_plane_range;
 use fogplanes::pixel::{plane_group, ray_set_of_plane, ray_set_rays};
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{PreparedPlanes, RenderOptions, render, render_in_passes};
+use fogplanes::render::{render, render_chunk, render_in_passes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
 use fogplanes::weights::Weighting;
 use glam::{DVec3, Vec3};
 
@@ -182,7 +187,7 @@ sigma_a = 0.0
             let scene = Scene::parse(&format!("{camera}{lights}"), "c.toml", "c").unwrap();
             let mut tally = MeanRgb::default();
             for seed in 0..100 {
-                let opts = RenderOptions { planes: 16, seed, ..RenderOptions::default() };
+                let opts = options(&scene, Overrides { planes: Some(16), seed: Some(seed), ..Overrides::default() });
                 let (film, _) = render(&scene, &opts, Control::none()).unwrap();
                 tally.add(film.get(3, 4));
             }
@@ -311,7 +316,15 @@ fn whole_pixel_images_match_the_reference() {
         let s = if file == "crossing" { crossing.clone() } else { scene(file, 32, 18) };
         let name = format!("{file}{}", if pixel_center { " (pixel centres)" } else { "" });
         failures.extend(against_reference(&name, &s, pixel_center, 64, &|seed| {
-            let opts = RenderOptions { planes: 1500, seed: 40 + seed, pixel_center, ..RenderOptions::default() };
+            let opts = options(
+                &s,
+                Overrides {
+                    planes: Some(1500),
+                    seed: Some(40 + seed),
+                    pixel_center: pixel_center,
+                    ..Overrides::default()
+                },
+            );
             render(&s, &opts, Control::none()).unwrap().0
         }));
     }
@@ -324,7 +337,7 @@ fn whole_pixel_images_match_the_reference() {
 fn a_render_in_passes_matches_the_reference() {
     let s = scene("media_scenes/six_lights.toml", 32, 18);
     let failures = against_reference("passes", &s, false, 24, &|seed| {
-        let opts = RenderOptions { seed: 70 + seed, ..RenderOptions::default() };
+        let opts = options(&s, Overrides { seed: Some(70 + seed), ..Overrides::default() });
         let mut schedule = [256usize, 256, 512, 3000, 0].into_iter();
         render_in_passes(&s, &opts, Control::none(), &mut |_, _| schedule.next().unwrap()).unwrap().0
     });
@@ -339,11 +352,11 @@ fn a_render_in_passes_matches_the_reference() {
 fn plane_ranges_rendered_apart_add_up_to_the_render() {
     let s = scene("media_scenes/six_lights.toml", 48, 27);
     let planes = 2 * CHUNK_PLANES + 5000;
-    let opts = RenderOptions { planes, seed: 9, ..RenderOptions::default() };
-    assert_eq!(ray_set_of_plane(planes - 1, planes, opts.spp), opts.spp - 1);
+    let opts = options(&s, Overrides { planes: Some(planes as u64), seed: Some(9), ..Overrides::default() });
+    assert_eq!(ray_set_of_plane(planes - 1, planes, opts.spp()), opts.spp() - 1);
     // The groups (of 2360 or 2361 planes) straddle the chunk boundaries.
-    assert!(chunks(planes).iter().any(|c| (0..opts.spp).any(|k| {
-        let g = plane_group(k, planes, opts.spp);
+    assert!(chunks(planes).iter().any(|c| (0..opts.spp()).any(|k| {
+        let g = plane_group(k, planes, opts.spp());
         g.start < c.start && c.start < g.end
     })));
     let parts: Vec<_> =
@@ -352,22 +365,14 @@ fn plane_ranges_rendered_apart_add_up_to_the_render() {
     let (film, _) = render(&s, &opts, Control::none()).unwrap();
     assert_eq!(finish(&s, &opts, &merged).unwrap(), film);
     // Each group alone, along its ray set.
-    let kernel = opts.kernel.resolve().unwrap();
+    let kernel = opts.kernel();
     let mut groups = vec![DVec3::ZERO; 48 * 27];
-    for k in 0..opts.spp {
-        let prepared = PreparedPlanes::range(
-            &s,
-            plane_group(k, planes, opts.spp),
-            1,
-            opts.seed,
-            opts.sampler,
-            opts.accelerator,
-            Control::none(),
-        )
-        .unwrap();
-        let rays = ray_set_rays(&s, opts.seed, k, false);
+    for k in 0..opts.spp() {
+        let group = plane_group(k, planes, opts.spp());
+        let prepared = PreparedPlanes::new(&s, opts.plane_set(), group, opts.accelerator(), Control::none()).unwrap();
+        let rays = ray_set_rays(&s, opts.seed(), k, false);
         let mut sums = vec![Vec3::ZERO; groups.len()];
-        prepared.gather(opts.weighting, kernel, &rays, &mut sums, Control::none()).unwrap();
+        prepared.gather(opts.weighting(), kernel, &rays, &mut sums, Control::none()).unwrap();
         groups.iter_mut().zip(&sums).for_each(|(g, s)| *g += s.as_dvec3());
     }
     let largest = groups.iter().map(|v| v.max_element()).fold(0.0f64, f64::max);
@@ -376,7 +381,7 @@ fn plane_ranges_rendered_apart_add_up_to_the_render() {
         assert!((*a - *b).abs().max_element() <= 1e-5 * largest, "{a} vs {b}");
     }
     // The render is those sums over N plus the emission.
-    let emission = fogplanes::emission::direct_emission(&s, opts.seed, opts.spp, false);
+    let emission = fogplanes::emission::direct_emission(&s, opts.seed(), opts.spp(), false);
     for ((f, g), e) in film.pixels.iter().zip(&groups).zip(&emission) {
         let expected = (*g / planes as f64).as_vec3() + *e;
         assert!((*f - expected).abs().max_element() <= 1e-5 * f.max_element().max(1e-3), "{f} vs {expected}");

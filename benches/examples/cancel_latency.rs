@@ -2,10 +2,12 @@
 //! delay and prints the time from setting it to the render's return (a measurement, not a
 //! test). `cargo run --release -p fogplanes-bench --example cancel_latency -- SCENE [PLANES]`.
 
+use fogplanes::accel::Accelerator;
 use fogplanes::control::Control;
 use fogplanes::reference::{ReferenceOptions, render_reference};
-use fogplanes::render::{Accelerator, RenderOptions, render, render_for};
+use fogplanes::render::{render, render_for};
 use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
@@ -40,7 +42,9 @@ fn main() {
         (Accelerator::BruteForce, &[8.0]),
     ] {
         for &d in delays {
-            let opts = RenderOptions { planes, accelerator, ..RenderOptions::default() };
+            let given =
+                Overrides { planes: Some(planes as u64), accelerator: Some(accelerator), ..Overrides::default() };
+            let opts = given.resolve(&scene).unwrap().options;
             let (units, latency) = cancel_after(Duration::from_secs_f64(d), |c| render(&scene, &opts, c).map(|_| ()));
             println!(
                 "render {planes} planes {accelerator}: cancelled after {d} s ({units} units done), stopped in {:.1} ms",
@@ -49,7 +53,7 @@ fn main() {
         }
     }
     for d in [0.5, 3.0, 10.0] {
-        let opts = RenderOptions::default();
+        let opts = Overrides::default().resolve(&scene).unwrap().options;
         let (units, latency) = cancel_after(Duration::from_secs_f64(d), |c| {
             render_for(&scene, &opts, Duration::from_secs(3600), c).map(|_| ())
         });

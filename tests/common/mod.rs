@@ -2,8 +2,18 @@
 //! how many standard errors it lies from a truth.
 #![allow(dead_code)] // each test file uses its own part
 
-use fogplanes::gather::{CameraRay, GatherContext};
+use fogplanes::camera::CameraRay;
+use fogplanes::gather::GatherContext;
+use fogplanes::options::RenderOptions;
+use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
 use fogplanes::weights::{Denominator, WithDenominator};
+
+/// The options `given` resolve to for `scene`: the one way to make render options, as every
+/// front end makes them.
+pub fn options(scene: &Scene, given: Overrides) -> RenderOptions {
+    given.resolve(scene).unwrap().options
+}
 
 /// A small fog box with two lights that cannot shadow each other (each lies behind the other's
 /// plane): a ceiling panel facing down, and a small panel tilted in the slab above it facing +x

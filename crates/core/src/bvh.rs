@@ -5,9 +5,11 @@
 //! [`crate::raster`] is the fast path for camera images, this one the baseline it is measured
 //! against (and a second independent path for the hit-equality tests).
 
+use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::error::Result;
-use crate::gather::{CameraRay, GatherContext, GatherStats};
+use crate::gather::{GatherContext, GatherStats};
+use crate::kernel::{Aggregate, Gathering, gather_per_ray};
 use crate::medium::Medium;
 use crate::photon_plane::PhotonPlane;
 use crate::weights::Denominator;
@@ -60,7 +62,7 @@ impl PlaneBvh {
     }
 
     /// One ray's estimate, testing only planes whose boxes the ray's segment crosses.
-    pub fn gather<D: Denominator>(&self, ctx: &GatherContext, weights: &D, ray: &CameraRay) -> (Vec3, GatherStats) {
+    pub fn gather_ray<D: Denominator>(&self, ctx: &GatherContext, weights: &D, ray: &CameraRay) -> (Vec3, GatherStats) {
         let (mut sum, mut stats) = (Vec3::ZERO, GatherStats::default());
         if self.order.is_empty() || !(ray.t0 <= ray.t1) {
             return (sum, stats);
@@ -93,6 +95,19 @@ impl PlaneBvh {
             }
         }
         (sum, stats)
+    }
+}
+
+/// A traversal per ray ([`gather_per_ray`]).
+impl Aggregate for PlaneBvh {
+    fn gather<D: Denominator>(
+        &self,
+        with: Gathering<D>,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> GatherStats {
+        gather_per_ray(rays, sums, control, |ray| self.gather_ray(with.ctx, with.weights, ray))
     }
 }
 

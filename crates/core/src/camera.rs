@@ -1,6 +1,15 @@
 //! The pinhole camera (docs/mathematics.md section 7).
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
+
+/// A camera ray: unit direction (f32, origin at the camera) and its segment `[t0, t1]` inside
+/// the medium before the first light panel (empty, `t0 > t1`, when there is none).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CameraRay {
+    pub dir: Vec3,
+    pub t0: f32,
+    pub t1: f32,
+}
 
 #[derive(Clone, Debug)]
 pub struct Camera {

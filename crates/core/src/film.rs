@@ -4,7 +4,7 @@
 //! destination holds either its old contents or the complete new image, never part of one.
 
 use crate::error::{Error, NonFinitePixel, Result};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -46,6 +46,16 @@ impl Film {
             let channel = (0..3).find(|&c| !p[c].is_finite())?;
             Some(NonFinitePixel { x: (i % w) as u32, y: (i / w) as u32, channel, value: p[channel] })
         })
+    }
+
+    /// The image of a photon-plane render (docs/mathematics.md section 8), the one place an
+    /// image is finished: per pixel, the sum of every plane's contribution (each weighted 1,
+    /// added in f64) divided by the plane count N in f64, rounded to f32 once, plus the direct
+    /// emission over the pixel.
+    pub fn finish(width: u32, height: u32, sums: &[DVec3], planes: usize, emission: &[Vec3]) -> Film {
+        let n = planes as f64;
+        let pixels = sums.iter().zip(emission).map(|(s, e)| (*s / n).as_vec3() + *e).collect();
+        Film { width, height, pixels }
     }
 
     /// Refuses an image holding a NaN or infinite value, naming the first one; `image` says

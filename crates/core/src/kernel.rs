@@ -7,11 +7,13 @@
 //! No operation is fused or reordered between them (Rust never contracts `a * b + c`, and
 //! every operation used is exactly rounded), so every kernel gives bit-identical sums.
 
+use crate::camera::CameraRay;
+use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::gather::{PlaneJob, RayLanes};
+use crate::gather::{GatherContext, GatherStats, PlaneJob, RayLanes};
 use crate::weights::Denominator;
-use std::fmt;
-use std::str::FromStr;
+use glam::Vec3;
+use rayon::prelude::*;
 
 /// How the gathering loop runs over the pixels of a span.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -79,17 +81,71 @@ impl Kernel {
     }
 }
 
-impl fmt::Display for Kernel {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
+crate::named_choice!(Kernel, "kernel");
+
+/// What one gathering call runs: the planes prepared for rays from the camera, the estimator's
+/// weights and the kernel (resolved, see [`Kernel::resolve`]). A new per-call setting is one
+/// field here.
+pub struct Gathering<'a, D: Denominator> {
+    pub ctx: &'a GatherContext,
+    pub weights: &'a D,
+    pub kernel: Kernel,
 }
 
-impl FromStr for Kernel {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::parse_name("kernel", s, &Kernel::ALL, Kernel::name)
+impl<D: Denominator> Clone for Gathering<'_, D> {
+    fn clone(&self) -> Self {
+        *self
     }
+}
+impl<D: Denominator> Copy for Gathering<'_, D> {}
+
+/// An intersection structure over prepared planes (as pbrt-v4's aggregate): what every
+/// accelerator answers, so that a render gathers through one call whichever it built.
+pub trait Aggregate {
+    /// Gathers every plane of `with.ctx` along `rays` (one per pixel, row-major), adding each
+    /// ray's estimate to its entry of `sums`. Reports each unit of work (a band of rows, a chunk
+    /// of rays) to `control`; once it is cancelled, the work stops before the next plane (or
+    /// ray) and `sums` is incomplete.
+    fn gather<D: Denominator>(
+        &self,
+        with: Gathering<D>,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> GatherStats;
+}
+
+/// Rays per parallel work item of the per-ray structures.
+pub const RAY_CHUNK: usize = 4096;
+
+/// The loop of the per-ray structures: chunks of rays in parallel, one progress unit per
+/// chunk, the cancel flag read before each ray (against every plane, a brute-force ray is the
+/// longest unit of work: milliseconds at a million planes). `one` is a ray's estimate.
+pub fn gather_per_ray(
+    rays: &[CameraRay],
+    sums: &mut [Vec3],
+    control: Control,
+    one: impl Fn(&CameraRay) -> (Vec3, GatherStats) + Sync,
+) -> GatherStats {
+    sums.par_chunks_mut(RAY_CHUNK)
+        .zip(rays.par_chunks(RAY_CHUNK))
+        .map(|(sums, rays)| {
+            let mut stats = GatherStats::default();
+            for (sum, ray) in sums.iter_mut().zip(rays) {
+                if control.is_cancelled() {
+                    return stats;
+                }
+                let (value, s) = one(ray);
+                *sum += value;
+                stats += s;
+            }
+            control.progress();
+            stats
+        })
+        .reduce(GatherStats::default, |mut a, b| {
+            a += b;
+            a
+        })
 }
 
 /// Pixels per block: the vector kernels take the rays of a span 16 at a time, as one AVX-512

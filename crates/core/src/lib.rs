@@ -39,6 +39,27 @@
 //! | [`export`] | the scene as a Mitsuba 3 XML file, to check against an outside renderer |
 //! | [`error`] | the library's typed errors |
 
+/// `Display` and `FromStr` of a named choice (estimator, sampler, kernel, accelerator) from its
+/// `name()` and `ALL`: written once, so that every choice prints and parses alike.
+#[macro_export]
+#[doc(hidden)]
+macro_rules! named_choice {
+    ($t:ty, $what:literal) => {
+        impl std::fmt::Display for $t {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+        impl std::str::FromStr for $t {
+            type Err = String;
+            fn from_str(s: &str) -> std::result::Result<Self, String> {
+                $crate::parse_name($what, s, &<$t>::ALL, <$t>::name)
+            }
+        }
+    };
+}
+
+pub mod accel;
 pub mod bvh;
 pub mod camera;
 pub mod control;
@@ -51,8 +72,11 @@ pub mod kernel;
 pub mod light;
 pub mod limits;
 pub mod medium;
+pub mod merge;
 pub mod metrics;
 pub mod numeric;
+pub mod occlusion;
+pub mod options;
 pub mod outputs;
 pub mod partial;
 pub mod photon_plane;
@@ -72,7 +96,8 @@ pub use sampling::sobol;
 
 /// Parses `s` as the member of the closed list `all` whose name it is, or says which names
 /// there are: the `FromStr` of every named choice (estimator, sampler, kernel, accelerator).
-pub(crate) fn parse_name<T: Copy>(
+#[doc(hidden)]
+pub fn parse_name<T: Copy>(
     what: &str,
     s: &str,
     all: &[T],

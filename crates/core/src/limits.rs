@@ -1,5 +1,25 @@
-//! What the library accepts: every range check of a setting lives here, so that scene files,
+//! What the library accepts and what it assumes when nothing is said: every default of a
+//! render, every range check of a setting and the memory rule live here, so that scene files,
 //! the command line and the Python bindings refuse the same things with the same words.
+
+// ---------------------------------------------------------------------------------------------
+// Defaults (a scene's `[render]` table and the caller override them)
+
+/// Planes of a render when neither the caller nor the scene says: the paper's setting.
+pub const DEFAULT_PLANES: u64 = 40_960;
+/// The seed of a render when neither the caller nor the scene says.
+pub const DEFAULT_SEED: u64 = 1;
+/// Ray sets per pixel when neither the command line nor the scene says (`--spp`): chosen by
+/// measurement (README, "Whole pixels").
+pub const DEFAULT_RAY_SETS: u32 = 16;
+/// Planes per canonical chunk ([`crate::partial`]): a power of two, fixed (it never depends on
+/// the number of workers or of planes), small enough that one chunk is a task of a fraction of
+/// a second at 640x360 and holds little memory, large enough that the per-chunk costs (one
+/// pass over the image's bands, the f64 conversion) stay near 1% of a render.
+pub const CHUNK_PLANES: usize = 16_384;
+
+// ---------------------------------------------------------------------------------------------
+// Ranges
 
 /// Scene files larger than this are refused before they are read.
 pub const MAX_SCENE_FILE_BYTES: u64 = 1 << 20;
@@ -83,11 +103,22 @@ pub fn check_sweep_seeds(seeds: u32) -> Result<(), String> {
     Ok(())
 }
 
-/// Refuses, with the figure, a render that would exhaust memory.
-pub fn check_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
-    let bytes = planes
+/// The memory rule of a render of `planes` planes at `width x height` (the scene loader and
+/// every front end apply it, through [`crate::settings`]): it holds one canonical chunk's
+/// planes at a time ([`CHUNK_PLANES`]) and, per pixel, besides [`BYTES_PER_PIXEL`], one f64 sum
+/// per level of the canonical tree over its chunks ([`crate::partial`]); so only the image can
+/// exceed the memory.
+pub fn check_render_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
+    let chunks = planes.div_ceil(CHUNK_PLANES as u64).max(1);
+    let levels = (u64::BITS - chunks.leading_zeros()) as u64 + 1;
+    let held = planes.min(CHUNK_PLANES as u64);
+    let bytes = held
         .saturating_mul(BYTES_PER_PLANE)
-        .saturating_add((width as u64 * height as u64).saturating_mul(BYTES_PER_PIXEL));
+        .saturating_add((width as u64 * height as u64).saturating_mul(BYTES_PER_PIXEL + 24 * levels));
+    budget(width, height, planes, bytes)
+}
+
+fn budget(width: u32, height: u32, planes: u64, bytes: u64) -> Result<(), String> {
     if bytes > MEMORY_BUDGET_BYTES {
         return Err(format!(
             "{width}x{height} pixels with {planes} planes would need about {:.1} GiB; the limit is {} GiB",
@@ -96,6 +127,15 @@ pub fn check_memory(width: u32, height: u32, planes: u64) -> Result<(), String> 
         ));
     }
     Ok(())
+}
+
+/// Refuses, with the figure, work that holds `planes` planes at once (the table, a pass of a render
+/// on a time budget) and would exhaust memory.
+pub fn check_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
+    let bytes = planes
+        .saturating_mul(BYTES_PER_PLANE)
+        .saturating_add((width as u64 * height as u64).saturating_mul(BYTES_PER_PIXEL));
+    budget(width, height, planes, bytes)
 }
 
 #[cfg(test)]

@@ -69,6 +69,14 @@ pub fn sample_plane(scene: &Scene, lights: &Discrete, u: [f64; 5]) -> PhotonPlan
     }
 }
 
+/// Which set of planes: the sampler and the seed that make it. A render's planes are its
+/// set's first N points; any range of them is sampled alike wherever it is ([`sample_plane_range`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlaneSet {
+    pub sampler: Sampler,
+    pub seed: u64,
+}
+
 /// Samples `n` planes, plane `i` from point `i` of the sampler: the set depends on the seed
 /// only.
 pub fn sample_planes(scene: &Scene, sampler: Sampler, n: usize, seed: u64) -> Vec<PhotonPlane> {

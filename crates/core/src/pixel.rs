@@ -9,23 +9,14 @@
 //! ([`ray_set_of_plane`], [`plane_group`], [`ray_set_position`]). The direct emission is
 //! integrated over the pixel separately ([`crate::emission`]).
 
-use crate::control::Control;
-use crate::error::Result;
-use crate::gather::{CameraRay, GatherStats};
-use crate::kernel::Kernel;
-use crate::render::PreparedPlanes;
+use crate::camera::CameraRay;
 use crate::sampling::sobol::{nested_uniform_scramble, sobol_u32};
 use crate::sampling::splitmix64;
 use crate::scene::Scene;
-use crate::weights::Weighting;
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
 use std::ops::Range;
 use std::time::Instant;
-
-/// Ray sets per pixel when neither the command line nor the scene says (`--spp`): chosen by
-/// measurement (README, "Whole pixels").
-pub const DEFAULT_RAY_SETS: u32 = 16;
 
 /// The random stream of the ray sets' positions in their pixels.
 const RAY_SET_STREAM: u64 = 0x91A5_E75D;
@@ -147,108 +138,62 @@ pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec
         .collect()
 }
 
-/// The camera rays of ray sets `0..ray_sets` (one set at pixel centres, which every set
-/// shares), kept for gathering several times: the passes of a render on a time budget (which
-/// makes each set when first needed), the estimators of the table.
+/// Which ray sets a [`RaySets`] keeps once made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Keep {
+    /// The last set made: a chunked render takes its pieces in plane order and a ray set
+    /// serves one group of consecutive planes, so a set is needed again only by the next piece,
+    /// and each set is made once in the memory of one.
+    Last,
+    /// Every set made: passes that come back to the same sets (a render on a time budget), or
+    /// several weightings gathered along the same rays (the table).
+    All,
+}
+
+/// The camera rays of a render's ray sets (one set at pixel centres, which every set shares),
+/// made when first asked for: the one cache of ray sets.
 pub struct RaySets {
     seed: u64,
     pixel_center: bool,
-    sets: Vec<Option<Vec<CameraRay>>>,
-    /// Seconds spent making rays.
+    count: u32,
+    keep: Keep,
+    /// The sets kept, by index.
+    sets: Vec<(u32, Vec<CameraRay>)>,
+    /// Rays made so far (a set made twice counts twice) and the seconds spent making them.
+    pub made: u64,
     pub seconds: f64,
 }
 
 impl RaySets {
-    /// Every set, made now.
-    pub fn new(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool) -> Self {
-        let mut sets = RaySets::empty(seed, ray_sets, pixel_center);
-        for k in 0..sets.sets.len() as u32 {
-            sets.rays(scene, k);
-        }
-        sets
-    }
-
-    /// No set made yet.
-    pub fn empty(seed: u64, ray_sets: u32, pixel_center: bool) -> Self {
+    /// `ray_sets` sets of rays under `seed` (one at pixel centres), none made yet.
+    pub fn new(seed: u64, ray_sets: u32, pixel_center: bool, keep: Keep) -> Self {
         let count = if pixel_center { 1 } else { ray_sets.max(1) };
-        RaySets { seed, pixel_center, sets: vec![None; count as usize], seconds: 0.0 }
+        RaySets { seed, pixel_center, count, keep, sets: Vec::new(), made: 0, seconds: 0.0 }
     }
 
-    /// The rays of ray set `k`, made if need be.
+    /// The rays of ray set `k` (taken modulo the set count), made if need be.
     pub fn rays(&mut self, scene: &Scene, k: u32) -> &[CameraRay] {
-        let k = k as usize % self.sets.len();
-        if self.sets[k].is_none() {
-            let t = Instant::now();
-            self.sets[k] = Some(ray_set_rays(scene, self.seed, k as u32, self.pixel_center));
-            self.seconds += t.elapsed().as_secs_f64();
-        }
-        self.sets[k].as_deref().unwrap_or_default()
-    }
-
-    /// The rays of ray set `k`, made before (empty otherwise).
-    pub fn get(&self, k: u32) -> &[CameraRay] {
-        self.sets[k as usize % self.sets.len()].as_deref().unwrap_or_default()
-    }
-
-    /// Rays made so far.
-    pub fn count(&self) -> u64 {
-        self.sets.iter().flatten().map(|s| s.len() as u64).sum()
+        let k = k % self.count;
+        let index = match self.sets.iter().position(|(set, _)| *set == k) {
+            Some(i) => i,
+            None => {
+                let t = Instant::now();
+                let rays = ray_set_rays(scene, self.seed, k, self.pixel_center);
+                self.seconds += t.elapsed().as_secs_f64();
+                self.made += rays.len() as u64;
+                if self.keep == Keep::Last {
+                    self.sets.clear();
+                }
+                self.sets.push((k, rays));
+                self.sets.len() - 1
+            }
+        };
+        &self.sets[index].1
     }
 
     /// Bytes the rays of `ray_sets` sets take at a resolution (for the memory check).
     pub fn bytes(width: u32, height: u32, ray_sets: u32) -> u64 {
         (width as u64 * height as u64).saturating_mul(ray_sets as u64 * std::mem::size_of::<CameraRay>() as u64)
-    }
-}
-
-/// A render's planes prepared group by group, with the ray sets, for gathering with several
-/// weightings (the table): the same planes along the same rays as [`crate::render::render`].
-pub struct PreparedPixels {
-    groups: Vec<(u32, PreparedPlanes)>,
-    pub rays: RaySets,
-    /// Direct emission over each pixel ([`crate::emission::direct_emission`]).
-    pub emission: Vec<Vec3>,
-    /// Seconds spent sampling planes, building the structures, making rays and emission.
-    pub seconds: f64,
-}
-
-/// How [`PreparedPixels`] are made.
-#[derive(Clone, Copy, Debug)]
-pub struct PixelSettings {
-    pub planes: usize,
-    pub ray_sets: u32,
-    pub seed: u64,
-    pub sampler: crate::sampling::Sampler,
-    pub pixel_center: bool,
-}
-
-impl PreparedPixels {
-    /// [`crate::error::Error::Cancelled`] once `control` is cancelled.
-    pub fn new(scene: &Scene, s: PixelSettings, control: Control) -> Result<Self> {
-        let start = Instant::now();
-        let rays = RaySets::new(scene, s.seed, s.ray_sets, s.pixel_center);
-        let ray_sets = if s.pixel_center { 1 } else { s.ray_sets.max(1) };
-        let groups = (0..ray_sets)
-            .map(|k| (k, plane_group(k, s.planes, ray_sets)))
-            .filter(|(_, g)| !g.is_empty())
-            .map(|(k, g)| {
-                let raster = crate::render::Accelerator::Raster;
-                Ok((k, PreparedPlanes::range(scene, g, s.planes, s.seed, s.sampler, raster, control)?))
-            })
-            .collect::<Result<_>>()?;
-        let emission = crate::emission::direct_emission(scene, s.seed, s.ray_sets, s.pixel_center);
-        Ok(PreparedPixels { groups, rays, emission, seconds: start.elapsed().as_secs_f64() })
-    }
-
-    /// Every group gathered along its ray set with `weighting`: the scattering sums (one per
-    /// pixel, weighted 1/N) and the statistics.
-    pub fn gather(&self, weighting: Weighting, kernel: Kernel, control: Control) -> Result<(Vec<Vec3>, GatherStats)> {
-        let mut sums = vec![Vec3::ZERO; self.emission.len()];
-        let mut stats = GatherStats::default();
-        for (k, prepared) in &self.groups {
-            stats += prepared.gather(weighting, kernel, self.rays.get(*k), &mut sums, control)?;
-        }
-        Ok((sums, stats))
     }
 }
 

@@ -12,9 +12,10 @@
 //! bit-identical for a seed.
 
 use crate::camera::Camera;
+use crate::camera::CameraRay;
 use crate::control::Control;
-use crate::gather::{CameraRay, GatherContext, GatherStats, RayLanes};
-use crate::kernel::{self, Band, Kernel, LANES, Span};
+use crate::gather::{GatherContext, GatherStats, RayLanes};
+use crate::kernel::{self, Aggregate, Band, Gathering, Kernel, LANES, Span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
@@ -26,21 +27,18 @@ pub const BAND_ROWS: u32 = 8;
 /// Slack in pixels around a projected polygon, far above the rounding of the projection.
 const SPAN_MARGIN: f32 = 1e-2;
 
-/// What one gathering call runs: the planes prepared for rays from the camera, the estimator's
-/// weights and the kernel (resolved, see [`Kernel::resolve`]). A new per-call setting is one
-/// field here.
-pub struct Gathering<'a, D: Denominator> {
-    pub ctx: &'a GatherContext,
-    pub weights: &'a D,
-    pub kernel: Kernel,
-}
-
-impl<D: Denominator> Clone for Gathering<'_, D> {
-    fn clone(&self) -> Self {
-        *self
+/// The raster's unit of work is a band of rows: one progress report each.
+impl Aggregate for ScreenRaster {
+    fn gather<D: Denominator>(
+        &self,
+        with: Gathering<D>,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> GatherStats {
+        self.gather_all::<D, true>(with, rays, sums, control)
     }
 }
-impl<D: Denominator> Copy for Gathering<'_, D> {}
 
 /// Projected, image-clipped polygons of all planes, binned into bands of rows.
 pub struct ScreenRaster {
@@ -180,19 +178,6 @@ impl ScreenRaster {
             out[j] = (first <= last).then_some((first, last));
         }
         out
-    }
-
-    /// Gathers every plane into `out` (one RGB sum per pixel, row-major) for the rays `rays`
-    /// (one per pixel), reporting each finished band to `control`. Once `control` is cancelled
-    /// every band stops before its next plane, and `out` is incomplete.
-    pub fn gather<D: Denominator>(
-        &self,
-        with: Gathering<D>,
-        rays: &[CameraRay],
-        out: &mut [Vec3],
-        control: Control,
-    ) -> GatherStats {
-        self.gather_all::<D, true>(with, rays, out, control)
     }
 
     /// Finds every hit without weighting it (the traversal and intersection work alone, for

@@ -1,364 +1,187 @@
-//! The photon-plane renderer: camera rays, direct emission, planes, gathering.
+//! The render drivers: a render of N planes in canonical chunks, a chunk range for another
+//! machine, a render on a time budget in plane passes, and the table's renders of several
+//! weightings over one prepared plane set.
 //!
-//! A render is three steps: sample the planes and build the intersection structure
-//! ([`PreparedPlanes`]), make the camera rays of a ray set ([`crate::pixel::ray_set_rays`]), and gather them
-//! with one weighting ([`PreparedPlanes::gather`]); each group of planes goes with its own ray
-//! set, and the direct emission is integrated over the pixel apart ([`crate::pixel`],
-//! [`crate::emission`]). The table reuses the steps through [`crate::pixel::PreparedPixels`].
+//! Every one of them goes through [`Gatherer::gather`], the one loop over plane groups and ray
+//! sets: a list of pieces of the plane set, each gathered along its ray set
+//! (docs/mathematics.md section 8.1) from the one cache of ray sets ([`RaySets`]), each plane
+//! weighted 1; and every image is finished by [`Film::finish`] (the division by N and the
+//! direct emission, [`crate::emission`]). The options come resolved and checked from
+//! [`crate::settings`]: nothing here checks them again.
 
-use crate::bvh::PlaneBvh;
+use crate::accel::PreparedPlanes;
 use crate::control::Control;
-use crate::error::Setting;
-use crate::error::{Error, Result};
+use crate::emission::direct_emission;
+use crate::error::{Error, Result, Setting};
 use crate::film::Film;
-use crate::gather::GatherStats;
-use crate::gather::{CameraRay, GatherContext};
-use crate::kernel::Kernel;
-use crate::limits::{check_memory, check_planes, check_spp};
-use crate::photon_plane::sample_plane_range;
-use crate::pixel::{RaySets, plane_group};
-use crate::raster::{Gathering, ScreenRaster};
-use crate::sampling::Sampler;
+use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
+use crate::options::{RenderOptions, RenderStats};
+use crate::partial::{Partial, chunk_indices, chunks, combine, fingerprint, pieces, split};
+use crate::pixel::{Keep, RaySets, plane_group};
 use crate::scene::Scene;
-use crate::weights::{Denominator, Weighting, WithDenominator};
-use glam::Vec3;
-use rayon::prelude::*;
+use crate::weights::Weighting;
+use glam::{DVec3, Vec3};
+use std::ops::Range;
 use std::time::Instant;
 
-/// How camera rays find the planes they hit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
-pub enum Accelerator {
-    /// Planes rasterised in screen space (the fast path).
-    #[default]
-    Raster,
-    /// A bounding volume hierarchy over the planes, traversed per ray.
-    Bvh,
-    /// Every ray tests every plane (for checking the others).
-    BruteForce,
+/// The one loop over plane groups and ray sets, with the cache of ray sets and what it measured.
+struct Gatherer<'a> {
+    scene: &'a Scene,
+    opts: &'a RenderOptions,
+    control: Control<'a>,
+    rays: RaySets,
+    stats: RenderStats,
 }
 
-impl Accelerator {
-    pub const ALL: [Accelerator; 3] = [Accelerator::Raster, Accelerator::Bvh, Accelerator::BruteForce];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Accelerator::Raster => "raster",
-            Accelerator::Bvh => "bvh",
-            Accelerator::BruteForce => "brute-force",
-        }
-    }
-}
-
-impl std::fmt::Display for Accelerator {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for Accelerator {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::parse_name("accelerator", s, &Accelerator::ALL, Accelerator::name)
-    }
-}
-
-/// Planes made in pieces of this many, so that the sampled planes never all exist at once:
-/// only their prepared views and screen polygons are kept.
-const PLANE_CHUNK: usize = 16_384;
-
-/// Planes sampled and prepared for gathering from the camera.
-pub struct PreparedPlanes {
-    pub context: GatherContext,
-    pub raster: Option<ScreenRaster>,
-    pub bvh: Option<PlaneBvh>,
-    pub accelerator: Accelerator,
-    /// Seconds spent sampling planes and building the structure.
-    pub seconds_sampling: f64,
-    pub seconds_build: f64,
-}
-
-impl PreparedPlanes {
-    /// The first `planes` planes of the set made with `seed` and `sampler`.
-    pub fn new(
-        scene: &Scene,
-        planes: usize,
-        seed: u64,
-        sampler: Sampler,
-        accelerator: Accelerator,
-        control: Control,
-    ) -> Result<Self> {
-        PreparedPlanes::range(scene, 0..planes, planes, seed, sampler, accelerator, control)
+impl<'a> Gatherer<'a> {
+    fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>, keep: Keep) -> Self {
+        let rays = RaySets::new(opts.seed, opts.ray_sets(), opts.pixel_center, keep);
+        Gatherer { scene, opts, control, rays, stats: RenderStats::new(opts) }
     }
 
-    /// Planes `range` of the set, each weighted as one of `planes_total` (1 leaves the
-    /// division by N to the caller, as passes that extend a set do). [`Error::Cancelled`] once
-    /// `control` is cancelled (checked after each piece of [`PLANE_CHUNK`] planes).
-    pub fn range(
-        scene: &Scene,
-        range: std::ops::Range<usize>,
-        planes_total: usize,
-        seed: u64,
-        sampler: Sampler,
-        accelerator: Accelerator,
-        control: Control,
-    ) -> Result<Self> {
-        let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
-        let origin = scene.camera.position;
-        let mut context = GatherContext::empty(scene, origin);
-        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
-        // The BVH is built over the whole set at once; it keeps the planes while it does.
-        let mut all = Vec::new();
-        for start in range.clone().step_by(PLANE_CHUNK) {
-            control.check()?;
-            let t = Instant::now();
-            let chunk = sample_plane_range(scene, sampler, seed, start..(start + PLANE_CHUNK).min(range.end));
-            seconds_sampling += t.elapsed().as_secs_f64();
-            let t = Instant::now();
-            context.push_planes(scene, &chunk, planes_total);
-            if let Some(r) = &mut raster {
-                r.push_planes(&scene.camera, &chunk, &scene.medium);
-            }
-            seconds_build += t.elapsed().as_secs_f64();
-            if accelerator == Accelerator::Bvh {
-                all.extend(chunk);
-            }
-        }
-        control.check()?;
-        let t = Instant::now();
-        let bvh = match accelerator {
-            Accelerator::Bvh => Some(PlaneBvh::build(&all, &scene.medium, origin, control)?),
-            _ => None,
-        };
-        seconds_build += t.elapsed().as_secs_f64();
-        Ok(PreparedPlanes { context, raster, bvh, accelerator, seconds_sampling, seconds_build })
-    }
-
-    /// Gathers the rays of one pass with `weighting`, adding each ray's estimate to `sums`;
-    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]). Reports each band of rows
-    /// (or chunk of rays) to `control`; once it is cancelled, the work stops before the next
-    /// plane (or ray) and the result is [`Error::Cancelled`], with `sums` incomplete.
-    pub fn gather(
-        &self,
+    /// Gathers each piece `(k, planes)` along ray set `k` with `weighting`, adding into `sums`
+    /// (f32, each plane weighted 1): its planes taken from `prepared` if they are there, else
+    /// sampled and prepared now (one piece's planes exist at a time).
+    fn gather(
+        &mut self,
+        pieces: impl IntoIterator<Item = (u32, Range<usize>)>,
         weighting: Weighting,
-        kernel: Kernel,
-        rays: &[CameraRay],
+        prepared: &[(Range<usize>, PreparedPlanes)],
         sums: &mut [Vec3],
-        control: Control,
-    ) -> Result<GatherStats> {
-        struct Gather<'a> {
-            planes: &'a PreparedPlanes,
-            kernel: Kernel,
-            rays: &'a [CameraRay],
-            sums: &'a mut [Vec3],
-            control: Control<'a>,
-        }
-        impl WithDenominator for Gather<'_> {
-            type Output = GatherStats;
-            fn run<D: Denominator>(self, weights: &D) -> GatherStats {
-                let with = Gathering { ctx: &self.planes.context, weights, kernel: self.kernel };
-                self.planes.gather_with(with, self.rays, self.sums, self.control)
-            }
-        }
-        let stats = weighting.dispatch(Gather { planes: self, kernel, rays, sums, control });
-        control.check()?;
-        Ok(stats)
-    }
-
-    /// [`PreparedPlanes::gather`] with the weights chosen (`with.kernel` serves the raster).
-    fn gather_with<D: Denominator>(
-        &self,
-        with: Gathering<D>,
-        rays: &[CameraRay],
-        sums: &mut [Vec3],
-        control: Control,
-    ) -> GatherStats {
-        if let Some(raster) = &self.raster {
-            return raster.gather(with, rays, sums, control);
-        }
-        let Gathering { ctx, weights, .. } = with;
-        // Per-ray structures: chunks of rays in parallel, one progress unit per chunk, the
-        // cancel flag read before each ray (against every plane, a brute-force ray is the
-        // longest unit of work: milliseconds at a million planes).
-        sums.par_chunks_mut(RAY_CHUNK)
-            .zip(rays.par_chunks(RAY_CHUNK))
-            .map(|(sums, rays)| {
-                let mut stats = GatherStats::default();
-                for (sum, ray) in sums.iter_mut().zip(rays) {
-                    if control.is_cancelled() {
-                        return stats;
-                    }
-                    let (value, s) = match &self.bvh {
-                        Some(bvh) => bvh.gather(ctx, weights, ray),
-                        None => {
-                            let (v, hits) = ctx.gather_brute_force(weights, ray);
-                            (v, GatherStats { tests: ctx.views.len() as u64, hits })
-                        }
-                    };
-                    *sum += value;
-                    stats += s;
+    ) -> Result<()> {
+        let (scene, opts, control) = (self.scene, self.opts, self.control);
+        for (k, piece) in pieces {
+            let made;
+            let planes = match prepared.iter().find(|(r, _)| *r == piece) {
+                Some((_, p)) => p,
+                None => {
+                    made = PreparedPlanes::new(scene, opts.plane_set(), piece, opts.accelerator, control)?;
+                    self.stats.seconds_sampling += made.seconds_sampling;
+                    self.stats.seconds_build += made.seconds_build;
+                    &made
                 }
-                control.progress();
-                stats
-            })
-            .reduce(GatherStats::default, |mut a, b| {
-                a += b;
-                a
-            })
-    }
-}
-
-/// Rays per parallel work item for the per-ray accelerators.
-const RAY_CHUNK: usize = 4096;
-
-/// Settings of one render. `RenderOptions::default()` is the paper's setting (40,960 planes,
-/// smis-exact with the perpendicular pair, one jittered sample per pixel);
-/// [`RenderOptions::from_scene`] takes the scene file's `[render]` table.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RenderOptions {
-    pub planes: usize,
-    pub weighting: Weighting,
-    pub seed: u64,
-    /// Where the planes' random numbers come from.
-    pub sampler: Sampler,
-    /// Camera samples per pixel: ray sets, each gathering its own share of the planes
-    /// (docs/mathematics.md section 8.1), so that more cost about as much as one.
-    pub spp: u32,
-    pub pixel_center: bool,
-    pub accelerator: Accelerator,
-    pub kernel: Kernel,
-}
-
-impl Default for RenderOptions {
-    fn default() -> Self {
-        RenderOptions {
-            planes: 40_960,
-            weighting: Weighting::default(),
-            seed: 1,
-            sampler: Sampler::default(),
-            spp: crate::pixel::DEFAULT_RAY_SETS,
-            pixel_center: false,
-            accelerator: Accelerator::Raster,
-            kernel: Kernel::Auto,
+            };
+            let rays = self.rays.rays(scene, k);
+            let t = Instant::now();
+            let s = planes.gather(weighting, opts.kernel, rays, sums, control)?;
+            self.stats.add_gather(s, t.elapsed().as_secs_f64());
         }
-    }
-}
-
-impl RenderOptions {
-    /// Ray sets per pixel: `spp`, or one at pixel centres (where every set would be the same
-    /// rays).
-    pub fn ray_sets(&self) -> u32 {
-        if self.pixel_center { 1 } else { self.spp.max(1) }
-    }
-
-    /// The scene file's defaults.
-    pub fn from_scene(scene: &Scene) -> Self {
-        let d = &scene.render;
-        RenderOptions {
-            planes: d.planes as usize,
-            weighting: d.weighting,
-            seed: d.seed,
-            sampler: d.sampler,
-            spp: d.spp,
-            ..RenderOptions::default()
-        }
-    }
-
-    /// Checks every setting against the scene (the memory budget at its resolution) and the
-    /// CPU (the kernel), naming the option at fault.
-    pub fn validate(&self, scene: &Scene) -> Result<()> {
-        check_planes(self.planes as u64).map_err(|m| Error::option(Setting::Planes, m))?;
-        check_spp(self.spp).map_err(|m| Error::option(Setting::Spp, m))?;
-        Weighting::new(self.weighting.estimator, Some(self.weighting.orientations))
-            .map_err(|m| Error::option(Setting::Orientations, m))?;
-        // One chunk of planes is held at a time ([`crate::partial`]).
-        let held = self.planes.min(crate::partial::CHUNK_PLANES) as u64;
-        check_memory(scene.camera.width, scene.camera.height, held)
-            .map_err(|m| Error::option(Setting::Resolution, m))?;
-        self.kernel.resolve()?;
+        (self.stats.rays, self.stats.seconds_rays) = (self.rays.made, self.rays.seconds);
         Ok(())
     }
 }
 
-/// What a render measured (wall-clock seconds; CPU time and memory are the caller's to read).
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct RenderStats {
-    pub estimator: String,
-    /// The kernel that ran (`auto` resolved).
-    pub kernel: String,
-    pub planes: usize,
-    /// Plane passes: 1, or more for a render on a time budget ([`render_for`]).
-    pub plane_passes: u32,
-    pub rays: u64,
-    pub hits: u64,
-    pub tests: u64,
-    pub seconds_sampling: f64,
-    pub seconds_build: f64,
-    pub seconds_rays: f64,
-    pub seconds_gather: f64,
-    pub seconds_total: f64,
+/// Renders canonical chunks of one render ([`crate::partial`]) and adds them along the
+/// canonical tree: the render, the chunk ranges of other machines, and the table's renders.
+pub struct ChunkRenderer<'a> {
+    gatherer: Gatherer<'a>,
+    fingerprint: String,
+    /// Pieces prepared ahead (the table's, gathered with several weightings), in plane order.
+    prepared: Vec<(Range<usize>, PreparedPlanes)>,
 }
 
-impl RenderStats {
-    /// Counts one gathering of `planes` that found `s` in `seconds`.
-    pub fn add_gather(&mut self, planes: &PreparedPlanes, s: GatherStats, seconds: f64) {
-        self.seconds_gather += seconds;
-        self.seconds_sampling += planes.seconds_sampling;
-        self.seconds_build += planes.seconds_build;
-        self.hits += s.hits;
-        self.tests += s.tests;
+impl<'a> ChunkRenderer<'a> {
+    /// A renderer that samples each piece's planes when it gathers them, and keeps the last
+    /// ray set (chunks go in plane order, so each set is made once).
+    pub fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>) -> Self {
+        ChunkRenderer {
+            gatherer: Gatherer::new(scene, opts, control, Keep::Last),
+            fingerprint: fingerprint(scene, opts),
+            prepared: Vec::new(),
+        }
     }
 
-    pub fn hits_per_ray(&self) -> f64 {
-        self.hits as f64 / self.rays.max(1) as f64
+    /// A renderer with every piece of the render's planes prepared now and every ray set kept,
+    /// for gathering them with several weightings ([`ChunkRenderer::render_with`]).
+    /// [`Error::Cancelled`] once `control` is cancelled.
+    pub fn prepared(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>) -> Result<Self> {
+        let mut r = ChunkRenderer {
+            gatherer: Gatherer::new(scene, opts, control, Keep::All),
+            fingerprint: fingerprint(scene, opts),
+            prepared: Vec::new(),
+        };
+        for c in chunks(opts.planes) {
+            for (k, piece) in pieces(opts.planes, opts.ray_sets(), c) {
+                let p = PreparedPlanes::new(scene, opts.plane_set(), piece.clone(), opts.accelerator, control)?;
+                r.gatherer.stats.seconds_sampling += p.seconds_sampling;
+                r.gatherer.stats.seconds_build += p.seconds_build;
+                r.gatherer.rays.rays(scene, k);
+                r.prepared.push((piece, p));
+            }
+        }
+        (r.gatherer.stats.rays, r.gatherer.stats.seconds_rays) = (r.gatherer.rays.made, r.gatherer.rays.seconds);
+        Ok(r)
     }
-    pub fn tests_per_hit(&self) -> f64 {
-        self.tests as f64 / self.hits.max(1) as f64
-    }
-    /// Nanoseconds of wall time in gathering per hit.
-    pub fn gather_ns_per_hit(&self) -> f64 {
-        1e9 * self.seconds_gather / self.hits.max(1) as f64
-    }
-    pub fn summary(&self) -> String {
-        format!(
-            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit wall, {} kernel), total {:.3} s",
-            self.estimator,
-            self.planes,
-            self.rays,
-            self.hits,
-            self.hits_per_ray(),
-            self.tests_per_hit(),
-            self.seconds_gather,
-            self.gather_ns_per_hit(),
-            self.kernel,
-            self.seconds_total
-        )
-    }
-}
 
-/// Number of progress units in one pass (for sizing a progress bar).
-pub fn progress_units_per_pass(scene: &Scene, accelerator: Accelerator) -> u64 {
-    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
-    match accelerator {
-        Accelerator::Raster => scene.camera.height.div_ceil(crate::raster::BAND_ROWS) as u64,
-        _ => pixels.div_ceil(RAY_CHUNK as u64),
+    /// What the renderer measured so far.
+    pub fn stats(&self) -> &RenderStats {
+        &self.gatherer.stats
+    }
+
+    /// The partial of canonical chunk `c`, gathered with `weighting`.
+    fn chunk(&mut self, c: usize, weighting: Weighting) -> Result<Partial> {
+        let start = Instant::now();
+        let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
+        let hits = self.gatherer.stats.hits;
+        let range = c * CHUNK_PLANES..((c + 1) * CHUNK_PLANES).min(opts.planes);
+        let cam = &scene.camera;
+        let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
+        let pieces = pieces(opts.planes, opts.ray_sets(), range.clone());
+        self.gatherer.gather(pieces, weighting, &self.prepared, &mut sums)?;
+        Ok(Partial {
+            width: cam.width,
+            height: cam.height,
+            sums: sums.iter().map(|s| s.as_dvec3()).collect(),
+            start: range.start,
+            end: range.end,
+            planes_total: opts.planes,
+            fingerprint: self.fingerprint.clone(),
+            hits: self.gatherer.stats.hits - hits,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The canonical node over chunks `range` (module docs of [`crate::partial`]): left
+    /// subtree, right subtree, added.
+    fn node(&mut self, range: Range<usize>, weighting: Weighting) -> Result<Partial> {
+        if range.len() == 1 {
+            return self.chunk(range.start, weighting);
+        }
+        let m = range.start + split(range.len());
+        let left = self.node(range.start..m, weighting)?;
+        let right = self.node(m..range.end, weighting)?;
+        combine(&left, &right)
+    }
+
+    /// The partial of planes `range`, a union of consecutive canonical chunks, added along the
+    /// canonical tree restricted to them (a node of the whole tree when the range is one).
+    pub fn render(&mut self, range: Range<usize>) -> Result<Partial> {
+        self.render_with(self.gatherer.opts.weighting, range)
+    }
+
+    /// [`ChunkRenderer::render`] with another weighting than the options' (the same planes,
+    /// the same rays: the table).
+    pub fn render_with(&mut self, weighting: Weighting, range: Range<usize>) -> Result<Partial> {
+        let chunks = chunk_indices(self.gatherer.opts.planes, &range)?;
+        self.gatherer.control.check()?;
+        self.node(chunks, weighting)
     }
 }
 
 /// Renders the scene: the mean over each pixel of the direct emission (integrated over the
 /// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
-/// gathered with one of the `spp` ray sets (docs/mathematics.md section 8). Checks the options
-/// first ([`RenderOptions::validate`]). Reports each band of rows (or chunk of rays) to
-/// `control`; once another thread cancels it, the work stops within a plane (or a ray) and the
-/// result is [`Error::Cancelled`].
+/// gathered with one of the `spp` ray sets (docs/mathematics.md section 8). Reports each band of
+/// rows (or chunk of rays) to `control`; once another thread cancels it, the work stops within
+/// a plane (or a ray) and the result is [`Error::Cancelled`].
 ///
 /// The planes are rendered in the canonical chunks of [`crate::partial`] and added along its
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
 /// bit; only one chunk's planes exist at a time.
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
-    let mut chunks = crate::partial::ChunkRenderer::new(scene, opts, control)?;
+    let mut chunks = ChunkRenderer::new(scene, opts, control);
     let partial = chunks.render(0..opts.planes)?;
-    let mut stats = chunks.stats;
+    let mut stats = chunks.gatherer.stats;
     let t = Instant::now();
     let film = crate::partial::finish(scene, opts, &partial)?;
     stats.seconds_rays += t.elapsed().as_secs_f64();
@@ -366,11 +189,29 @@ pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(
     Ok((film, stats))
 }
 
+/// Renders planes `range` of the render `opts` describes (a union of consecutive canonical
+/// chunks) into a [`Partial`], with what it measured. `control` as for [`render`].
+pub fn render_chunk(
+    scene: &Scene,
+    opts: &RenderOptions,
+    range: Range<usize>,
+    control: Control,
+) -> Result<(Partial, RenderStats)> {
+    let start = Instant::now();
+    let mut r = ChunkRenderer::new(scene, opts, control);
+    let partial = r.render(range)?;
+    let mut stats = r.gatherer.stats;
+    stats.planes = partial.end - partial.start;
+    stats.seconds_total = start.elapsed().as_secs_f64();
+    Ok((partial, stats))
+}
+
 /// Progress units of a render of planes `range` (a union of chunks; `0..opts.planes` for a
-/// whole [`render`]): [`progress_units_per_pass`] for every gathering over the image, one per
+/// whole [`render`]): one per unit of work of every gathering over the image, one gathering per
 /// piece of every chunk ([`crate::partial::gatherings`]).
-pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: std::ops::Range<usize>) -> u64 {
-    progress_units_per_pass(scene, opts.accelerator) * crate::partial::gatherings(opts.planes, opts.ray_sets(), range)
+pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: Range<usize>) -> u64 {
+    let per_gathering = opts.accelerator.units_per_gathering(scene.camera.width, scene.camera.height);
+    per_gathering * crate::partial::gatherings(opts.planes, opts.ray_sets(), range)
 }
 
 /// The first pass of a render on a time budget, small so that even the slowest estimator
@@ -430,25 +271,22 @@ pub fn render_in_passes(
     control: Control,
     next_pass: &mut dyn FnMut(usize, f64) -> usize,
 ) -> Result<(Film, RenderStats)> {
-    RenderOptions { planes: FIRST_PASS_PLANES, ..opts.clone() }.validate(scene)?;
-    let kernel = opts.kernel.resolve()?;
     let start = Instant::now();
     let (width, height) = (scene.camera.width, scene.camera.height);
     let ray_sets = opts.ray_sets();
     // The ray sets are kept for every pass: their memory counts as that many planes'.
-    let rays_as_planes = RaySets::bytes(width, height, ray_sets) / crate::limits::BYTES_PER_PLANE;
+    let rays_as_planes = RaySets::bytes(width, height, ray_sets) / BYTES_PER_PLANE;
     check_memory(width, height, rays_as_planes).map_err(|m| Error::option(Setting::Spp, m))?;
-    let mut sets = RaySets::empty(opts.seed, ray_sets, opts.pixel_center);
+    let mut gatherer = Gatherer::new(scene, opts, control, Keep::All);
+    gatherer.stats.plane_passes = 0;
     let pixels = width as usize * height as usize;
-    let mut stats = RenderStats { estimator: opts.weighting.label(), kernel: kernel.to_string(), ..Default::default() };
-    // Each pass sums its planes in f32 weighted 1 (not 1/N, which is known only at the end);
-    // the passes add up in f64, so that the sums stay as far from f32 overflow as a single
-    // pass's.
-    let mut total = vec![glam::DVec3::ZERO; pixels];
+    // Each pass sums its planes in f32 weighted 1 (N is known only at the end); the passes add
+    // up in f64, so that the sums stay as far from f32 overflow as a single pass's.
+    let mut total = vec![DVec3::ZERO; pixels];
     let (mut done, mut per_plane, mut next_set) = (0usize, 0.0, 0u32);
     loop {
         control.check()?;
-        let next = next_pass(done, per_plane).min(crate::limits::MAX_PLANES as usize - done);
+        let next = next_pass(done, per_plane).min(MAX_PLANES as usize - done);
         if next == 0 {
             break;
         }
@@ -456,48 +294,39 @@ pub fn render_in_passes(
         let pass_start = Instant::now();
         // The pass's planes split into groups, each gathered along the next ray set in turn
         // (section 8.1): as many groups as ray sets once a pass has MIN_PASS_GROUP planes per
-        // set, fewer before (a gather costs something per pixel). Weighted as one of 1, the
-        // division by the final count comes at the end.
+        // set, fewer before (a gather costs something per pixel).
         let used = (next / MIN_PASS_GROUP).clamp(1, ray_sets as usize) as u32;
-        let mut sums = vec![Vec3::ZERO; pixels];
-        for g in 0..used {
+        let pass = (0..used).map(|g| {
             let group = plane_group(g, next, used);
-            let range = done + group.start..done + group.end;
-            let prepared = PreparedPlanes::range(scene, range, 1, opts.seed, opts.sampler, opts.accelerator, control)?;
-            let rays = sets.rays(scene, (next_set + g) % ray_sets);
-            let t = Instant::now();
-            let s = prepared.gather(opts.weighting, kernel, rays, &mut sums, control)?;
-            stats.add_gather(&prepared, s, t.elapsed().as_secs_f64());
-        }
+            ((next_set + g) % ray_sets, done + group.start..done + group.end)
+        });
+        let mut sums = vec![Vec3::ZERO; pixels];
+        gatherer.gather(pass, opts.weighting, &[], &mut sums)?;
         next_set = (next_set + used) % ray_sets;
         for (t, s) in total.iter_mut().zip(&sums) {
             *t += s.as_dvec3();
         }
-        stats.plane_passes += 1;
+        gatherer.stats.plane_passes += 1;
         done += next;
         per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
     }
     if done == 0 {
         return Err(Error::option(Setting::TimeBudget, "no plane pass was made"));
     }
-    (stats.rays, stats.seconds_rays) = (sets.count(), sets.seconds);
+    let mut stats = gatherer.stats;
     let t = Instant::now();
-    let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
+    let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
     stats.seconds_rays += t.elapsed().as_secs_f64();
-    let mut film = Film::new(width, height);
-    let inv = 1.0 / done as f64;
-    for ((f, s), e) in film.pixels.iter_mut().zip(&total).zip(&emission) {
-        *f = (*s * inv).as_vec3() + *e;
-    }
     stats.planes = done;
     stats.seconds_total = start.elapsed().as_secs_f64();
-    Ok((film, stats))
+    Ok((Film::finish(width, height, &total, done, &emission), stats))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::weights::{HitLanes, PlaneFrame, Unweighted};
+    use crate::accel::Accelerator;
+    use crate::settings::Overrides;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
     fn small_scene() -> Scene {
@@ -507,7 +336,8 @@ mod tests {
     #[test]
     fn cancelling_stops_a_render_after_the_work_under_way() {
         let scene = small_scene();
-        let opts = RenderOptions { planes: 3000, spp: 3, ..RenderOptions::default() };
+        let given = Overrides { planes: Some(3000), spp: Some(3), ..Overrides::default() };
+        let opts = given.resolve(&scene).unwrap().options;
         // Never set: the same image as without a flag.
         let (a, _) = render(&scene, &opts, Control::none()).unwrap();
         let (b, _) = render(&scene, &opts, Control::with_cancel(&AtomicBool::new(false))).unwrap();
@@ -519,7 +349,7 @@ mod tests {
         // plane (or a ray), and no further unit starts.
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
         for accelerator in Accelerator::ALL {
-            let opts = RenderOptions { accelerator, ..opts.clone() };
+            let opts = Overrides { accelerator: Some(accelerator), ..given.clone() }.resolve(&scene).unwrap().options;
             let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
             let progress = || {
                 units.fetch_add(1, Ordering::Relaxed);
@@ -527,7 +357,7 @@ mod tests {
             };
             let e = pool.install(|| render(&scene, &opts, Control::new(&progress, &cancel))).unwrap_err();
             assert!(matches!(e, Error::Cancelled));
-            let per_pass = progress_units_per_pass(&scene, accelerator) as usize;
+            let per_pass = accelerator.units_per_gathering(scene.camera.width, scene.camera.height) as usize;
             assert!(per_pass >= 3, "{accelerator}: {per_pass} units a pass");
             assert!(
                 units.load(Ordering::Relaxed) <= 2,
@@ -537,75 +367,11 @@ mod tests {
         }
     }
 
-    /// The unweighted D, counting the planes prepared (once per plane and band on the raster,
-    /// once per hit on the per-ray paths) and setting `cancel` when the count reaches `after`:
-    /// a flag set in the middle of a band, where no progress is reported.
-    struct CancelAfter<'a> {
-        prepared: AtomicUsize,
-        after: usize,
-        cancel: &'a AtomicBool,
-    }
-
-    impl Denominator for CancelAfter<'_> {
-        type Plane = PlaneFrame;
-        fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
-            if self.prepared.fetch_add(1, Ordering::Relaxed) + 1 == self.after {
-                self.cancel.store(true, Ordering::Relaxed);
-            }
-            *f
-        }
-        fn denominators<const L: usize>(&self, p: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
-            Unweighted.denominators(p, h, out)
-        }
-    }
-
-    /// Cancelled in the middle of a band, the raster stops before the next plane: each thread
-    /// prepares at most one plane after the flag is set, with every kernel. The per-ray paths
-    /// stop before the next ray: each thread finishes at most the hits of its ray under way.
-    /// Counted in planes prepared, out of the millions a whole pass prepares.
-    #[test]
-    fn cancelling_stops_gathering_within_a_plane_or_a_ray() {
-        let scene = small_scene();
-        let rays = crate::pixel::ray_set_rays(&scene, 1, 0, false);
-        let (planes, after, threads) = (3000, 20, 2);
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        for accelerator in Accelerator::ALL {
-            let prepared =
-                PreparedPlanes::new(&scene, planes, 1, Sampler::default(), accelerator, Control::none()).unwrap();
-            let kernels = if accelerator == Accelerator::Raster { Kernel::available() } else { vec![Kernel::Portable] };
-            for kernel in kernels {
-                let run = |after: usize| {
-                    let cancel = AtomicBool::new(false);
-                    let weights = CancelAfter { prepared: AtomicUsize::new(0), after, cancel: &cancel };
-                    let mut sums = vec![Vec3::ZERO; rays.len()];
-                    let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
-                    let stats =
-                        pool.install(|| prepared.gather_with(with, &rays, &mut sums, Control::with_cancel(&cancel)));
-                    (weights.prepared.into_inner(), stats, cancel.into_inner())
-                };
-                let (whole, whole_stats, set) = run(usize::MAX);
-                assert!(!set && whole > 100 * after, "{accelerator} {kernel}: {whole} planes prepared in a pass");
-                let (done, stats, set) = run(after);
-                assert!(set);
-                let bound = match accelerator {
-                    Accelerator::Raster => after + (threads - 1),
-                    _ => after + threads * planes,
-                };
-                assert!(done <= bound, "{accelerator} {kernel}: {done} planes prepared, at most {bound} expected");
-                // On the raster the ray-plane tests follow the planes (the per-ray paths test
-                // every plane of a ray whether it hits or not).
-                if accelerator == Accelerator::Raster {
-                    assert!(stats.tests < whole_stats.tests / 20, "{kernel}: {stats:?} of {whole_stats:?}");
-                }
-            }
-        }
-    }
-
     /// A render in passes, and so a render on a time budget, stops in the middle of a pass.
     #[test]
     fn cancelling_stops_a_render_in_passes_mid_pass() {
         let scene = small_scene();
-        let opts = RenderOptions::default();
+        let opts = Overrides::default().resolve(&scene).unwrap().options;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
         let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
         let progress = || {
@@ -635,7 +401,10 @@ mod tests {
         };
         let e = render_in_passes(&scene, &opts, Control::new(&count, &cancel), &mut next).unwrap_err();
         assert!(matches!(e, Error::Cancelled));
-        assert_eq!(units.into_inner() as u64, progress_units_per_pass(&scene, Accelerator::Raster));
+        assert_eq!(
+            units.into_inner() as u64,
+            Accelerator::Raster.units_per_gathering(scene.camera.width, scene.camera.height)
+        );
         // On a budget of an hour: the first band ends it.
         let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
         let progress = || {

@@ -5,7 +5,10 @@
 
 use crate::camera::Camera;
 use crate::light::RectLight;
-use crate::limits::{MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_memory, check_planes, check_resolution, check_spp};
+use crate::limits::{
+    DEFAULT_PLANES, DEFAULT_RAY_SETS, DEFAULT_SEED, MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_planes,
+    check_render_memory, check_resolution, check_spp,
+};
 use crate::medium::Medium;
 use crate::sampling::{Discrete, Sampler};
 use crate::weights::{Estimator, Weighting};
@@ -303,23 +306,21 @@ impl Scene {
 
         // Render defaults.
         let r = &desc.render;
-        let planes = r.planes.unwrap_or(40_960);
+        let planes = r.planes.unwrap_or(DEFAULT_PLANES);
         check_planes(planes).map_err(|m| err("render.planes".into(), m))?;
         let estimator = match &r.estimator {
             Some(name) => name.parse::<Estimator>().map_err(|m| err("render.estimator".into(), m))?,
-            None => Estimator::SmisExact,
+            None => Estimator::DEFAULT,
         };
         let weighting = Weighting::new(estimator, r.orientations).map_err(|m| err("render.orientations".into(), m))?;
-        let spp = r.spp.unwrap_or(crate::pixel::DEFAULT_RAY_SETS);
+        let spp = r.spp.unwrap_or(DEFAULT_RAY_SETS);
         check_spp(spp).map_err(|m| err("render.spp".into(), m))?;
         let sampler = match &r.sampler {
             Some(name) => name.parse::<Sampler>().map_err(|m| err("render.sampler".into(), m))?,
             None => Sampler::default(),
         };
-        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(1), spp, sampler };
-        // A render holds one chunk of planes at a time ([`crate::partial`]).
-        let held = planes.min(crate::partial::CHUNK_PLANES as u64);
-        check_memory(camera.width, camera.height, held).map_err(|m| err("camera.resolution".into(), m))?;
+        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(DEFAULT_SEED), spp, sampler };
+        check_render_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
 
         Ok(Scene { name: name.to_string(), camera, medium, lights, render, source: None })
     }

@@ -1,5 +1,6 @@
 //! What a user may set, resolved once: the scene's `[render]` defaults, the library's defaults
-//! and the caller's overrides become checked options, here and nowhere else.
+//! ([`crate::limits`]) and the caller's overrides become checked options. The resolved render
+//! options ([`RenderOptions`]) are built here alone; the renderers trust them.
 //!
 //! Each command has its overrides (plain data: `None` takes the default) and its resolution
 //! ([`resolve_render`], [`resolve_reference`], [`resolve_table`], [`resolve_scaling`]), which
@@ -9,16 +10,16 @@
 //! ([`Error::worded`]): a setting is a closed [`Setting`], named `--planes` on the command line
 //! and `planes=` in Python, and a value the scene gave is named as the scene file names it.
 
+use crate::accel::Accelerator;
 use crate::error::{Error, Result};
 pub use crate::error::{Origin, Setting};
 use crate::kernel::Kernel;
 use crate::limits::{
-    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes, check_resolution,
-    check_seconds, check_spp, check_sweep_seeds, check_threads,
+    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes, check_render_memory,
+    check_resolution, check_seconds, check_spp, check_sweep_seeds, check_threads,
 };
-use crate::partial::CHUNK_PLANES;
+use crate::options::RenderOptions;
 use crate::reference::ReferenceOptions;
-use crate::render::{Accelerator, RenderOptions};
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::weights::{Estimator, Weighting};
@@ -47,8 +48,9 @@ fn scene_at(scene: &Scene, resolution: Option<(u32, u32)>) -> Result<Scene> {
     }
 }
 
-/// `planes` planes at the scene's resolution fit the memory budget; an excess is blamed on the
-/// resolution if the caller gave it, else on the plane count's `setting` and origin.
+/// `planes` planes held at once at the scene's resolution fit the memory budget; an excess is
+/// blamed on the resolution if the caller gave it, else on the plane count's `setting` and
+/// origin.
 fn check_fits(scene: &Scene, planes: u64, resolution: Origin, planes_from: (Setting, Origin)) -> Result<()> {
     let (setting, origin) = if resolution == Origin::Given { (Setting::Resolution, resolution) } else { planes_from };
     check_memory(scene.camera.width, scene.camera.height, planes).map_err(invalid(setting, origin))
@@ -97,7 +99,8 @@ fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
 // render
 
 /// What a caller may set for a photon-plane render (`fogplanes render`, Python `render`). `None`
-/// takes the scene's `[render]` default, else the library's ([`RenderOptions::default`]).
+/// takes the scene's `[render]` default (which the scene took from [`crate::limits`] where its
+/// file says nothing), and the library's for the rest.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Overrides {
     pub estimator: Option<Estimator>,
@@ -138,9 +141,9 @@ pub struct ResolvedRender {
 /// the resolution, the kernel on this CPU).
 pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender> {
     let scene = scene_at(scene, given.resolution)?;
-    let defaults = RenderOptions::from_scene(&scene);
+    let defaults = &scene.render;
     let weighting = weighting(&scene, given.estimator, given.orientations)?;
-    let planes = given.planes.unwrap_or(defaults.planes as u64);
+    let planes = given.planes.unwrap_or(defaults.planes);
     check_planes(planes).map_err(invalid(Setting::Planes, origin(&given.planes)))?;
     let spp = given.spp.unwrap_or(defaults.spp);
     check_spp(spp).map_err(invalid(Setting::Spp, origin(&given.spp)))?;
@@ -153,13 +156,12 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
             ));
         }
     }
-    // A render holds one chunk's planes at a time ([`crate::partial`]), so what can exceed the
-    // memory is the image: the resolution is at fault, the caller's or the scene's. A render on
-    // a time budget sizes its passes to fit (each checks its own memory).
-    let held = if given.time_budget.is_some() { 1 } else { planes.min(CHUNK_PLANES as u64) };
-    check_fits(&scene, held, origin(&given.resolution), (Setting::Resolution, Origin::Scene))?;
-    let kernel = given.kernel.unwrap_or(defaults.kernel);
-    kernel.resolve()?;
+    // A render holds one chunk's planes at a time, so what can exceed the memory is the image:
+    // the resolution is at fault, the caller's or the scene's. A render on a time budget sizes
+    // its passes to fit (each checks its own memory).
+    let held = if given.time_budget.is_some() { 1 } else { planes };
+    check_render_memory(scene.camera.width, scene.camera.height, held)
+        .map_err(invalid(Setting::Resolution, origin(&given.resolution)))?;
     let options = RenderOptions {
         planes: planes as usize,
         weighting,
@@ -167,8 +169,8 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
         sampler: given.sampler.unwrap_or(defaults.sampler),
         spp,
         pixel_center: given.pixel_center,
-        accelerator: given.accelerator.unwrap_or(defaults.accelerator),
-        kernel,
+        accelerator: given.accelerator.unwrap_or_default(),
+        kernel: given.kernel.unwrap_or_default().resolve()?,
     };
     Ok(ResolvedRender {
         scene,
@@ -177,6 +179,13 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
         exposure: exposure(given.exposure)?,
         threads: threads(given.threads)?,
     })
+}
+
+impl Overrides {
+    /// [`resolve_render`] of these overrides.
+    pub fn resolve(&self, scene: &Scene) -> Result<ResolvedRender> {
+        resolve_render(scene, self)
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -267,6 +276,8 @@ pub struct ResolvedTable {
     pub scene: Scene,
     pub planes: usize,
     pub seed: u64,
+    /// Camera samples per pixel: the scene's (the table renders as `render` does).
+    pub spp: u32,
     pub pixel_center: bool,
     /// Plane counts of the sweep (empty: no sweep).
     pub sweep: Vec<usize>,
@@ -308,6 +319,7 @@ pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTa
     Ok(ResolvedTable {
         planes: planes as usize,
         seed: given.seed.unwrap_or(scene.render.seed),
+        spp: scene.render.spp,
         pixel_center: given.pixel_center,
         sweep: sweep.iter().map(|&n| n as usize).collect(),
         sweep_seeds,
@@ -318,6 +330,24 @@ pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTa
         threads: threads(given.threads)?,
         scene,
     })
+}
+
+impl ResolvedTable {
+    /// The options of one of the table's renders: `weighting` with `sampler` over `planes`
+    /// planes (the table's count or one of its sweep, all checked) made with `seed`; the rest
+    /// as `render` with nothing given would take them (the table's pixel filter).
+    pub fn render_options(&self, weighting: Weighting, sampler: Sampler, planes: usize, seed: u64) -> RenderOptions {
+        RenderOptions {
+            planes,
+            weighting,
+            seed,
+            sampler,
+            spp: self.spp,
+            pixel_center: self.pixel_center,
+            accelerator: Accelerator::default(),
+            kernel: Kernel::Auto.resolve().unwrap_or(Kernel::Portable),
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -347,6 +377,23 @@ pub struct ResolvedScaling {
     pub planes: Vec<usize>,
     pub resolutions: Vec<(u32, u32)>,
     pub threads: Option<usize>,
+}
+
+impl ResolvedScaling {
+    /// The options of the study's render of `planes` planes (one of its counts): the rest as
+    /// `render` with nothing given would take them, but the study's estimator and sampler.
+    pub fn render_options(&self, planes: usize) -> RenderOptions {
+        RenderOptions {
+            planes,
+            weighting: self.weighting,
+            seed: crate::limits::DEFAULT_SEED,
+            sampler: self.sampler,
+            spp: crate::limits::DEFAULT_RAY_SETS,
+            pixel_center: false,
+            accelerator: Accelerator::default(),
+            kernel: Kernel::Auto.resolve().unwrap_or(Kernel::Portable),
+        }
+    }
 }
 
 pub fn resolve_scaling(given: &ScalingOverrides) -> Result<ResolvedScaling> {
@@ -401,12 +448,13 @@ mod tests {
             seed: 3,
             sampler: Sampler::Independent,
             spp: 2,
-            ..RenderOptions::default()
+            pixel_center: false,
+            accelerator: Accelerator::Raster,
+            kernel: Kernel::Auto.resolve().unwrap(),
         };
         assert_eq!(r.options, expected);
         assert_eq!((r.time_budget, r.exposure, r.threads), (None, 0.0, None));
         assert_eq!((r.scene.camera.width, r.scene.camera.height), (32, 16));
-        r.options.validate(&r.scene).unwrap();
         // Everything given replaces the scene's.
         let given = Overrides {
             estimator: Some(Estimator::CmisExact),

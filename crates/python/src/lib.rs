@@ -11,13 +11,15 @@
 //! core's cancel flag and raises `KeyboardInterrupt` once the work under way has stopped.
 
 use fogplanes::Error;
+use fogplanes::accel::Accelerator;
 use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::kernel::Kernel;
 use fogplanes::metrics::compare as compare_films;
+use fogplanes::options::RenderStats;
 use fogplanes::partial::{self, Partial, stable_hash};
 use fogplanes::reference::{self as refs, render_reference};
-use fogplanes::render::{Accelerator, RenderStats, render_for};
+use fogplanes::render::render_for;
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
@@ -820,24 +822,23 @@ fn plan_render<'py>(
     scene: &Bound<'py, PyAny>,
     kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let (r, _) = resolve_chunked(scene, kwargs)?;
     let (scene, o) = (&r.scene, &r.options);
-    o.validate(scene).map_err(|e| given.error(e))?;
     let d = PyDict::new(py);
-    d.set_item("planes", o.planes)?;
-    d.set_item("chunk_planes", partial::CHUNK_PLANES)?;
-    let chunks: Vec<(usize, usize)> = partial::chunks(o.planes).into_iter().map(|c| (c.start, c.end)).collect();
+    d.set_item("planes", o.planes())?;
+    d.set_item("chunk_planes", fogplanes::limits::CHUNK_PLANES)?;
+    let chunks: Vec<(usize, usize)> = partial::chunks(o.planes()).into_iter().map(|c| (c.start, c.end)).collect();
     d.set_item("chunks", chunks)?;
     d.set_item("fingerprint", partial::fingerprint(scene, o))?;
     d.set_item("shape", (scene.camera.height, scene.camera.width, 3))?;
-    d.set_item("estimator", o.weighting.estimator.name())?;
-    d.set_item("orientations", o.weighting.orientations)?;
-    d.set_item("seed", o.seed)?;
-    d.set_item("sampler", o.sampler.name())?;
-    d.set_item("spp", o.spp)?;
-    d.set_item("pixel_center", o.pixel_center)?;
-    d.set_item("accelerator", o.accelerator.name())?;
-    d.set_item("kernel", o.kernel.name())?;
+    d.set_item("estimator", o.weighting().estimator.name())?;
+    d.set_item("orientations", o.weighting().orientations)?;
+    d.set_item("seed", o.seed())?;
+    d.set_item("sampler", o.sampler().name())?;
+    d.set_item("spp", o.spp())?;
+    d.set_item("pixel_center", o.pixel_center())?;
+    d.set_item("accelerator", o.accelerator().name())?;
+    d.set_item("kernel", o.kernel().name())?;
     d.set_item("resolution", (scene.camera.width, scene.camera.height))?;
     d.set_item("threads", r.threads)?;
     Ok(d)
@@ -966,7 +967,7 @@ fn render_chunk(
 ) -> PyResult<PyPartial> {
     let (r, given) = resolve_chunked(scene, kwargs)?;
     let (p, _) = run_interruptible(py, pool(r.threads)?, |cancel| {
-        partial::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
+        fogplanes::render::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
     })?
     .map_err(|e| given.error(e))?;
     Ok(PyPartial { inner: p })
@@ -1016,9 +1017,9 @@ fn finish_render<'py>(
     }
     let o = &r.options;
     let stats = RenderStats {
-        estimator: o.weighting.label(),
-        kernel: o.kernel.resolve().map(|k| k.to_string()).unwrap_or_default(),
-        planes: o.planes,
+        estimator: o.weighting().label(),
+        kernel: o.kernel().to_string(),
+        planes: o.planes(),
         plane_passes: 1,
         rays: film.pixels.len() as u64 * o.ray_sets() as u64,
         hits: p.hits,

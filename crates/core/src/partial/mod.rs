@@ -6,7 +6,7 @@
 //! range `0..N` can be rendered apart and the sums added. To make the result independent of who
 //! renders what, every split is made of the same pieces and added in the same order:
 //!
-//! - the **canonical chunks**: `0..C, C..2C, ...` with `C` = [`CHUNK_PLANES`], a fixed power of
+//! - the **canonical chunks**: `0..C, C..2C, ...` with `C` = [`CHUNK_PLANES`](crate::limits::CHUNK_PLANES), a fixed power of
 //!   two that depends on nothing (not on the workers, not on N); the last chunk is shorter;
 //! - a chunk's sum is gathered in f32 (as a whole render gathers), each plane weighted 1, and
 //!   kept as f64 ([`Partial`]);
@@ -14,7 +14,7 @@
 //!   `node(a..b) = node(a..m) + node(m..b)`, `m = a +` the largest power of two below `b - a`
 //!   (pairs 0+1, 2+3, ..., then pairs of pairs, an odd one carried up); [`merge_in_canonical_order`];
 //! - the whole is divided by `N` in f64, rounded to f32 once, and the direct emission added
-//!   once ([`finish`]).
+//!   once ([`finish`], by [`Film::finish`]).
 //!
 //! [`crate::render::render`] itself is exactly these steps, so a render spread over machines is
 //! bit-identical to a render on one, whatever the number of workers, the retries and the order
@@ -23,30 +23,20 @@
 //! Each plane meets in its chunk exactly what it meets in a whole render: its sampler point
 //! (the index in one sequence), its orientations, and the camera rays of its ray set (that of
 //! its group of planes, docs/mathematics.md section 8.1, which depends on its index, N and the
-//! ray set count alone). The one function that gathers a plane range is
-//! [`ChunkRenderer::gather_planes`].
+//! ray set count alone). The renderers that gather chunks are in [`crate::render`].
 
 pub mod file;
 pub mod parts;
 
-use crate::control::Control;
+use crate::emission::direct_emission;
 use crate::error::{Error, Result};
 use crate::film::Film;
-use crate::gather::CameraRay;
-use crate::kernel::Kernel;
-use crate::limits::{BYTES_PER_PIXEL, BYTES_PER_PLANE, MEMORY_BUDGET_BYTES};
-use crate::pixel::{plane_group, ray_set_rays};
-use crate::render::{PreparedPlanes, RenderOptions, RenderStats};
+use crate::limits::CHUNK_PLANES;
+use crate::options::RenderOptions;
+use crate::pixel::plane_group;
 use crate::scene::Scene;
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use std::ops::Range;
-use std::time::Instant;
-
-/// Planes per canonical chunk: a power of two, fixed (it never depends on the number of
-/// workers or of planes), small enough that one chunk is a task of a fraction of a second at
-/// 640x360 and holds little memory, large enough that the per-chunk costs (one pass over the
-/// image's bands, the f64 conversion) stay near 1% of a render.
-pub const CHUNK_PLANES: usize = 16_384;
 
 /// The canonical chunks of a set of `planes` planes, in order.
 pub fn chunks(planes: usize) -> Vec<Range<usize>> {
@@ -156,7 +146,7 @@ pub fn combine(a: &Partial, b: &Partial) -> Result<Partial> {
 }
 
 /// The largest power of two strictly below `n` (n >= 2): where the canonical tree splits.
-fn split(n: usize) -> usize {
+pub(crate) fn split(n: usize) -> usize {
     1 << (usize::BITS - 1 - (n - 1).leading_zeros())
 }
 
@@ -216,28 +206,6 @@ fn merge_node(parts: &mut [Option<Partial>], range: Range<usize>) -> Result<Part
     taken.try_fold(first, |a, b| combine(&a, &b))
 }
 
-/// Bytes a chunked render holds besides its chunk's planes: per pixel, the f32 sums of the
-/// chunk and, along the canonical tree, one f64 sum per level (at most `depth + 1`).
-fn check_chunk_memory(scene: &Scene, chunks: usize) -> Result<()> {
-    let pixels = scene.camera.width as u64 * scene.camera.height as u64;
-    let depth = usize::BITS - chunks.max(1).leading_zeros();
-    let bytes = (CHUNK_PLANES as u64 * BYTES_PER_PLANE)
-        .saturating_add(pixels.saturating_mul(BYTES_PER_PIXEL + 24 * (depth as u64 + 1)));
-    if bytes > MEMORY_BUDGET_BYTES {
-        return Err(Error::option(
-            crate::settings::Setting::Resolution,
-            format!(
-                "{}x{} pixels in {chunks} chunks would need about {:.1} GiB; the limit is {} GiB",
-                scene.camera.width,
-                scene.camera.height,
-                bytes as f64 / (1u64 << 30) as f64,
-                MEMORY_BUDGET_BYTES >> 30
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// The pieces a set of `planes` splits into for gathering: the canonical chunks cut further
 /// where a group of planes with its own ray set ends ([`crate::pixel::plane_group`]), in plane
 /// order, each with its ray set. Each is one gathering over the image.
@@ -260,112 +228,6 @@ pub fn gatherings(planes: usize, ray_sets: u32, range: Range<usize>) -> u64 {
         .sum()
 }
 
-/// Renders chunks of one render: the scene, the settings, the kernel, and the camera rays of
-/// the last ray set used. Chunks are rendered in plane order and a ray set serves one group of
-/// consecutive planes, so a set is needed again only by the next piece, across a chunk's end:
-/// keeping the last one makes each set once, in the memory of one.
-pub struct ChunkRenderer<'a> {
-    scene: &'a Scene,
-    opts: &'a RenderOptions,
-    kernel: Kernel,
-    control: Control<'a>,
-    fingerprint: String,
-    last_rays: Option<(u32, Vec<CameraRay>)>,
-    pub stats: RenderStats,
-}
-
-impl<'a> ChunkRenderer<'a> {
-    /// Checks the options ([`RenderOptions::validate`]).
-    pub fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>) -> Result<Self> {
-        opts.validate(scene)?;
-        let kernel = opts.kernel.resolve()?;
-        Ok(ChunkRenderer {
-            scene,
-            opts,
-            kernel,
-            control,
-            fingerprint: fingerprint(scene, opts),
-            last_rays: None,
-            stats: RenderStats {
-                estimator: opts.weighting.label(),
-                kernel: kernel.to_string(),
-                planes: opts.planes,
-                plane_passes: 1,
-                ..Default::default()
-            },
-        })
-    }
-
-    /// The rays of ray set `k`: the last set's if it is `k`, else made now (and kept).
-    fn rays(&mut self, k: u32) -> &[CameraRay] {
-        if self.last_rays.as_ref().is_none_or(|(last, _)| *last != k) {
-            let t = Instant::now();
-            let rays = ray_set_rays(self.scene, self.opts.seed, k, self.opts.pixel_center);
-            self.stats.seconds_rays += t.elapsed().as_secs_f64();
-            self.stats.rays += rays.len() as u64;
-            self.last_rays = Some((k, rays));
-        }
-        self.last_rays.as_ref().map_or(&[], |(_, rays)| rays)
-    }
-
-    /// Gathers planes `range` of the render, each weighted 1 and each with the ray set it meets
-    /// in a whole render (that of its group, [`crate::pixel::ray_set_of_plane`]), adding into
-    /// `sums`: the one place that gathers a plane range. One piece's planes exist at a time.
-    fn gather_planes(&mut self, range: Range<usize>, sums: &mut [Vec3]) -> Result<()> {
-        let o = self.opts;
-        for (k, piece) in pieces(o.planes, o.ray_sets(), range) {
-            let prepared = PreparedPlanes::range(self.scene, piece, 1, o.seed, o.sampler, o.accelerator, self.control)?;
-            let (kernel, control) = (self.kernel, self.control);
-            let rays = self.rays(k);
-            let t = Instant::now();
-            let s = prepared.gather(o.weighting, kernel, rays, sums, control);
-            self.stats.add_gather(&prepared, s?, t.elapsed().as_secs_f64());
-        }
-        Ok(())
-    }
-
-    /// The partial of canonical chunk `c`.
-    fn chunk(&mut self, c: usize) -> Result<Partial> {
-        let start = Instant::now();
-        let hits = self.stats.hits;
-        let range = c * CHUNK_PLANES..((c + 1) * CHUNK_PLANES).min(self.opts.planes);
-        let cam = &self.scene.camera;
-        let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
-        self.gather_planes(range.clone(), &mut sums)?;
-        Ok(Partial {
-            width: cam.width,
-            height: cam.height,
-            sums: sums.iter().map(|s| s.as_dvec3()).collect(),
-            start: range.start,
-            end: range.end,
-            planes_total: self.opts.planes,
-            fingerprint: self.fingerprint.clone(),
-            hits: self.stats.hits - hits,
-            seconds: start.elapsed().as_secs_f64(),
-        })
-    }
-
-    /// The canonical node over chunks `range` (module docs): left subtree, right subtree, added.
-    fn node(&mut self, range: Range<usize>) -> Result<Partial> {
-        if range.len() == 1 {
-            return self.chunk(range.start);
-        }
-        let m = range.start + split(range.len());
-        let left = self.node(range.start..m)?;
-        let right = self.node(m..range.end)?;
-        combine(&left, &right)
-    }
-
-    /// The partial of planes `range`, a union of consecutive canonical chunks, added along the
-    /// canonical tree restricted to them (a node of the whole tree when the range is one).
-    pub fn render(&mut self, range: Range<usize>) -> Result<Partial> {
-        let chunks = chunk_indices(self.opts.planes, &range)?;
-        check_chunk_memory(self.scene, chunks.len())?;
-        self.control.check()?;
-        self.node(chunks)
-    }
-}
-
 /// Whether chunks `range` form a node of the canonical tree over `n` chunks.
 pub fn is_canonical_node(range: &Range<usize>, n: usize) -> bool {
     let mut node = 0..n;
@@ -385,23 +247,6 @@ pub fn is_canonical_node(range: &Range<usize>, n: usize) -> bool {
             return false;
         };
     }
-}
-
-/// Renders planes `range` of the render `opts` describes (a union of consecutive canonical
-/// chunks) into a [`Partial`], with what it measured. `control` as for [`crate::render::render`].
-pub fn render_chunk(
-    scene: &Scene,
-    opts: &RenderOptions,
-    range: Range<usize>,
-    control: Control,
-) -> Result<(Partial, RenderStats)> {
-    let start = Instant::now();
-    let mut r = ChunkRenderer::new(scene, opts, control)?;
-    let partial = r.render(range)?;
-    let mut stats = r.stats;
-    stats.planes = partial.end - partial.start;
-    stats.seconds_total = start.elapsed().as_secs_f64();
-    Ok((partial, stats))
 }
 
 /// The image of a render from the partial of all its planes: the sums divided by N in f64,
@@ -430,13 +275,8 @@ pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<
             partial.width, partial.height, cam.width, cam.height
         )));
     }
-    let emission = crate::emission::direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
-    let n = opts.planes as f64;
-    let mut film = Film::new(cam.width, cam.height);
-    for ((f, s), e) in film.pixels.iter_mut().zip(&partial.sums).zip(&emission) {
-        *f = (*s / n).as_vec3() + *e;
-    }
-    Ok(film)
+    let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
+    Ok(Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission))
 }
 
 #[cfg(test)]

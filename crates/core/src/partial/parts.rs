@@ -3,13 +3,12 @@
 //! `merge`). The format is [`super::file`]'s.
 
 use super::file::{self, Array, PartKind, PartMeta, ReferenceRecord, RenderRecord, SceneRecord};
-use super::{Partial, fingerprint, stable_hash};
+use super::{Partial, stable_hash};
 use crate::error::{Error, Result};
 use crate::film::Film;
+use crate::options::RenderOptions;
 use crate::reference::ReferenceOptions;
-use crate::render::RenderOptions;
 use crate::scene::Scene;
-use crate::weights::Weighting;
 use glam::{DVec3, Vec3};
 use std::path::{Path, PathBuf};
 
@@ -27,7 +26,7 @@ fn scene_record(scene: &Scene) -> Result<SceneRecord> {
 }
 
 /// The scene a part records, remade.
-fn scene_of(r: &SceneRecord) -> Result<Scene> {
+pub fn scene_of(r: &SceneRecord) -> Result<Scene> {
     Scene::parse(&r.text, &r.file, &r.name)?.with_resolution(r.resolution[0], r.resolution[1])
 }
 
@@ -43,19 +42,6 @@ fn render_record(o: &RenderOptions) -> RenderRecord {
         accelerator: o.accelerator.name().into(),
         kernel: o.kernel.name().into(),
     }
-}
-
-fn options_of(r: &RenderRecord) -> std::result::Result<RenderOptions, String> {
-    Ok(RenderOptions {
-        planes: r.planes,
-        weighting: Weighting::new(r.estimator.parse()?, Some(r.orientations))?,
-        seed: r.seed,
-        sampler: r.sampler.parse()?,
-        spp: r.spp,
-        pixel_center: r.pixel_center,
-        accelerator: r.accelerator.parse()?,
-        kernel: r.kernel.parse()?,
-    })
 }
 
 /// Identifies a reference image (`pilot`: its pilot pass): the scene's content and every
@@ -168,7 +154,7 @@ fn reference_record(o: &ReferenceOptions) -> ReferenceRecord {
     ReferenceRecord { spp: o.spp, seed: o.seed, pixel_center: o.pixel_center, uniform: o.uniform }
 }
 
-fn reference_options_of(r: &ReferenceRecord) -> ReferenceOptions {
+pub fn reference_options_of(r: &ReferenceRecord) -> ReferenceOptions {
     ReferenceOptions { spp: r.spp, seed: r.seed, pixel_center: r.pixel_center, uniform: r.uniform }
 }
 
@@ -180,11 +166,11 @@ pub struct Part {
 }
 
 impl Part {
-    fn bad(&self, message: impl std::fmt::Display) -> Error {
+    pub fn bad(&self, message: impl std::fmt::Display) -> Error {
         Error::bad_input(&self.path, message.to_string())
     }
 
-    fn film(&self, name: &str) -> Result<Film> {
+    pub fn film(&self, name: &str) -> Result<Film> {
         let (w, rows) = (self.meta.scene.resolution[0], (self.meta.end - self.meta.start) as u32);
         let values = file::entry(&self.arrays, name)
             .and_then(|a| a.as_f32s(&pixel_shape(rows as usize, w)))
@@ -195,7 +181,7 @@ impl Part {
     }
 
     /// The render partial it holds.
-    fn partial(&self) -> Result<Partial> {
+    pub fn partial(&self) -> Result<Partial> {
         let m = &self.meta;
         let [w, h] = m.scene.resolution;
         let sums = file::entry(&self.arrays, "sums")
@@ -220,114 +206,6 @@ pub fn read_part(path: &Path) -> Result<Part> {
     let arrays = file::read_npz(path)?;
     let meta = file::meta(&arrays).map_err(|m| Error::bad_input(path, m))?;
     Ok(Part { path: path.to_path_buf(), meta, arrays })
-}
-
-/// What parts merge into.
-pub enum Merged {
-    /// A whole render: its image, the scene, the settings and the merged sums.
-    Render { scene: Scene, options: RenderOptions, partial: Partial, image: Film },
-    /// A whole reference: mean and standard error.
-    Reference { scene: Scene, options: ReferenceOptions, mean: Film, stderr: Film, seconds: f64 },
-    /// A whole pilot pass.
-    Pilot { scene: Scene, options: ReferenceOptions, pilot: Film, seconds: f64 },
-}
-
-/// Reads and merges parts of one render (plane ranges) or one reference or pilot (row bands),
-/// given in any order: refuses parts of different kinds, scenes or settings, overlapping
-/// ranges and gaps, each with one line naming the files.
-pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
-    let parts = paths.iter().map(|p| read_part(p)).collect::<Result<Vec<_>>>()?;
-    let first = parts.first().ok_or_else(|| Error::Partial("no parts to merge".into()))?;
-    for p in &parts[1..] {
-        if p.meta.kind != first.meta.kind
-            || p.meta.fingerprint != first.meta.fingerprint
-            || p.meta.total != first.meta.total
-        {
-            return Err(Error::Partial(format!(
-                "{} and {} are parts of different images (another scene, other settings or another kind)",
-                first.path.display(),
-                p.path.display()
-            )));
-        }
-    }
-    let scene = scene_of(&first.meta.scene).map_err(|e| first.bad(format!("its scene: {e}")))?;
-    match first.meta.kind {
-        PartKind::Render => {
-            let record = first.meta.render.as_ref().ok_or_else(|| first.bad("no render settings"))?;
-            let options = options_of(record).map_err(|m| first.bad(m))?;
-            if fingerprint(&scene, &options) != first.meta.fingerprint {
-                return Err(
-                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
-                );
-            }
-            let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
-            let partial = super::merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
-            let image = super::finish(&scene, &options, &partial)?;
-            Ok(Merged::Render { scene, options, partial, image })
-        }
-        kind => {
-            let record = first.meta.reference.as_ref().ok_or_else(|| first.bad("no reference settings"))?;
-            let options = reference_options_of(record);
-            let pilot = kind == PartKind::Pilot;
-            if reference_fingerprint(&scene, &options, pilot) != first.meta.fingerprint {
-                return Err(
-                    first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
-                );
-            }
-            if first.meta.total != scene.camera.height as usize {
-                return Err(first.bad("its rows do not match its scene's resolution"));
-            }
-            let mut order: Vec<&Part> = parts.iter().collect();
-            order.sort_by_key(|p| (p.meta.start, p.meta.end));
-            let mut next = 0;
-            for p in &order {
-                if p.meta.start > next {
-                    return Err(Error::Partial(format!("rows {next}:{} are missing", p.meta.start)));
-                }
-                if p.meta.start < next {
-                    return Err(Error::Partial(format!(
-                        "{} overlaps another part (rows {}:{})",
-                        p.path.display(),
-                        p.meta.start,
-                        p.meta.end
-                    )));
-                }
-                next = p.meta.end;
-            }
-            if next != first.meta.total {
-                return Err(Error::Partial(format!("rows {next}:{} are missing", first.meta.total)));
-            }
-            let seconds = parts.iter().map(|p| p.meta.seconds).sum();
-            let stack = |name: &str| -> Result<Film> {
-                let mut film = Film::new(scene.camera.width, scene.camera.height);
-                film.pixels.clear();
-                for p in &order {
-                    film.pixels.extend(p.film(name)?.pixels);
-                }
-                Ok(film)
-            };
-            if pilot {
-                Ok(Merged::Pilot { pilot: stack("pilot")?, scene, options, seconds })
-            } else {
-                Ok(Merged::Reference { mean: stack("mean")?, stderr: stack("stderr")?, scene, options, seconds })
-            }
-        }
-    }
-}
-
-/// A merge error of render parts, with the files that hold the planes it names.
-fn named(parts: &[Part], e: Error) -> Error {
-    match e {
-        Error::Partial(m) => {
-            let files: Vec<String> = parts
-                .iter()
-                .filter(|p| m.contains(&format!("planes {}:{}", p.meta.start, p.meta.end)))
-                .map(|p| p.path.display().to_string())
-                .collect();
-            if files.is_empty() { Error::Partial(m) } else { Error::Partial(format!("{m} ({})", files.join(", "))) }
-        }
-        e => e,
-    }
 }
 
 /// The whole pilot of an adaptive reference read from `path` (a merged pilot file), checked

@@ -19,8 +19,6 @@ pub use warp::{Discrete, concentric_disk, cosine_hemisphere};
 
 use rand::RngCore;
 use sobol::SobolSampler;
-use std::fmt;
-use std::str::FromStr;
 
 /// The random stream that planes draw from (see [`rng_for`]).
 const PLANE_STREAM: u64 = 0x9_1A4E;
@@ -30,7 +28,7 @@ const PLANE_STREAM: u64 = 0x9_1A4E;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub enum Sampler {
     /// Randomised quasi-Monte Carlo: plane i is point i of a 5D Owen-scrambled Sobol sequence,
-    /// an independent scrambling per seed ([`crate::sobol`]). Unbiased for every seed, and the
+    /// an independent scrambling per seed ([`sobol`]). Unbiased for every seed, and the
     /// planes cover the five dimensions far more evenly than independent ones.
     #[default]
     Sobol,
@@ -79,18 +77,7 @@ impl Sampler {
 /// The largest f64 below 1.
 const ONE_BELOW: f64 = 1.0 - f64::EPSILON / 2.0;
 
-impl fmt::Display for Sampler {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Sampler {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::parse_name("sampler", s, &Sampler::ALL, Sampler::name)
-    }
-}
+crate::named_choice!(Sampler, "sampler");
 
 #[cfg(test)]
 mod tests {

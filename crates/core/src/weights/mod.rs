@@ -18,7 +18,6 @@ pub use denominators::{
 
 use crate::limits::MAX_ORIENTATIONS;
 use std::fmt;
-use std::str::FromStr;
 
 /// The weighting schemes: the closed list of estimators. Everything that names or dispatches
 /// an estimator reads it from here ([`Estimator::ALL`], [`Estimator::info`],
@@ -102,18 +101,7 @@ impl Estimator {
     }
 }
 
-impl fmt::Display for Estimator {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Estimator {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::parse_name("estimator", s, &Estimator::ALL, Estimator::name)
-    }
-}
+crate::named_choice!(Estimator, "estimator");
 
 /// An estimator with its number of stratified orientations K (2 for the paper's pair).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,0 +1,275 @@
+//! The planes of a render prepared for gathering, behind one interface whatever the
+//! intersection structure (docs/mathematics.md section 6): a set's planes are sampled in pieces,
+//! each plane's constants prepared for rays from the camera ([`GatherContext`]), and the
+//! structure chosen by [`Accelerator`] built over them; [`PreparedPlanes::gather`] then runs one
+//! weighting through the structure's [`Aggregate::gather`].
+
+use crate::bvh::PlaneBvh;
+use crate::camera::CameraRay;
+use crate::control::Control;
+use crate::error::Result;
+use crate::gather::{GatherContext, GatherStats};
+use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
+use crate::photon_plane::{PlaneSet, sample_plane_range};
+use crate::raster::{BAND_ROWS, ScreenRaster};
+use crate::scene::Scene;
+use crate::weights::{Denominator, Weighting, WithDenominator};
+use glam::Vec3;
+use std::ops::Range;
+use std::time::Instant;
+
+/// How camera rays find the planes they hit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Accelerator {
+    /// Planes rasterised in screen space (the fast path).
+    #[default]
+    Raster,
+    /// A bounding volume hierarchy over the planes, traversed per ray.
+    Bvh,
+    /// Every ray tests every plane (for checking the others).
+    BruteForce,
+}
+
+impl Accelerator {
+    pub const ALL: [Accelerator; 3] = [Accelerator::Raster, Accelerator::Bvh, Accelerator::BruteForce];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Accelerator::Raster => "raster",
+            Accelerator::Bvh => "bvh",
+            Accelerator::BruteForce => "brute-force",
+        }
+    }
+
+    /// Progress units of one gathering over the image (for sizing a progress bar): a band of
+    /// rows on the raster, a chunk of rays on the per-ray structures.
+    pub fn units_per_gathering(self, width: u32, height: u32) -> u64 {
+        match self {
+            Accelerator::Raster => height.div_ceil(BAND_ROWS) as u64,
+            _ => (width as u64 * height as u64).div_ceil(RAY_CHUNK as u64),
+        }
+    }
+}
+
+crate::named_choice!(Accelerator, "accelerator");
+
+/// Every ray tests every plane: the slowest structure, and the simplest check of the others.
+pub struct BruteForce;
+
+impl Aggregate for BruteForce {
+    fn gather<D: Denominator>(
+        &self,
+        with: Gathering<D>,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> GatherStats {
+        let tests = with.ctx.views.len() as u64;
+        gather_per_ray(rays, sums, control, |ray| {
+            let (value, hits) = with.ctx.gather_brute_force(with.weights, ray);
+            (value, GatherStats { tests, hits })
+        })
+    }
+}
+
+/// The structure built over a set's planes.
+enum Structure {
+    Raster(ScreenRaster),
+    Bvh(PlaneBvh),
+    BruteForce(BruteForce),
+}
+
+impl Aggregate for Structure {
+    fn gather<D: Denominator>(
+        &self,
+        with: Gathering<D>,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> GatherStats {
+        match self {
+            Structure::Raster(s) => s.gather(with, rays, sums, control),
+            Structure::Bvh(s) => s.gather(with, rays, sums, control),
+            Structure::BruteForce(s) => s.gather(with, rays, sums, control),
+        }
+    }
+}
+
+/// Planes sampled in pieces of this many, so that the sampled planes never all exist at once:
+/// only their prepared views and screen polygons are kept.
+const SAMPLING_PIECE: usize = 16_384;
+
+/// Planes sampled and prepared for gathering from the camera, each weighted 1 (the division by
+/// the set's N comes once, when the image is finished: [`crate::film::finish`]).
+pub struct PreparedPlanes {
+    context: GatherContext,
+    structure: Structure,
+    /// Seconds spent sampling planes and building the structure.
+    pub seconds_sampling: f64,
+    pub seconds_build: f64,
+}
+
+impl PreparedPlanes {
+    /// Planes `range` of `set`, with the structure `accelerator` over them.
+    /// [`crate::Error::Cancelled`] once `control` is cancelled (checked after each piece of
+    /// planes sampled).
+    pub fn new(
+        scene: &Scene,
+        set: PlaneSet,
+        range: Range<usize>,
+        accelerator: Accelerator,
+        control: Control,
+    ) -> Result<Self> {
+        let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
+        let origin = scene.camera.position;
+        let mut context = GatherContext::empty(scene, origin);
+        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
+        // The BVH is built over the whole set at once; it keeps the planes while it does.
+        let mut all = Vec::new();
+        for start in range.clone().step_by(SAMPLING_PIECE) {
+            control.check()?;
+            let t = Instant::now();
+            let piece =
+                sample_plane_range(scene, set.sampler, set.seed, start..(start + SAMPLING_PIECE).min(range.end));
+            seconds_sampling += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            context.push_planes(scene, &piece, 1);
+            if let Some(r) = &mut raster {
+                r.push_planes(&scene.camera, &piece, &scene.medium);
+            }
+            seconds_build += t.elapsed().as_secs_f64();
+            if accelerator == Accelerator::Bvh {
+                all.extend(piece);
+            }
+        }
+        control.check()?;
+        let t = Instant::now();
+        let structure = match (accelerator, raster) {
+            (Accelerator::Raster, Some(r)) => Structure::Raster(r),
+            (Accelerator::Bvh, _) => Structure::Bvh(PlaneBvh::build(&all, &scene.medium, origin, control)?),
+            _ => Structure::BruteForce(BruteForce),
+        };
+        seconds_build += t.elapsed().as_secs_f64();
+        Ok(PreparedPlanes { context, structure, seconds_sampling, seconds_build })
+    }
+
+    /// The planes' per-plane constants.
+    pub fn context(&self) -> &GatherContext {
+        &self.context
+    }
+
+    /// The raster, if that is the structure (for measuring the traversal alone).
+    pub fn raster(&self) -> Option<&ScreenRaster> {
+        match &self.structure {
+            Structure::Raster(r) => Some(r),
+            _ => None,
+        }
+    }
+
+    /// Gathers the rays of one ray set with `weighting`, adding each ray's estimate to `sums`;
+    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]). Reports each unit of work to
+    /// `control`; once it is cancelled, the work stops before the next plane (or ray) and the
+    /// result is [`crate::Error::Cancelled`], with `sums` incomplete.
+    pub fn gather(
+        &self,
+        weighting: Weighting,
+        kernel: Kernel,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> Result<GatherStats> {
+        struct Run<'a> {
+            planes: &'a PreparedPlanes,
+            kernel: Kernel,
+            rays: &'a [CameraRay],
+            sums: &'a mut [Vec3],
+            control: Control<'a>,
+        }
+        impl WithDenominator for Run<'_> {
+            type Output = GatherStats;
+            fn run<D: Denominator>(self, weights: &D) -> GatherStats {
+                let with = Gathering { ctx: &self.planes.context, weights, kernel: self.kernel };
+                self.planes.structure.gather(with, self.rays, self.sums, self.control)
+            }
+        }
+        let stats = weighting.dispatch(Run { planes: self, kernel, rays, sums, control });
+        control.check()?;
+        Ok(stats)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Sampler;
+    use crate::weights::{HitLanes, PlaneFrame, Unweighted};
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    fn small_scene() -> Scene {
+        Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap()
+    }
+
+    /// The unweighted D, counting the planes prepared (once per plane and band on the raster,
+    /// once per hit on the per-ray paths) and setting `cancel` when the count reaches `after`:
+    /// a flag set in the middle of a band, where no progress is reported.
+    struct CancelAfter<'a> {
+        prepared: AtomicUsize,
+        after: usize,
+        cancel: &'a AtomicBool,
+    }
+
+    impl Denominator for CancelAfter<'_> {
+        type Plane = PlaneFrame;
+        fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
+            if self.prepared.fetch_add(1, Ordering::Relaxed) + 1 == self.after {
+                self.cancel.store(true, Ordering::Relaxed);
+            }
+            *f
+        }
+        fn denominators<const L: usize>(&self, p: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+            Unweighted.denominators(p, h, out)
+        }
+    }
+
+    /// Cancelled in the middle of a band, the raster stops before the next plane: each thread
+    /// prepares at most one plane after the flag is set, with every kernel. The per-ray paths
+    /// stop before the next ray: each thread finishes at most the hits of its ray under way.
+    /// Counted in planes prepared, out of the millions a whole pass prepares.
+    #[test]
+    fn cancelling_stops_gathering_within_a_plane_or_a_ray() {
+        let scene = small_scene();
+        let rays = crate::pixel::ray_set_rays(&scene, 1, 0, false);
+        let (planes, after, threads) = (3000, 20, 2);
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        for accelerator in Accelerator::ALL {
+            let set = PlaneSet { sampler: Sampler::default(), seed: 1 };
+            let prepared = PreparedPlanes::new(&scene, set, 0..planes, accelerator, Control::none()).unwrap();
+            let kernels = if accelerator == Accelerator::Raster { Kernel::available() } else { vec![Kernel::Portable] };
+            for kernel in kernels {
+                let run = |after: usize| {
+                    let cancel = AtomicBool::new(false);
+                    let weights = CancelAfter { prepared: AtomicUsize::new(0), after, cancel: &cancel };
+                    let mut sums = vec![Vec3::ZERO; rays.len()];
+                    let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
+                    let stats = pool
+                        .install(|| prepared.structure.gather(with, &rays, &mut sums, Control::with_cancel(&cancel)));
+                    (weights.prepared.into_inner(), stats, cancel.into_inner())
+                };
+                let (whole, whole_stats, set) = run(usize::MAX);
+                assert!(!set && whole > 100 * after, "{accelerator} {kernel}: {whole} planes prepared in a pass");
+                let (done, stats, set) = run(after);
+                assert!(set);
+                let bound = match accelerator {
+                    Accelerator::Raster => after + (threads - 1),
+                    _ => after + threads * planes,
+                };
+                assert!(done <= bound, "{accelerator} {kernel}: {done} planes prepared, at most {bound} expected");
+                // On the raster the ray-plane tests follow the planes (the per-ray paths test
+                // every plane of a ray whether it hits or not).
+                if accelerator == Accelerator::Raster {
+                    assert!(stats.tests < whole_stats.tests / 20, "{kernel}: {stats:?} of {whole_stats:?}");
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,128 @@
+//! The visibility test of a hit: which other light panels may shadow a photon plane's light
+//! paths, found once per plane, and the branch-free per-hit test against them
+//! (docs/mathematics.md section 2.3).
+
+use crate::light::RectLight;
+use crate::photon_plane::{PhotonPlane, clip_segment};
+use crate::scene::Scene;
+use glam::{DVec2, DVec3};
+
+/// A light panel that may block the light paths of one plane, as a function of the chord
+/// parameter a of the light vertex y' = y0 + a d: the segment from y' along wl meets the
+/// panel's plane at distance t(a) = t0 + a t_a, at the panel-local point
+/// (p(a), q(a)) = (p0 + a p_a, q0 + a q_a) (all linear in a, made once per plane in f64).
+/// A hit at plane distance r is in shadow when 0 < t < r (with a relative margin of 1e-6 at
+/// both ends, so that neither the light itself nor the hit's own panel counts) and the point
+/// lies on the panel, edges included (docs/mathematics.md section 2.3).
+#[derive(Clone, Copy, Debug)]
+pub struct Occluder {
+    pub t0: f32,
+    pub t_a: f32,
+    pub p0: f32,
+    pub p_a: f32,
+    pub q0: f32,
+    pub q_a: f32,
+    pub width: f32,
+    pub height: f32,
+}
+
+impl Occluder {
+    /// The panel `light` against the plane's light paths; `None` if the sweep direction is
+    /// parallel to the panel (its paths can never cross it).
+    pub fn new(plane: &PhotonPlane, light: &RectLight) -> Option<Self> {
+        let denom = plane.direction.dot(light.n);
+        if denom == 0.0 {
+            return None;
+        }
+        let rel = plane.origin - light.corner;
+        let (t0, t_a) = (-rel.dot(light.n) / denom, -plane.chord.dot(light.n) / denom);
+        let along = |axis: DVec3| {
+            let w = plane.direction.dot(axis);
+            ((rel.dot(axis) + t0 * w) as f32, (plane.chord.dot(axis) + t_a * w) as f32)
+        };
+        let ((p0, p_a), (q0, q_a)) = (along(light.u), along(light.v));
+        Some(Occluder {
+            t0: t0 as f32,
+            t_a: t_a as f32,
+            p0,
+            p_a,
+            q0,
+            q_a,
+            width: light.width as f32,
+            height: light.height as f32,
+        })
+    }
+
+    /// Whether the panel blocks the path from the light vertex at chord parameter `a` to the
+    /// hit at plane distance `r`.
+    #[inline(always)]
+    pub fn blocks(&self, a: f32, r: f32) -> bool {
+        let t = self.t0 + a * self.t_a;
+        let (p, q) = (self.p0 + a * self.p_a, self.q0 + a * self.q_a);
+        (t > 1e-6 * r) & (t < r * (1.0 - 1e-6)) & (p >= 0.0) & (p <= self.width) & (q >= 0.0) & (q <= self.height)
+    }
+}
+
+/// The other lights whose panel crosses the plane's polygon (a bit per light), so that the
+/// per-hit visibility test runs only where it can matter. The polygon meets the light's plane
+/// in a segment (if it straddles it at all); the light can block only if that segment crosses
+/// the rectangle, which is tested by clipping it to the rectangle grown by a small margin.
+pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
+    let poly = plane.polygon_in_box(&scene.medium, 0.0);
+    if poly.len < 3 {
+        return 0;
+    }
+    let eps = 1e-9 * scene.medium.diagonal();
+    let margin = 1e-6 * scene.medium.diagonal();
+    let mut mask = 0u64;
+    for (k, light) in scene.lights.iter().enumerate() {
+        if k == plane.light {
+            continue;
+        }
+        let pts = poly.points();
+        let dist: Vec<f64> = pts.iter().map(|&v| (v - light.corner).dot(light.n)).collect();
+        if dist.iter().all(|&d| d > eps) || dist.iter().all(|&d| d < -eps) {
+            continue;
+        }
+        if dist.iter().all(|d| d.abs() <= eps) {
+            mask |= 1 << k; // in the light's own plane: leave it to the per-hit test
+            continue;
+        }
+        // Where the polygon's boundary meets the light's plane, in the light's local frame.
+        let mut crossing = Vec::with_capacity(4);
+        for a in 0..pts.len() {
+            let b = (a + 1) % pts.len();
+            let (da, db) = (dist[a], dist[b]);
+            if da.abs() <= eps {
+                crossing.push(light.local(pts[a]));
+            } else if (da < 0.0) != (db < 0.0) && db.abs() > eps {
+                crossing.push(light.local(pts[a] + (pts[b] - pts[a]) * (da / (da - db))));
+            }
+        }
+        if segment_meets_rectangle(&crossing, light.width, light.height, margin) {
+            mask |= 1 << k;
+        }
+    }
+    mask
+}
+
+/// Whether the segment spanned by collinear points meets [-m, w + m] x [-m, h + m]
+/// (Liang-Barsky clipping of the segment between its two extreme points).
+fn segment_meets_rectangle(points: &[(f64, f64)], w: f64, h: f64, m: f64) -> bool {
+    let Some(&first) = points.first() else {
+        return false;
+    };
+    // The extreme points along the line through the crossing points.
+    let far = points.iter().copied().max_by(|a, b| {
+        let da = (a.0 - first.0).hypot(a.1 - first.1);
+        da.total_cmp(&(b.0 - first.0).hypot(b.1 - first.1))
+    });
+    let a = far.unwrap_or(first);
+    let b = points
+        .iter()
+        .copied()
+        .max_by(|p, q| (p.0 - a.0).hypot(p.1 - a.1).total_cmp(&(q.0 - a.0).hypot(q.1 - a.1)))
+        .unwrap_or(a);
+    let (a, b) = (DVec2::new(a.0, a.1), DVec2::new(b.0, b.1));
+    clip_segment(a, b, DVec2::splat(-m), DVec2::new(w + m, h + m)).is_some()
+}

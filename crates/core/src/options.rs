@@ -1,0 +1,136 @@
+//! A render's options resolved: every value checked against the scene and this CPU, nothing
+//! left to default, and what a render measured.
+//!
+//! [`RenderOptions`] is built by [`crate::settings`] alone (its fields are private to the
+//! library), from the caller's overrides, the scene's `[render]` table and the defaults of
+//! [`crate::limits`]; the renderers below trust it and check nothing again (ripgrep's `HiArgs`).
+
+use crate::accel::Accelerator;
+use crate::gather::GatherStats;
+use crate::kernel::Kernel;
+use crate::photon_plane::PlaneSet;
+use crate::sampling::Sampler;
+use crate::weights::Weighting;
+
+/// Settings of one render, resolved ([`crate::settings::resolve_render`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOptions {
+    pub(crate) planes: usize,
+    pub(crate) weighting: Weighting,
+    pub(crate) seed: u64,
+    /// Where the planes' random numbers come from.
+    pub(crate) sampler: Sampler,
+    /// Camera samples per pixel: ray sets, each gathering its own share of the planes
+    /// (docs/mathematics.md section 8.1), so that more cost about as much as one.
+    pub(crate) spp: u32,
+    pub(crate) pixel_center: bool,
+    pub(crate) accelerator: Accelerator,
+    /// The kernel that runs (`auto` resolved on this CPU).
+    pub(crate) kernel: Kernel,
+}
+
+impl RenderOptions {
+    /// Planes N of the render (unused by a render on a time budget, which chooses its own).
+    pub fn planes(&self) -> usize {
+        self.planes
+    }
+    pub fn weighting(&self) -> Weighting {
+        self.weighting
+    }
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+    pub fn sampler(&self) -> Sampler {
+        self.sampler
+    }
+    /// Camera samples per pixel as asked (see [`RenderOptions::ray_sets`]).
+    pub fn spp(&self) -> u32 {
+        self.spp
+    }
+    pub fn pixel_center(&self) -> bool {
+        self.pixel_center
+    }
+    pub fn accelerator(&self) -> Accelerator {
+        self.accelerator
+    }
+    /// The kernel that runs: resolved, never [`Kernel::Auto`].
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
+    }
+
+    /// Ray sets per pixel: `spp`, or one at pixel centres (where every set would be the same
+    /// rays).
+    pub fn ray_sets(&self) -> u32 {
+        if self.pixel_center { 1 } else { self.spp.max(1) }
+    }
+
+    /// The set the planes come from.
+    pub fn plane_set(&self) -> PlaneSet {
+        PlaneSet { sampler: self.sampler, seed: self.seed }
+    }
+}
+
+/// What a render measured (wall-clock seconds; CPU time and memory are the caller's to read).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct RenderStats {
+    pub estimator: String,
+    /// The kernel that ran (`auto` resolved).
+    pub kernel: String,
+    pub planes: usize,
+    /// Plane passes: 1, or more for a render on a time budget ([`crate::render::render_for`]).
+    pub plane_passes: u32,
+    pub rays: u64,
+    pub hits: u64,
+    pub tests: u64,
+    pub seconds_sampling: f64,
+    pub seconds_build: f64,
+    pub seconds_rays: f64,
+    pub seconds_gather: f64,
+    pub seconds_total: f64,
+}
+
+impl RenderStats {
+    /// The statistics of a render with `opts`, before any work.
+    pub fn new(opts: &RenderOptions) -> Self {
+        RenderStats {
+            estimator: opts.weighting.label(),
+            kernel: opts.kernel.to_string(),
+            planes: opts.planes,
+            plane_passes: 1,
+            ..Default::default()
+        }
+    }
+
+    /// Counts one gathering that found `s` in `seconds`.
+    pub fn add_gather(&mut self, s: GatherStats, seconds: f64) {
+        self.seconds_gather += seconds;
+        self.hits += s.hits;
+        self.tests += s.tests;
+    }
+
+    pub fn hits_per_ray(&self) -> f64 {
+        self.hits as f64 / self.rays.max(1) as f64
+    }
+    pub fn tests_per_hit(&self) -> f64 {
+        self.tests as f64 / self.hits.max(1) as f64
+    }
+    /// Nanoseconds of wall time in gathering alone per hit.
+    pub fn gather_ns_per_hit(&self) -> f64 {
+        1e9 * self.seconds_gather / self.hits.max(1) as f64
+    }
+    pub fn summary(&self) -> String {
+        format!(
+            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit of gathering, wall, {} kernel), total {:.3} s",
+            self.estimator,
+            self.planes,
+            self.rays,
+            self.hits,
+            self.hits_per_ray(),
+            self.tests_per_hit(),
+            self.seconds_gather,
+            self.gather_ns_per_hit(),
+            self.kernel,
+            self.seconds_total
+        )
+    }
+}
