@@ -51,7 +51,7 @@ fn chunks_merged_in_any_order_equal_the_whole_render_bit_for_bit() {
                 planes: Some(planes as u64),
                 spp: Some(spp),
                 seed: Some(5),
-                pixel_center: pixel_center,
+                pixel_center,
                 ..Overrides::default()
             },
         );

@@ -318,12 +318,7 @@ fn whole_pixel_images_match_the_reference() {
         failures.extend(against_reference(&name, &s, pixel_center, 64, &|seed| {
             let opts = options(
                 &s,
-                Overrides {
-                    planes: Some(1500),
-                    seed: Some(40 + seed),
-                    pixel_center: pixel_center,
-                    ..Overrides::default()
-                },
+                Overrides { planes: Some(1500), seed: Some(40 + seed), pixel_center, ..Overrides::default() },
             );
             render(&s, &opts, Control::none()).unwrap().0
         }));

@@ -1,0 +1,230 @@
+//! Argument parsing: the settings a caller gave, named as Python names them, and the keyword arguments of each function, parsed in one place for all.
+
+use crate::errors::*;
+use crate::scene::*;
+use fogplanes::Error;
+use fogplanes::scene::Scene;
+use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
+use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::{Path, PathBuf};
+
+/// The settings a caller gave, as Python shows them, so that an error names a setting the way
+/// the caller wrote it (`planes=0: ...`), and never a command-line flag.
+#[derive(Default)]
+pub(crate) struct Given {
+    pub(crate) reprs: Vec<(Setting, String)>,
+}
+
+impl Given {
+    /// `keyword=value` of a setting given, the keyword alone of one not given.
+    pub(crate) fn name(&self, setting: Setting) -> String {
+        match self.reprs.iter().rev().find(|(s, _)| *s == setting) {
+            Some((_, repr)) => format!("{}={repr}", setting.keyword()),
+            None => setting.keyword().to_string(),
+        }
+    }
+
+    pub(crate) fn error(&self, e: Error) -> PyErr {
+        py_error_named(e, |s| self.name(s))
+    }
+
+    pub(crate) fn invalid(&self, setting: Setting, message: impl std::fmt::Display) -> PyErr {
+        PyValueError::new_err(format!("{}: {message}", self.name(setting)))
+    }
+
+    pub(crate) fn note(&mut self, setting: Setting, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.reprs.push((setting, value.repr()?.to_string()));
+        Ok(())
+    }
+
+    /// A non-negative integer: a Python int out of range is a `ValueError` naming the setting,
+    /// anything but an int a `TypeError`.
+    pub(crate) fn uint(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
+        let Some(v) = value else { return Ok(None) };
+        self.note(setting, v)?;
+        match v.extract::<u64>() {
+            Ok(n) => Ok(Some(n)),
+            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
+                Err(self.invalid(setting, "out of range (a non-negative integer below 2**64)"))
+            }
+            Err(e) => Err(PyTypeError::new_err(format!("{}: expected an integer ({e})", setting.keyword()))),
+        }
+    }
+
+    /// A `u32` (out of range as in [`Given::uint`]).
+    pub(crate) fn uint32(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u32>> {
+        self.uint(setting, value)?
+            .map(|n| u32::try_from(n).map_err(|_| self.invalid(setting, "out of range (an integer below 2**32)")))
+            .transpose()
+    }
+
+    /// A number of seconds or stops (a float, or an int).
+    pub(crate) fn float(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<f64>> {
+        let Some(v) = value else { return Ok(None) };
+        self.note(setting, v)?;
+        v.extract::<f64>()
+            .map(Some)
+            .map_err(|e| PyTypeError::new_err(format!("{}: expected a number ({e})", setting.keyword())))
+    }
+
+    /// A name from a closed list (estimator, sampler, ...).
+    pub(crate) fn named<T: std::str::FromStr<Err = String>>(
+        &mut self,
+        setting: Setting,
+        value: Option<&str>,
+    ) -> PyResult<Option<T>> {
+        let Some(v) = value else { return Ok(None) };
+        self.reprs.push((setting, py_str(v)));
+        v.parse().map(Some).map_err(|m| self.invalid(setting, m))
+    }
+
+    /// `(width, height)`.
+    pub(crate) fn resolution(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
+        let Some(v) = value else { return Ok(None) };
+        let (w, h): (Bound<PyAny>, Bound<PyAny>) =
+            v.extract().map_err(|_| PyTypeError::new_err(format!("resolution: expected (width, height), got {v}")))?;
+        let (w, h) = (self.uint32(Setting::Resolution, Some(&w))?, self.uint32(Setting::Resolution, Some(&h))?);
+        self.note(Setting::Resolution, v)?;
+        Ok(w.zip(h))
+    }
+
+    /// A thread count (its range is the core's to check).
+    pub(crate) fn threads(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<usize>> {
+        self.uint(Setting::Threads, value)?
+            .map(|t| usize::try_from(t).map_err(|_| self.invalid(Setting::Threads, "out of range")))
+            .transpose()
+    }
+}
+
+pub(crate) fn load(path: &Path) -> PyResult<Scene> {
+    Scene::load(path).map_err(|e| file_error(path, e.to_string()))
+}
+
+/// The scene of a `scene` argument: a `Scene`, or the path of a scene file (str or
+/// os.PathLike).
+pub(crate) fn scene_arg(scene: &Bound<'_, PyAny>) -> PyResult<Scene> {
+    if let Ok(s) = scene.cast::<PyScene>() {
+        Ok(s.get().inner.clone())
+    } else if let Ok(path) = scene.extract::<PathBuf>() {
+        load(&path)
+    } else {
+        Err(PyTypeError::new_err(format!(
+            "scene: expected a fogplanes.Scene or the path of a scene file, got {}",
+            scene.get_type().name()?
+        )))
+    }
+}
+
+/// The worker pool of `threads` resolved (None: rayon's global pool).
+pub(crate) fn pool(threads: Option<usize>) -> PyResult<Option<rayon::ThreadPool>> {
+    let Some(t) = threads else { return Ok(None) };
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(t)
+        .thread_name(|i| format!("fogplanes-{i}"))
+        .build()
+        .map(Some)
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the worker threads: {e}")))
+}
+
+/// Which function's keyword arguments [`render_overrides`] parses.
+#[derive(Clone, Copy, PartialEq)]
+pub(crate) enum Front {
+    /// `render`: also `time_budget` and `return_stats`.
+    Render,
+    /// The chunked functions (`plan_render`, `render_chunk`, `finish_render`): a plane count.
+    Chunks,
+}
+
+/// A keyword argument that is a flag (None: false).
+pub(crate) fn flag(value: &Option<Bound<'_, PyAny>>) -> PyResult<bool> {
+    Ok(value.as_ref().map(|v| v.extract()).transpose()?.unwrap_or(false))
+}
+
+/// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names,
+/// parsed in one place for every function that takes them; and `return_stats` (`render` only).
+pub(crate) fn render_overrides(
+    kwargs: Option<&Bound<'_, PyDict>>,
+    given: &mut Given,
+    front: Front,
+) -> PyResult<(Overrides, bool)> {
+    let (mut o, mut return_stats) = (Overrides::default(), false);
+    let Some(kwargs) = kwargs else { return Ok((o, return_stats)) };
+    for (key, value) in kwargs.iter() {
+        let key: String = key.extract()?;
+        let value = (!value.is_none()).then_some(value);
+        let text =
+            |v: &Option<Bound<'_, PyAny>>| -> PyResult<Option<String>> { v.as_ref().map(|v| v.extract()).transpose() };
+        match key.as_str() {
+            "estimator" => o.estimator = given.named(Setting::Estimator, text(&value)?.as_deref())?,
+            "orientations" => o.orientations = given.uint32(Setting::Orientations, value.as_ref())?,
+            "planes" => o.planes = given.uint(Setting::Planes, value.as_ref())?,
+            "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
+            "sampler" => o.sampler = given.named(Setting::Sampler, text(&value)?.as_deref())?,
+            "spp" => o.spp = given.uint32(Setting::Spp, value.as_ref())?,
+            "pixel_center" => o.pixel_center = flag(&value)?,
+            "accelerator" => o.accelerator = given.named(Setting::Accelerator, text(&value)?.as_deref())?,
+            "kernel" => o.kernel = given.named(Setting::Kernel, text(&value)?.as_deref())?,
+            "resolution" => o.resolution = given.resolution(value.as_ref())?,
+            "threads" => o.threads = given.threads(value.as_ref())?,
+            "time_budget" if front == Front::Render => {
+                o.time_budget = given.float(Setting::TimeBudget, value.as_ref())?;
+            }
+            "return_stats" if front == Front::Render => return_stats = flag(&value)?,
+            "time_budget" if value.is_some() => {
+                return Err(PyValueError::new_err(
+                    "time_budget: a render in chunks has a plane count; give planes= instead",
+                ));
+            }
+            "time_budget" => {}
+            other => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{other}'"))),
+        }
+    }
+    Ok((o, return_stats))
+}
+
+/// The render `scene` and `**kwargs` describe, resolved as `render` resolves it.
+pub(crate) fn resolve_chunked(
+    scene: &Bound<'_, PyAny>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(settings::ResolvedRender, Given)> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let (overrides, _) = render_overrides(kwargs, &mut given, Front::Chunks)?;
+    let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
+    Ok((r, given))
+}
+
+/// The keyword arguments of `reference` (and of `reference_rows`, with `counts`).
+pub(crate) const REFERENCE_KEYWORDS: [&str; 5] = ["pixel_center", "resolution", "seed", "uniform", "threads"];
+
+/// The reference resolved from `spp` and the keyword arguments of `reference`, by the same
+/// names, parsed in one place for every function that takes them; `accepted` are the keywords
+/// the caller takes (besides `spp`).
+pub(crate) fn resolve_reference_args(
+    scene: &Bound<'_, PyAny>,
+    spp: Option<&Bound<'_, PyAny>>,
+    kwargs: Option<&Bound<'_, PyDict>>,
+    accepted: &[&str],
+) -> PyResult<(settings::ResolvedReference, Given)> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let mut o = ReferenceOverrides { spp: given.uint32(Setting::Spp, spp)?, ..ReferenceOverrides::default() };
+    for (key, value) in kwargs.into_iter().flat_map(|k| k.iter()) {
+        let key: String = key.extract()?;
+        if !accepted.contains(&key.as_str()) {
+            return Err(PyTypeError::new_err(format!("unexpected keyword argument '{key}'")));
+        }
+        let value = (!value.is_none()).then_some(value);
+        match key.as_str() {
+            "pixel_center" => o.pixel_center = flag(&value)?,
+            "uniform" => o.uniform = flag(&value)?,
+            "resolution" => o.resolution = given.resolution(value.as_ref())?,
+            "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
+            _ => o.threads = given.threads(value.as_ref())?,
+        }
+    }
+    let r = settings::resolve_reference(&scene, &o).map_err(|e| given.error(e))?;
+    Ok((r, given))
+}

@@ -1,0 +1,75 @@
+//! Images as numpy arrays (float32, (height, width, 3)), checked at the door.
+
+use crate::*;
+use fogplanes::film::Film;
+use fogplanes::options::RenderStats;
+use numpy::ndarray::Array3;
+use numpy::{AllowTypeChange, PyArray3, PyArrayLike3};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+pub(crate) fn film_to_array<'py>(py: Python<'py>, film: &Film) -> Image<'py> {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let flat: Vec<f32> = film.pixels.iter().flat_map(|p| p.to_array()).collect();
+    let array = Array3::from_shape_vec((h, w, 3), flat).unwrap_or_else(|_| Array3::zeros((h, w, 3)));
+    PyArray3::from_owned_array(py, array)
+}
+
+/// The shape of an array as Python writes it: `(2, 3)`, `(5,)`.
+pub(crate) fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [n] => format!("({n},)"),
+        _ => format!("({})", shape.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+/// The image of an array-like argument (any real dtype), its shape checked against the
+/// renderer's limits before anything is converted: a broadcast or float64 array that claims a
+/// huge shape costs nothing until converted to float32.
+pub(crate) fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> {
+    let py = image.py();
+    // Arrays keep their own shape (no copy); nested lists become one to have one.
+    let array = match image.getattr("shape") {
+        Ok(_) => image.clone(),
+        Err(_) => py.import("numpy")?.call_method1("asarray", (image,))?,
+    };
+    let Ok(shape) = array.getattr("shape")?.extract::<Vec<usize>>() else {
+        return Err(PyTypeError::new_err(format!("{what}: expected an array, got {}", image.get_type().name()?)));
+    };
+    let [h, w, 3] = shape[..] else {
+        return Err(PyValueError::new_err(format!(
+            "{what}: expected an array of shape (height, width, 3), got {}",
+            shape_text(&shape)
+        )));
+    };
+    let side = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+    fogplanes::limits::check_resolution(side(w), side(h)).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
+    let array: PyArrayLike3<'_, f32, AllowTypeChange> = array.extract()?;
+    let view = array.as_array();
+    let mut film = Film::new(w as u32, h as u32);
+    for ((y, x), p) in (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).zip(film.pixels.iter_mut()) {
+        *p = glam::Vec3::new(view[[y, x, 0]], view[[y, x, 1]], view[[y, x, 2]]);
+    }
+    Ok(film)
+}
+
+pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("estimator", &s.estimator)?;
+    d.set_item("kernel", &s.kernel)?;
+    d.set_item("planes", s.planes)?;
+    d.set_item("plane_passes", s.plane_passes)?;
+    d.set_item("rays", s.rays)?;
+    d.set_item("hits", s.hits)?;
+    d.set_item("tests", s.tests)?;
+    d.set_item("seconds_sampling", s.seconds_sampling)?;
+    d.set_item("seconds_build", s.seconds_build)?;
+    d.set_item("seconds_rays", s.seconds_rays)?;
+    d.set_item("seconds_gather", s.seconds_gather)?;
+    d.set_item("seconds_total", s.seconds_total)?;
+    d.set_item("hits_per_ray", s.hits_per_ray())?;
+    d.set_item("gather_ns_per_hit", s.gather_ns_per_hit())?;
+    d.set_item("summary", s.summary())?;
+    Ok(d)
+}

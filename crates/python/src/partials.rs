@@ -1,0 +1,233 @@
+//! Renders in chunks (the cluster layer, `fogplanes.distributed`): the plan, `Partial` and its
+//! canonical merge, and the finish.
+
+use crate::args::*;
+use crate::arrays::*;
+use crate::errors::*;
+use crate::interrupt::*;
+use fogplanes::control::Control;
+use fogplanes::options::RenderStats;
+use fogplanes::partial::{self, Partial};
+use numpy::PyArray3;
+use numpy::ndarray::Array3;
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyTuple};
+
+/// The plan of a render in chunks: its resolved settings (the keyword arguments of `render`),
+/// `planes` N, `chunk_planes` (a fixed power of two), `chunks` (the (start, end) plane ranges,
+/// in order, covering 0..N), `fingerprint` (the scene and every setting that changes the
+/// image) and `shape` (height, width, 3). Raises ValueError as `render` does.
+#[pyfunction]
+#[pyo3(signature = (scene, **kwargs))]
+pub(crate) fn plan_render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (r, _) = resolve_chunked(scene, kwargs)?;
+    let (scene, o) = (&r.scene, &r.options);
+    let d = PyDict::new(py);
+    d.set_item("planes", o.planes())?;
+    d.set_item("chunk_planes", fogplanes::limits::CHUNK_PLANES)?;
+    let chunks: Vec<(usize, usize)> = partial::chunks(o.planes()).into_iter().map(|c| (c.start, c.end)).collect();
+    d.set_item("chunks", chunks)?;
+    d.set_item("fingerprint", partial::fingerprint(scene, o))?;
+    d.set_item("shape", (scene.camera.height, scene.camera.width, 3))?;
+    d.set_item("estimator", o.weighting().estimator.name())?;
+    d.set_item("orientations", o.weighting().orientations)?;
+    d.set_item("seed", o.seed())?;
+    d.set_item("sampler", o.sampler().name())?;
+    d.set_item("spp", o.spp())?;
+    d.set_item("pixel_center", o.pixel_center())?;
+    d.set_item("accelerator", o.accelerator().name())?;
+    d.set_item("kernel", o.kernel().name())?;
+    d.set_item("resolution", (scene.camera.width, scene.camera.height))?;
+    d.set_item("threads", r.threads)?;
+    Ok(d)
+}
+
+/// A partial render: the unnormalised sums of planes `start` to `end` (excluded) of a render of
+/// `planes_total`, float64 (height, width, 3). Picklable; `a + b` adds adjacent partials of one
+/// render (`combine`); `merge_partials` adds many in the canonical order.
+#[pyclass(frozen, module = "fogplanes", name = "Partial")]
+pub(crate) struct PyPartial {
+    pub(crate) inner: Partial,
+}
+
+#[pymethods]
+impl PyPartial {
+    /// The sums, float64 (height, width, 3) (a copy).
+    #[getter]
+    fn sums<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
+        let p = &self.inner;
+        let flat: Vec<f64> = p.sums.iter().flat_map(|s| s.to_array()).collect();
+        let array = Array3::from_shape_vec((p.height as usize, p.width as usize, 3), flat)
+            .unwrap_or_else(|_| Array3::zeros((p.height as usize, p.width as usize, 3)));
+        PyArray3::from_owned_array(py, array)
+    }
+    #[getter]
+    fn start(&self) -> usize {
+        self.inner.start
+    }
+    #[getter]
+    fn end(&self) -> usize {
+        self.inner.end
+    }
+    #[getter]
+    fn planes_total(&self) -> usize {
+        self.inner.planes_total
+    }
+    #[getter]
+    fn fingerprint(&self) -> &str {
+        &self.inner.fingerprint
+    }
+    #[getter]
+    fn hits(&self) -> u64 {
+        self.inner.hits
+    }
+    /// Seconds spent rendering it (added up over merged partials).
+    #[getter]
+    fn seconds(&self) -> f64 {
+        self.inner.seconds
+    }
+    /// (height, width, 3).
+    #[getter]
+    fn shape(&self) -> (u32, u32, u32) {
+        (self.inner.height, self.inner.width, 3)
+    }
+
+    fn __add__(&self, other: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+        let other =
+            other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
+        partial::combine(&self.inner, &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+    }
+
+    /// Rebuilds a pickled partial from its state, the tuple `__reduce__` gives: (width, height,
+    /// sums as little-endian f64 bytes, start, end, planes_total, fingerprint, hits, seconds).
+    #[staticmethod]
+    fn _from_state(state: &Bound<'_, PyTuple>) -> PyResult<Self> {
+        let not_a_state = || PyValueError::new_err("not the state of a fogplanes.Partial");
+        if state.len() != 9 {
+            return Err(not_a_state());
+        }
+        let item = |k: usize| state.get_item(k);
+        let (width, height): (u32, u32) = (item(0)?.extract()?, item(1)?.extract()?);
+        let sums = item(2)?;
+        let sums = sums.cast::<PyBytes>().map_err(|_| not_a_state())?.as_bytes();
+        let (start, end, planes_total): (usize, usize, usize) =
+            (item(3)?.extract()?, item(4)?.extract()?, item(5)?.extract()?);
+        let (fingerprint, hits, seconds): (String, u64, f64) =
+            (item(6)?.extract()?, item(7)?.extract()?, item(8)?.extract()?);
+        let pixels = width as usize * height as usize;
+        if sums.len() != pixels * 24 || start >= end || end > planes_total {
+            return Err(not_a_state());
+        }
+        let values: Vec<f64> =
+            sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
+        let sums = values.chunks_exact(3).map(|c| glam::DVec3::new(c[0], c[1], c[2])).collect();
+        Ok(PyPartial { inner: Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds } })
+    }
+
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let p = &slf.get().inner;
+        let bytes: Vec<u8> = p.sums.iter().flat_map(|s| s.to_array()).flat_map(f64::to_le_bytes).collect();
+        let args = (
+            p.width,
+            p.height,
+            PyBytes::new(py, &bytes),
+            p.start,
+            p.end,
+            p.planes_total,
+            p.fingerprint.clone(),
+            p.hits,
+            p.seconds,
+        )
+            .into_pyobject(py)?;
+        Ok((slf.get_type().getattr("_from_state")?, PyTuple::new(py, [args])?))
+    }
+
+    fn __repr__(&self) -> String {
+        let p = &self.inner;
+        format!(
+            "Partial(planes {}:{} of {}, {}x{}, {} hits)",
+            p.start, p.end, p.planes_total, p.width, p.height, p.hits
+        )
+    }
+}
+
+/// Renders planes `chunk` = (start, end) of the render `**kwargs` describe (the keyword
+/// arguments of `render`): one of `plan_render`'s chunks or a union of consecutive ones. Each
+/// plane meets exactly what it meets in a whole render. The GIL is released; Ctrl-C cancels.
+#[pyfunction]
+#[pyo3(signature = (scene, chunk, **kwargs))]
+pub(crate) fn render_chunk(
+    py: Python<'_>,
+    scene: &Bound<'_, PyAny>,
+    chunk: (usize, usize),
+    kwargs: Option<&Bound<'_, PyDict>>,
+) -> PyResult<PyPartial> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let (p, _) = run_interruptible(py, pool(r.threads)?, |cancel| {
+        fogplanes::render::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok(PyPartial { inner: p })
+}
+
+/// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in
+/// float64. ValueError for partials of different renders, overlapping or not adjacent.
+#[pyfunction]
+pub(crate) fn combine(a: &Bound<'_, PyPartial>, b: &Bound<'_, PyPartial>) -> PyResult<PyPartial> {
+    partial::combine(&a.get().inner, &b.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+}
+
+/// Merges partials (any order) into one covering their union, added in the canonical order that
+/// `render` uses: with the plan's chunks, the bits of `render`. ValueError for partials of
+/// different renders, overlaps and gaps.
+#[pyfunction]
+pub(crate) fn merge_partials(py: Python<'_>, parts: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+    let mut all = Vec::new();
+    for p in parts.try_iter()? {
+        let p = p?;
+        let p = p.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("parts: expected Partial objects"))?;
+        all.push(p.get().inner.clone());
+    }
+    py.detach(|| partial::merge_in_canonical_order(all)).map(|inner| PyPartial { inner }).map_err(py_error)
+}
+
+/// The image (float32, (height, width, 3)) of a render from the partial of all its planes:
+/// divided by N, plus the direct emission (computed here). `**kwargs` are the render's, as
+/// given to `plan_render`. ValueError if the partial is of another render or does not cover
+/// 0..N. With `return_stats=True`: (image, stats).
+#[pyfunction]
+#[pyo3(signature = (scene, partial, return_stats = false, **kwargs))]
+pub(crate) fn finish_render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    partial: &Bound<'py, PyPartial>,
+    return_stats: bool,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (r, given) = resolve_chunked(scene, kwargs)?;
+    let p = &partial.get().inner;
+    let film = run_interruptible(py, pool(r.threads)?, |_| partial::finish(&r.scene, &r.options, p))?
+        .map_err(|e| given.error(e))?;
+    let image = film_to_array(py, &film).into_any();
+    if !return_stats {
+        return Ok(image);
+    }
+    let o = &r.options;
+    let stats = RenderStats {
+        estimator: o.weighting().label(),
+        kernel: o.kernel().to_string(),
+        planes: o.planes(),
+        plane_passes: 1,
+        rays: film.pixels.len() as u64 * o.ray_sets() as u64,
+        hits: p.hits,
+        seconds_total: p.seconds,
+        ..Default::default()
+    };
+    Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any())
+}

@@ -1,0 +1,144 @@
+//! The whole-image functions: `render`, `reference`, `compare`, `load_image`, `save_image`, `load_scene`.
+
+use crate::args::*;
+use crate::arrays::*;
+use crate::errors::*;
+use crate::interrupt::*;
+use crate::scene::*;
+use crate::*;
+use fogplanes::control::Control;
+use fogplanes::film::Film;
+use fogplanes::metrics::compare as compare_films;
+use fogplanes::reference::render_reference;
+use fogplanes::render::render_for;
+use fogplanes::settings::{self, Setting};
+use fogplanes::weights::Estimator;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Reads and validates a scene file (TOML).
+///
+/// Raises FileNotFoundError (an OSError) if the file cannot be opened, ValueError naming the
+/// file, line and field if its content is invalid.
+#[pyfunction]
+pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
+    load(&path).map(|inner| PyScene { inner })
+}
+
+/// Renders a scene with photon planes: the image, shape (height, width, 3), float32.
+///
+/// The arguments are those of `fogplanes render`, and None takes the scene's [render]
+/// default exactly as the command line does (both resolve them in the core): `estimator` (the
+/// scene's, else smis-exact), `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent";
+/// the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
+/// estimator is the one rendered). `resolution` is (width, height). Pixels are whole: the mean
+/// over each pixel's square (box filter), with `spp` camera samples per pixel (the scene's, else
+/// 16) sharing the planes; `pixel_center=True` takes the centres. `time_budget` renders for
+/// that many seconds instead of a plane count: planes in passes, each extending the set (the
+/// stats give "planes" and "plane_passes"). `threads` runs the render in a pool of that many
+/// threads (None: all cores); the image depends on the seed alone. The image is bit-identical
+/// to the EXR that `fogplanes render` writes for the same
+/// arguments. With `return_stats=True`, returns (image, stats).
+///
+/// Raises ValueError for bad input (the command line's message, the setting named as given
+/// here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
+/// on Ctrl-C. The GIL is released while rendering.
+#[pyfunction]
+#[pyo3(signature = (scene, estimator = None, **kwargs))]
+#[pyo3(text_signature = "(scene, estimator=None, planes=None, seed=None, spp=None, pixel_center=False, \
+    resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', return_stats=False, \
+    sampler=None, time_budget=None)")]
+pub(crate) fn render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    estimator: Option<&str>,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let scene = scene_arg(scene)?;
+    let mut given = Given::default();
+    let (mut overrides, return_stats) = render_overrides(kwargs, &mut given, Front::Render)?;
+    overrides.estimator = given.named::<Estimator>(Setting::Estimator, estimator)?.or(overrides.estimator);
+    let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
+    let (film, stats) = run_interruptible(py, pool(r.threads)?, |cancel| match r.time_budget {
+        None => fogplanes::render::render(&r.scene, &r.options, Control::with_cancel(cancel)),
+        Some(seconds) => {
+            render_for(&r.scene, &r.options, Duration::from_secs_f64(seconds), Control::with_cancel(cancel))
+        }
+    })?
+    .map_err(|e| given.error(e))?;
+    let image = film_to_array(py, &film).into_any();
+    if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
+}
+
+/// Renders the independent reference: (image, per-pixel standard error), both float32.
+///
+/// As `fogplanes reference` with its -o and --stderr-image files: `spp` samples per pixel on
+/// average, spread by need unless `uniform`; whole pixels (box filter, as `render`), or
+/// `pixel_center` to compare with `render(..., pixel_center=True)`. Ctrl-C stops it with
+/// KeyboardInterrupt.
+#[pyfunction]
+#[pyo3(signature = (scene, spp = None, **kwargs))]
+#[pyo3(text_signature = "(scene, spp=1024, pixel_center=False, resolution=None, seed=1, uniform=False, threads=None)")]
+pub(crate) fn reference<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    spp: Option<&Bound<'py, PyAny>>,
+    kwargs: Option<&Bound<'py, PyDict>>,
+) -> PyResult<(Image<'py>, Image<'py>)> {
+    let (r, given) = resolve_reference_args(scene, spp, kwargs, &REFERENCE_KEYWORDS)?;
+    let image = run_interruptible(py, pool(r.threads)?, |cancel| {
+        render_reference(&r.scene, &r.options, Control::with_cancel(cancel))
+    })?
+    .map_err(|e| given.error(e))?;
+    Ok((film_to_array(py, &image.mean), film_to_array(py, &image.stderr)))
+}
+
+/// Error metrics of an image against a reference, as `fogplanes compare` prints them.
+///
+/// Both are arrays of shape (height, width, 3) (any real dtype, converted to float32 as the
+/// EXR files hold them). Returns a dict: smape, mse, rel_mse (also under "relmse"), max_abs.
+#[pyfunction]
+pub(crate) fn compare<'py>(
+    py: Python<'py>,
+    image: &Bound<'py, PyAny>,
+    reference: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let image = image_arg(image, "image")?;
+    let reference = image_arg(reference, "reference")?;
+    let m = compare_films(&image, &reference).map_err(py_error)?;
+    let d = PyDict::new(py);
+    d.set_item("smape", m.smape)?;
+    d.set_item("mse", m.mse)?;
+    d.set_item("rel_mse", m.rel_mse)?;
+    d.set_item("relmse", m.rel_mse)?;
+    d.set_item("max_abs", m.max_abs_error)?;
+    Ok(d)
+}
+
+/// Reads the first RGB(A) layer of an EXR file as an array (height, width, 3), float32.
+#[pyfunction]
+pub(crate) fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<'py>> {
+    let film = Film::load_exr(&path).map_err(|e| file_error(&path, e.to_string()))?;
+    Ok(film_to_array(py, &film))
+}
+
+/// Writes an array (height, width, 3) as .exr (linear float32) or .png (tone-mapped sRGB by
+/// `exposure` stops), whole or not at all, as the command line writes its images.
+#[pyfunction]
+#[pyo3(signature = (path, image, exposure = None))]
+#[pyo3(text_signature = "(path, image, exposure=0.0)")]
+pub(crate) fn save_image(
+    py: Python<'_>,
+    path: PathBuf,
+    image: &Bound<'_, PyAny>,
+    exposure: Option<&Bound<'_, PyAny>>,
+) -> PyResult<()> {
+    let mut given = Given::default();
+    let exposure = given.float(Setting::Exposure, exposure)?;
+    let exposure = settings::exposure(exposure.map(|e| e as f32)).map_err(|e| given.error(e))?;
+    let film = image_arg(image, "image")?;
+    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)]).map_err(py_error)?;
+    py.detach(|| film.save(&path, exposure)).map_err(py_error)
+}

@@ -1,0 +1,412 @@
+//! The command line's arguments: every command and flag, each documented once here (clap shows
+//! these comments as `--help`), and what each command's arguments ask of the library (its
+//! overrides, `From<&...Args>`), which `fogplanes::settings` resolves.
+
+use clap::builder::{PossibleValuesParser, TypedValueParser};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use fogplanes::accel::Accelerator;
+use fogplanes::kernel::Kernel;
+use fogplanes::sampling::Sampler;
+use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
+use fogplanes::weights::Estimator;
+use std::path::PathBuf;
+
+/// Renders single scattering in fog lit by rectangular lights, with photon planes weighted by
+/// continuous and stochastic multiple importance sampling (West et al. 2020, Section 6), and
+/// measures the estimators against an independent reference.
+#[derive(Parser)]
+#[command(name = "fogplanes", version, about, long_about = None, max_term_width = 100)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Subcommand)]
+pub(crate) enum Command {
+    /// Render a scene with photon planes.
+    ///
+    /// Samples the planes from the lights, intersects every camera ray with them and weights
+    /// each hit with the chosen estimator. Prints a one-line summary: estimator, planes, hits,
+    /// seconds.
+    Render(RenderArgs),
+    /// Render the independent reference (light point + equiangular distance sampling).
+    ///
+    /// Shares nothing with the photon planes but the scene. Prints its own relative standard
+    /// error and the MSE its noise adds to any comparison.
+    Reference(ReferenceArgs),
+    /// Compare an image against a reference: SMAPE, MSE, relMSE, largest absolute error.
+    Compare(CompareArgs),
+    /// Merge partial files into one image: the plane ranges of a render (`render --plane-range
+    /// A:B --partial part.npz`) or the row bands of a reference (`reference --rows J0:J1
+    /// --partial part.npz`), written by the jobs of a job array.
+    ///
+    /// The parts may come in any order; they must be parts of one image (same scene and
+    /// settings), without overlap or gap. A render's parts are added in the same fixed order as
+    /// `render` adds its chunks, so the image is bit-identical to `render`'s when each part is
+    /// a chunk of 16384 planes (or an aligned power-of-two run of them). Pilot parts of an
+    /// adaptive reference (`reference --rows J0:J1 --pilot-pass`) merge into the .npz that
+    /// `reference --pilot` reads.
+    Merge(MergeArgs),
+    /// Render every estimator from the same planes and rays, and write the table, panel and plot.
+    ///
+    /// Writes table.md, table.json, panel.png, error_vs_time.png (and .svg) and index.html (an
+    /// offline comparison page: the images, their per-pixel errors, the table and the plot) to --out.
+    Table(TableArgs),
+    /// Measure how render time grows with the number of ray-plane hits.
+    ///
+    /// Renders over a grid of plane counts and resolutions and writes scaling.md, scaling.json
+    /// and seconds_vs_hits.png (and .svg) to --out.
+    Scaling(ScalingArgs),
+    /// Write the scene for another renderer, to check fogplanes against it.
+    ///
+    /// mitsuba: a Mitsuba 3 XML file rendering direct emission plus single scattering (volpath,
+    /// max_depth 2, no Russian roulette); resolution, samples and seed are its parameters resx,
+    /// resy, spp and seed. tests/mitsuba/check_export.py compares it with `reference`.
+    Export(ExportArgs),
+}
+
+#[derive(Args)]
+pub(crate) struct MergeArgs {
+    /// The partial files (.npz).
+    #[arg(required = true)]
+    pub(crate) parts: Vec<PathBuf>,
+    /// Output: an image (.exr or .png) for render and reference parts, a .npz for pilot parts.
+    #[arg(long, short, value_name = "OUT")]
+    pub(crate) output: PathBuf,
+    /// Reference parts: also write the per-pixel standard error as an image.
+    #[arg(long, value_name = "PATH")]
+    pub(crate) stderr_image: Option<PathBuf>,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    pub(crate) exposure: Option<f32>,
+    /// No summary line.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+/// The formats `export` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(crate) enum ExportFormat {
+    /// Mitsuba 3 scene XML (scalar_rgb variant).
+    Mitsuba,
+}
+
+#[derive(Args)]
+pub(crate) struct ExportArgs {
+    /// The scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// The format to write.
+    #[arg(long, short, value_enum)]
+    pub(crate) format: ExportFormat,
+    /// Output file. Default: <scene name>.xml here.
+    #[arg(long, short, value_name = "OUT")]
+    pub(crate) output: Option<PathBuf>,
+    /// Image size WIDTHxHEIGHT written as the file's default, overriding the scene's camera.
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
+    pub(crate) resolution: Option<(u32, u32)>,
+}
+
+#[derive(Args)]
+pub(crate) struct ScalingArgs {
+    /// The scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// The weighting to time.
+    #[arg(long, short, default_value = Estimator::DEFAULT.name(), value_parser = estimator_parser())]
+    pub(crate) estimator: Estimator,
+    /// Plane counts, comma separated.
+    #[arg(long, value_delimiter = ',', default_values_t = settings::SCALING_PLANES)]
+    pub(crate) planes: Vec<u64>,
+    /// Resolutions WxH, comma separated [default: 160x90,320x180,640x360,1280x720].
+    #[arg(long, value_delimiter = ',', value_parser = parse_resolution)]
+    pub(crate) resolutions: Option<Vec<(u32, u32)>>,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "scaling")]
+    pub(crate) out: PathBuf,
+    /// Where the planes' random numbers come from.
+    #[arg(long, default_value = "sobol", value_parser = sampler_parser())]
+    pub(crate) sampler: Sampler,
+    #[command(flatten)]
+    pub(crate) common: CommonArgs,
+}
+
+#[derive(Args)]
+pub(crate) struct CommonArgs {
+    /// Image size WIDTHxHEIGHT, overriding the scene's camera resolution.
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
+    pub(crate) resolution: Option<(u32, u32)>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_name = "T")]
+    pub(crate) threads: Option<usize>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub(crate) quiet: bool,
+}
+
+#[derive(Args)]
+pub(crate) struct RenderArgs {
+    /// The scene file (TOML), e.g. media_scenes/six_lights.toml.
+    pub(crate) scene: PathBuf,
+    /// Weighting (default: the scene's, else smis-exact).
+    #[arg(long, short, value_parser = estimator_parser())]
+    pub(crate) estimator: Option<Estimator>,
+    /// Stratified orientations K for smis-cosine and smis-exact (2 is the paper's pair).
+    #[arg(long, value_name = "K")]
+    pub(crate) orientations: Option<u32>,
+    /// Number of photon planes N.
+    #[arg(long, short, value_name = "N")]
+    pub(crate) planes: Option<u64>,
+    /// Random seed: the image depends on it alone, not on the thread count.
+    #[arg(long, short, value_name = "S")]
+    pub(crate) seed: Option<u64>,
+    /// Where the planes' random numbers come from: sobol (randomised quasi-Monte Carlo, the
+    /// default) or independent (the paper's planes). Default: the scene's, else sobol.
+    #[arg(long, value_parser = sampler_parser())]
+    pub(crate) sampler: Option<Sampler>,
+    /// Camera samples per pixel (ray sets), stratified over the pixel; each gathers its own
+    /// share of the N planes, so K of them cost about what one does (default: the scene's, else
+    /// 16).
+    #[arg(long, value_name = "K")]
+    pub(crate) spp: Option<u32>,
+    /// Render for this many seconds of wall time (the whole command) instead of a fixed plane
+    /// count: planes in passes, each extending the set, until the budget is spent.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub(crate) time_budget: Option<f64>,
+    /// Pixel centres instead of whole pixels (the box filter, by default): compare with
+    /// `reference --pixel-center`.
+    #[arg(long)]
+    pub(crate) pixel_center: bool,
+    /// How rays find planes [default: raster].
+    #[arg(long, value_parser = accelerator_parser())]
+    pub(crate) accelerator: Option<Accelerator>,
+    /// The gathering kernel: the widest vector kernel the CPU has (auto), one of them by name,
+    /// or one hit at a time (per-hit); all give bit-identical images [default: auto].
+    #[arg(long, value_parser = kernel_parser())]
+    pub(crate) kernel: Option<Kernel>,
+    /// Output: .exr (linear float) or .png (tone-mapped sRGB). Default: <scene name>.exr here.
+    #[arg(long, short, value_name = "OUT", conflicts_with = "partial")]
+    pub(crate) output: Option<PathBuf>,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    pub(crate) exposure: Option<f32>,
+    /// Render only planes A to B (excluded) of the N, for a job array: A and B multiples of
+    /// 16384 (the render's chunks) or N. Needs --partial; `fogplanes merge` adds the parts.
+    #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with = "time_budget")]
+    pub(crate) plane_range: Option<(u64, u64)>,
+    /// Write the unnormalised sums of the planes rendered (all, or --plane-range) to this .npz
+    /// file instead of an image (numpy loads it: `sums` and a JSON `meta`).
+    #[arg(long, value_name = "PART.npz", conflicts_with = "time_budget")]
+    pub(crate) partial: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) common: CommonArgs,
+}
+
+#[derive(Args)]
+pub(crate) struct ReferenceArgs {
+    /// The scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// Samples per pixel, on average (see --uniform).
+    #[arg(long, value_name = "N", default_value_t = settings::REFERENCE_SPP)]
+    pub(crate) spp: u32,
+    /// Random seed.
+    #[arg(long, short, value_name = "S", default_value_t = settings::REFERENCE_SEED)]
+    pub(crate) seed: u64,
+    /// Sample pixel centres instead of whole pixels (to compare with `render --pixel-center`
+    /// and `table --pixel-center`).
+    #[arg(long)]
+    pub(crate) pixel_center: bool,
+    /// The same number of samples in every pixel (by default a pilot pass spreads them by need).
+    #[arg(long)]
+    pub(crate) uniform: bool,
+    /// Output image (.exr or .png). Default: <scene name>_reference.exr here.
+    #[arg(long, short, value_name = "OUT")]
+    pub(crate) output: Option<PathBuf>,
+    /// Also write the per-pixel standard error as an image.
+    #[arg(long, value_name = "PATH")]
+    pub(crate) stderr_image: Option<PathBuf>,
+    /// Exposure in stops for PNG output [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    pub(crate) exposure: Option<f32>,
+    /// Render only rows J0 to J1 (excluded), for a job array; needs --partial, and `fogplanes
+    /// merge` assembles the bands. Without --uniform, the bands share one pilot pass: render its
+    /// bands with --pilot-pass, merge them into pilot.npz, then render each band with --pilot
+    /// pilot.npz.
+    #[arg(long, value_name = "J0:J1", value_parser = parse_range, requires = "partial")]
+    pub(crate) rows: Option<(u64, u64)>,
+    /// Write the rows' mean and standard error (or pilot) to this .npz instead of images.
+    #[arg(long, value_name = "PART.npz", conflicts_with_all = ["output", "stderr_image"])]
+    pub(crate) partial: Option<PathBuf>,
+    /// Render the rows of the adaptive reference's pilot pass (its per-pixel standard errors).
+    #[arg(long, requires = "partial", conflicts_with_all = ["uniform", "pilot"])]
+    pub(crate) pilot_pass: bool,
+    /// The adaptive reference's whole pilot pass (a .npz merged from --pilot-pass parts): the
+    /// sample counts come from it instead of a pilot pass of this run's own.
+    #[arg(long, value_name = "PILOT.npz", conflicts_with = "uniform")]
+    pub(crate) pilot: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) common: CommonArgs,
+}
+
+#[derive(Args)]
+pub(crate) struct CompareArgs {
+    /// The image to measure (EXR).
+    pub(crate) image: PathBuf,
+    /// The reference (EXR).
+    pub(crate) reference: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+#[derive(Args)]
+pub(crate) struct TableArgs {
+    /// The scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// Reference image (EXR) at the same resolution and with the same pixel filter: whole
+    /// pixels (`reference` as it is), or pixel centres (`reference --pixel-center`) with
+    /// --pixel-center.
+    #[arg(long, value_name = "REF")]
+    pub(crate) reference: PathBuf,
+    /// Number of photon planes of the table (default: the scene's).
+    #[arg(long, short, value_name = "N")]
+    pub(crate) planes: Option<u64>,
+    /// Random seed of the table's planes (the sweep uses seed + 1000 onwards).
+    #[arg(long, short, value_name = "S")]
+    pub(crate) seed: Option<u64>,
+    /// Pixel centres instead of whole pixels (box filter); the reference must match.
+    #[arg(long)]
+    pub(crate) pixel_center: bool,
+    /// Plane counts of the error-versus-time sweep, comma separated.
+    #[arg(long, value_delimiter = ',', default_values_t = settings::TABLE_SWEEP)]
+    pub(crate) sweep: Vec<u64>,
+    /// Skip the error-versus-time sweep (no plot).
+    #[arg(long)]
+    pub(crate) no_sweep: bool,
+    /// Seeds per plane count in the sweep.
+    #[arg(long, default_value_t = settings::TABLE_SWEEP_SEEDS)]
+    pub(crate) sweep_seeds: u32,
+    /// Also render every estimator for this many seconds each and compare at equal time.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    pub(crate) equal_time: Option<f64>,
+    /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
+    #[arg(long, value_delimiter = ',', default_values = settings::TABLE_SAMPLERS.map(|s| s.name()), value_parser = sampler_parser())]
+    pub(crate) samplers: Vec<Sampler>,
+    /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
+    #[arg(long, value_delimiter = ',', value_name = "K")]
+    pub(crate) orientations: Vec<u32>,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "report")]
+    pub(crate) out: PathBuf,
+    /// Exposure in stops for the panel [default: 0].
+    #[arg(long, value_name = "EV", allow_negative_numbers = true)]
+    pub(crate) exposure: Option<f32>,
+    #[command(flatten)]
+    pub(crate) common: CommonArgs,
+}
+
+/// Parses a value from the closed list of names `names` (shown in `--help` and in errors).
+pub(crate) fn named<T: std::str::FromStr + Clone + Send + Sync + 'static>(
+    names: Vec<&'static str>,
+) -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(names).map(|s| s.parse::<T>().ok().expect("a listed name parses"))
+}
+
+pub(crate) fn estimator_parser() -> impl TypedValueParser<Value = Estimator> {
+    named(Estimator::names())
+}
+
+pub(crate) fn accelerator_parser() -> impl TypedValueParser<Value = Accelerator> {
+    named(Accelerator::ALL.iter().map(|a| a.name()).collect())
+}
+
+pub(crate) fn sampler_parser() -> impl TypedValueParser<Value = Sampler> {
+    named(Sampler::ALL.iter().map(|s| s.name()).collect())
+}
+
+pub(crate) fn kernel_parser() -> impl TypedValueParser<Value = Kernel> {
+    named(Kernel::ALL.iter().map(|k| k.name()).collect())
+}
+
+pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
+    Ok((parse(w)?, parse(h)?))
+}
+
+/// `A:B` with A < B.
+pub(crate) fn parse_range(s: &str) -> Result<(u64, u64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("expected START:END, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u64>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
+    let (a, b) = (parse(a)?, parse(b)?);
+    if a >= b {
+        return Err(format!("{s:?}: the start must be below the end"));
+    }
+    Ok((a, b))
+}
+
+// ---------------------------------------------------------------------------------------------
+// What each command's arguments ask of the library: its overrides, resolved by
+// `fogplanes::settings` (the one place that applies defaults and checks).
+
+impl From<&RenderArgs> for Overrides {
+    fn from(a: &RenderArgs) -> Self {
+        Overrides {
+            estimator: a.estimator,
+            orientations: a.orientations,
+            planes: a.planes,
+            seed: a.seed,
+            sampler: a.sampler,
+            spp: a.spp,
+            pixel_center: a.pixel_center,
+            accelerator: a.accelerator,
+            kernel: a.kernel,
+            time_budget: a.time_budget,
+            resolution: a.common.resolution,
+            threads: a.common.threads,
+            exposure: a.exposure,
+        }
+    }
+}
+
+impl From<&ReferenceArgs> for ReferenceOverrides {
+    fn from(a: &ReferenceArgs) -> Self {
+        ReferenceOverrides {
+            spp: Some(a.spp),
+            seed: Some(a.seed),
+            pixel_center: a.pixel_center,
+            uniform: a.uniform,
+            resolution: a.common.resolution,
+            threads: a.common.threads,
+            exposure: a.exposure,
+        }
+    }
+}
+
+impl From<&TableArgs> for TableOverrides {
+    fn from(a: &TableArgs) -> Self {
+        TableOverrides {
+            planes: a.planes,
+            seed: a.seed,
+            pixel_center: a.pixel_center,
+            sweep: Some(if a.no_sweep { Vec::new() } else { a.sweep.clone() }),
+            sweep_seeds: Some(a.sweep_seeds),
+            equal_time: a.equal_time,
+            samplers: Some(a.samplers.clone()),
+            orientations: a.orientations.clone(),
+            resolution: a.common.resolution,
+            threads: a.common.threads,
+            exposure: a.exposure,
+        }
+    }
+}
+
+impl From<&ScalingArgs> for ScalingOverrides {
+    fn from(a: &ScalingArgs) -> Self {
+        ScalingOverrides {
+            estimator: Some(a.estimator),
+            sampler: Some(a.sampler),
+            planes: Some(a.planes.clone()),
+            resolutions: a.resolutions.clone(),
+            threads: a.common.threads,
+        }
+    }
+}

@@ -1,0 +1,393 @@
+//! The commands: each loads its scene, resolves its arguments through `fogplanes::settings`,
+//! checks every output before any work, runs, and reports. Errors carry their exit code
+//! ([`Failure`]: 2 for bad input, 1 for the rest).
+
+use crate::args::*;
+use crate::experiments::{self, TableOptions, run_table};
+use crate::{page, system};
+use anyhow::{Context, Result, anyhow};
+use fogplanes::control::Control;
+use fogplanes::film::{Film, check_writable, write_file_atomically};
+use fogplanes::merge::{Merged, merge_parts};
+use fogplanes::metrics::compare;
+use fogplanes::options::RenderOptions;
+use fogplanes::outputs::{Output, check_outputs};
+use fogplanes::partial::parts::{read_pilot, save_pilot_part, save_reference_part, save_render_part};
+use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference};
+use fogplanes::render::{progress_units, render, render_chunk, render_for};
+use fogplanes::scene::Scene;
+use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Prints a line to standard output; a closed pipe (`fogplanes ... | head`) is not an error.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
+/// An error with the exit code it deserves: 2 for bad input, 1 for everything else.
+pub(crate) struct Failure {
+    pub(crate) code: u8,
+    pub(crate) error: anyhow::Error,
+}
+
+fn input<E: Into<anyhow::Error>>(e: E) -> Failure {
+    Failure { code: 2, error: e.into() }
+}
+
+impl From<fogplanes::Error> for Failure {
+    fn from(e: fogplanes::Error) -> Self {
+        // A setting is named as the command line spells it: `--planes`.
+        Failure { code: if e.is_input() { 2 } else { 1 }, error: anyhow!(e.worded(|s| s.flag())) }
+    }
+}
+
+impl From<anyhow::Error> for Failure {
+    fn from(e: anyhow::Error) -> Self {
+        // The library's errors keep their exit code through the experiments' anyhow chains.
+        let code = match e.downcast_ref::<fogplanes::Error>() {
+            Some(inner) if inner.is_input() => 2,
+            _ => 1,
+        };
+        Failure { code, error: e }
+    }
+}
+
+/// When the command started (for `--time-budget`, which covers the whole command).
+pub(crate) static STARTED: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+
+fn film_pixels(scene: &Scene) -> f64 {
+    scene.camera.width as f64 * scene.camera.height as f64
+}
+
+/// A partial file's name ends in .npz (numpy loads it by that name).
+fn check_partial_output(path: &std::path::Path) -> Result<(), Failure> {
+    if path.extension().and_then(|e| e.to_str()) != Some("npz") {
+        return Err(input(anyhow!("{}: a partial file is a .npz", path.display())));
+    }
+    check_outputs(&[Output::File(path)])?;
+    Ok(())
+}
+
+/// Starts the worker threads the settings ask for (none: rayon's default, every core).
+fn start_threads(threads: Option<usize>) -> Result<(), Failure> {
+    if let Some(t) = threads {
+        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().context("cannot start the worker threads")?;
+    }
+    Ok(())
+}
+
+fn progress_bar(quiet: bool, total: u64, what: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} (eta {eta})")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_message(what.to_string());
+    bar
+}
+
+fn default_output(scene: &Scene, suffix: &str) -> PathBuf {
+    PathBuf::from(format!("{}{suffix}.exr", scene.name))
+}
+
+pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    let r = settings::resolve_render(&scene, &Overrides::from(&a))?;
+    let (scene, opts) = (&r.scene, &r.options);
+    if let Some(part) = &a.partial {
+        return render_part(&a, scene, opts, part, r.threads);
+    }
+    let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
+    check_outputs(&[Output::Image(&output)])?;
+    start_threads(r.threads)?;
+
+    let bar =
+        progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes()), opts.weighting().label().as_str());
+    let cpu = system::cpu_seconds();
+    let (film, stats) = match r.time_budget {
+        None => render(scene, opts, Control::with_progress(&|| bar.inc(1)))?,
+        Some(seconds) => {
+            bar.set_length(u64::MAX);
+            // What the command spent before rendering, and what writing the file will take.
+            let reserve = 0.02 + 5e-8 * film_pixels(scene);
+            let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
+            let budget = std::time::Duration::from_secs_f64(left.max(0.0));
+            render_for(scene, opts, budget, Control::with_progress(&|| bar.inc(1)))?
+        }
+    };
+    let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
+    bar.finish_and_clear();
+    film.save(&output, r.exposure)?;
+    let mut summary = stats.summary();
+    if r.time_budget.is_some() {
+        summary += &format!(", {} plane passes", stats.plane_passes);
+    }
+    if let Some(c) = cpu {
+        summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
+    }
+    if let Some(b) = system::peak_memory_bytes() {
+        summary += &format!(", peak memory {:.0} MB", b as f64 / 1e6);
+    }
+    say!("{summary}");
+    say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", output.display(), film.width, film.height, film.mean(), film.max());
+    Ok(())
+}
+
+/// `render --partial`: planes `--plane-range` (all by default) into a partial file.
+fn render_part(
+    a: &RenderArgs,
+    scene: &Scene,
+    opts: &RenderOptions,
+    part: &std::path::Path,
+    threads: Option<usize>,
+) -> Result<(), Failure> {
+    check_partial_output(part)?;
+    let (start, end) = a.plane_range.unwrap_or((0, opts.planes() as u64));
+    let range = start as usize..end as usize;
+    fogplanes::partial::chunk_indices(opts.planes(), &range)?;
+    start_threads(threads)?;
+    let units = progress_units(scene, opts, range.clone());
+    let bar = progress_bar(a.common.quiet, units, opts.weighting().label().as_str());
+    let (partial, stats) = render_chunk(scene, opts, range, Control::with_progress(&|| bar.inc(1)))?;
+    bar.finish_and_clear();
+    save_render_part(part, scene, opts, &partial)?;
+    say!("{}", stats.summary());
+    say!("wrote {} (planes {}:{} of {})", part.display(), partial.start, partial.end, partial.planes_total);
+    Ok(())
+}
+
+pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
+    let merged = merge_parts(&a.parts)?;
+    let exposure = settings::exposure(a.exposure)?;
+    match merged {
+        Merged::Render { partial, image, .. } => {
+            if a.stderr_image.is_some() {
+                return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
+            }
+            check_outputs(&[Output::Image(&a.output)])?;
+            image.save(&a.output, exposure)?;
+            if !a.quiet {
+                say!(
+                    "merged {} parts: {} planes, {} hits, {:.3} s of rendering",
+                    a.parts.len(),
+                    partial.planes_total,
+                    partial.hits,
+                    partial.seconds
+                );
+                say!(
+                    "wrote {} ({}x{}, mean {:.6}, max {:.4})",
+                    a.output.display(),
+                    image.width,
+                    image.height,
+                    image.mean(),
+                    image.max()
+                );
+            }
+        }
+        Merged::Reference { mean, stderr, seconds, .. } => {
+            let mut outputs = vec![Output::Image(&a.output)];
+            outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+            check_outputs(&outputs)?;
+            mean.save(&a.output, exposure)?;
+            if let Some(p) = &a.stderr_image {
+                stderr.save(p, exposure)?;
+            }
+            if !a.quiet {
+                say!("merged {} reference bands ({:.3} s of rendering)", a.parts.len(), seconds);
+                say!("wrote {}", a.output.display());
+            }
+        }
+        Merged::Pilot { scene, options, pilot, seconds } => {
+            if a.stderr_image.is_some() {
+                return Err(input(anyhow!("--stderr-image: pilot parts merge into one .npz")));
+            }
+            check_partial_output(&a.output)?;
+            let rows = 0..scene.camera.height;
+            save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
+            if !a.quiet {
+                say!("merged {} pilot bands; wrote {} (for reference --pilot)", a.parts.len(), a.output.display());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `reference --partial`: rows `--rows` (all by default) into a partial file: the pilot's with
+/// `--pilot-pass`, else the reference's (counts from `--pilot` unless uniform).
+fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std::path::Path) -> Result<(), Failure> {
+    check_partial_output(part)?;
+    let (scene, opts) = (&r.scene, &r.options);
+    let (j0, j1) = a.rows.unwrap_or((0, scene.camera.height as u64));
+    let rows = u32::try_from(j0).unwrap_or(u32::MAX)..u32::try_from(j1).unwrap_or(u32::MAX);
+    start_threads(r.threads)?;
+    let bar = progress_bar(a.common.quiet, rows.len() as u64, "reference");
+    let tick = || bar.inc(1);
+    let control = Control::with_progress(&tick);
+    let start = std::time::Instant::now();
+    if a.pilot_pass {
+        let pilot = reference_pilot_rows(scene, opts, rows.clone(), control)?;
+        bar.finish_and_clear();
+        save_pilot_part(part, scene, opts, rows.clone(), &pilot, start.elapsed().as_secs_f64())?;
+        say!("wrote {} (pilot rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+        return Ok(());
+    }
+    let counts = match (&a.pilot, opts.uniform) {
+        (_, true) => None,
+        (Some(p), false) => Some(reference_counts(opts, &read_pilot(p, scene, opts)?.pixels)),
+        (None, false) if rows.len() as u32 == scene.camera.height => {
+            let pilot = reference_pilot_rows(scene, opts, 0..scene.camera.height, control)?;
+            Some(reference_counts(opts, &pilot.pixels))
+        }
+        (None, false) => {
+            return Err(input(anyhow!(
+                "--rows: the bands of an adaptive reference share one pilot pass: give --pilot PILOT.npz \
+                 (made by `reference --rows J0:J1 --pilot-pass` for each band and `merge`), or --uniform"
+            )));
+        }
+    };
+    let (mean, stderr) = reference_rows(scene, opts, rows.clone(), counts.as_deref(), control)?;
+    bar.finish_and_clear();
+    save_reference_part(part, scene, opts, rows.clone(), (&mean, &stderr), start.elapsed().as_secs_f64())?;
+    say!("wrote {} (rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+    Ok(())
+}
+
+pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    let r = settings::resolve_reference(&scene, &ReferenceOverrides::from(&a))?;
+    if let Some(part) = &a.partial {
+        return reference_part(&a, &r, part);
+    }
+    if a.pilot_pass || a.pilot.is_some() {
+        return Err(input(anyhow!("--pilot and --pilot-pass make partial files: give --partial PART.npz")));
+    }
+    let scene = &r.scene;
+    let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
+    let mut outputs = vec![Output::Image(&output)];
+    outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    check_outputs(&outputs)?;
+    start_threads(r.threads)?;
+    let passes = if r.options.uniform { 1 } else { 2 };
+    let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
+    let reference = render_reference(scene, &r.options, Control::with_progress(&|| bar.inc(1)))?;
+    bar.finish_and_clear();
+    reference.mean.save(&output, r.exposure)?;
+    if let Some(p) = &a.stderr_image {
+        reference.stderr.save(p, r.exposure)?;
+    }
+    say!(
+        "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
+        r.options.spp,
+        reference.seconds,
+        reference.relative_stderr(),
+        reference.noise_mse(),
+        reference.noise_mse() * 1e4
+    );
+    say!("wrote {}", output.display());
+    Ok(())
+}
+
+pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
+    let image = Film::load_exr(&a.image).map_err(input)?;
+    let reference = Film::load_exr(&a.reference).map_err(input)?;
+    let m = compare(&image, &reference)?;
+    if a.json {
+        say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
+    } else {
+        say!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
+        say!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
+        say!("relMSE       {:.6e}", m.rel_mse);
+        say!("max |error|  {:.6e}", m.max_abs_error);
+    }
+    Ok(())
+}
+
+/// The files `table` writes into its directory; the plot's only with a sweep.
+const TABLE_FILES: [&str; 3] = ["table.md", "table.json", "index.html"];
+const TABLE_PLOTS: [&str; 2] = ["error_vs_time.png", "error_vs_time.svg"];
+
+pub(crate) fn cmd_table(a: TableArgs) -> Result<(), Failure> {
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    let r = settings::resolve_table(&scene, &TableOverrides::from(&a))?;
+    let scene = &r.scene;
+    let reference = Film::load_exr(&a.reference).map_err(input)?;
+    reference.check_finite("reference").map_err(|e| input(anyhow!("{}: {e}", a.reference.display())))?;
+    if (reference.width, reference.height) != (scene.camera.width, scene.camera.height) {
+        return Err(input(anyhow!(
+            "{}: the reference is {}x{} but the scene renders at {}x{} (use --resolution)",
+            a.reference.display(),
+            reference.width,
+            reference.height,
+            scene.camera.width,
+            scene.camera.height
+        )));
+    }
+    // The comparison page is written last: refuse what it cannot show before any work.
+    if scene.camera.width.max(scene.camera.height) > page::MAX_SIDE {
+        return Err(input(anyhow!(
+            "--resolution: the table's comparison page shows images up to {} pixels on a side, not {}x{}",
+            page::MAX_SIDE,
+            scene.camera.width,
+            scene.camera.height
+        )));
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
+        .map_err(input)?;
+    // Every file the table writes, checked now: a failure after the renders would lose them.
+    let panel = a.out.join("panel.png");
+    let plots = if r.sweep.is_empty() { &[][..] } else { &TABLE_PLOTS[..] };
+    let files: Vec<PathBuf> = TABLE_FILES.iter().chain(plots).map(|f| a.out.join(f)).collect();
+    let outputs: Vec<Output> =
+        std::iter::once(Output::Image(&panel)).chain(files.iter().map(|p| Output::File(p))).collect();
+    check_outputs(&outputs)?;
+    start_threads(r.threads)?;
+    let opts =
+        TableOptions { settings: &r, out: a.out.clone(), quiet: a.common.quiet, reference_path: a.reference.clone() };
+    let table = run_table(&reference, &opts)?;
+    say!("{}", table);
+    Ok(())
+}
+
+/// The files `scaling` writes into its directory besides its plot's PNG.
+const SCALING_FILES: [&str; 3] = ["scaling.md", "scaling.json", "seconds_vs_hits.svg"];
+
+pub(crate) fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
+    let scene = Scene::load(&a.scene).map_err(input)?;
+    if a.common.resolution.is_some() {
+        return Err(input(anyhow!("--resolution: scaling measures the sizes of --resolutions")));
+    }
+    let r = settings::resolve_scaling(&ScalingOverrides::from(&a))?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
+        .map_err(input)?;
+    let (plot, files) = (a.out.join("seconds_vs_hits.png"), SCALING_FILES.map(|f| a.out.join(f)));
+    check_outputs(&[&[Output::Image(&plot)][..], &files.each_ref().map(|p| Output::File(p))].concat())?;
+    start_threads(r.threads)?;
+    let md = experiments::run_scaling(&scene, &r, &a.out, a.common.quiet)?;
+    say!("{md}");
+    Ok(())
+}
+
+pub(crate) fn cmd_export(a: ExportArgs) -> Result<(), Failure> {
+    let mut scene = Scene::load(&a.scene).map_err(input)?;
+    if let Some((w, h)) = a.resolution {
+        scene = scene.with_resolution(w, h)?;
+    }
+    let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.xml", scene.name)));
+    check_writable(&output)?;
+    let text = match a.format {
+        ExportFormat::Mitsuba => fogplanes::export::mitsuba_xml(&scene),
+    };
+    write_file_atomically(&output, text.as_bytes())?;
+    say!("wrote {} ({} lights, {}x{})", output.display(), scene.lights.len(), scene.camera.width, scene.camera.height);
+    Ok(())
+}
