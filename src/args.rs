@@ -28,6 +28,7 @@ pub(crate) enum Command {
     /// Samples the planes from the lights, intersects every camera ray with them and weights
     /// each hit with the chosen estimator. Prints a one-line summary: estimator, planes, hits,
     /// seconds.
+    #[command(after_long_help = chunk_note())]
     Render(RenderArgs),
     /// Render the independent reference (light point + equiangular distance sampling).
     ///
@@ -43,9 +44,10 @@ pub(crate) enum Command {
     /// The parts may come in any order; they must be parts of one image (same scene and
     /// settings), without overlap or gap. A render's parts are added in the same fixed order as
     /// `render` adds its chunks, so the image is bit-identical to `render`'s when each part is
-    /// a chunk of 16384 planes (or an aligned power-of-two run of them). Pilot parts of an
+    /// a canonical chunk of planes (or an aligned power-of-two run of them). Pilot parts of an
     /// adaptive reference (`reference --rows J0:J1 --pilot-pass`) merge into the .npz that
     /// `reference --pilot` reads.
+    #[command(after_long_help = chunk_note())]
     Merge(MergeArgs),
     /// Render every estimator from the same planes and rays, and write the table, panel and plot.
     ///
@@ -189,7 +191,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "EV", allow_negative_numbers = true)]
     pub(crate) exposure: Option<f32>,
     /// Render only planes A to B (excluded) of the N, for a job array: A and B multiples of
-    /// 16384 (the render's chunks) or N. Needs --partial; `fogplanes merge` adds the parts.
+    /// the canonical chunk size or N. Needs --partial; `fogplanes merge` adds the parts.
     #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with = "time_budget")]
     pub(crate) plane_range: Option<(u64, u64)>,
     /// Write the unnormalised sums of the planes rendered (all, or --plane-range) to this .npz
@@ -324,6 +326,11 @@ pub(crate) fn sampler_parser() -> impl TypedValueParser<Value = Sampler> {
 
 pub(crate) fn kernel_parser() -> impl TypedValueParser<Value = Kernel> {
     named(Kernel::ALL.iter().map(|k| k.name()).collect())
+}
+
+/// The canonical chunk size, as the help states it (from the library, never written out).
+pub(crate) fn chunk_note() -> String {
+    format!("A canonical chunk is {} planes.", fogplanes::limits::CHUNK_PLANES)
 }
 
 pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {

@@ -9,9 +9,9 @@
 //! ([`Occluder::blocks`]), the estimator's D ([`Denominator::denominators`]) and
 //! [`PlaneView::contribution`] (the transmittance and the finite check), each as a loop over the
 //! L lanes. The vector kernels of [`crate::kernel`] call it with L = [`crate::kernel::LANES`],
-//! which the compiler turns into vector instructions; the per-hit path
-//! ([`GatherContext::gather_one`]: the BVH, the brute-force loop and the `per-hit` kernel) calls
-//! it with L = 1. Every lane does the same operations in the same order whatever L, so images are
+//! which the compiler turns into vector instructions; the per-hit paths call it with L = 1: the
+//! BVH and the brute-force loop through [`GatherContext::gather_one`], the raster's `per-hit`
+//! kernel through [`PlaneJob::gather_lanes_in`]. Every lane does the same operations in the same order whatever L, so images are
 //! bit-identical whichever path found a hit.
 
 // Lane loops (`for l in 0..L`) index several arrays in step, as the vector code they become.

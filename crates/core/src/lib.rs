@@ -91,8 +91,6 @@ pub mod settings;
 pub mod weights;
 
 pub use error::{Error, Result};
-/// The Sobol sequence under its former path: it is a part of [`sampling`] now.
-pub use sampling::sobol;
 
 /// Parses `s` as the member of the closed list `all` whose name it is, or says which names
 /// there are: the `FromStr` of every named choice (estimator, sampler, kernel, accelerator).
