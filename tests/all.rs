@@ -18,6 +18,7 @@ mod page;
 mod partials;
 mod reference;
 mod sampling;
+mod scene_docs;
 mod structures;
 mod unbiasedness;
 mod whole_pixels;
