@@ -404,7 +404,7 @@ fn the_doc_states_the_codes_limits() {
             "MEMORY_BUDGET_BYTES" => MEMORY_BUDGET_BYTES as f64,
             "BYTES_PER_PIXEL" => BYTES_PER_PIXEL as f64,
             "BYTES_PER_PLANE" => BYTES_PER_PLANE as f64,
-            "CHUNK_PLANES" => fogplanes::partial::CHUNK_PLANES as f64,
+            "CHUNK_PLANES" => fogplanes::limits::CHUNK_PLANES as f64,
             other => panic!("docs/scenes.md names a limit this test does not know: {other}"),
         };
         assert_eq!(value, actual, "docs/scenes.md: {name} is {actual} in the code");
