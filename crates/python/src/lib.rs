@@ -961,9 +961,10 @@ impl PyPartial {
 fn render_chunk(
     py: Python<'_>,
     scene: &Bound<'_, PyAny>,
-    chunk: (usize, usize),
+    chunk: &Bound<'_, PyAny>,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyPartial> {
+    let chunk = index_pair(chunk, "chunk", "plane indices")?;
     let (r, given) = resolve_chunked(scene, kwargs)?;
     let (p, _) = run_interruptible(py, pool(r.threads)?, |cancel| {
         partial::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
@@ -971,6 +972,55 @@ fn render_chunk(
     .map_err(|e| given.error(e))?;
     Ok(PyPartial { inner: p })
 }
+
+/// A `(start, end)` pair of argument `name`, as Python ints checked before any conversion: a
+/// `TypeError` for anything but a pair of integers, a `ValueError` for a negative one or one of
+/// 2**64 or more, both naming the argument (`what` the integers are).
+fn index_pair(value: &Bound<'_, PyAny>, name: &str, what: &str) -> PyResult<(usize, usize)> {
+    let repr = value.repr()?;
+    let not_a_pair = || PyTypeError::new_err(format!("{name}={repr}: expected a (start, end) pair of {what}"));
+    let (start, end): (Bound<'_, PyAny>, Bound<'_, PyAny>) = value.extract().map_err(|_| not_a_pair())?;
+    let index = |v: &Bound<'_, PyAny>| match v.extract::<i128>() {
+        Ok(n) => usize::try_from(n).map_err(|_| {
+            PyValueError::new_err(format!("{name}={repr}: {what} must be non-negative integers below 2**64"))
+        }),
+        Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
+            Err(PyValueError::new_err(format!("{name}={repr}: {what} must be non-negative integers below 2**64")))
+        }
+        Err(_) => Err(not_a_pair()),
+    };
+    Ok((index(&start)?, index(&end)?))
+}
+
+/// The plan of a render of `chunks` canonical chunks (`len(plan_render(...)["chunks"])`) spread
+/// over tasks of at most `block` chunks (a power of two): the core's steps in post-order, each a
+/// tuple `(start, end, left, right)` over chunks `start..end`: `left` and `right` are None for a
+/// task that renders those chunks (`render_chunk` of their planes), else the indices of the two
+/// earlier steps whose partials it adds (`combine(left, right)`). The last step is the whole
+/// render; following the plan gives the bits of `render`. ValueError for no chunks, more than a
+/// render has, or a block that is not a power of two.
+#[pyfunction]
+fn merge_plan(chunks: &Bound<'_, PyAny>, block: &Bound<'_, PyAny>) -> PyResult<Vec<PlanTuple>> {
+    let count = |v: &Bound<'_, PyAny>, name: &str| -> PyResult<usize> {
+        let type_error = || -> PyResult<PyErr> {
+            Ok(PyTypeError::new_err(format!("{name}: expected an integer, got {}", v.get_type().name()?)))
+        };
+        let n = match v.extract::<i128>() {
+            _ if v.is_instance_of::<pyo3::types::PyBool>() => return Err(type_error()?),
+            Ok(n) => n,
+            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => i128::MAX,
+            Err(_) => return Err(type_error()?),
+        };
+        let repr = v.repr()?;
+        usize::try_from(n).map_err(|_| PyValueError::new_err(format!("{name}: out of range, got {repr}")))
+    };
+    let (n, b) = (count(chunks, "chunks")?, count(block, "block")?);
+    let plan = partial::merge_plan(n, b).map_err(py_error)?;
+    Ok(plan.into_iter().map(|s| (s.chunks.start, s.chunks.end, s.parts.map(|p| p.0), s.parts.map(|p| p.1))).collect())
+}
+
+/// A step of [`merge_plan`] for Python: (start, end, left, right).
+type PlanTuple = (usize, usize, Option<usize>, Option<usize>);
 
 /// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in
 /// float64. ValueError for partials of different renders, overlapping or not adjacent.
@@ -1171,6 +1221,7 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyPartial>()?;
     m.add_function(wrap_pyfunction!(plan_render, m)?)?;
     m.add_function(wrap_pyfunction!(render_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(merge_plan, m)?)?;
     m.add_function(wrap_pyfunction!(combine, m)?)?;
     m.add_function(wrap_pyfunction!(merge_partials, m)?)?;
     m.add_function(wrap_pyfunction!(finish_render, m)?)?;
