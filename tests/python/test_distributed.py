@@ -122,7 +122,8 @@ def test_task_keys_are_stable_and_name_the_work(client, scene):
 def test_the_progress_bar_is_on_stderr(client, scene, capfd):
     fd.render(scene, client=client, threads=1, resolution=(32, 18), planes=2 * chunk_planes(scene) + 1)
     out, err = capfd.readouterr()
-    # 3 chunks (one per task: too few for more), 2 additions and the finish.
+    # 3 chunks (one per task: too few for more), 2 additions (the core's plan) and the finish.
+    assert len(fogplanes.merge_plan(3, 1)) + 1 == 6
     assert out == "" and "fogplanes render [" in err and "6/6 tasks" in err
 
 

@@ -19,13 +19,14 @@ How a render is spread (why the image does not depend on the cluster):
   into a `Partial`: the chunks' unnormalised f64 sums. Plane i is the same plane wherever it
   is rendered (point i of the seed's scrambled Sobol sequence).
 - Partials are added on the workers along the core's canonical binary tree over chunk indices
-  (`_canonical_tree`; the same tree `fogplanes.render` uses), one task per node, and the last
-  task divides by N and adds the direct emission (`finish_render`). Only the image reaches the
+  (the same tree `fogplanes.render` uses), one task per step of the core's plan (`merge_plan`:
+  a leaf renders a block of chunks, a node adds two earlier steps), and the last task divides
+  by N and adds the direct emission (`finish_render`). Only the image reaches the
   client. The sums, and so the image, are the same bits for any number of workers, any order
   of completion and any retry or lost worker: equal to `fogplanes.render`'s.
-- Tasks are submitted depth-first and the client keeps no future but the last one, so the
-  scheduler frees each partial once its parent has added it: at most the tree's frontier is
-  alive (about log2(tasks) + one per worker). Mind the size: a partial is height x width x 3
+- Tasks are submitted in the plan's post-order and the client keeps no future once it is
+  added, so the scheduler frees each partial once its parent has added it: at most the tree's
+  frontier is alive (about log2(tasks) + one per worker). Mind the size: a partial is height x width x 3
   f64, 5.5 MB at 640x360 and about 200 MB at 3840x2160 (4K), on the worker that holds it.
 - Task keys are derived from the scene's Dask token, the render's fingerprint and the plane
   range, so resubmitting the same work while its results are held reuses them; each task is
@@ -43,7 +44,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -174,25 +175,6 @@ def _wait(future: Future, progress: bool, label: str) -> Any:
 # -- Renders -------------------------------------------------------------------------------------
 
 
-def _canonical_tree(first: int, last: int, block: int, leaf: Callable[[int, int], Any],
-                    node: Callable[[Any, Any, int, int], Any]) -> Any:
-    """Builds the core's canonical tree over chunk indices first..last (post-order: a node is
-    made after its two children), with leaves of at most `block` chunks:
-
-        node(a..b) = node(a..m) + node(m..b),  m = a + the largest power of two below b - a
-
-    `block` must be a power of two: then every leaf is itself a node of the tree over single
-    chunks (an aligned block, or the tail: `render_chunk` sums a block in the same tree), so
-    the sums are the tree's bits."""
-    if last - first <= block:
-        return leaf(first, last)
-    half = 1 << ((last - first - 1).bit_length() - 1)
-    middle = first + half
-    left = _canonical_tree(first, middle, block, leaf, node)
-    right = _canonical_tree(middle, last, block, leaf, node)
-    return node(left, right, first, last)
-
-
 def _auto_block(chunks: int, slots: int) -> int:
     """The largest power of two of chunks per task that leaves TASKS_PER_SLOT tasks per Dask
     thread (at least one chunk)."""
@@ -234,19 +216,22 @@ def render_future(scene: native.Scene, client: Client, *, threads: int, slots: i
     if block < 1 or block & (block - 1):
         raise ValueError(f"chunks_per_task={block}: must be a power of two")
     stem = f"{tokenize(scene)}-{plan['fingerprint']}"
-
-    def leaf(a: int, b: int) -> Future:
-        planes = (chunks[a][0], chunks[b - 1][1])
-        return client.submit(_render_block, scene, planes, threads, kwargs, retries=retries,
-                             key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}")
-
-    def node(left: Future, right: Future, a: int, b: int) -> Future:
-        return client.submit(_add, left, right, retries=retries,
-                             key=f"fogplanes-add-{stem}-{chunks[a][0]}-{chunks[b - 1][1]}")
-
-    # The children's futures are dropped as the recursion returns: the scheduler keeps each
+    # The core's plan: leaves render blocks of chunks, nodes add two earlier steps (post-order).
+    # A step's future is dropped once its parent is submitted: the scheduler keeps each
     # partial only until its parent has added it.
-    total = _canonical_tree(0, len(chunks), block, leaf, node)
+    steps: list[Future | None] = []
+    for start, end, left, right in native.merge_plan(len(chunks), block):
+        planes = (chunks[start][0], chunks[end - 1][1])
+        if left is None:
+            step = client.submit(_render_block, scene, planes, threads, kwargs, retries=retries,
+                                 key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}")
+        else:
+            step = client.submit(_add, steps[left], steps[right], retries=retries,
+                                 key=f"fogplanes-add-{stem}-{planes[0]}-{planes[1]}")
+            steps[left] = steps[right] = None
+        steps.append(step)
+    total = steps.pop()
+    del steps
     return client.submit(_finish, scene, total, kwargs, return_stats, retries=retries,
                          key=f"fogplanes-finish-{stem}-{int(return_stats)}")
 
