@@ -8,6 +8,7 @@ task, completion order and lost worker.
 
 import os
 import pickle
+import reprlib
 import signal
 import subprocess
 import sys
@@ -145,20 +146,143 @@ def test_merge_refuses_mismatched_parts(scene):
     assert_bit_identical(whole, fogplanes.render(scene, **kwargs))
 
 
-def test_bad_arguments_raise_value_error_before_any_cluster(scene):
-    start = time.monotonic()
-    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0), dict(threads=0),
-                   dict(workers=0)):
-        with pytest.raises(ValueError):
-            fd.render(scene, progress=False, **kwargs)
-    with pytest.raises(ValueError):
-        fd.render(scene, chunks_per_task=3, client=None, planes=10, progress=False)
-    for kwargs in (dict(spp=0), dict(resolution=(0, 5)), dict(seed=-1), dict(band_rows=0)):
-        with pytest.raises(ValueError):
-            fd.reference(scene, progress=False, **kwargs)
-    with pytest.raises(ValueError):
-        fd.table(scene, np.zeros((360, 640, 3), np.float32), estimators=["smis-exact", "nope"], progress=False)
-    assert time.monotonic() - start < 5, "a cluster was started for bad arguments"
+# Bad arguments of every function: (keyword arguments, the exception, a word its message must
+# hold: the argument's name). Each is refused before any cluster starts.
+BAD_COMMON = [
+    (dict(retries="x"), TypeError, "retries"),
+    (dict(retries=-1), ValueError, "retries"),
+    (dict(retries=True), TypeError, "retries"),
+    (dict(client="tcp://127.0.0.1:8786"), TypeError, "client"),
+    (dict(client=object()), TypeError, "client"),
+    (dict(workers=0), ValueError, "workers"),
+    (dict(workers=True), TypeError, "workers"),
+    (dict(workers=1.5), TypeError, "workers"),
+    (dict(threads=0), ValueError, "threads"),
+    (dict(threads=5000), ValueError, "threads"),
+    (dict(threads="2"), TypeError, "threads"),
+    (dict(progress="yes"), TypeError, "progress"),
+]
+BAD_RENDER_SETTINGS = [
+    (dict(planes=0), ValueError, "planes"),
+    (dict(planes=-5), ValueError, "planes"),
+    (dict(estimator="nope"), ValueError, "estimator"),
+    (dict(estimator=5), TypeError, "estimator"),
+    (dict(sampler=1), TypeError, "sampler"),
+    (dict(kernel=3), TypeError, "kernel"),
+    (dict(accelerator=b"bvh"), TypeError, "accelerator"),
+    (dict(pixel_center="no"), TypeError, "pixel_center"),
+    (dict(resolution=(0, 5)), ValueError, "resolution"),
+    (dict(time_budget=1.0), ValueError, "time_budget"),
+    (dict(colour=1), TypeError, "colour"),
+]
+BAD_RENDER = BAD_COMMON + BAD_RENDER_SETTINGS + [
+    (dict(chunks_per_task=3), ValueError, "chunks_per_task"),
+    (dict(chunks_per_task=0), ValueError, "chunks_per_task"),
+    (dict(chunks_per_task=-4), ValueError, "chunks_per_task"),
+    (dict(chunks_per_task=True), TypeError, "chunks_per_task"),
+    (dict(chunks_per_task=2.0), TypeError, "chunks_per_task"),
+    (dict(return_stats=1), TypeError, "return_stats"),
+]
+BAD_RENDER_FUTURE = [case for case in BAD_RENDER if not {"client", "workers", "progress"} & case[0].keys()] + [
+    (dict(threads=None), TypeError, "threads"),
+    (dict(slots=0), ValueError, "slots"),
+    (dict(slots="4"), TypeError, "slots"),
+]
+BAD_REFERENCE = BAD_COMMON + [
+    (dict(spp=0), ValueError, "spp"),
+    (dict(spp=-1), ValueError, "spp"),
+    (dict(resolution=(0, 5)), ValueError, "resolution"),
+    (dict(resolution=(8, 6, 3)), TypeError, "resolution"),
+    (dict(resolution="8x6"), TypeError, "resolution"),
+    (dict(seed=-1), ValueError, "seed"),
+    (dict(band_rows=0), ValueError, "band_rows"),
+    (dict(band_rows=2.5), TypeError, "band_rows"),
+    (dict(uniform="yes"), TypeError, "uniform"),
+    (dict(pixel_center="no"), TypeError, "pixel_center"),
+]
+BAD_TABLE = BAD_COMMON + [
+    (dict(estimators=["smis-exact", "nope"]), ValueError, "estimator"),
+    (dict(estimators=[5]), TypeError, "estimator"),
+    (dict(planes=[1000, 0]), ValueError, "planes"),
+    (dict(seeds=[1, -1]), ValueError, "seed"),
+    (dict(reference=np.zeros((6, 9, 3), np.float32)), ValueError, "reference"),
+    (dict(reference="missing.exr"), FileNotFoundError, "missing.exr"),
+    (dict(pixel_center="no"), TypeError, "pixel_center"),
+    (dict(kernel=3), TypeError, "kernel"),
+]
+
+
+def test_every_bad_argument_raises_naming_it_before_any_cluster_starts(scene, client, monkeypatch):
+    def refuse(*args, **kwargs):
+        pytest.fail("a cluster was started or asked for bad arguments")
+
+    monkeypatch.setattr(fd, "LocalCluster", refuse)
+    monkeypatch.setattr(client, "submit", refuse)
+    monkeypatch.setattr(client, "scheduler_info", refuse)
+    monkeypatch.setattr(client, "run", refuse)
+    size = dict(resolution=(8, 6))
+    calls = (
+        [(fd.render, dict(size, planes=100, progress=False), case) for case in BAD_RENDER]
+        + [(lambda **k: fd.render_future(scene, client, **k), dict(size, threads=1, planes=100), case)
+           for case in BAD_RENDER_FUTURE]
+        + [(fd.reference, dict(size, spp=4, progress=False), case) for case in BAD_REFERENCE]
+        + [(fd.table, dict(size, reference=np.zeros((6, 8, 3), np.float32), planes=100, progress=False), case)
+           for case in BAD_TABLE]
+    )
+    wrong = []  # every case that did not raise as it should, reported at once
+    for function, good, (bad, error, name) in calls:
+        args = () if function.__name__ == "<lambda>" else (scene,)
+        try:
+            function(*args, **{**good, **bad})
+            wrong.append(f"{function.__name__}({reprlib.repr(bad)}): no error")
+        except BaseException as e:  # noqa: B036 (pytest.fail's exception too)
+            if not isinstance(e, error) or name not in str(e):
+                wrong.append(f"{function.__name__}({reprlib.repr(bad)}): {type(e).__name__}: {str(e)[:100]}")
+    assert not wrong, "\n".join(wrong)
+    for scene_arg, error in ((42, TypeError), (None, TypeError), ("missing.toml", FileNotFoundError)):
+        for function in (fd.render, fd.reference):
+            with pytest.raises(error, match="scene|missing.toml"):
+                function(scene_arg, resolution=(8, 6), progress=False)
+        with pytest.raises(error, match="scene|missing.toml"):
+            fd.table(scene_arg, np.zeros((6, 8, 3), np.float32), resolution=(8, 6), progress=False)
+        with pytest.raises(error, match="scene|missing.toml"):
+            fd.render_future(scene_arg, client, threads=1, resolution=(8, 6))
+    with pytest.raises(TypeError, match="client"):
+        fd.render_future(scene, "tcp://127.0.0.1:8786", threads=1)
+    for bad in (dict(workers=0), dict(threads=0), dict(workers="2")):
+        with pytest.raises((ValueError, TypeError), match=next(iter(bad))):
+            with fd.local_client(**bad):
+                pass
+
+
+def test_a_client_whose_scheduler_is_gone_is_named(scene):
+    cluster = LocalCluster(n_workers=0, processes=False, dashboard_address=":0")  # in-process, no worker
+    gone = Client(cluster)
+    cluster.close()
+    size = dict(resolution=(8, 6))
+    for call in (lambda: fd.render(scene, client=gone, planes=100, progress=False, **size),
+                 lambda: fd.reference(scene, spp=4, client=gone, progress=False, **size),
+                 lambda: fd.table(scene, np.zeros((6, 8, 3), np.float32), client=gone, progress=False, **size),
+                 lambda: fd.render_future(scene, gone, threads=1, planes=100, **size)):
+        with pytest.raises(ValueError, match=r"client.*scheduler"):
+            call()
+    gone.close()
+
+
+def test_every_function_takes_a_scene_or_the_path_of_its_file(client, scene):
+    size = dict(resolution=(16, 9))
+    render = dict(size, planes=chunk_planes(scene) + 3)
+    expected = fogplanes.render(scene, **render)
+    expected_ref = fogplanes.reference(scene, spp=4, **size)
+    for path in (str(SIX_LIGHTS), SIX_LIGHTS):
+        assert_bit_identical(fd.render(path, client=client, threads=1, progress=False, **render), expected)
+        assert_bit_identical(fd.render_future(path, client, threads=1, **render).result(), expected)
+        mean, stderr = fd.reference(path, spp=4, client=client, threads=1, progress=False, **size)
+        assert_bit_identical(mean, expected_ref[0])
+        assert_bit_identical(stderr, expected_ref[1])
+        [row] = fd.table(path, expected_ref, estimators="unweighted", planes=500, seeds=1, client=client,
+                         threads=1, progress=False, **size)
+        assert row["estimator"] == "unweighted" and row["planes"] == 500 and row["smape"] > 0
 
 
 # -- References and sweeps -----------------------------------------------------------------------
