@@ -6,6 +6,7 @@ The images must be the same bits as one machine's: for any number of workers, ch
 task, completion order and lost worker.
 """
 
+import asyncio
 import os
 import pickle
 import reprlib
@@ -111,12 +112,19 @@ def test_a_pickled_scene_renders_identically(client, scene):
     assert_bit_identical(image, fogplanes.render(copy, **kwargs))
 
 
-def test_task_keys_are_stable_and_name_the_work(client, scene):
+def test_task_keys_name_the_work_and_are_each_calls_own(client, scene):
     kwargs = dict(resolution=(32, 18), planes=3000)
     a = fd.render_future(scene, client, threads=1, **kwargs)
     b = fd.render_future(pickle.loads(pickle.dumps(scene)), client, threads=1, kernel="portable", **kwargs)
     c = fd.render_future(scene, client, threads=1, **dict(kwargs, seed=2))
-    assert a.key == b.key != c.key  # the kernel changes no bit, the seed does
+
+    def work(key):  # the key without the call's id
+        return key.rsplit("-", 1)[0]
+
+    # Each call its own keys; the work they name: the kernel changes no bit, the seed does.
+    assert a.key != b.key and work(a.key) == work(b.key) != work(c.key)
+    plan = fogplanes.plan_render(scene, **kwargs)
+    assert work(a.key) == f"fogplanes-finish-{tokenize(scene)}-{plan['fingerprint']}-0"
     assert_bit_identical(a.result(), b.result())
 
 
@@ -194,6 +202,7 @@ BAD_REFERENCE = BAD_COMMON + [
     (dict(resolution=(0, 5)), ValueError, "resolution"),
     (dict(resolution=(8, 6, 3)), TypeError, "resolution"),
     (dict(resolution="8x6"), TypeError, "resolution"),
+    (dict(resolution=[8, 6]), TypeError, "resolution"),
     (dict(seed=-1), ValueError, "seed"),
     (dict(band_rows=0), ValueError, "band_rows"),
     (dict(band_rows=2.5), TypeError, "band_rows"),
@@ -258,7 +267,7 @@ def test_every_bad_argument_raises_naming_it_before_any_cluster_starts(scene, cl
 def test_a_client_whose_scheduler_is_gone_is_named(scene):
     cluster = LocalCluster(n_workers=0, processes=False, dashboard_address=":0")  # in-process, no worker
     gone = Client(cluster)
-    cluster.close()
+    cluster.close()  # the scheduler is gone: the client closes itself (it used to be KeyError 'workers')
     size = dict(resolution=(8, 6))
     for call in (lambda: fd.render(scene, client=gone, planes=100, progress=False, **size),
                  lambda: fd.reference(scene, spp=4, client=gone, progress=False, **size),
@@ -283,6 +292,55 @@ def test_every_function_takes_a_scene_or_the_path_of_its_file(client, scene):
         [row] = fd.table(path, expected_ref, estimators="unweighted", planes=500, seeds=1, client=client,
                          threads=1, progress=False, **size)
         assert row["estimator"] == "unweighted" and row["planes"] == 500 and row["smape"] > 0
+
+
+def _late_cancellation_reports(client, monkeypatch, wait=0.5):
+    """Makes the scheduler's report that keys were cancelled reach the client late, as a slow
+    network or a busy scheduler may: after the client has submitted tasks under those keys again
+    (or after `wait` seconds, if it does not), the other reports not held back."""
+    handle = client._stream_handlers["cancelled-keys"]
+
+    def late(keys, **kwargs):
+        async def deliver():
+            deadline = time.monotonic() + wait
+            while not all(k in client.futures for k in keys) and time.monotonic() < deadline:
+                await asyncio.sleep(0.001)
+            handle(keys=keys, **kwargs)
+
+        asyncio.ensure_future(deliver())
+
+    monkeypatch.setitem(client._stream_handlers, "cancelled-keys", late)
+
+
+def test_a_failed_render_leaves_the_client_clean_for_the_next(client, scene, monkeypatch):
+    # A failed render cancels its last task; the scheduler reports the cancellation to the
+    # client, which cancels whatever future it then holds under that key. Were the next render's
+    # keys the same, a late report would cancel it (FutureCancelledError for fogplanes-finish-...).
+    kwargs = dict(resolution=(32, 18), planes=2 * chunk_planes(scene) + 1)
+    expected = fogplanes.render(scene, **kwargs)
+    _late_cancellation_reports(client, monkeypatch)
+    for _ in range(2):
+        with monkeypatch.context() as m:
+            m.setattr(fd, "_render_block", fd._add)  # every block raises TypeError on its worker
+            with pytest.raises(TypeError):
+                fd.render(scene, client=client, threads=1, retries=0, chunks_per_task=1, progress=False,
+                          **kwargs)
+        image = fd.render(scene, client=client, threads=1, chunks_per_task=1, progress=False, **kwargs)
+        assert_bit_identical(image, expected)
+
+
+def test_a_failed_render_future_still_held_does_not_poison_the_next(client, scene, monkeypatch):
+    # While a future is alive its client keeps the key's state (here: erred) and gives it to
+    # whoever submits the key again.
+    kwargs = dict(resolution=(32, 18), planes=chunk_planes(scene) + 1)
+    with monkeypatch.context() as m:
+        m.setattr(fd, "_render_block", fd._add)
+        failed = fd.render_future(scene, client, threads=1, retries=0, **kwargs)
+        with pytest.raises(TypeError):
+            failed.result()
+    again = fd.render_future(scene, client, threads=1, **kwargs)  # `failed` is still held
+    assert_bit_identical(again.result(), fogplanes.render(scene, **kwargs))
+    assert failed.status == "error"
 
 
 # -- References and sweeps -----------------------------------------------------------------------

@@ -33,11 +33,17 @@ How a render is spread (why the image does not depend on the cluster):
   of completion and any retry or lost worker: equal to `fogplanes.render`'s.
 - Tasks are submitted in the plan's post-order and the client keeps no future once it is
   added, so the scheduler frees each partial once its parent has added it: at most the tree's
-  frontier is alive (about log2(tasks) + one per worker). Mind the size: a partial is height x width x 3
-  f64, 5.5 MB at 640x360 and about 200 MB at 3840x2160 (4K), on the worker that holds it.
-- Task keys are derived from the scene's Dask token, the render's fingerprint and the plane
-  range, so resubmitting the same work while its results are held reuses them; each task is
-  retried `retries` times if it raises, and a task lost with its worker is rerun by Dask.
+  frontier is alive (about log2(tasks) + one per worker). Mind the size: a partial is
+  height x width x 3 f64, 5.5 MB at 640x360 and about 200 MB at 3840x2160 (4K), on the worker
+  that holds it.
+- Task keys name the work (the scene's Dask token, the render's fingerprint, the plane range)
+  and end with an id drawn for each call: a call's tasks are its own. Dask gives a key it
+  still holds to whoever submits it again (its error, or its cancellation: the scheduler's
+  report that a failed call's key was cancelled may reach the client after the next call has
+  submitted that key), so shared keys let a failed call break a later one. Within a call each
+  task is retried `retries` times if it raises, and a task lost with its worker is rerun by
+  Dask under its key; two calls for the same image compute it twice. On any exception while
+  waiting (KeyboardInterrupt included) the call's work is cancelled.
 
 Threads: run one worker process per node with one Dask thread, and let each render use the
 node's cores (`threads`). Dask sets OMP_NUM_THREADS for its workers but not rayon's thread
@@ -52,6 +58,7 @@ import contextlib
 import numbers
 import os
 import sys
+import uuid
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
@@ -131,8 +138,10 @@ def _client(client: Any, required: bool = False) -> Client | None:
     if client is None and not required:
         return None
     if not isinstance(client, Client):
-        hint = " (connect to a scheduler's address with distributed.Client(address))" if isinstance(client, str) else ""
-        raise TypeError(f"client={client!r}: expected a distributed.Client{'' if required else ' or None'}{hint}")
+        expected = "a distributed.Client" if required else "a distributed.Client or None"
+        if isinstance(client, str):
+            expected += " (connect to a scheduler's address with distributed.Client(address))"
+        raise TypeError(f"client={client!r}: expected {expected}")
     if client.status != "running":
         raise ValueError(_gone(client))
     return client
@@ -174,6 +183,11 @@ def _render_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
     if "pixel_center" in kwargs:
         _flag("pixel_center", kwargs["pixel_center"])
     return kwargs
+
+
+def _call_id() -> str:
+    """The id that ends the task keys of one call: 64 random bits."""
+    return uuid.uuid4().hex[:16]
 
 
 # -- The cluster ---------------------------------------------------------------------------------
@@ -264,7 +278,8 @@ class _StderrProgressBar(TextProgressBar):
 
 def _wait(future: Future, progress: bool, label: str) -> Any:
     """The future's result, with a progress bar over it and every task it depends on. On
-    any exception here (KeyboardInterrupt included) the work is cancelled."""
+    any exception here (KeyboardInterrupt included) the work is cancelled: the scheduler then
+    releases every task of the call (the client holds none but this one)."""
     try:
         if progress:
             _StderrProgressBar([future], label)
@@ -300,7 +315,8 @@ def _finish(scene: native.Scene, partial: native.Partial, kwargs: dict[str, Any]
 
 
 def _check_render(scene: SceneArg, render_kwargs: dict[str, Any], threads: int | None, retries: Any,
-                  chunks_per_task: Any, return_stats: Any) -> tuple[native.Scene, dict[str, Any], dict[str, Any]]:
+                  chunks_per_task: Any, return_stats: Any
+                  ) -> tuple[native.Scene, dict[str, Any], dict[str, Any]]:
     """(scene, settings, plan) of a render, every argument checked."""
     scene = _scene(scene)
     kwargs = _render_kwargs(render_kwargs)
@@ -318,7 +334,7 @@ def render_future(scene: SceneArg, client: Client, *, threads: int, slots: int =
     """Submits a render to `client` and returns the future of its image (or (image, stats)):
     the tasks of `render` without waiting. `threads` is each task's render threads, `slots`
     the Dask threads of the cluster (for the automatic `chunks_per_task`). Every argument is
-    checked before anything is submitted."""
+    checked before anything is submitted; the task keys are this call's own."""
     client = _client(client, required=True)
     _int("threads", threads, 1)
     _int("slots", slots, 1)
@@ -326,6 +342,7 @@ def render_future(scene: SceneArg, client: Client, *, threads: int, slots: int =
     chunks = plan["chunks"]
     block = _block(chunks_per_task) or _auto_block(len(chunks), slots)
     stem = f"{tokenize(scene)}-{plan['fingerprint']}"
+    call = _call_id()
     # The core's plan: leaves render blocks of chunks, nodes add two earlier steps (post-order).
     # A step's future is dropped once its parent is submitted: the scheduler keeps each
     # partial only until its parent has added it.
@@ -334,16 +351,16 @@ def render_future(scene: SceneArg, client: Client, *, threads: int, slots: int =
         planes = (chunks[start][0], chunks[end - 1][1])
         if left is None:
             step = client.submit(_render_block, scene, planes, threads, kwargs, retries=retries,
-                                 key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}")
+                                 key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}-{call}")
         else:
             step = client.submit(_add, steps[left], steps[right], retries=retries,
-                                 key=f"fogplanes-add-{stem}-{planes[0]}-{planes[1]}")
+                                 key=f"fogplanes-add-{stem}-{planes[0]}-{planes[1]}-{call}")
             steps[left] = steps[right] = None
         steps.append(step)
     total = steps.pop()
     del steps
     return client.submit(_finish, scene, total, kwargs, return_stats, retries=retries,
-                         key=f"fogplanes-finish-{stem}-{int(return_stats)}")
+                         key=f"fogplanes-finish-{stem}-{int(return_stats)}-{call}")
 
 
 def render(scene: SceneArg, estimator: str | None = None, *, client: Client | None = None,
@@ -416,7 +433,7 @@ def reference(scene: SceneArg, spp: int | None = None, *, pixel_center: bool = F
     # The errors before any cluster, by the core's checks: the resolution on the scene, the
     # settings on one pixel (its pilot costs milliseconds), the threads.
     if resolution is not None:
-        if not isinstance(resolution, (tuple, list)) or len(resolution) != 2:
+        if not isinstance(resolution, tuple) or len(resolution) != 2:
             raise TypeError(f"resolution={resolution!r}: expected (width, height)")
         scene_at = scene.with_resolution(*resolution)
     else:
@@ -424,7 +441,7 @@ def reference(scene: SceneArg, spp: int | None = None, *, pixel_center: bool = F
     native.reference_pilot_rows(scene, (0, 1), **dict(kwargs, resolution=(1, 1)))
     _check_threads(scene, threads)
     bands = _bands(scene_at.resolution[1], band_rows)
-    stem = f"{tokenize(scene)}-{tokenize(kwargs, uniform)}"
+    stem = f"{tokenize(scene)}-{tokenize(kwargs, uniform)}-{_call_id()}"
     with _session(client, workers, threads) as (c, per_task, _):
         counts = None
         if not uniform:
@@ -497,8 +514,9 @@ def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | Non
     ref = np.asarray(reference)
     for shape in shapes:
         if ref.shape != shape:
-            raise ValueError(f"reference: expected an image of the renders' shape {shape}, got shape {ref.shape}")
-    stem = tokenize(scene, ref, kwargs)
+            raise ValueError(f"reference: expected an image of the renders' shape {shape}, "
+                             f"got shape {ref.shape}")
+    stem = f"{tokenize(scene, ref, kwargs)}-{_call_id()}"
     with _session(client, workers, threads) as (c, per_task, _):
         shared_ref = c.scatter(ref, broadcast=True, hash=True)
         rows = [c.submit(_row, scene, shared_ref, e, n, s, per_task, kwargs, retries=retries,
