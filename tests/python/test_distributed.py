@@ -6,8 +6,10 @@ The images must be the same bits as one machine's: for any number of workers, ch
 task, completion order and lost worker.
 """
 
+import asyncio
 import os
 import pickle
+import reprlib
 import signal
 import subprocess
 import sys
@@ -110,19 +112,27 @@ def test_a_pickled_scene_renders_identically(client, scene):
     assert_bit_identical(image, fogplanes.render(copy, **kwargs))
 
 
-def test_task_keys_are_stable_and_name_the_work(client, scene):
+def test_task_keys_name_the_work_and_are_each_calls_own(client, scene):
     kwargs = dict(resolution=(32, 18), planes=3000)
     a = fd.render_future(scene, client, threads=1, **kwargs)
     b = fd.render_future(pickle.loads(pickle.dumps(scene)), client, threads=1, kernel="portable", **kwargs)
     c = fd.render_future(scene, client, threads=1, **dict(kwargs, seed=2))
-    assert a.key == b.key != c.key  # the kernel changes no bit, the seed does
+
+    def work(key):  # the key without the call's id
+        return key.rsplit("-", 1)[0]
+
+    # Each call its own keys; the work they name: the kernel changes no bit, the seed does.
+    assert a.key != b.key and work(a.key) == work(b.key) != work(c.key)
+    plan = fogplanes.plan_render(scene, **kwargs)
+    assert work(a.key) == f"fogplanes-finish-{tokenize(scene)}-{plan['fingerprint']}-0"
     assert_bit_identical(a.result(), b.result())
 
 
 def test_the_progress_bar_is_on_stderr(client, scene, capfd):
     fd.render(scene, client=client, threads=1, resolution=(32, 18), planes=2 * chunk_planes(scene) + 1)
     out, err = capfd.readouterr()
-    # 3 chunks (one per task: too few for more), 2 additions and the finish.
+    # 3 chunks (one per task: too few for more), 2 additions (the core's plan) and the finish.
+    assert len(fogplanes.merge_plan(3, 1)) + 1 == 6
     assert out == "" and "fogplanes render [" in err and "6/6 tasks" in err
 
 
@@ -144,20 +154,193 @@ def test_merge_refuses_mismatched_parts(scene):
     assert_bit_identical(whole, fogplanes.render(scene, **kwargs))
 
 
-def test_bad_arguments_raise_value_error_before_any_cluster(scene):
-    start = time.monotonic()
-    for kwargs in (dict(planes=0), dict(estimator="nope"), dict(time_budget=1.0), dict(threads=0),
-                   dict(workers=0)):
-        with pytest.raises(ValueError):
-            fd.render(scene, progress=False, **kwargs)
-    with pytest.raises(ValueError):
-        fd.render(scene, chunks_per_task=3, client=None, planes=10, progress=False)
-    for kwargs in (dict(spp=0), dict(resolution=(0, 5)), dict(seed=-1), dict(band_rows=0)):
-        with pytest.raises(ValueError):
-            fd.reference(scene, progress=False, **kwargs)
-    with pytest.raises(ValueError):
-        fd.table(scene, np.zeros((360, 640, 3), np.float32), estimators=["smis-exact", "nope"], progress=False)
-    assert time.monotonic() - start < 5, "a cluster was started for bad arguments"
+# Bad arguments of every function: (keyword arguments, the exception, a word its message must
+# hold: the argument's name). Each is refused before any cluster starts.
+BAD_COMMON = [
+    (dict(retries="x"), TypeError, "retries"),
+    (dict(retries=-1), ValueError, "retries"),
+    (dict(retries=True), TypeError, "retries"),
+    (dict(client="tcp://127.0.0.1:8786"), TypeError, "client"),
+    (dict(client=object()), TypeError, "client"),
+    (dict(workers=0), ValueError, "workers"),
+    (dict(workers=True), TypeError, "workers"),
+    (dict(workers=1.5), TypeError, "workers"),
+    (dict(threads=0), ValueError, "threads"),
+    (dict(threads=5000), ValueError, "threads"),
+    (dict(threads="2"), TypeError, "threads"),
+    (dict(progress="yes"), TypeError, "progress"),
+]
+BAD_RENDER_SETTINGS = [
+    (dict(planes=0), ValueError, "planes"),
+    (dict(planes=-5), ValueError, "planes"),
+    (dict(estimator="nope"), ValueError, "estimator"),
+    (dict(estimator=5), TypeError, "estimator"),
+    (dict(sampler=1), TypeError, "sampler"),
+    (dict(kernel=3), TypeError, "kernel"),
+    (dict(accelerator=b"bvh"), TypeError, "accelerator"),
+    (dict(pixel_center="no"), TypeError, "pixel_center"),
+    (dict(resolution=(0, 5)), ValueError, "resolution"),
+    (dict(time_budget=1.0), ValueError, "time_budget"),
+    (dict(colour=1), TypeError, "colour"),
+]
+BAD_RENDER = BAD_COMMON + BAD_RENDER_SETTINGS + [
+    (dict(chunks_per_task=3), ValueError, "chunks_per_task"),
+    (dict(chunks_per_task=0), ValueError, "chunks_per_task"),
+    (dict(chunks_per_task=-4), ValueError, "chunks_per_task"),
+    (dict(chunks_per_task=True), TypeError, "chunks_per_task"),
+    (dict(chunks_per_task=2.0), TypeError, "chunks_per_task"),
+    (dict(return_stats=1), TypeError, "return_stats"),
+]
+BAD_RENDER_FUTURE = [case for case in BAD_RENDER if not {"client", "workers", "progress"} & case[0].keys()] + [
+    (dict(threads=None), TypeError, "threads"),
+    (dict(slots=0), ValueError, "slots"),
+    (dict(slots="4"), TypeError, "slots"),
+]
+BAD_REFERENCE = BAD_COMMON + [
+    (dict(spp=0), ValueError, "spp"),
+    (dict(spp=-1), ValueError, "spp"),
+    (dict(resolution=(0, 5)), ValueError, "resolution"),
+    (dict(resolution=(8, 6, 3)), TypeError, "resolution"),
+    (dict(resolution="8x6"), TypeError, "resolution"),
+    (dict(resolution=[8, 6]), TypeError, "resolution"),
+    (dict(seed=-1), ValueError, "seed"),
+    (dict(band_rows=0), ValueError, "band_rows"),
+    (dict(band_rows=2.5), TypeError, "band_rows"),
+    (dict(uniform="yes"), TypeError, "uniform"),
+    (dict(pixel_center="no"), TypeError, "pixel_center"),
+]
+BAD_TABLE = BAD_COMMON + [
+    (dict(estimators=["smis-exact", "nope"]), ValueError, "estimator"),
+    (dict(estimators=[5]), TypeError, "estimator"),
+    (dict(planes=[1000, 0]), ValueError, "planes"),
+    (dict(seeds=[1, -1]), ValueError, "seed"),
+    (dict(reference=np.zeros((6, 9, 3), np.float32)), ValueError, "reference"),
+    (dict(reference="missing.exr"), FileNotFoundError, "missing.exr"),
+    (dict(pixel_center="no"), TypeError, "pixel_center"),
+    (dict(kernel=3), TypeError, "kernel"),
+]
+
+
+def test_every_bad_argument_raises_naming_it_before_any_cluster_starts(scene, client, monkeypatch):
+    def refuse(*args, **kwargs):
+        pytest.fail("a cluster was started or asked for bad arguments")
+
+    monkeypatch.setattr(fd, "LocalCluster", refuse)
+    monkeypatch.setattr(client, "submit", refuse)
+    monkeypatch.setattr(client, "scheduler_info", refuse)
+    monkeypatch.setattr(client, "run", refuse)
+    size = dict(resolution=(8, 6))
+    calls = (
+        [(fd.render, dict(size, planes=100, progress=False), case) for case in BAD_RENDER]
+        + [(lambda **k: fd.render_future(scene, client, **k), dict(size, threads=1, planes=100), case)
+           for case in BAD_RENDER_FUTURE]
+        + [(fd.reference, dict(size, spp=4, progress=False), case) for case in BAD_REFERENCE]
+        + [(fd.table, dict(size, reference=np.zeros((6, 8, 3), np.float32), planes=100, progress=False), case)
+           for case in BAD_TABLE]
+    )
+    wrong = []  # every case that did not raise as it should, reported at once
+    for function, good, (bad, error, name) in calls:
+        args = () if function.__name__ == "<lambda>" else (scene,)
+        try:
+            function(*args, **{**good, **bad})
+            wrong.append(f"{function.__name__}({reprlib.repr(bad)}): no error")
+        except BaseException as e:  # noqa: B036 (pytest.fail's exception too)
+            if not isinstance(e, error) or name not in str(e):
+                wrong.append(f"{function.__name__}({reprlib.repr(bad)}): {type(e).__name__}: {str(e)[:100]}")
+    assert not wrong, "\n".join(wrong)
+    for scene_arg, error in ((42, TypeError), (None, TypeError), ("missing.toml", FileNotFoundError)):
+        for function in (fd.render, fd.reference):
+            with pytest.raises(error, match="scene|missing.toml"):
+                function(scene_arg, resolution=(8, 6), progress=False)
+        with pytest.raises(error, match="scene|missing.toml"):
+            fd.table(scene_arg, np.zeros((6, 8, 3), np.float32), resolution=(8, 6), progress=False)
+        with pytest.raises(error, match="scene|missing.toml"):
+            fd.render_future(scene_arg, client, threads=1, resolution=(8, 6))
+    with pytest.raises(TypeError, match="client"):
+        fd.render_future(scene, "tcp://127.0.0.1:8786", threads=1)
+    for bad in (dict(workers=0), dict(threads=0), dict(workers="2")):
+        with pytest.raises((ValueError, TypeError), match=next(iter(bad))):
+            with fd.local_client(**bad):
+                pass
+
+
+def test_a_client_whose_scheduler_is_gone_is_named(scene):
+    cluster = LocalCluster(n_workers=0, processes=False, dashboard_address=":0")  # in-process, no worker
+    gone = Client(cluster)
+    cluster.close()  # the scheduler is gone: the client closes itself (it used to be KeyError 'workers')
+    size = dict(resolution=(8, 6))
+    for call in (lambda: fd.render(scene, client=gone, planes=100, progress=False, **size),
+                 lambda: fd.reference(scene, spp=4, client=gone, progress=False, **size),
+                 lambda: fd.table(scene, np.zeros((6, 8, 3), np.float32), client=gone, progress=False, **size),
+                 lambda: fd.render_future(scene, gone, threads=1, planes=100, **size)):
+        with pytest.raises(ValueError, match=r"client.*scheduler"):
+            call()
+    gone.close()
+
+
+def test_every_function_takes_a_scene_or_the_path_of_its_file(client, scene):
+    size = dict(resolution=(16, 9))
+    render = dict(size, planes=chunk_planes(scene) + 3)
+    expected = fogplanes.render(scene, **render)
+    expected_ref = fogplanes.reference(scene, spp=4, **size)
+    for path in (str(SIX_LIGHTS), SIX_LIGHTS):
+        assert_bit_identical(fd.render(path, client=client, threads=1, progress=False, **render), expected)
+        assert_bit_identical(fd.render_future(path, client, threads=1, **render).result(), expected)
+        mean, stderr = fd.reference(path, spp=4, client=client, threads=1, progress=False, **size)
+        assert_bit_identical(mean, expected_ref[0])
+        assert_bit_identical(stderr, expected_ref[1])
+        [row] = fd.table(path, expected_ref, estimators="unweighted", planes=500, seeds=1, client=client,
+                         threads=1, progress=False, **size)
+        assert row["estimator"] == "unweighted" and row["planes"] == 500 and row["smape"] > 0
+
+
+def _late_cancellation_reports(client, monkeypatch, wait=0.5):
+    """Makes the scheduler's report that keys were cancelled reach the client late, as a slow
+    network or a busy scheduler may: after the client has submitted tasks under those keys again
+    (or after `wait` seconds, if it does not), the other reports not held back."""
+    handle = client._stream_handlers["cancelled-keys"]
+
+    def late(keys, **kwargs):
+        async def deliver():
+            deadline = time.monotonic() + wait
+            while not all(k in client.futures for k in keys) and time.monotonic() < deadline:
+                await asyncio.sleep(0.001)
+            handle(keys=keys, **kwargs)
+
+        asyncio.ensure_future(deliver())
+
+    monkeypatch.setitem(client._stream_handlers, "cancelled-keys", late)
+
+
+def test_a_failed_render_leaves_the_client_clean_for_the_next(client, scene, monkeypatch):
+    # A failed render cancels its last task; the scheduler reports the cancellation to the
+    # client, which cancels whatever future it then holds under that key. Were the next render's
+    # keys the same, a late report would cancel it (FutureCancelledError for fogplanes-finish-...).
+    kwargs = dict(resolution=(32, 18), planes=2 * chunk_planes(scene) + 1)
+    expected = fogplanes.render(scene, **kwargs)
+    _late_cancellation_reports(client, monkeypatch)
+    for _ in range(2):
+        with monkeypatch.context() as m:
+            m.setattr(fd, "_render_block", fd._add)  # every block raises TypeError on its worker
+            with pytest.raises(TypeError):
+                fd.render(scene, client=client, threads=1, retries=0, chunks_per_task=1, progress=False,
+                          **kwargs)
+        image = fd.render(scene, client=client, threads=1, chunks_per_task=1, progress=False, **kwargs)
+        assert_bit_identical(image, expected)
+
+
+def test_a_failed_render_future_still_held_does_not_poison_the_next(client, scene, monkeypatch):
+    # While a future is alive its client keeps the key's state (here: erred) and gives it to
+    # whoever submits the key again.
+    kwargs = dict(resolution=(32, 18), planes=chunk_planes(scene) + 1)
+    with monkeypatch.context() as m:
+        m.setattr(fd, "_render_block", fd._add)
+        failed = fd.render_future(scene, client, threads=1, retries=0, **kwargs)
+        with pytest.raises(TypeError):
+            failed.result()
+    again = fd.render_future(scene, client, threads=1, **kwargs)  # `failed` is still held
+    assert_bit_identical(again.result(), fogplanes.render(scene, **kwargs))
+    assert failed.status == "error"
 
 
 # -- References and sweeps -----------------------------------------------------------------------

@@ -88,6 +88,47 @@ def test_partials_that_do_not_make_the_render_are_refused(scene):
         fogplanes.plan_render(scene, plains=10)
 
 
+def test_a_bad_chunk_is_named_before_any_conversion(scene):
+    for chunk, error in [((-1, 16384), ValueError), ((0, -5), ValueError), ((0, 2**64), ValueError),
+                         ((0.0, 16384), TypeError), ((0,), TypeError), ("0:16384", TypeError),
+                         (None, TypeError)]:
+        with pytest.raises(error, match=r"^chunk="):
+            fogplanes.render_chunk(scene, chunk, **SETTINGS)
+    # In range but not the render's chunks: the core's error.
+    with pytest.raises(ValueError, match="not a union of the render's chunks"):
+        fogplanes.render_chunk(scene, (16384, 0), **SETTINGS)
+
+
+def test_the_merge_plan_is_the_cores_tree_and_gives_the_render_bit_for_bit(scene):
+    settings = dict(SETTINGS, planes=4 * 16384 + 7, resolution=(12, 7))  # 5 chunks, the last short
+    plan = fogplanes.plan_render(scene, **settings)
+    chunks = plan["chunks"]
+    whole = fogplanes.render(scene, **settings)
+    singles = [fogplanes.render_chunk(scene, c, threads=1, **settings) for c in chunks]
+    # The plan over 7 chunks in blocks of 2, post-order: leaves (None, None), additions of
+    # two earlier steps.
+    assert fogplanes.merge_plan(7, 2) == [(0, 2, None, None), (2, 4, None, None), (0, 4, 0, 1),
+                                         (4, 6, None, None), (6, 7, None, None), (4, 7, 3, 4),
+                                         (0, 7, 2, 5)]
+    for block in (1, 2, 4):
+        steps = fogplanes.merge_plan(len(chunks), block)
+        parts = []
+        for start, end, left, right in steps:
+            if left is None:
+                planes = (chunks[start][0], chunks[end - 1][1])
+                parts.append(fogplanes.render_chunk(scene, planes, threads=1, **settings) if end - start > 1
+                             else singles[start])
+            else:
+                parts.append(fogplanes.combine(parts[left], parts[right]))
+                assert (parts[-1].start, parts[-1].end) == (chunks[start][0], chunks[end - 1][1])
+        assert np.array_equal(fogplanes.finish_render(scene, parts[-1], **settings), whole), block
+    for args, error in [((0, 1), ValueError), ((8193, 1), ValueError), ((7, 3), ValueError),
+                        ((7, 0), ValueError), ((-1, 1), ValueError), ((7, -2), ValueError),
+                        ((7.0, 1), TypeError), ((7, True), TypeError), ((2**70, 1), ValueError)]:
+        with pytest.raises(error, match="chunks|block"):
+            fogplanes.merge_plan(*args)
+
+
 @pytest.mark.parametrize("uniform", [True, False])
 def test_reference_rows_are_the_rows_of_the_reference(scene, uniform):
     args = dict(spp=32, seed=2, resolution=(16, 10))

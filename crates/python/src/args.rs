@@ -228,3 +228,22 @@ pub(crate) fn resolve_reference_args(
     let r = settings::resolve_reference(&scene, &o).map_err(|e| given.error(e))?;
     Ok((r, given))
 }
+
+/// A `(start, end)` pair of argument `name`, as Python ints checked before any conversion: a
+/// `TypeError` for anything but a pair of integers, a `ValueError` for a negative one or one of
+/// 2**64 or more, both naming the argument (`what` the integers are).
+pub(crate) fn index_pair(value: &Bound<'_, PyAny>, name: &str, what: &str) -> PyResult<(usize, usize)> {
+    let repr = value.repr()?;
+    let not_a_pair = || PyTypeError::new_err(format!("{name}={repr}: expected a (start, end) pair of {what}"));
+    let (start, end): (Bound<'_, PyAny>, Bound<'_, PyAny>) = value.extract().map_err(|_| not_a_pair())?;
+    let index = |v: &Bound<'_, PyAny>| match v.extract::<i128>() {
+        Ok(n) => usize::try_from(n).map_err(|_| {
+            PyValueError::new_err(format!("{name}={repr}: {what} must be non-negative integers below 2**64"))
+        }),
+        Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
+            Err(PyValueError::new_err(format!("{name}={repr}: {what} must be non-negative integers below 2**64")))
+        }
+        Err(_) => Err(not_a_pair()),
+    };
+    Ok((index(&start)?, index(&end)?))
+}

@@ -59,6 +59,7 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyPartial>()?;
     m.add_function(wrap_pyfunction!(plan_render, m)?)?;
     m.add_function(wrap_pyfunction!(render_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(merge_plan, m)?)?;
     m.add_function(wrap_pyfunction!(combine, m)?)?;
     m.add_function(wrap_pyfunction!(merge_partials, m)?)?;
     m.add_function(wrap_pyfunction!(finish_render, m)?)?;

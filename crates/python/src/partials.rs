@@ -10,7 +10,7 @@ use fogplanes::options::RenderStats;
 use fogplanes::partial::{self, Partial};
 use numpy::PyArray3;
 use numpy::ndarray::Array3;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
 
@@ -165,9 +165,10 @@ impl PyPartial {
 pub(crate) fn render_chunk(
     py: Python<'_>,
     scene: &Bound<'_, PyAny>,
-    chunk: (usize, usize),
+    chunk: &Bound<'_, PyAny>,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyPartial> {
+    let chunk = index_pair(chunk, "chunk", "plane indices")?;
     let (r, given) = resolve_chunked(scene, kwargs)?;
     let (p, _) = run_interruptible(py, pool(r.threads)?, |cancel| {
         fogplanes::render::render_chunk(&r.scene, &r.options, chunk.0..chunk.1, Control::with_cancel(cancel))
@@ -175,6 +176,36 @@ pub(crate) fn render_chunk(
     .map_err(|e| given.error(e))?;
     Ok(PyPartial { inner: p })
 }
+
+/// The plan of a render of `chunks` canonical chunks (`len(plan_render(...)["chunks"])`) spread
+/// over tasks of at most `block` chunks (a power of two): the core's steps in post-order, each a
+/// tuple `(start, end, left, right)` over chunks `start..end`: `left` and `right` are None for a
+/// task that renders those chunks (`render_chunk` of their planes), else the indices of the two
+/// earlier steps whose partials it adds (`combine(left, right)`). The last step is the whole
+/// render; following the plan gives the bits of `render`. ValueError for no chunks, more than a
+/// render has, or a block that is not a power of two.
+#[pyfunction]
+pub(crate) fn merge_plan(chunks: &Bound<'_, PyAny>, block: &Bound<'_, PyAny>) -> PyResult<Vec<PlanTuple>> {
+    let count = |v: &Bound<'_, PyAny>, name: &str| -> PyResult<usize> {
+        let type_error = || -> PyResult<PyErr> {
+            Ok(PyTypeError::new_err(format!("{name}: expected an integer, got {}", v.get_type().name()?)))
+        };
+        let n = match v.extract::<i128>() {
+            _ if v.is_instance_of::<pyo3::types::PyBool>() => return Err(type_error()?),
+            Ok(n) => n,
+            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => i128::MAX,
+            Err(_) => return Err(type_error()?),
+        };
+        let repr = v.repr()?;
+        usize::try_from(n).map_err(|_| PyValueError::new_err(format!("{name}: out of range, got {repr}")))
+    };
+    let (n, b) = (count(chunks, "chunks")?, count(block, "block")?);
+    let plan = partial::merge_plan(n, b).map_err(py_error)?;
+    Ok(plan.into_iter().map(|s| (s.chunks.start, s.chunks.end, s.parts.map(|p| p.0), s.parts.map(|p| p.1))).collect())
+}
+
+/// A step of [`merge_plan`] for Python: (start, end, left, right).
+pub(crate) type PlanTuple = (usize, usize, Option<usize>, Option<usize>);
 
 /// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in
 /// float64. ValueError for partials of different renders, overlapping or not adjacent.

@@ -153,7 +153,7 @@ pub(crate) fn split(n: usize) -> usize {
 /// Merges partials given in any order into one covering their union, adding along the
 /// canonical tree over chunk indices (module docs). Refuses parts of different renders or
 /// sizes, overlapping parts, gaps and parts that do not reach `0` or `N`, naming them, before
-/// adding anything. Parts that are nodes of the tree (a single chunk, or what [`render_chunk`]
+/// adding anything. Parts that are nodes of the tree (a single chunk, or what [`crate::render::render_chunk`]
 /// made of a node's chunks) give the bits of a whole render; where a part straddles a split of
 /// the tree, the parts under that node are added left to right instead (equal within f64
 /// rounding).
@@ -249,6 +249,44 @@ pub fn is_canonical_node(range: &Range<usize>, n: usize) -> bool {
     }
 }
 
+/// One step of the plan of a render spread over tasks ([`merge_plan`]): chunks `chunks`
+/// rendered into one partial ([`crate::render::render_chunk`] of their planes) when `parts` is `None`, else
+/// the partials of the two earlier steps `parts` (indices into the plan), left then right,
+/// added ([`combine`]) into the node over `chunks`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlanStep {
+    pub chunks: Range<usize>,
+    pub parts: Option<(usize, usize)>,
+}
+
+/// The plan of a render of `chunks` canonical chunks spread over tasks that render at most
+/// `block` chunks each (a power of two): the canonical tree's nodes in post-order (each step
+/// after the two it adds; the last is the whole render), cut where a node has at most `block`
+/// chunks, which one task renders. Every step is a node of the canonical tree (with `block` a
+/// power of two, a leaf is an aligned block or the tail), so the sums are the bits of
+/// [`crate::render::render`]. Refuses no chunks, more than a render can have, and a `block`
+/// that is not a power of two.
+pub fn merge_plan(chunks: usize, block: usize) -> Result<Vec<PlanStep>> {
+    let most = (crate::limits::MAX_PLANES as usize).div_ceil(CHUNK_PLANES);
+    if chunks == 0 || chunks > most {
+        return Err(Error::Partial(format!("chunks: a render has between 1 and {most} chunks, got {chunks}")));
+    }
+    if !block.is_power_of_two() {
+        return Err(Error::Partial(format!("block: the chunks per task must be a power of two, got {block}")));
+    }
+    fn node(range: Range<usize>, block: usize, steps: &mut Vec<PlanStep>) -> usize {
+        let parts = (range.len() > block).then(|| {
+            let m = range.start + split(range.len());
+            (node(range.start..m, block, steps), node(m..range.end, block, steps))
+        });
+        steps.push(PlanStep { chunks: range, parts });
+        steps.len() - 1
+    }
+    let mut steps = Vec::with_capacity(2 * chunks.div_ceil(block));
+    node(0..chunks, block, &mut steps);
+    Ok(steps)
+}
+
 /// The image of a render from the partial of all its planes: the sums divided by N in f64,
 /// rounded to f32 once, plus the direct emission over each pixel (computed here,
 /// [`crate::emission::direct_emission`]). Refuses a
@@ -289,6 +327,50 @@ mod tests {
         assert!(is_canonical_node(&(0..4), 7) && is_canonical_node(&(4..6), 7) && is_canonical_node(&(6..7), 7));
         assert!(!is_canonical_node(&(0..3), 7) && !is_canonical_node(&(1..3), 7) && !is_canonical_node(&(4..7), 8));
         assert!(is_canonical_node(&(4..7), 7) && is_canonical_node(&(0..7), 7));
+    }
+
+    #[test]
+    fn the_merge_plan_is_canonical_nodes_in_post_order_covering_every_chunk() {
+        for n in 1..=70 {
+            for block in [1, 2, 4, 8, 64] {
+                let plan = merge_plan(n, block).unwrap();
+                let mut next = 0; // leaves come in chunk order, each after the last
+                for (i, step) in plan.iter().enumerate() {
+                    assert!(is_canonical_node(&step.chunks, n), "{n} {block}: {step:?}");
+                    match step.parts {
+                        None => {
+                            assert!(!step.chunks.is_empty() && step.chunks.len() <= block, "{n} {block}: {step:?}");
+                            assert_eq!(step.chunks.start, next, "{n} {block}");
+                            next = step.chunks.end;
+                        }
+                        Some((l, r)) => {
+                            assert!(l < r && r < i, "{n} {block}: step {i} adds {l} and {r}");
+                            assert_eq!(plan[l].chunks.start, step.chunks.start);
+                            assert_eq!(plan[l].chunks.end, plan[r].chunks.start);
+                            assert_eq!(plan[r].chunks.end, step.chunks.end);
+                            assert!(step.chunks.len() > block);
+                        }
+                    }
+                }
+                assert_eq!(next, n, "{n} {block}: the leaves cover 0..{n}");
+                assert_eq!(plan.last().unwrap().chunks, 0..n);
+                // Each step is added exactly once, except the last.
+                let mut used = vec![0; plan.len()];
+                for (l, r) in plan.iter().filter_map(|s| s.parts) {
+                    used[l] += 1;
+                    used[r] += 1;
+                }
+                assert!(used[..plan.len() - 1].iter().all(|&u| u == 1) && used[plan.len() - 1] == 0);
+            }
+        }
+        // 7 chunks in blocks of 2: (0..2, 2..4 | 0..4), (4..6, 6..7 | 4..7), 0..7.
+        let ranges: Vec<_> = merge_plan(7, 2).unwrap().into_iter().map(|s| s.chunks).collect();
+        assert_eq!(ranges, [0..2, 2..4, 0..4, 4..6, 6..7, 4..7, 0..7]);
+        assert_eq!(merge_plan(7, 2).unwrap()[6].parts, Some((2, 5)));
+        for (chunks, block) in [(0, 1), (5, 0), (5, 3), (8193, 1)] {
+            assert!(merge_plan(chunks, block).is_err(), "{chunks} {block}");
+        }
+        assert_eq!(merge_plan(8192, 1).unwrap().len(), 2 * 8192 - 1);
     }
 
     #[test]

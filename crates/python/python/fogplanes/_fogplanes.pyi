@@ -306,7 +306,25 @@ def plan_render(scene: Scene | PathLike, **render_kwargs: object) -> RenderPlan:
     """The resolved settings of a render in chunks, its chunks and fingerprint."""
 
 def render_chunk(scene: Scene | PathLike, chunk: tuple[int, int], **render_kwargs: object) -> Partial:
-    """Renders a plan's chunk (or a union of consecutive ones). GIL released; Ctrl-C cancels."""
+    """Renders a plan's chunk (or a union of consecutive ones). GIL released; Ctrl-C cancels.
+
+    `chunk` is a (start, end) tuple of plane indices: TypeError for anything else, ValueError
+    naming it for a negative index (or one of 2**64 or more) and for a range that is not a union
+    of the plan's chunks."""
+
+MergeStep: TypeAlias = tuple[int, int, int | None, int | None]
+"""A step of `merge_plan`: (start, end, left, right) over chunks start..end. `left` and `right`
+are None for a task that renders those chunks, else the indices of the two earlier steps whose
+partials it adds, left then right."""
+
+def merge_plan(chunks: int, block: int) -> list[MergeStep]:
+    """The core's plan of a render of `chunks` canonical chunks (`len(plan_render(...)["chunks"])`)
+    spread over tasks that render at most `block` chunks each (a power of two): the canonical
+    tree's nodes in post-order, each after the two it adds, the last the whole render. Every
+    step is a node of the tree `render` adds along, so following the plan (`render_chunk` of a
+    leaf's planes, `combine` of two steps) gives the bits of `render`. ValueError for no chunks,
+    more than a render has (8192) or a block that is not a power of two; TypeError for
+    anything but integers."""
 
 def combine(a: Partial, b: Partial) -> Partial:
     """a + b for adjacent partials of one render (a.end == b.start)."""

@@ -10,7 +10,14 @@ Every function takes `client=None`: then it starts a `LocalCluster` of `workers`
 this machine (bound to 127.0.0.1) and closes it afterwards. Pass a
 `distributed.Client` to use a cluster you started yourself: a scheduler address
 (`Client("tcp://host:8786")`) or a batch queue (dask-jobqueue's `SLURMCluster`); the README's
-section "On a cluster" shows all three.
+section "On a cluster" shows all three. `client` is a Client, not an address: a string is a
+TypeError (connect with `distributed.Client(address)`, which you then own and close).
+
+Every function takes its `scene` as a `fogplanes.Scene` or the path of a scene file (str or
+os.PathLike), read on this machine: the workers get the scene, not the path. Every argument is
+checked before any cluster starts or is asked anything: a bad one raises ValueError (a bad
+value) or TypeError (a bad type) naming it; a scene file that cannot be opened raises OSError; a
+client whose scheduler is gone (or that was closed) raises ValueError naming the client.
 
 How a render is spread (why the image does not depend on the cluster):
 
@@ -19,17 +26,24 @@ How a render is spread (why the image does not depend on the cluster):
   into a `Partial`: the chunks' unnormalised f64 sums. Plane i is the same plane wherever it
   is rendered (point i of the seed's scrambled Sobol sequence).
 - Partials are added on the workers along the core's canonical binary tree over chunk indices
-  (`_canonical_tree`; the same tree `fogplanes.render` uses), one task per node, and the last
-  task divides by N and adds the direct emission (`finish_render`). Only the image reaches the
+  (the same tree `fogplanes.render` uses), one task per step of the core's plan (`merge_plan`:
+  a leaf renders a block of chunks, a node adds two earlier steps), and the last task divides
+  by N and adds the direct emission (`finish_render`). Only the image reaches the
   client. The sums, and so the image, are the same bits for any number of workers, any order
   of completion and any retry or lost worker: equal to `fogplanes.render`'s.
-- Tasks are submitted depth-first and the client keeps no future but the last one, so the
-  scheduler frees each partial once its parent has added it: at most the tree's frontier is
-  alive (about log2(tasks) + one per worker). Mind the size: a partial is height x width x 3
-  f64, 5.5 MB at 640x360 and about 200 MB at 3840x2160 (4K), on the worker that holds it.
-- Task keys are derived from the scene's Dask token, the render's fingerprint and the plane
-  range, so resubmitting the same work while its results are held reuses them; each task is
-  retried `retries` times if it raises, and a task lost with its worker is rerun by Dask.
+- Tasks are submitted in the plan's post-order and the client keeps no future once it is
+  added, so the scheduler frees each partial once its parent has added it: at most the tree's
+  frontier is alive (about log2(tasks) + one per worker). Mind the size: a partial is
+  height x width x 3 f64, 5.5 MB at 640x360 and about 200 MB at 3840x2160 (4K), on the worker
+  that holds it.
+- Task keys name the work (the scene's Dask token, the render's fingerprint, the plane range)
+  and end with an id drawn for each call: a call's tasks are its own. Dask gives a key it
+  still holds to whoever submits it again (its error, or its cancellation: the scheduler's
+  report that a failed call's key was cancelled may reach the client after the next call has
+  submitted that key), so shared keys let a failed call break a later one. Within a call each
+  task is retried `retries` times if it raises, and a task lost with its worker is rerun by
+  Dask under its key; two calls for the same image compute it twice. On any exception while
+  waiting (KeyboardInterrupt included) the call's work is cancelled.
 
 Threads: run one worker process per node with one Dask thread, and let each render use the
 node's cores (`threads`). Dask sets OMP_NUM_THREADS for its workers but not rayon's thread
@@ -41,9 +55,11 @@ there (the smallest over the nodes), and the local cluster also sets RAYON_NUM_T
 from __future__ import annotations
 
 import contextlib
+import numbers
 import os
 import sys
-from collections.abc import Callable, Iterable, Iterator, Sequence
+import uuid
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -67,6 +83,112 @@ BAND_ROWS = 16
 #: How many leaf tasks per Dask thread the automatic block size aims at (load balance).
 TASKS_PER_SLOT = 8
 
+SceneArg = native.Scene | str | os.PathLike
+
+
+# -- Arguments: every one checked before any cluster starts ---------------------------------------
+
+
+def _scene(scene: SceneArg) -> native.Scene:
+    """The scene of a `scene` argument: a `fogplanes.Scene`, or the path of a scene file (str or
+    os.PathLike), read here (the workers get the scene: they need not see the file)."""
+    if isinstance(scene, native.Scene):
+        return scene
+    if isinstance(scene, (str, os.PathLike)):
+        return native.load_scene(scene)
+    raise TypeError(f"scene: expected a fogplanes.Scene or the path of a scene file (str or os.PathLike), "
+                    f"got {type(scene).__name__}")
+
+
+def _int(name: str, value: Any, least: int) -> int:
+    """An integer argument (not a bool) of at least `least`."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name}={value!r}: expected an integer")
+    if value < least:
+        raise ValueError(f"{name}={value!r}: must be an integer of at least {least}")
+    return int(value)
+
+
+def _flag(name: str, value: Any) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}={value!r}: expected True or False")
+    return bool(value)
+
+
+def _block(chunks_per_task: Any) -> int | None:
+    """`chunks_per_task`: None, or a power of two."""
+    if chunks_per_task is None:
+        return None
+    if isinstance(chunks_per_task, bool) or not isinstance(chunks_per_task, numbers.Integral):
+        raise TypeError(f"chunks_per_task={chunks_per_task!r}: expected a power of two (an integer) or None")
+    n = int(chunks_per_task)
+    if n < 1 or n & (n - 1):
+        raise ValueError(f"chunks_per_task={chunks_per_task!r}: must be a power of two (1, 2, 4, ...) or None")
+    return n
+
+
+def _gone(client: Client) -> str:
+    address = getattr(client.scheduler, "address", None) or "its scheduler"
+    return (f"client={client!r}: the Dask client is not connected to {address} (status {client.status!r}): "
+            f"the scheduler is gone or the client was closed; connect a new distributed.Client")
+
+
+def _client(client: Any, required: bool = False) -> Client | None:
+    """`client`: a running `distributed.Client` (or None unless `required`)."""
+    if client is None and not required:
+        return None
+    if not isinstance(client, Client):
+        expected = "a distributed.Client" if required else "a distributed.Client or None"
+        if isinstance(client, str):
+            expected += " (connect to a scheduler's address with distributed.Client(address))"
+        raise TypeError(f"client={client!r}: expected {expected}")
+    if client.status != "running":
+        raise ValueError(_gone(client))
+    return client
+
+
+def _check_layout(workers: Any, threads: Any) -> None:
+    _int("workers", workers, 1)
+    if threads is not None:
+        _int("threads", threads, 1)
+
+
+def _check_threads(scene: native.Scene, threads: int | None) -> None:
+    """The core's range of `threads` (its check alone: no pool is started)."""
+    if threads is not None:
+        native.plan_render(scene, planes=1, threads=threads)
+
+
+def _common(client: Any, workers: Any, threads: Any, progress: Any, retries: Any) -> None:
+    """The arguments every function takes besides its scene and settings."""
+    _client(client)
+    _check_layout(workers, threads)
+    _flag("progress", progress)
+    _int("retries", retries, 0)
+
+
+#: Render settings given by name (their values are checked by the core).
+_NAMED_SETTINGS = ("estimator", "sampler", "accelerator", "kernel")
+
+
+def _render_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The settings given (None: not given), their types checked here so that a bad one is
+    named (the core checks their values)."""
+    if "threads" in kwargs:
+        raise ValueError("threads is an argument of fogplanes.distributed.render itself")
+    kwargs = {k: v for k, v in kwargs.items() if v is not None}
+    for name in _NAMED_SETTINGS:
+        if name in kwargs and not isinstance(kwargs[name], str):
+            raise TypeError(f"{name}={kwargs[name]!r}: expected a name (a str)")
+    if "pixel_center" in kwargs:
+        _flag("pixel_center", kwargs["pixel_center"])
+    return kwargs
+
+
+def _call_id() -> str:
+    """The id that ends the task keys of one call: 64 random bits."""
+    return uuid.uuid4().hex[:16]
+
 
 # -- The cluster ---------------------------------------------------------------------------------
 
@@ -82,7 +204,9 @@ def _cores() -> int:
 def _threads_per_task(client: Client) -> tuple[int, int]:
     """(threads per render, Dask threads in the cluster): each node's cores over its Dask
     threads, the smallest over the nodes, so that no node runs more render threads than cores."""
-    workers = client.scheduler_info(n_workers=-1)["workers"]
+    workers = client.scheduler_info(n_workers=-1).get("workers")
+    if workers is None:  # the client lost its scheduler (it then closes itself)
+        raise ValueError(_gone(client))
     if not workers:
         raise ValueError("the Dask cluster has no workers")
     cores = client.run(_cores)
@@ -94,13 +218,6 @@ def _threads_per_task(client: Client) -> tuple[int, int]:
         cores_by_host[host] = max(cores_by_host.get(host, 1), int(cores.get(address, 1)))
     threads = min(max(1, cores_by_host[h] // slots_by_host[h]) for h in slots_by_host)
     return threads, sum(slots_by_host.values())
-
-
-def _check_layout(workers: int, threads: int | None) -> None:
-    if not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers={workers!r}: must be an integer of at least 1")
-    if threads is not None and (not isinstance(threads, int) or threads < 1):
-        raise ValueError(f"threads={threads!r}: must be an integer of at least 1, or None")
 
 
 @contextlib.contextmanager
@@ -161,7 +278,8 @@ class _StderrProgressBar(TextProgressBar):
 
 def _wait(future: Future, progress: bool, label: str) -> Any:
     """The future's result, with a progress bar over it and every task it depends on. On
-    any exception here (KeyboardInterrupt included) the work is cancelled."""
+    any exception here (KeyboardInterrupt included) the work is cancelled: the scheduler then
+    releases every task of the call (the client holds none but this one)."""
     try:
         if progress:
             _StderrProgressBar([future], label)
@@ -172,25 +290,6 @@ def _wait(future: Future, progress: bool, label: str) -> Any:
 
 
 # -- Renders -------------------------------------------------------------------------------------
-
-
-def _canonical_tree(first: int, last: int, block: int, leaf: Callable[[int, int], Any],
-                    node: Callable[[Any, Any, int, int], Any]) -> Any:
-    """Builds the core's canonical tree over chunk indices first..last (post-order: a node is
-    made after its two children), with leaves of at most `block` chunks:
-
-        node(a..b) = node(a..m) + node(m..b),  m = a + the largest power of two below b - a
-
-    `block` must be a power of two: then every leaf is itself a node of the tree over single
-    chunks (an aligned block, or the tail: `render_chunk` sums a block in the same tree), so
-    the sums are the tree's bits."""
-    if last - first <= block:
-        return leaf(first, last)
-    half = 1 << ((last - first - 1).bit_length() - 1)
-    middle = first + half
-    left = _canonical_tree(first, middle, block, leaf, node)
-    right = _canonical_tree(middle, last, block, leaf, node)
-    return node(left, right, first, last)
 
 
 def _auto_block(chunks: int, slots: int) -> int:
@@ -215,59 +314,73 @@ def _finish(scene: native.Scene, partial: native.Partial, kwargs: dict[str, Any]
     return native.finish_render(scene, partial, return_stats=return_stats, **kwargs)
 
 
-def _render_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
-    if "threads" in kwargs:
-        raise ValueError("threads is an argument of fogplanes.distributed.render itself")
-    return {k: v for k, v in kwargs.items() if v is not None}
+def _check_render(scene: SceneArg, render_kwargs: dict[str, Any], threads: int | None, retries: Any,
+                  chunks_per_task: Any, return_stats: Any
+                  ) -> tuple[native.Scene, dict[str, Any], dict[str, Any]]:
+    """(scene, settings, plan) of a render, every argument checked."""
+    scene = _scene(scene)
+    kwargs = _render_kwargs(render_kwargs)
+    plan = native.plan_render(scene, **kwargs)
+    _check_threads(scene, threads)
+    _int("retries", retries, 0)
+    _block(chunks_per_task)
+    _flag("return_stats", return_stats)
+    return scene, kwargs, plan
 
 
-def render_future(scene: native.Scene, client: Client, *, threads: int, slots: int = 1,
+def render_future(scene: SceneArg, client: Client, *, threads: int, slots: int = 1,
                   retries: int = 2, chunks_per_task: int | None = None,
                   return_stats: bool = False, **render_kwargs: Any) -> Future:
     """Submits a render to `client` and returns the future of its image (or (image, stats)):
     the tasks of `render` without waiting. `threads` is each task's render threads, `slots`
-    the Dask threads of the cluster (for the automatic `chunks_per_task`)."""
-    kwargs = _render_kwargs(render_kwargs)
-    plan = native.plan_render(scene, **kwargs)
+    the Dask threads of the cluster (for the automatic `chunks_per_task`). Every argument is
+    checked before anything is submitted; the task keys are this call's own."""
+    client = _client(client, required=True)
+    _int("threads", threads, 1)
+    _int("slots", slots, 1)
+    scene, kwargs, plan = _check_render(scene, render_kwargs, threads, retries, chunks_per_task, return_stats)
     chunks = plan["chunks"]
-    block = chunks_per_task or _auto_block(len(chunks), slots)
-    if block < 1 or block & (block - 1):
-        raise ValueError(f"chunks_per_task={block}: must be a power of two")
+    block = _block(chunks_per_task) or _auto_block(len(chunks), slots)
     stem = f"{tokenize(scene)}-{plan['fingerprint']}"
-
-    def leaf(a: int, b: int) -> Future:
-        planes = (chunks[a][0], chunks[b - 1][1])
-        return client.submit(_render_block, scene, planes, threads, kwargs, retries=retries,
-                             key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}")
-
-    def node(left: Future, right: Future, a: int, b: int) -> Future:
-        return client.submit(_add, left, right, retries=retries,
-                             key=f"fogplanes-add-{stem}-{chunks[a][0]}-{chunks[b - 1][1]}")
-
-    # The children's futures are dropped as the recursion returns: the scheduler keeps each
+    call = _call_id()
+    # The core's plan: leaves render blocks of chunks, nodes add two earlier steps (post-order).
+    # A step's future is dropped once its parent is submitted: the scheduler keeps each
     # partial only until its parent has added it.
-    total = _canonical_tree(0, len(chunks), block, leaf, node)
+    steps: list[Future | None] = []
+    for start, end, left, right in native.merge_plan(len(chunks), block):
+        planes = (chunks[start][0], chunks[end - 1][1])
+        if left is None:
+            step = client.submit(_render_block, scene, planes, threads, kwargs, retries=retries,
+                                 key=f"fogplanes-chunks-{stem}-{planes[0]}-{planes[1]}-{call}")
+        else:
+            step = client.submit(_add, steps[left], steps[right], retries=retries,
+                                 key=f"fogplanes-add-{stem}-{planes[0]}-{planes[1]}-{call}")
+            steps[left] = steps[right] = None
+        steps.append(step)
+    total = steps.pop()
+    del steps
     return client.submit(_finish, scene, total, kwargs, return_stats, retries=retries,
-                         key=f"fogplanes-finish-{stem}-{int(return_stats)}")
+                         key=f"fogplanes-finish-{stem}-{int(return_stats)}-{call}")
 
 
-def render(scene: native.Scene, estimator: str | None = None, *, client: Client | None = None,
+def render(scene: SceneArg, estimator: str | None = None, *, client: Client | None = None,
            workers: int = 1, threads: int | None = None, progress: bool = True,
            retries: int = 2, chunks_per_task: int | None = None, return_stats: bool = False,
            **render_kwargs: Any) -> Any:
     """Renders like `fogplanes.render(scene, estimator, **render_kwargs)`, on a Dask cluster:
     the same image, bit for bit, whatever the cluster.
 
-    `client`: a `distributed.Client`; None starts a local cluster of `workers` processes for
-    this call. `threads`: render threads per task (None: each node's cores over its Dask
-    threads). `progress`: a text progress bar on stderr. `retries`: how many times a task that
-    raises is retried. `chunks_per_task`: canonical chunks rendered by one task, a power of
-    two (None: enough tasks for TASKS_PER_SLOT per Dask thread). The other arguments are
-    `fogplanes.render`'s (`time_budget` excepted: a distributed render has a plane count).
-    Bad arguments raise ValueError before any cluster starts."""
+    `scene`: a `fogplanes.Scene` or the path of a scene file. `client`: a
+    `distributed.Client`; None starts a local cluster of `workers` processes for this call.
+    `threads`: render threads per task (None: each node's cores over its Dask threads).
+    `progress`: a text progress bar on stderr. `retries`: how many times a task that raises is
+    retried (an integer >= 0). `chunks_per_task`: canonical chunks rendered by one task, a
+    power of two (None: enough tasks for TASKS_PER_SLOT per Dask thread). The other arguments
+    are `fogplanes.render`'s (`time_budget` excepted: a distributed render has a plane count).
+    Bad arguments raise ValueError or TypeError naming them before any cluster starts."""
     kwargs = dict(render_kwargs, estimator=estimator)
-    native.plan_render(scene, **_render_kwargs(kwargs))  # the errors before any cluster
-    _check_layout(workers, threads)
+    _common(client, workers, threads, progress, retries)
+    scene, _, _ = _check_render(scene, kwargs, threads, retries, chunks_per_task, return_stats)
     with _session(client, workers, threads) as (c, per_task, slots):
         future = render_future(scene, c, threads=per_task, slots=slots, retries=retries,
                                chunks_per_task=chunks_per_task, return_stats=return_stats,
@@ -301,7 +414,7 @@ def _stack(*bands: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarra
             np.concatenate([b[1] for b in bands], axis=0))
 
 
-def reference(scene: native.Scene, spp: int | None = None, *, pixel_center: bool = False,
+def reference(scene: SceneArg, spp: int | None = None, *, pixel_center: bool = False,
               resolution: tuple[int, int] | None = None, seed: int | None = None,
               uniform: bool = False, client: Client | None = None, workers: int = 1,
               threads: int | None = None, progress: bool = True, retries: int = 2,
@@ -310,18 +423,25 @@ def reference(scene: native.Scene, spp: int | None = None, *, pixel_center: bool
     rows: (image, per-pixel standard error), the same bits as one machine's (each pixel's
     random stream is keyed by the seed and the pixel). The adaptive mode (the default) runs
     the pilot in bands, the per-pixel counts in one task (the core's code), then the final
-    bands. `client`, `workers`, `threads`, `progress`, `retries` as in `render`."""
-    if band_rows < 1:
-        raise ValueError(f"band_rows={band_rows}: must be at least 1")
-    _check_layout(workers, threads)
+    bands. `scene`, `client`, `workers`, `threads`, `progress`, `retries` as in `render`."""
+    scene = _scene(scene)
+    _common(client, workers, threads, progress, retries)
+    band_rows = _int("band_rows", band_rows, 1)
+    uniform = _flag("uniform", uniform)
     kwargs = {k: v for k, v in dict(spp=spp, resolution=resolution, seed=seed).items() if v is not None}
-    kwargs["pixel_center"] = pixel_center
-    # The errors before any cluster, by the core's checks: the settings on one pixel (its pilot
-    # costs milliseconds), the resolution on the scene.
+    kwargs["pixel_center"] = _flag("pixel_center", pixel_center)
+    # The errors before any cluster, by the core's checks: the resolution on the scene, the
+    # settings on one pixel (its pilot costs milliseconds), the threads.
+    if resolution is not None:
+        if not isinstance(resolution, tuple) or len(resolution) != 2:
+            raise TypeError(f"resolution={resolution!r}: expected (width, height)")
+        scene_at = scene.with_resolution(*resolution)
+    else:
+        scene_at = scene
     native.reference_pilot_rows(scene, (0, 1), **dict(kwargs, resolution=(1, 1)))
-    height = (scene.with_resolution(*resolution) if resolution else scene).resolution[1]
-    bands = _bands(height, band_rows)
-    stem = f"{tokenize(scene)}-{tokenize(kwargs, uniform)}"
+    _check_threads(scene, threads)
+    bands = _bands(scene_at.resolution[1], band_rows)
+    stem = f"{tokenize(scene)}-{tokenize(kwargs, uniform)}-{_call_id()}"
     with _session(client, workers, threads) as (c, per_task, _):
         counts = None
         if not uniform:
@@ -360,12 +480,12 @@ def _row(scene: native.Scene, ref: np.ndarray, estimator: str, planes: int | Non
 def _listed(value: Any, default: Iterable[Any]) -> list[Any]:
     if value is None:
         return list(default)
-    if isinstance(value, (str, int)):
+    if isinstance(value, (str, numbers.Integral)):
         return [value]
     return list(value)
 
 
-def table(scene: native.Scene, reference: Any, estimators: str | Iterable[str] | None = None,
+def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | None = None,
           planes: int | Iterable[int] | None = None, seeds: int | Iterable[int] | None = None, *,
           client: Client | None = None, workers: int = 1, threads: int | None = None,
           progress: bool = True, retries: int = 2, **render_kwargs: Any) -> list[dict[str, Any]]:
@@ -375,20 +495,28 @@ def table(scene: native.Scene, reference: Any, estimators: str | Iterable[str] |
     seconds (the render's wall time on its worker). The reference (an image, a path, or the
     (image, stderr) pair of `reference`) is sent to every worker once. `estimators` default to
     every estimator, `planes` and `seeds` to the scene's; the other keyword arguments are
-    `fogplanes.render`'s. `client`, `workers`, `threads`, `progress`, `retries` as in
-    `render`."""
+    `fogplanes.render`'s. `scene`, `client`, `workers`, `threads`, `progress`, `retries` as in
+    `render`; the reference must have the renders' shape (height, width, 3)."""
+    scene = _scene(scene)
+    _common(client, workers, threads, progress, retries)
+    kwargs = _render_kwargs(render_kwargs)
+    runs = [(e, n, s) for e in _listed(estimators, native.ESTIMATORS)
+            for n in _listed(planes, [None]) for s in _listed(seeds, [None])]
+    shapes = set()
+    for e, n, s in runs:  # every setting checked before any cluster
+        run = _render_kwargs(dict(estimator=e, planes=n, seed=s))
+        shapes.add(tuple(native.plan_render(scene, **run, **kwargs)["shape"]))
+    _check_threads(scene, threads)
     if isinstance(reference, tuple):
         reference = reference[0]
     if isinstance(reference, (str, os.PathLike)):
         reference = native.load_image(reference)
     ref = np.asarray(reference)
-    kwargs = _render_kwargs(render_kwargs)
-    runs = [(e, n, s) for e in _listed(estimators, native.ESTIMATORS)
-            for n in _listed(planes, [None]) for s in _listed(seeds, [None])]
-    for e, n, s in runs:  # every setting checked before any cluster
-        native.plan_render(scene, estimator=e, planes=n, seed=s, **kwargs)
-    _check_layout(workers, threads)
-    stem = tokenize(scene, ref, kwargs)
+    for shape in shapes:
+        if ref.shape != shape:
+            raise ValueError(f"reference: expected an image of the renders' shape {shape}, "
+                             f"got shape {ref.shape}")
+    stem = f"{tokenize(scene, ref, kwargs)}-{_call_id()}"
     with _session(client, workers, threads) as (c, per_task, _):
         shared_ref = c.scatter(ref, broadcast=True, hash=True)
         rows = [c.submit(_row, scene, shared_ref, e, n, s, per_task, kwargs, retries=retries,
