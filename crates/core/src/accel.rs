@@ -100,7 +100,7 @@ impl Aggregate for Structure {
 const SAMPLING_PIECE: usize = 16_384;
 
 /// Planes sampled and prepared for gathering from the camera, each weighted 1 (the division by
-/// the set's N comes once, when the image is finished: [`crate::film::finish`]).
+/// the set's N comes once, when the image is finished: [`crate::film::Film::finish`]).
 pub struct PreparedPlanes {
     context: GatherContext,
     structure: Structure,

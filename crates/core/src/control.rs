@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A progress callback: called once per finished unit of work (a band of rows, a chunk of rays,
-/// a row of the reference); see [`crate::render::progress_units_per_pass`].
+/// a row of the reference); see [`crate::accel::Accelerator::units_per_gathering`].
 pub type Progress<'a> = &'a (dyn Fn() + Sync);
 
 /// Progress reporting and cancellation of one job. Cheap to copy; pass it by value.

@@ -6,38 +6,42 @@
 //! follows is written out in [`mathematics`] (the file `docs/mathematics.md`); "section N" in
 //! the documentation below refers to it, "eq. (N)" to the paper.
 //!
-//! One module per concept (a directory where a concept has parts):
+//! One module per concept (a directory where a concept has parts), in layers that read like
+//! `docs/mathematics.md`: a module takes names only from the layers above it in this table
+//! (lower layers first), never from its own layer's later rows or from below.
 //!
-//! | module | concept |
-//! |---|---|
-//! | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] and its light choice by power |
-//! | [`limits`] | every range a setting must lie in, checked in one place |
-//! | [`settings`] | what a user may set, resolved once: defaults, overrides, checks |
-//! | [`outputs`] | every output path checked before any work |
-//! | [`camera`] | the pinhole camera and its rays (section 7) |
-//! | [`pixel`] | the pixel: its area, the ray sets and their plane groups (section 8) |
-//! | [`emission`] | direct emission integrated over the pixel (section 8) |
-//! | [`medium`] | the homogeneous medium box: clipping and transmittance |
-//! | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
-//! | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
-//! | [`sampling`] | the plane samplers, the one hash and its random streams, warps, the chi-square test of samplers |
-//! | [`sampling::sobol`] | the Owen-scrambled Sobol sequence (randomised quasi-Monte Carlo) |
-//! | [`sampling::Kronecker`] | the reference's low-discrepancy sequence (section 4) |
-//! | [`photon_plane`] | photon-plane sampling (section 2) and the clipped plane polygon |
-//! | [`weights`] | the estimators: their registry and dispatch (`mod.rs`), their denominators D (`denominators.rs`, section 2), the closed form of cmis-exact in f64 and f32 (`closed_form.rs`, section 3) |
-//! | [`gather`] | one ray against one plane: hit test and weighted contribution, written once |
-//! | [`kernel`] | the span kernels (AVX-512, AVX2, portable) and the choice between them |
-//! | [`raster`] | the intersection structure: planes rasterised in screen space |
-//! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
-//! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
-//! | [`render`] | the photon-plane renderer and its options |
-//! | [`partial`] | partial renders: canonical chunks of the plane set, their f64 sums, the canonical merge |
-//! | [`control`] | following and stopping a long job: progress callback and cancel flag |
-//! | [`reference`](mod@reference) | the independent reference renderer (section 4) |
-//! | [`metrics`] | SMAPE, MSE and friends (section 5) |
-//! | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
-//! | [`export`] | the scene as a Mitsuba 3 XML file, to check against an outside renderer |
-//! | [`error`] | the library's typed errors |
+//! | layer | module | what it holds |
+//! |---|---|---|
+//! | foundations | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
+//! | | [`error`] | the library's typed errors, and the closed list of settings they name |
+//! | | [`control`] | following and stopping a long job: progress callback and cancel flag |
+//! | | [`limits`] | every default of a render, every range a setting must lie in, the memory rule |
+//! | | [`sampling`] | the plane samplers (Owen-scrambled Sobol, independent), the one hash and its random streams, warps, the Kronecker sequence of the reference (section 4), the chi-square test |
+//! | the scene | [`medium`] | the homogeneous medium box: clipping and transmittance |
+//! | | [`light`] | rectangular lights, their chords, and the ray-rectangle test |
+//! | | [`camera`] | the pinhole camera and its rays, [`camera::CameraRay`] (section 7) |
+//! | | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] and its light choice by power |
+//! | planes | [`photon_plane`] | photon-plane sampling (section 2), the plane set, the clipped plane polygon |
+//! | | [`weights`] | the estimators: their registry and dispatch (`mod.rs`), their denominators D (`denominators.rs`, section 2), the closed form of cmis-exact (`closed_form.rs`, section 3) |
+//! | one hit | [`gather`] | one ray against one plane: hit test and weighted contribution `C = K / (N P_l D)`, written once for every vector width |
+//! | | [`occlusion`] | which other panels may shadow a plane, and the per-hit test (section 2.3) |
+//! | traversal | [`kernel`] | the span kernels (AVX-512, AVX2, portable, per-hit) and the choice between them; the [`kernel::Aggregate`] interface every structure answers |
+//! | | [`raster`] | planes rasterised in screen space: the fast structure for camera rays |
+//! | | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
+//! | | [`accel`] | the prepared planes of a render behind one gather, whatever the structure |
+//! | pixels and film | [`pixel`] | the pixel: the ray sets that sample it, their plane groups, the one cache of ray sets (section 8.1) |
+//! | | [`emission`] | direct emission integrated over the pixel (section 8.2) |
+//! | | [`film`] | pixel buffers, the one place an image is finished ([`film::Film::finish`]), EXR / PNG files written whole or not at all |
+//! | | [`metrics`] | SMAPE, MSE and friends (section 5) |
+//! | | [`outputs`] | every output path checked before any work |
+//! | options | [`options`] | a render's options resolved (built by [`settings`] alone) and what a render measured |
+//! | partials | [`partial`] | canonical chunks of the plane set, their f64 sums, the canonical merge tree and its plan; the part files |
+//! | drivers | [`render`] | the renders: the one loop over plane groups and ray sets, in canonical chunks, in plane passes, for the table |
+//! | | [`reference`](mod@reference) | the independent reference renderer (section 4) |
+//! | | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
+//! | | [`export`] | the scene as a Mitsuba 3 XML file, to check against an outside renderer |
+//! | settings | [`settings`] | what a user may set, resolved once: defaults, overrides, checks |
+//! | | [`merge`] | part files merged into images, their recorded settings resolved like a caller's |
 
 /// `Display` and `FromStr` of a named choice (estimator, sampler, kernel, accelerator) from its
 /// `name()` and `ALL`: written once, so that every choice prints and parses alike.

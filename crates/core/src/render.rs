@@ -2,7 +2,7 @@
 //! machine, a render on a time budget in plane passes, and the table's renders of several
 //! weightings over one prepared plane set.
 //!
-//! Every one of them goes through [`Gatherer::gather`], the one loop over plane groups and ray
+//! Every one of them goes through `Gatherer::gather`, the one loop over plane groups and ray
 //! sets: a list of pieces of the plane set, each gathered along its ray set
 //! (docs/mathematics.md section 8.1) from the one cache of ray sets ([`RaySets`]), each plane
 //! weighted 1; and every image is finished by [`Film::finish`] (the division by N and the
