@@ -30,8 +30,9 @@
 //! | [`raster`] | the intersection structure: planes rasterised in screen space |
 //! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
 //! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
+//! | [`display`] | a live view of a running job in the tev image viewer, over its TCP protocol |
 //! | [`render`] | the photon-plane renderer and its options |
-//! | [`partial`] | partial renders: canonical chunks of the plane set, their f64 sums, the canonical merge |
+//! | [`partial`] | partial renders: canonical chunks of the plane set, their f64 sums, the canonical merge, checkpoints |
 //! | [`control`] | following and stopping a long job: progress callback and cancel flag |
 //! | [`reference`](mod@reference) | the independent reference renderer (section 4) |
 //! | [`metrics`] | SMAPE, MSE and friends (section 5) |
@@ -63,6 +64,7 @@ pub mod accel;
 pub mod bvh;
 pub mod camera;
 pub mod control;
+pub mod display;
 pub mod emission;
 pub mod error;
 pub mod export;

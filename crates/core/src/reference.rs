@@ -105,16 +105,108 @@ pub const REPLICATES: u32 = 16;
 /// thread cancels it, the work stops before the next pixel and the result is
 /// [`crate::Error::Cancelled`].
 pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, control: Control) -> Result<ReferenceImage> {
+    render_reference_from(scene, opts, control, ReferenceDone::default(), &mut |_| Ok(()))
+}
+
+/// A band of rows of a reference's final pass: its mean and standard error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceBand {
+    pub rows: std::ops::Range<u32>,
+    pub mean: Film,
+    pub stderr: Film,
+}
+
+/// What a reference has finished: the pilot pass of an adaptive one (every row's standard
+/// error) and bands of its final pass, in any order, without overlap.
+#[derive(Clone, Debug, Default)]
+pub struct ReferenceDone {
+    pub pilot: Option<Film>,
+    pub bands: Vec<ReferenceBand>,
+}
+
+/// What a reference tells its caller as it goes ([`render_reference_from`]).
+pub enum ReferenceStep<'a> {
+    /// The pilot pass of an adaptive reference is finished.
+    Pilot(&'a Film),
+    /// A band of the final pass is finished.
+    Band(&'a ReferenceBand),
+}
+
+/// Rows per band of the final pass for each worker thread: enough that the rows' uneven costs
+/// leave the threads little idle time at a band's end.
+const BAND_ROWS_PER_THREAD: u32 = 8;
+
+/// [`render_reference`] resumed from `done` (what an earlier call with the same scene and
+/// options finished; empty: from the start), rendering the final pass in bands of rows and
+/// telling `observer` of the pilot pass and of each band as it finishes (a checkpoint, a live
+/// view). Each pixel's samples are keyed by the seed and the pixel alone, so the image is
+/// [`render_reference`]'s bit for bit however it was banded and resumed; `seconds` is this
+/// call's. Refuses `done` of another size.
+pub fn render_reference_from(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    control: Control,
+    done: ReferenceDone,
+    observer: &mut dyn FnMut(ReferenceStep) -> Result<()>,
+) -> Result<ReferenceImage> {
     let start = std::time::Instant::now();
-    let all = 0..scene.camera.height;
-    let counts = if opts.uniform {
-        None
-    } else {
-        let pilot = reference_pilot_rows(scene, opts, all.clone(), control)?;
-        Some(reference_counts(opts, &pilot.pixels))
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let sized = |f: &Film, rows: u32| f.width == w && f.height == rows && f.pixels.len() == (w * rows) as usize;
+    let counts = match (opts.uniform, done.pilot) {
+        (true, None) => None,
+        (false, Some(pilot)) if sized(&pilot, h) => Some(reference_counts(opts, &pilot.pixels)),
+        (false, None) => {
+            let pilot = reference_pilot_rows(scene, opts, 0..h, control)?;
+            observer(ReferenceStep::Pilot(&pilot))?;
+            Some(reference_counts(opts, &pilot.pixels))
+        }
+        _ => return Err(crate::Error::Partial("the pilot pass to resume from is not this reference's".into())),
     };
-    let (mean, stderr) = reference_rows(scene, opts, all, counts.as_deref(), control)?;
+    let (mut mean, mut stderr) = (Film::new(w, h), Film::new(w, h));
+    let mut finished = vec![false; h as usize];
+    for b in &done.bands {
+        let rows = b.rows.start as usize..b.rows.end as usize;
+        let fits = b.rows.start < b.rows.end && b.rows.end <= h;
+        if !fits || !sized(&b.mean, b.rows.len() as u32) || !sized(&b.stderr, b.rows.len() as u32) {
+            return Err(crate::Error::Partial(format!(
+                "rows {}:{} to resume from are not a band of this reference",
+                b.rows.start, b.rows.end
+            )));
+        }
+        if finished[rows.clone()].iter().any(|&f| f) {
+            return Err(crate::Error::Partial(format!(
+                "rows {}:{} to resume from overlap another band",
+                b.rows.start, b.rows.end
+            )));
+        }
+        finished[rows.clone()].fill(true);
+        place(&mut mean, b.rows.start, &b.mean);
+        place(&mut stderr, b.rows.start, &b.stderr);
+    }
+    let band_rows = BAND_ROWS_PER_THREAD * rayon::current_num_threads() as u32;
+    let mut j = 0;
+    while j < h {
+        if finished[j as usize] {
+            j += 1;
+            continue;
+        }
+        let mut end = j + 1;
+        while end < h && end - j < band_rows && !finished[end as usize] {
+            end += 1;
+        }
+        let (m, e) = reference_rows(scene, opts, j..end, counts.as_deref(), control)?;
+        place(&mut mean, j, &m);
+        place(&mut stderr, j, &e);
+        observer(ReferenceStep::Band(&ReferenceBand { rows: j..end, mean: m, stderr: e }))?;
+        j = end;
+    }
     Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
+}
+
+/// Copies `band` into `film` from row `row` on.
+fn place(film: &mut Film, row: u32, band: &Film) {
+    let at = row as usize * film.width as usize;
+    film.pixels[at..at + band.pixels.len()].copy_from_slice(&band.pixels);
 }
 
 /// Samples per pixel of the pilot pass of the adaptive reference.

@@ -16,7 +16,7 @@ use crate::error::{Error, Result, Setting};
 use crate::film::Film;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
 use crate::options::{RenderOptions, RenderStats};
-use crate::partial::{Partial, chunk_indices, chunks, combine, fingerprint, pieces, split};
+use crate::partial::{Partial, chunk_indices, chunk_planes, chunks, combine, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::scene::Scene;
 use crate::weights::Weighting;
@@ -141,18 +141,6 @@ impl<'a> ChunkRenderer<'a> {
         })
     }
 
-    /// The canonical node over chunks `range` (module docs of [`crate::partial`]): left
-    /// subtree, right subtree, added.
-    fn node(&mut self, range: Range<usize>, weighting: Weighting) -> Result<Partial> {
-        if range.len() == 1 {
-            return self.chunk(range.start, weighting);
-        }
-        let m = range.start + split(range.len());
-        let left = self.node(range.start..m, weighting)?;
-        let right = self.node(m..range.end, weighting)?;
-        combine(&left, &right)
-    }
-
     /// The partial of planes `range`, a union of consecutive canonical chunks, added along the
     /// canonical tree restricted to them (a node of the whole tree when the range is one).
     pub fn render(&mut self, range: Range<usize>) -> Result<Partial> {
@@ -162,11 +150,69 @@ impl<'a> ChunkRenderer<'a> {
     /// [`ChunkRenderer::render`] with another weighting than the options' (the same planes,
     /// the same rays: the table).
     pub fn render_with(&mut self, weighting: Weighting, range: Range<usize>) -> Result<Partial> {
-        let chunks = chunk_indices(self.gatherer.opts.planes, &range)?;
+        self.render_from(weighting, range, Vec::new(), &mut |_| Ok(()))
+    }
+
+    /// [`ChunkRenderer::render_with`] resumed from `held`, the nodes an earlier render of the
+    /// same planes held after its first chunks (what its `observer` was last given; empty to
+    /// start afresh), telling `observer` the nodes held after each further chunk. The chunks
+    /// go in order and each node is added as soon as its right child is (the canonical tree's
+    /// post-order, [`frontier`]), so wherever the render was resumed the result is the bits
+    /// of one uninterrupted render.
+    fn render_from(
+        &mut self,
+        weighting: Weighting,
+        range: Range<usize>,
+        mut held: Vec<Partial>,
+        observer: ChunkObserver,
+    ) -> Result<Partial> {
+        let root = chunk_indices(self.gatherer.opts.planes, &range)?;
         self.gatherer.control.check()?;
-        self.node(chunks, weighting)
+        let done = self.resumed_chunks(&root, &held)?;
+        for c in done..root.end {
+            held.push(self.chunk(c, weighting)?);
+            // The nodes this chunk completes, the innermost first.
+            let alive = frontier(root.clone(), c + 1).len();
+            while held.len() > alive {
+                let right = held.pop().expect("a right child");
+                let left = held.pop().expect("its left sibling");
+                held.push(combine(&left, &right)?);
+            }
+            observer(&held)?;
+        }
+        Ok(held.pop().expect("the root node, checked or made above"))
+    }
+
+    /// The end of the chunks that `held` covers, if it is what this render of chunks `root`
+    /// holds after them: partials of this render and image size over exactly the nodes of
+    /// [`frontier`].
+    fn resumed_chunks(&self, root: &Range<usize>, held: &[Partial]) -> Result<usize> {
+        let (planes, cam) = (self.gatherer.opts.planes, &self.gatherer.scene.camera);
+        let done = held.last().map_or(root.start, |p| p.end.div_ceil(CHUNK_PLANES));
+        let expected = frontier(root.clone(), done);
+        let pixels = cam.width as usize * cam.height as usize;
+        let ours = |p: &Partial, chunks: &Range<usize>| {
+            p.fingerprint == self.fingerprint
+                && p.planes_total == planes
+                && (p.width, p.height) == (cam.width, cam.height)
+                && p.sums.len() == pixels
+                && (p.start..p.end) == chunk_planes(planes, chunks)
+        };
+        if held.len() != expected.len() || !held.iter().zip(&expected).all(|(p, c)| ours(p, c)) {
+            let planes_range = chunk_planes(planes, root);
+            return Err(Error::Partial(format!(
+                "the partials to resume from are not what a render of planes {}:{} holds after its first chunks",
+                planes_range.start, planes_range.end
+            )));
+        }
+        Ok(done)
     }
 }
+
+/// What a render tells its caller after each finished chunk: the nodes it holds then
+/// ([`frontier`]: consecutive partials from its first plane), for a checkpoint to save or a
+/// running image to add up ([`crate::partial::RunningImage`]). An error stops the render.
+pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial]) -> Result<()>;
 
 /// Renders the scene: the mean over each pixel of the direct emission (integrated over the
 /// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
@@ -178,10 +224,27 @@ impl<'a> ChunkRenderer<'a> {
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
 /// bit; only one chunk's planes exist at a time.
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
+    render_from(scene, opts, control, Vec::new(), &mut |_| Ok(()))
+}
+
+/// [`render`] resumed from `held`, the nodes an earlier render of the same scene and options
+/// held after its first chunks (empty: from the start), telling `observer` the nodes it holds
+/// after each further chunk (a checkpoint, [`crate::partial::checkpoint`]; a live view). The
+/// image is [`render`]'s bit for bit, wherever it was resumed; the statistics count this call's
+/// planes and work. Refuses `held` that is not what this render holds after some chunks.
+pub fn render_from(
+    scene: &Scene,
+    opts: &RenderOptions,
+    control: Control,
+    held: Vec<Partial>,
+    observer: ChunkObserver,
+) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
+    let resumed = held.last().map_or(0, |p| p.end);
     let mut chunks = ChunkRenderer::new(scene, opts, control);
-    let partial = chunks.render(0..opts.planes)?;
+    let partial = chunks.render_from(opts.weighting, 0..opts.planes, held, observer)?;
     let mut stats = chunks.gatherer.stats;
+    stats.planes = opts.planes - resumed;
     let t = Instant::now();
     let film = crate::partial::finish(scene, opts, &partial)?;
     stats.seconds_rays += t.elapsed().as_secs_f64();
