@@ -382,6 +382,57 @@ mod tests {
     use crate::error::Error;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
+    /// Resumed from its pilot pass and any bands, in any order, the reference is the bits of
+    /// one uninterrupted run; the observer sees the pilot, then each band, covering every row.
+    #[test]
+    fn a_reference_resumed_from_some_bands_is_the_uninterrupted_reference() {
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(12, 40).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        for uniform in [false, true] {
+            let opts = ReferenceOptions { spp: 32, uniform, seed: 3, pixel_center: false };
+            let whole = render_reference(&scene, &opts, Control::none()).unwrap();
+            let mut done = ReferenceDone::default();
+            let mut rows = 0;
+            let again = pool.install(|| {
+                render_reference_from(&scene, &opts, Control::none(), ReferenceDone::default(), &mut |step| {
+                    match step {
+                        ReferenceStep::Pilot(p) => done.pilot = Some(p.clone()),
+                        ReferenceStep::Band(b) => {
+                            assert_eq!(b.rows.start, rows);
+                            rows = b.rows.end;
+                            done.bands.push(b.clone());
+                        }
+                    }
+                    Ok(())
+                })
+            });
+            let again = again.unwrap();
+            assert!(again.mean == whole.mean && again.stderr == whole.stderr);
+            // One thread: bands of 8 rows.
+            assert_eq!((rows, done.bands.len(), done.pilot.is_some()), (40, 5, !uniform));
+            // Bands 1 and 3 done (given out of order): the rest is rendered, nothing more.
+            let kept =
+                ReferenceDone { pilot: done.pilot.clone(), bands: vec![done.bands[3].clone(), done.bands[1].clone()] };
+            let mut rendered = Vec::new();
+            let resumed = render_reference_from(&scene, &opts, Control::none(), kept, &mut |step| {
+                if let ReferenceStep::Band(b) = step {
+                    rendered.push(b.rows.clone());
+                }
+                assert!(!matches!(step, ReferenceStep::Pilot(_)), "the pilot is done");
+                Ok(())
+            })
+            .unwrap();
+            assert!(resumed.mean == whole.mean && resumed.stderr == whole.stderr, "uniform {uniform}");
+            let covered: u32 = rendered.iter().map(|r| r.len() as u32).sum();
+            assert_eq!(covered, 24, "{rendered:?}");
+            // Overlapping bands, or a band of another size, are refused.
+            let overlapping =
+                ReferenceDone { pilot: done.pilot.clone(), bands: vec![done.bands[1].clone(), done.bands[1].clone()] };
+            assert!(render_reference_from(&scene, &opts, Control::none(), overlapping, &mut |_| Ok(())).is_err());
+        }
+    }
+
     /// Cancelled when the first row ends: on one thread no other row runs; on two, the other
     /// thread's row stops before its next pixel (it may have finished just before the flag).
     #[test]

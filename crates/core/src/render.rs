@@ -430,6 +430,54 @@ mod tests {
         }
     }
 
+    /// Resumed from what it held after any number of chunks, a render gives the bits of one
+    /// uninterrupted render; what it holds is the canonical tree's frontier; anything else to
+    /// resume from is refused.
+    #[test]
+    fn a_render_resumed_after_any_chunk_is_the_uninterrupted_render() {
+        let scene = small_scene().with_resolution(24, 16).unwrap();
+        let planes = 5 * CHUNK_PLANES + 100;
+        let opts = Overrides { planes: Some(planes as u64), spp: Some(4), ..Overrides::default() }
+            .resolve(&scene)
+            .unwrap()
+            .options;
+        let mut snapshots: Vec<Vec<Partial>> = Vec::new();
+        let (whole, _) = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held| {
+            snapshots.push(held.to_vec());
+            Ok(())
+        })
+        .unwrap();
+        assert!(whole == render(&scene, &opts, Control::none()).unwrap().0);
+        assert_eq!(snapshots.len(), 6);
+        for (i, held) in snapshots.iter().enumerate() {
+            let ranges: Vec<_> = held.iter().map(|p| p.start..p.end).collect();
+            let nodes: Vec<_> = frontier(0..6, i + 1).iter().map(|c| chunk_planes(planes, c)).collect();
+            assert_eq!(ranges, nodes, "after chunk {i}");
+            let mut later = 0;
+            let (resumed, stats) = render_from(&scene, &opts, Control::none(), held.clone(), &mut |_| {
+                later += 1;
+                Ok(())
+            })
+            .unwrap();
+            assert!(resumed == whole, "resumed after chunk {i}");
+            assert_eq!((later, stats.planes), (5 - i, planes - held.last().unwrap().end));
+        }
+        // Not a frontier: a node missing, a node of another render, a node of another size.
+        let other = Overrides { seed: Some(9), planes: Some(planes as u64), spp: Some(4), ..Overrides::default() };
+        let other = other.resolve(&scene).unwrap().options;
+        let mut foreign = snapshots[2].clone();
+        foreign[0].fingerprint = fingerprint(&scene, &other);
+        let mut small = snapshots[2].clone();
+        small[1].sums.pop();
+        for held in [snapshots[2][1..].to_vec(), foreign, small] {
+            let e = render_from(&scene, &opts, Control::none(), held, &mut |_| Ok(())).unwrap_err();
+            assert!(e.to_string().contains("not what a render of planes 0:82020 holds"), "{e}");
+        }
+        // An observer's error stops the render with it.
+        let e = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |_| Err(Error::Cancelled)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled));
+    }
+
     /// A render in passes, and so a render on a time budget, stops in the middle of a pass.
     #[test]
     fn cancelling_stops_a_render_in_passes_mid_pass() {

@@ -249,7 +249,7 @@ fn another(dir: &Path, file: &Path) -> Error {
     Error::bad_input(
         dir,
         format!(
-            "is the checkpoint of another render or reference ({name}: another scene or other settings); \
+            "holds the work of another render or reference ({name}: another scene or other settings); \
              remove it to start afresh, or give another directory"
         ),
     )
