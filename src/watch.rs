@@ -81,9 +81,12 @@ impl<'a> RenderWatch<'a> {
             };
             (LiveView::start(spec, warner(bar)), RunningImage::new(scene, opts))
         });
-        let watch = RenderWatch { scene, opts, checkpoint, live, resumed };
-        watch.show(&watch.resumed);
-        Ok(watch)
+        // The image is created at once: black, or what the checkpoint holds.
+        if let Some((view, image)) = &live {
+            let (w, h) = (scene.camera.width, scene.camera.height);
+            view.show(vec![image.image(&resumed).unwrap_or_else(|| Film::new(w, h))], 0..h);
+        }
+        Ok(RenderWatch { scene, opts, checkpoint, live, resumed })
     }
 
     /// The planes the checkpoint held at the start (0 without one).
@@ -186,9 +189,8 @@ impl<'a> ReferenceWatch<'a> {
                 layers: vec![String::new(), "stderr".into()],
             };
             let view = LiveView::start(spec, warner(bar));
-            if watch.rows > 0 {
-                view.show(vec![watch.mean.clone(), watch.stderr.clone()], 0..h);
-            }
+            // The image is created at once: black, or the bands the checkpoint holds.
+            view.show(vec![watch.mean.clone(), watch.stderr.clone()], 0..h);
             watch.live = Some(view);
         }
         Ok(watch)
