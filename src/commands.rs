@@ -144,7 +144,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     if r.time_budget.is_some() {
         summary += &format!(", {} plane passes", stats.plane_passes);
     }
-    if let Some(c) = cpu {
+    if let Some(c) = cpu.filter(|_| stats.hits > 0) {
         summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
     }
     if let Some(b) = system::peak_memory_bytes() {

@@ -223,19 +223,8 @@ fn a_render_shown_in_tev_is_created_once_and_updated_until_its_image() {
     let (address, received) = listen();
     let planes = 4 * CHUNK_PLANES;
     let planes_arg = planes.to_string();
-    let o = fogplanes(&[
-        "render",
-        SCENE,
-        "--resolution",
-        "150x40",
-        "--planes",
-        &planes_arg,
-        "-q",
-        "-o",
-        path(&out),
-        "--display-server",
-        &address,
-    ]);
+    let run = ["render", SCENE, "--resolution", "150x40", "--planes", &planes_arg, "-q", "--display-server", &address];
+    let o = fogplanes(&[&run[..], &["-o", path(&out)]].concat());
     succeeded(&o, "render");
     assert!(o.stderr.is_empty(), "{}", String::from_utf8_lossy(&o.stderr));
     let canvas = Canvas::of(&decode(&received.join().unwrap()));
@@ -275,30 +264,16 @@ fn a_reference_shown_in_tev_is_updated_band_by_band_until_its_images() {
     let dir = scratch("tev-reference");
     let (mean, stderr) = (dir.join("mean.exr"), dir.join("stderr.exr"));
     let (address, received) = listen();
-    let o = fogplanes(&[
-        "reference",
-        SCENE,
-        "--resolution",
-        "20x40",
-        "--spp",
-        "64",
-        "--threads",
-        "2",
-        "-q",
-        "-o",
-        path(&mean),
-        "--stderr-image",
-        path(&stderr),
-        "--display-server",
-        &address,
-    ]);
+    let images = ["-o", path(&mean), "--stderr-image", path(&stderr)];
+    let run = ["reference", SCENE, "--resolution", "20x40", "--spp", "1024", "-q", "--display-server", &address];
+    let o = fogplanes(&[&run[..], &images].concat());
     succeeded(&o, "reference");
     let canvas = Canvas::of(&decode(&received.join().unwrap()));
     let rgb = ["R", "G", "B"].map(String::from);
     let channels: Vec<String> = rgb.iter().cloned().chain(rgb.iter().map(|c| format!("stderr.{c}"))).collect();
     assert_eq!((canvas.width, canvas.height, &canvas.channels), (20, 40, &channels));
-    // Created black at the start (one tile: all 40 rows), then each band of 16 rows (two
-    // threads) as it finishes, unless the band before is still being sent, then the whole image.
+    // Created black at the start (one tile: all 40 rows), then each band of 16 rows as it
+    // finishes, unless the band before is still being sent, then the whole image.
     assert_eq!(canvas.rows[0], (0, 40));
     assert!(canvas.rows[1..].iter().any(|&(a, b)| a % 16 == 0 && b - a <= 16), "{:?}", canvas.rows);
     assert!(same_bits(&canvas.film(&canvas.values, 0), &Film::load_exr(&mean).unwrap()));
@@ -418,9 +393,8 @@ fn a_reference_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
     let ck = dir.join("ck");
     let args = |name: &str, ck: Option<&Path>| -> Vec<String> {
         let (mean, err) = (dir.join(format!("{name}.exr")), dir.join(format!("{name}_err.exr")));
-        let mut v: Vec<String> = ["reference", SCENE, "--resolution", "48x48", "--spp", "512", "--threads", "2", "-q"]
-            .map(String::from)
-            .into();
+        let mut v: Vec<String> =
+            ["reference", SCENE, "--resolution", "48x48", "--spp", "512", "-q"].map(String::from).into();
         v.extend(["-o".into(), path(&mean).into(), "--stderr-image".into(), path(&err).into()]);
         v.extend(ck.map(|c| ["--checkpoint".to_string(), path(c).into()]).into_iter().flatten());
         v
