@@ -463,7 +463,7 @@ fn another_jobs_checkpoint_is_refused_and_ctrl_c_says_what_it_holds() {
     assert_eq!(o.status.code(), Some(130), "{err}");
     let note = err.lines().find(|l| l.starts_with("interrupted: ")).unwrap_or_else(|| panic!("{err}"));
     let k: u64 = note.split(" holds ").nth(1).and_then(|r| r.split(' ').next()).and_then(|k| k.parse().ok()).unwrap();
-    assert!(k > 0 && k % CHUNK_PLANES as u64 == 0, "{note}");
+    assert!(k > 0 && k.is_multiple_of(CHUNK_PLANES as u64), "{note}");
     let expected = format!(
         "interrupted: the checkpoint {} holds {k} of 2000000 planes; run the same command to resume",
         busy.display()

@@ -428,7 +428,7 @@ mod tests {
             })
             .unwrap();
             assert!(resumed.mean == whole.mean && resumed.stderr == whole.stderr, "uniform {uniform}");
-            assert_eq!(rendered, [16..32], "{rendered:?}");
+            assert_eq!(rendered, vec![16u32..32], "{rendered:?}");
             // Overlapping bands, or a band of another size, are refused.
             let overlapping =
                 ReferenceDone { pilot: done.pilot.clone(), bands: vec![done.bands[1].clone(), done.bands[1].clone()] };

@@ -405,7 +405,7 @@ mod tests {
             for (i, snapshot) in seen.iter().enumerate() {
                 assert_eq!(&frontier(root.clone(), root.start + i + 1), snapshot, "{root:?} after {i}");
             }
-            assert_eq!(frontier(root.clone(), root.end), [root.clone()]);
+            assert_eq!(frontier(root.clone(), root.end), std::slice::from_ref(&root));
         }
         assert_eq!(frontier(0..7, 5), [0..4, 4..5]);
         assert_eq!(frontier(0..7, 6), [0..4, 4..6]);
