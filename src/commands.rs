@@ -292,7 +292,10 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let passes = if r.options.uniform { 1 } else { 2 };
     let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
     let mut watch = ReferenceWatch::start(&a.watch, scene, &r.options, &bar)?;
-    bar.set_position(watch.units_done());
+    if let (Some(ck), 1..) = (&a.watch.checkpoint, watch.units_done()) {
+        bar.set_position(watch.units_done());
+        say!("resuming from {}: {} are done", ck.display(), watch.done());
+    }
     let done = watch.take_done();
     let tick = || bar.inc(1);
     let control = Control::with_progress(&tick);

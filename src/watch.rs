@@ -214,10 +214,14 @@ impl<'a> ReferenceWatch<'a> {
         self.rows += mean.height;
     }
 
-    fn note(&self) -> String {
-        let ck = self.checkpoint.as_ref().expect("a checkpoint is open");
+    /// What is done: "the pilot pass and 32 of 180 rows".
+    pub(crate) fn done(&self) -> String {
         let pilot = if self.pilot { "the pilot pass and " } else { "" };
-        resume_note(ck, &format!("{pilot}{} of {} rows", self.rows, self.scene.camera.height))
+        format!("{pilot}{} of {} rows", self.rows, self.scene.camera.height)
+    }
+
+    fn note(&self) -> String {
+        resume_note(self.checkpoint.as_ref().expect("a checkpoint is open"), &self.done())
     }
 
     /// After the pilot pass and each band: the checkpoint saves it, the view shows the rows.

@@ -401,10 +401,16 @@ fn a_reference_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
     };
     succeeded(&fogplanes(&strs(&args("whole", None))), "the uninterrupted reference");
     let mut rng = rand_pcg::Pcg64::seed_from_u64(28);
+    let mut said = Vec::new();
     for _ in 0..2 {
-        kill_at_random(&strs(&args("out", Some(&ck))), &ck, "pilot", &mut rng);
+        said.push(kill_at_random(&strs(&args("out", Some(&ck))), &ck, "pilot", &mut rng));
     }
-    succeeded(&fogplanes(&strs(&args("out", Some(&ck)))), "the last run");
+    said.push(succeeded(&fogplanes(&strs(&args("out", Some(&ck)))), "the last run"));
+    let resumed: Vec<&str> = said.iter().flat_map(|s| s.lines()).filter(|l| l.starts_with("resuming from")).collect();
+    assert!(
+        resumed.iter().any(|l| l.contains(": the pilot pass and ") && !l.contains(" 48 of 48 rows")),
+        "{resumed:?}"
+    );
     let load = |name: &str| Film::load_exr(&dir.join(name)).unwrap();
     assert!(same_bits(&load("out.exr"), &load("whole.exr")) && same_bits(&load("out_err.exr"), &load("whole_err.exr")));
     std::fs::remove_dir_all(&dir).unwrap();

@@ -18,8 +18,9 @@
 //! The view sends from a thread of its own: the job hands over a frame and goes on, a frame
 //! not sent yet is replaced by a newer one (only the latest matters), and each write has a
 //! time limit, so a slow, absent or vanished viewer never holds the job up. A viewer that
-//! cannot be reached, or is lost, costs one warning (through the caller's `warn`); the view
-//! tries again with each later frame, silently, and creates the image anew once connected.
+//! cannot be reached, or is lost, costs one warning in the view's life (through the caller's
+//! `warn`); the view tries again with each later frame, silently, and creates the image anew
+//! once connected.
 
 use crate::film::Film;
 use std::io::Write;
@@ -103,7 +104,7 @@ pub struct LiveView {
 
 impl LiveView {
     /// Starts the view's thread; nothing is sent before the first frame. `warn` gets one line
-    /// each time the viewer cannot be reached or is lost.
+    /// the first time the viewer cannot be reached or is lost.
     pub fn start(spec: ViewSpec, warn: Arc<dyn Fn(&str) + Send + Sync>) -> LiveView {
         let shared = Arc::new(Shared { slot: Mutex::new(Slot::default()), wake: Condvar::new() });
         let (theirs, their_warn) = (Arc::clone(&shared), Arc::clone(&warn));
@@ -162,7 +163,8 @@ impl Drop for LiveView {
     }
 }
 
-/// The view's thread: its connection and whether it warned since it last had one.
+/// The view's thread: its connection, and whether it has warned (once in a view's life: a
+/// viewer that accepts connections but never reads would otherwise cost a line per frame).
 struct Sender {
     spec: ViewSpec,
     warn: Arc<dyn Fn(&str) + Send + Sync>,
@@ -193,10 +195,7 @@ impl Sender {
         let rows = if self.stream.is_some() { frame.rows.clone() } else { 0..self.spec.height };
         if self.stream.is_none() {
             match self.connect() {
-                Ok(stream) => {
-                    self.stream = Some(stream);
-                    self.warned = false;
-                }
+                Ok(stream) => self.stream = Some(stream),
                 Err(e) => {
                     self.warn_once(&format!("no viewer at {} ({e}); the job goes on without it", self.spec.address));
                     return;
