@@ -144,6 +144,25 @@ pub(crate) struct CommonArgs {
     pub(crate) quiet: bool,
 }
 
+/// Watching a long job: `render` and `reference`.
+#[derive(Args)]
+pub(crate) struct WatchArgs {
+    /// Show the image in the tev viewer as it is made: tev listening on HOST:PORT (its default
+    /// is 127.0.0.1:14158), the image created once and updated after each finished chunk of
+    /// planes (a render: the image of the planes so far) or band of rows (a reference: its mean
+    /// and, as the layer `stderr`, its standard error). A viewer that is absent or lost costs
+    /// one warning; the job goes on.
+    #[arg(long, value_name = "HOST:PORT", value_parser = parse_display_server, conflicts_with = "partial")]
+    pub(crate) display_server: Option<String>,
+    /// Save each finished chunk of planes (or band of rows) into the directory CK (made if
+    /// missing) as it completes; after an interruption (Ctrl-C, a kill), the same command
+    /// resumes from it, with the bits of an uninterrupted run. Refused if CK holds another
+    /// scene's or other settings' work. A finished job leaves its parts there
+    /// (`fogplanes merge CK/*.npz` reads them): remove CK when done.
+    #[arg(long, value_name = "CK", conflicts_with = "partial")]
+    pub(crate) checkpoint: Option<PathBuf>,
+}
+
 #[derive(Args)]
 pub(crate) struct RenderArgs {
     /// The scene file (TOML), e.g. media_scenes/six_lights.toml.
@@ -199,6 +218,8 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "PART.npz", conflicts_with = "time_budget")]
     pub(crate) partial: Option<PathBuf>,
     #[command(flatten)]
+    pub(crate) watch: WatchArgs,
+    #[command(flatten)]
     pub(crate) common: CommonArgs,
 }
 
@@ -244,6 +265,8 @@ pub(crate) struct ReferenceArgs {
     /// sample counts come from it instead of a pilot pass of this run's own.
     #[arg(long, value_name = "PILOT.npz", conflicts_with = "uniform")]
     pub(crate) pilot: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) watch: WatchArgs,
     #[command(flatten)]
     pub(crate) common: CommonArgs,
 }
@@ -337,6 +360,11 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?} in {s:?}: {e}"));
     Ok((parse(w)?, parse(h)?))
+}
+
+/// A display server's `HOST:PORT` (checked by the library, not resolved).
+pub(crate) fn parse_display_server(s: &str) -> Result<String, String> {
+    fogplanes::display::check_address(s).map(|()| s.to_string())
 }
 
 /// `A:B` with A < B.

@@ -4,6 +4,7 @@
 
 use crate::args::*;
 use crate::experiments::{self, TableOptions, run_table};
+use crate::watch::{ReferenceWatch, RenderWatch};
 use crate::{page, system};
 use anyhow::{Context, Result, anyhow};
 use fogplanes::control::Control;
@@ -13,8 +14,8 @@ use fogplanes::metrics::compare;
 use fogplanes::options::RenderOptions;
 use fogplanes::outputs::{Output, check_outputs};
 use fogplanes::partial::parts::{read_pilot, save_pilot_part, save_reference_part, save_render_part};
-use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference};
-use fogplanes::render::{progress_units, render, render_chunk, render_for};
+use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference_from};
+use fogplanes::render::{progress_units, render_chunk, render_for, render_from};
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -107,13 +108,25 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     }
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
     check_outputs(&[Output::Image(&output)])?;
+    if r.time_budget.is_some() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
+        let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
+        return Err(input(anyhow!("{flag}: a render on a time budget has no chunks to follow: give --planes")));
+    }
     start_threads(r.threads)?;
 
     let bar =
         progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes()), opts.weighting().label().as_str());
+    let mut watch = RenderWatch::start(&a.watch, scene, opts, &bar)?;
+    if let (Some(ck), resumed @ 1..) = (&a.watch.checkpoint, watch.resumed_planes()) {
+        bar.set_position(progress_units(scene, opts, 0..resumed));
+        say!("resuming from {}: {resumed} of {} planes are done", ck.display(), opts.planes());
+    }
     let cpu = system::cpu_seconds();
     let (film, stats) = match r.time_budget {
-        None => render(scene, opts, Control::with_progress(&|| bar.inc(1)))?,
+        None => {
+            let held = watch.take_resumed();
+            render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h| watch.chunk_done(h))?
+        }
         Some(seconds) => {
             bar.set_length(u64::MAX);
             // What the command spent before rendering, and what writing the file will take.
@@ -126,11 +139,12 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
     film.save(&output, r.exposure)?;
+    watch.finish(&film);
     let mut summary = stats.summary();
     if r.time_budget.is_some() {
         summary += &format!(", {} plane passes", stats.plane_passes);
     }
-    if let Some(c) = cpu {
+    if let Some(c) = cpu.filter(|_| stats.hits > 0) {
         summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
     }
     if let Some(b) = system::peak_memory_bytes() {
@@ -277,12 +291,21 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     start_threads(r.threads)?;
     let passes = if r.options.uniform { 1 } else { 2 };
     let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
-    let reference = render_reference(scene, &r.options, Control::with_progress(&|| bar.inc(1)))?;
+    let mut watch = ReferenceWatch::start(&a.watch, scene, &r.options, &bar)?;
+    if let (Some(ck), 1..) = (&a.watch.checkpoint, watch.units_done()) {
+        bar.set_position(watch.units_done());
+        say!("resuming from {}: {} are done", ck.display(), watch.done());
+    }
+    let done = watch.take_done();
+    let tick = || bar.inc(1);
+    let control = Control::with_progress(&tick);
+    let reference = render_reference_from(scene, &r.options, control, done, &mut |step| watch.step(step))?;
     bar.finish_and_clear();
     reference.mean.save(&output, r.exposure)?;
     if let Some(p) = &a.stderr_image {
         reference.stderr.save(p, r.exposure)?;
     }
+    watch.finish(&reference);
     say!(
         "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
         r.options.spp,

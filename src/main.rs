@@ -9,6 +9,7 @@ mod page;
 mod pictures;
 mod report;
 mod system;
+mod watch;
 
 use args::{Cli, Command};
 use clap::Parser;
@@ -20,10 +21,11 @@ fn main() -> ExitCode {
     STARTED.get_or_init(std::time::Instant::now);
     let cli = Cli::parse();
     // Ctrl-C, SIGTERM or SIGHUP: remove any half-written output before leaving, so no truncated
-    // file remains.
+    // file remains (a checkpoint's file under way is finished first: the note tells what it holds).
     let _ = ctrlc::set_handler(|| {
+        let note = watch::interrupted_note();
         fogplanes::film::remove_unfinished_files();
-        let _ = writeln!(std::io::stderr(), "\ninterrupted: nothing was written");
+        let _ = writeln!(std::io::stderr(), "\ninterrupted: {note}");
         std::process::exit(130);
     });
     let result = match cli.command {

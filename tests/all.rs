@@ -13,6 +13,7 @@ mod fuzz_exr;
 mod fuzz_scene;
 mod hard_scenes;
 mod hostile;
+mod live;
 mod mitsuba_export;
 mod page;
 mod partials;

@@ -32,10 +32,11 @@
 //! | pixels and film | [`pixel`] | the pixel: the ray sets that sample it, their plane groups, the one cache of ray sets (section 8.1) |
 //! | | [`emission`] | direct emission integrated over the pixel (section 8.2) |
 //! | | [`film`] | pixel buffers, the one place an image is finished ([`film::Film::finish`]), EXR / PNG files written whole or not at all |
+//! | | [`display`] | a live view of a running job in the tev image viewer, over its TCP protocol |
 //! | | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | | [`outputs`] | every output path checked before any work |
 //! | options | [`options`] | a render's options resolved (built by [`settings`] alone) and what a render measured |
-//! | partials | [`partial`] | canonical chunks of the plane set, their f64 sums, the canonical merge tree and its plan; the part files |
+//! | partials | [`partial`] | canonical chunks of the plane set, their f64 sums, the canonical merge tree and its plan; the part files and checkpoints |
 //! | drivers | [`render`] | the renders: the one loop over plane groups and ray sets, in canonical chunks, in plane passes, for the table |
 //! | | [`reference`](mod@reference) | the independent reference renderer (section 4) |
 //! | | [`quadrature`] | deterministic quadrature, the ground truth for single rays |
@@ -67,6 +68,7 @@ pub mod accel;
 pub mod bvh;
 pub mod camera;
 pub mod control;
+pub mod display;
 pub mod emission;
 pub mod error;
 pub mod export;

@@ -17,6 +17,7 @@ use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rand::RngCore;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 const REFERENCE_STREAM: u64 = 0x2EF_E2E;
 
@@ -105,16 +106,107 @@ pub const REPLICATES: u32 = 16;
 /// thread cancels it, the work stops before the next pixel and the result is
 /// [`crate::Error::Cancelled`].
 pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, control: Control) -> Result<ReferenceImage> {
+    render_reference_from(scene, opts, control, ReferenceDone::default(), &mut |_| Ok(()))
+}
+
+/// A band of rows of a reference's final pass: its mean and standard error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceBand {
+    pub rows: std::ops::Range<u32>,
+    pub mean: Film,
+    pub stderr: Film,
+}
+
+/// What a reference has finished: the pilot pass of an adaptive one (every row's standard
+/// error) and bands of its final pass, in any order, without overlap.
+#[derive(Clone, Debug, Default)]
+pub struct ReferenceDone {
+    pub pilot: Option<Film>,
+    pub bands: Vec<ReferenceBand>,
+}
+
+/// What a reference tells its caller as it goes ([`render_reference_from`]).
+pub enum ReferenceStep<'a> {
+    /// The pilot pass of an adaptive reference is finished.
+    Pilot(&'a Film),
+    /// A band of the final pass is finished.
+    Band(&'a ReferenceBand),
+}
+
+/// Rows per band of the final pass: each band is a live view's update and a checkpoint's file.
+/// The threads share a band's pixels ([`render_pixels`]), so small bands cost no idle time.
+pub const BAND_ROWS: u32 = 16;
+
+/// [`render_reference`] resumed from `done` (what an earlier call with the same scene and
+/// options finished; empty: from the start), rendering the final pass in bands of rows and
+/// telling `observer` of the pilot pass and of each band as it finishes (a checkpoint, a live
+/// view). Each pixel's samples are keyed by the seed and the pixel alone, so the image is
+/// [`render_reference`]'s bit for bit however it was banded and resumed; `seconds` is this
+/// call's. Refuses `done` of another size.
+pub fn render_reference_from(
+    scene: &Scene,
+    opts: &ReferenceOptions,
+    control: Control,
+    done: ReferenceDone,
+    observer: &mut dyn FnMut(ReferenceStep) -> Result<()>,
+) -> Result<ReferenceImage> {
     let start = std::time::Instant::now();
-    let all = 0..scene.camera.height;
-    let counts = if opts.uniform {
-        None
-    } else {
-        let pilot = reference_pilot_rows(scene, opts, all.clone(), control)?;
-        Some(reference_counts(opts, &pilot.pixels))
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let sized = |f: &Film, rows: u32| f.width == w && f.height == rows && f.pixels.len() == (w * rows) as usize;
+    let counts = match (opts.uniform, done.pilot) {
+        (true, None) => None,
+        (false, Some(pilot)) if sized(&pilot, h) => Some(reference_counts(opts, &pilot.pixels)),
+        (false, None) => {
+            let pilot = reference_pilot_rows(scene, opts, 0..h, control)?;
+            observer(ReferenceStep::Pilot(&pilot))?;
+            Some(reference_counts(opts, &pilot.pixels))
+        }
+        _ => return Err(crate::Error::Partial("the pilot pass to resume from is not this reference's".into())),
     };
-    let (mean, stderr) = reference_rows(scene, opts, all, counts.as_deref(), control)?;
+    let (mut mean, mut stderr) = (Film::new(w, h), Film::new(w, h));
+    let mut finished = vec![false; h as usize];
+    for b in &done.bands {
+        let rows = b.rows.start as usize..b.rows.end as usize;
+        let fits = b.rows.start < b.rows.end && b.rows.end <= h;
+        if !fits || !sized(&b.mean, b.rows.len() as u32) || !sized(&b.stderr, b.rows.len() as u32) {
+            return Err(crate::Error::Partial(format!(
+                "rows {}:{} to resume from are not a band of this reference",
+                b.rows.start, b.rows.end
+            )));
+        }
+        if finished[rows.clone()].iter().any(|&f| f) {
+            return Err(crate::Error::Partial(format!(
+                "rows {}:{} to resume from overlap another band",
+                b.rows.start, b.rows.end
+            )));
+        }
+        finished[rows.clone()].fill(true);
+        place(&mut mean, b.rows.start, &b.mean);
+        place(&mut stderr, b.rows.start, &b.stderr);
+    }
+    let mut j = 0;
+    while j < h {
+        if finished[j as usize] {
+            j += 1;
+            continue;
+        }
+        let mut end = j + 1;
+        while end < h && end - j < BAND_ROWS && !finished[end as usize] {
+            end += 1;
+        }
+        let (m, e) = reference_rows(scene, opts, j..end, counts.as_deref(), control)?;
+        place(&mut mean, j, &m);
+        place(&mut stderr, j, &e);
+        observer(ReferenceStep::Band(&ReferenceBand { rows: j..end, mean: m, stderr: e }))?;
+        j = end;
+    }
     Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
+}
+
+/// Copies `band` into `film` from row `row` on.
+fn place(film: &mut Film, row: u32, band: &Film) {
+    let at = row as usize * film.width as usize;
+    film.pixels[at..at + band.pixels.len()].copy_from_slice(&band.pixels);
 }
 
 /// Samples per pixel of the pilot pass of the adaptive reference.
@@ -219,69 +311,73 @@ fn render_pixels(
     let lights = scene.light_distribution();
     let sequence = Kronecker::<6>::new();
     let band = rows.len() as u32;
-    let rows: Vec<(Vec<Vec3>, Vec<Vec3>)> = (rows.start as usize..rows.end as usize)
+    // Pixels, not rows, are the unit of parallel work: the threads run out of a band's work
+    // within a pixel's time of each other, so small bands keep every thread busy. A row's last
+    // pixel to finish reports the row.
+    let unfinished: Vec<AtomicUsize> = (0..band).map(|_| AtomicUsize::new(w)).collect();
+    let top = rows.start as usize;
+    let values: Vec<(Vec3, Vec3)> = (top * w..rows.end as usize * w)
         .into_par_iter()
-        .map(|j| {
-            let mut means = Vec::with_capacity(w);
-            let mut errors = Vec::with_capacity(w);
-            for i in 0..w {
-                if control.is_cancelled() {
-                    // The image is discarded: the row's length is all that matters.
-                    means.resize(w, Vec3::ZERO);
-                    errors.resize(w, Vec3::ZERO);
-                    return (means, errors);
-                }
-                let pixel = (j * w + i) as u64;
-                let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
-                let count = spp(pixel as usize);
-                let replicates = REPLICATES.min(count).max(1);
-                let per_replicate = count.div_ceil(replicates) as u64;
-                let centre_dir = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
-                let centre = scene.camera_segment(cam.position, centre_dir);
-                let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
-                for _ in 0..replicates {
-                    let shift: [f64; 6] = std::array::from_fn(|_| unit_f64(rng.next_u64()));
-                    let mut replicate = DVec3::ZERO;
-                    for k in 0..per_replicate {
-                        let u = sequence.point(k, &shift);
-                        let (we, (segment, emission)) = if pixel_center {
-                            (centre_dir, centre)
-                        } else {
-                            let we = cam.direction(i as f64 + u[0], j as f64 + u[1]).normalize();
-                            (we, scene.camera_segment(cam.position, we))
-                        };
-                        replicate += emission;
-                        if let Some((t0, t1)) = segment {
-                            let v =
-                                scattering_sample(scene, &lights, cam.position, we, t0, t1, [u[2], u[3], u[4], u[5]]);
-                            replicate += v;
-                        }
-                    }
-                    let replicate = replicate / per_replicate as f64;
-                    sum += replicate;
-                    sum_sq += replicate * replicate;
-                }
-                let r = replicates as f64;
-                let mean = sum / r;
-                let variance_of_mean = ((sum_sq / r - mean * mean) / (r - 1.0).max(1.0)).max(DVec3::ZERO);
-                means.push(mean.as_vec3());
-                errors.push(
-                    DVec3::new(variance_of_mean.x.sqrt(), variance_of_mean.y.sqrt(), variance_of_mean.z.sqrt())
-                        .as_vec3(),
-                );
+        .map(|p| {
+            if control.is_cancelled() {
+                return (Vec3::ZERO, Vec3::ZERO); // the image is discarded
             }
-            control.progress();
-            (means, errors)
+            let v = pixel_estimate(scene, &lights, &sequence, (seed, pixel_center), (p % w, p / w), spp(p));
+            if unfinished[p / w - top].fetch_sub(1, Ordering::Relaxed) == 1 {
+                control.progress();
+            }
+            v
         })
         .collect();
     control.check()?;
-    let mut mean = Film::new(cam.width, band);
-    let mut stderr = Film::new(cam.width, band);
-    for (j, (m, e)) in rows.into_iter().enumerate() {
-        mean.pixels[j * w..(j + 1) * w].copy_from_slice(&m);
-        stderr.pixels[j * w..(j + 1) * w].copy_from_slice(&e);
-    }
+    let mean = Film { width: cam.width, height: band, pixels: values.iter().map(|v| v.0).collect() };
+    let stderr = Film { width: cam.width, height: band, pixels: values.iter().map(|v| v.1).collect() };
     Ok((mean, stderr))
+}
+
+/// Pixel `(i, j)`'s mean and standard error from `count` samples in [`REPLICATES`] replicates
+/// (what [`render_pixels`] describes), its random numbers keyed by the seed and the pixel.
+fn pixel_estimate(
+    scene: &Scene,
+    lights: &Discrete,
+    sequence: &Kronecker<6>,
+    (seed, pixel_center): (u64, bool),
+    (i, j): (usize, usize),
+    count: u32,
+) -> (Vec3, Vec3) {
+    let cam = &scene.camera;
+    let pixel = (j * cam.width as usize + i) as u64;
+    let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
+    let replicates = REPLICATES.min(count).max(1);
+    let per_replicate = count.div_ceil(replicates) as u64;
+    let centre_dir = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
+    let centre = scene.camera_segment(cam.position, centre_dir);
+    let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
+    for _ in 0..replicates {
+        let shift: [f64; 6] = std::array::from_fn(|_| unit_f64(rng.next_u64()));
+        let mut replicate = DVec3::ZERO;
+        for k in 0..per_replicate {
+            let u = sequence.point(k, &shift);
+            let (we, (segment, emission)) = if pixel_center {
+                (centre_dir, centre)
+            } else {
+                let we = cam.direction(i as f64 + u[0], j as f64 + u[1]).normalize();
+                (we, scene.camera_segment(cam.position, we))
+            };
+            replicate += emission;
+            if let Some((t0, t1)) = segment {
+                replicate += scattering_sample(scene, lights, cam.position, we, t0, t1, [u[2], u[3], u[4], u[5]]);
+            }
+        }
+        let replicate = replicate / per_replicate as f64;
+        sum += replicate;
+        sum_sq += replicate * replicate;
+    }
+    let r = replicates as f64;
+    let mean = sum / r;
+    let variance_of_mean = ((sum_sq / r - mean * mean) / (r - 1.0).max(1.0)).max(DVec3::ZERO);
+    let stderr = DVec3::new(variance_of_mean.x.sqrt(), variance_of_mean.y.sqrt(), variance_of_mean.z.sqrt());
+    (mean.as_vec3(), stderr.as_vec3())
 }
 
 #[cfg(test)]
@@ -289,6 +385,56 @@ mod tests {
     use super::*;
     use crate::error::Error;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    /// Resumed from its pilot pass and any bands, in any order, the reference is the bits of
+    /// one uninterrupted run; the observer sees the pilot, then each band, covering every row.
+    #[test]
+    fn a_reference_resumed_from_some_bands_is_the_uninterrupted_reference() {
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(12, 40).unwrap();
+        // On one thread: the bands do not depend on the threads.
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        for uniform in [false, true] {
+            let opts = ReferenceOptions { spp: 32, uniform, seed: 3, pixel_center: false };
+            let whole = render_reference(&scene, &opts, Control::none()).unwrap();
+            let mut done = ReferenceDone::default();
+            let mut rows = 0;
+            let again = pool.install(|| {
+                render_reference_from(&scene, &opts, Control::none(), ReferenceDone::default(), &mut |step| {
+                    match step {
+                        ReferenceStep::Pilot(p) => done.pilot = Some(p.clone()),
+                        ReferenceStep::Band(b) => {
+                            assert_eq!(b.rows.start, rows);
+                            rows = b.rows.end;
+                            done.bands.push(b.clone());
+                        }
+                    }
+                    Ok(())
+                })
+            });
+            let again = again.unwrap();
+            assert!(again.mean == whole.mean && again.stderr == whole.stderr);
+            assert_eq!((rows, done.bands.len(), done.pilot.is_some()), (40, 3, !uniform));
+            // Bands 0 and 2 done (given out of order): the rest is rendered, nothing more.
+            let kept =
+                ReferenceDone { pilot: done.pilot.clone(), bands: vec![done.bands[2].clone(), done.bands[0].clone()] };
+            let mut rendered = Vec::new();
+            let resumed = render_reference_from(&scene, &opts, Control::none(), kept, &mut |step| {
+                if let ReferenceStep::Band(b) = step {
+                    rendered.push(b.rows.clone());
+                }
+                assert!(!matches!(step, ReferenceStep::Pilot(_)), "the pilot is done");
+                Ok(())
+            })
+            .unwrap();
+            assert!(resumed.mean == whole.mean && resumed.stderr == whole.stderr, "uniform {uniform}");
+            assert_eq!(rendered, vec![16u32..32], "{rendered:?}");
+            // Overlapping bands, or a band of another size, are refused.
+            let overlapping =
+                ReferenceDone { pilot: done.pilot.clone(), bands: vec![done.bands[1].clone(), done.bands[1].clone()] };
+            assert!(render_reference_from(&scene, &opts, Control::none(), overlapping, &mut |_| Ok(())).is_err());
+        }
+    }
 
     /// Cancelled when the first row ends: on one thread no other row runs; on two, the other
     /// thread's row stops before its next pixel (it may have finished just before the flag).

@@ -16,7 +16,7 @@ use crate::error::{Error, Result, Setting};
 use crate::film::Film;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
 use crate::options::{RenderOptions, RenderStats};
-use crate::partial::{Partial, chunk_indices, chunks, combine, fingerprint, pieces, split};
+use crate::partial::{Partial, chunk_indices, chunk_planes, chunks, combine, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::scene::Scene;
 use crate::weights::Weighting;
@@ -141,18 +141,6 @@ impl<'a> ChunkRenderer<'a> {
         })
     }
 
-    /// The canonical node over chunks `range` (module docs of [`crate::partial`]): left
-    /// subtree, right subtree, added.
-    fn node(&mut self, range: Range<usize>, weighting: Weighting) -> Result<Partial> {
-        if range.len() == 1 {
-            return self.chunk(range.start, weighting);
-        }
-        let m = range.start + split(range.len());
-        let left = self.node(range.start..m, weighting)?;
-        let right = self.node(m..range.end, weighting)?;
-        combine(&left, &right)
-    }
-
     /// The partial of planes `range`, a union of consecutive canonical chunks, added along the
     /// canonical tree restricted to them (a node of the whole tree when the range is one).
     pub fn render(&mut self, range: Range<usize>) -> Result<Partial> {
@@ -162,11 +150,69 @@ impl<'a> ChunkRenderer<'a> {
     /// [`ChunkRenderer::render`] with another weighting than the options' (the same planes,
     /// the same rays: the table).
     pub fn render_with(&mut self, weighting: Weighting, range: Range<usize>) -> Result<Partial> {
-        let chunks = chunk_indices(self.gatherer.opts.planes, &range)?;
+        self.render_from(weighting, range, Vec::new(), &mut |_| Ok(()))
+    }
+
+    /// [`ChunkRenderer::render_with`] resumed from `held`, the nodes an earlier render of the
+    /// same planes held after its first chunks (what its `observer` was last given; empty to
+    /// start afresh), telling `observer` the nodes held after each further chunk. The chunks
+    /// go in order and each node is added as soon as its right child is (the canonical tree's
+    /// post-order, [`frontier`]), so wherever the render was resumed the result is the bits
+    /// of one uninterrupted render.
+    fn render_from(
+        &mut self,
+        weighting: Weighting,
+        range: Range<usize>,
+        mut held: Vec<Partial>,
+        observer: ChunkObserver,
+    ) -> Result<Partial> {
+        let root = chunk_indices(self.gatherer.opts.planes, &range)?;
         self.gatherer.control.check()?;
-        self.node(chunks, weighting)
+        let done = self.resumed_chunks(&root, &held)?;
+        for c in done..root.end {
+            held.push(self.chunk(c, weighting)?);
+            // The nodes this chunk completes, the innermost first.
+            let alive = frontier(root.clone(), c + 1).len();
+            while held.len() > alive {
+                let right = held.pop().expect("a right child");
+                let left = held.pop().expect("its left sibling");
+                held.push(combine(&left, &right)?);
+            }
+            observer(&held)?;
+        }
+        Ok(held.pop().expect("the root node, checked or made above"))
+    }
+
+    /// The end of the chunks that `held` covers, if it is what this render of chunks `root`
+    /// holds after them: partials of this render and image size over exactly the nodes of
+    /// [`frontier`].
+    fn resumed_chunks(&self, root: &Range<usize>, held: &[Partial]) -> Result<usize> {
+        let (planes, cam) = (self.gatherer.opts.planes, &self.gatherer.scene.camera);
+        let done = held.last().map_or(root.start, |p| p.end.div_ceil(CHUNK_PLANES));
+        let expected = frontier(root.clone(), done);
+        let pixels = cam.width as usize * cam.height as usize;
+        let ours = |p: &Partial, chunks: &Range<usize>| {
+            p.fingerprint == self.fingerprint
+                && p.planes_total == planes
+                && (p.width, p.height) == (cam.width, cam.height)
+                && p.sums.len() == pixels
+                && (p.start..p.end) == chunk_planes(planes, chunks)
+        };
+        if held.len() != expected.len() || !held.iter().zip(&expected).all(|(p, c)| ours(p, c)) {
+            let planes_range = chunk_planes(planes, root);
+            return Err(Error::Partial(format!(
+                "the partials to resume from are not what a render of planes {}:{} holds after its first chunks",
+                planes_range.start, planes_range.end
+            )));
+        }
+        Ok(done)
     }
 }
+
+/// What a render tells its caller after each finished chunk: the nodes it holds then
+/// ([`frontier`]: consecutive partials from its first plane), for a checkpoint to save or a
+/// running image to add up ([`crate::partial::RunningImage`]). An error stops the render.
+pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial]) -> Result<()>;
 
 /// Renders the scene: the mean over each pixel of the direct emission (integrated over the
 /// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
@@ -178,10 +224,27 @@ impl<'a> ChunkRenderer<'a> {
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
 /// bit; only one chunk's planes exist at a time.
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
+    render_from(scene, opts, control, Vec::new(), &mut |_| Ok(()))
+}
+
+/// [`render`] resumed from `held`, the nodes an earlier render of the same scene and options
+/// held after its first chunks (empty: from the start), telling `observer` the nodes it holds
+/// after each further chunk (a checkpoint, [`crate::partial::checkpoint`]; a live view). The
+/// image is [`render`]'s bit for bit, wherever it was resumed; the statistics count this call's
+/// planes and work. Refuses `held` that is not what this render holds after some chunks.
+pub fn render_from(
+    scene: &Scene,
+    opts: &RenderOptions,
+    control: Control,
+    held: Vec<Partial>,
+    observer: ChunkObserver,
+) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
+    let resumed = held.last().map_or(0, |p| p.end);
     let mut chunks = ChunkRenderer::new(scene, opts, control);
-    let partial = chunks.render(0..opts.planes)?;
+    let partial = chunks.render_from(opts.weighting, 0..opts.planes, held, observer)?;
     let mut stats = chunks.gatherer.stats;
+    stats.planes = opts.planes - resumed;
     let t = Instant::now();
     let film = crate::partial::finish(scene, opts, &partial)?;
     stats.seconds_rays += t.elapsed().as_secs_f64();
@@ -365,6 +428,54 @@ mod tests {
                 units.into_inner()
             );
         }
+    }
+
+    /// Resumed from what it held after any number of chunks, a render gives the bits of one
+    /// uninterrupted render; what it holds is the canonical tree's frontier; anything else to
+    /// resume from is refused.
+    #[test]
+    fn a_render_resumed_after_any_chunk_is_the_uninterrupted_render() {
+        let scene = small_scene().with_resolution(24, 16).unwrap();
+        let planes = 5 * CHUNK_PLANES + 100;
+        let opts = Overrides { planes: Some(planes as u64), spp: Some(4), ..Overrides::default() }
+            .resolve(&scene)
+            .unwrap()
+            .options;
+        let mut snapshots: Vec<Vec<Partial>> = Vec::new();
+        let (whole, _) = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held| {
+            snapshots.push(held.to_vec());
+            Ok(())
+        })
+        .unwrap();
+        assert!(whole == render(&scene, &opts, Control::none()).unwrap().0);
+        assert_eq!(snapshots.len(), 6);
+        for (i, held) in snapshots.iter().enumerate() {
+            let ranges: Vec<_> = held.iter().map(|p| p.start..p.end).collect();
+            let nodes: Vec<_> = frontier(0..6, i + 1).iter().map(|c| chunk_planes(planes, c)).collect();
+            assert_eq!(ranges, nodes, "after chunk {i}");
+            let mut later = 0;
+            let (resumed, stats) = render_from(&scene, &opts, Control::none(), held.clone(), &mut |_| {
+                later += 1;
+                Ok(())
+            })
+            .unwrap();
+            assert!(resumed == whole, "resumed after chunk {i}");
+            assert_eq!((later, stats.planes), (5 - i, planes - held.last().unwrap().end));
+        }
+        // Not a frontier: a node missing, a node of another render, a node of another size.
+        let other = Overrides { seed: Some(9), planes: Some(planes as u64), spp: Some(4), ..Overrides::default() };
+        let other = other.resolve(&scene).unwrap().options;
+        let mut foreign = snapshots[2].clone();
+        foreign[0].fingerprint = fingerprint(&scene, &other);
+        let mut small = snapshots[2].clone();
+        small[1].sums.pop();
+        for held in [snapshots[2][1..].to_vec(), foreign, small] {
+            let e = render_from(&scene, &opts, Control::none(), held, &mut |_| Ok(())).unwrap_err();
+            assert!(e.to_string().contains("not what a render of planes 0:82020 holds"), "{e}");
+        }
+        // An observer's error stops the render with it.
+        let e = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |_| Err(Error::Cancelled)).unwrap_err();
+        assert!(matches!(e, Error::Cancelled));
     }
 
     /// A render in passes, and so a render on a time budget, stops in the middle of a pass.

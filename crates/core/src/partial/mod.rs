@@ -25,6 +25,7 @@
 //! its group of planes, docs/mathematics.md section 8.1, which depends on its index, N and the
 //! ray set count alone). The renderers that gather chunks are in [`crate::render`].
 
+pub mod checkpoint;
 pub mod file;
 pub mod parts;
 
@@ -35,7 +36,7 @@ use crate::limits::CHUNK_PLANES;
 use crate::options::RenderOptions;
 use crate::pixel::plane_group;
 use crate::scene::Scene;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use std::ops::Range;
 
 /// The canonical chunks of a set of `planes` planes, in order.
@@ -249,6 +250,32 @@ pub fn is_canonical_node(range: &Range<usize>, n: usize) -> bool {
     }
 }
 
+/// The nodes a render of chunks `root` holds once chunks `root.start..done` are finished, in
+/// order: the nodes of the canonical tree over `root` (split as [`split`] splits, relative to
+/// `root.start`) whose chunks are all finished and whose parent's are not. Chunks finish in
+/// order and each node is added as soon as its right child finishes (post-order), so these are
+/// exactly the partials alive at that moment: what a checkpoint saves and a running image adds
+/// up. Empty before any chunk; `[root]` once all are finished.
+pub fn frontier(root: Range<usize>, done: usize) -> Vec<Range<usize>> {
+    fn descend(node: Range<usize>, done: usize, out: &mut Vec<Range<usize>>) {
+        if node.end <= done {
+            out.push(node);
+        } else if node.start < done && node.len() >= 2 {
+            let m = node.start + split(node.len());
+            descend(node.start..m, done, out);
+            descend(m..node.end, done, out);
+        }
+    }
+    let mut out = Vec::new();
+    descend(root, done, &mut out);
+    out
+}
+
+/// The planes of chunks `chunks` of a render of `planes` planes.
+pub fn chunk_planes(planes: usize, chunks: &Range<usize>) -> Range<usize> {
+    chunks.start * CHUNK_PLANES..(chunks.end * CHUNK_PLANES).min(planes)
+}
+
 /// One step of the plan of a render spread over tasks ([`merge_plan`]): chunks `chunks`
 /// rendered into one partial ([`crate::render::render_chunk`] of their planes) when `parts` is `None`, else
 /// the partials of the two earlier steps `parts` (indices into the plan), left then right,
@@ -317,9 +344,73 @@ pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<
     Ok(Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission))
 }
 
+/// The image of the first planes of a render while it runs (docs/mathematics.md section 8.1, "A
+/// running image"): the sums of the nodes it holds ([`frontier`]) added in order, divided by
+/// their plane count, plus the direct emission (computed once, here). Its last image, from the
+/// one node of all N planes, is [`finish`]'s bit for bit.
+pub struct RunningImage {
+    width: u32,
+    height: u32,
+    emission: Vec<Vec3>,
+}
+
+impl RunningImage {
+    pub fn new(scene: &Scene, opts: &RenderOptions) -> Self {
+        let (width, height) = (scene.camera.width, scene.camera.height);
+        RunningImage { width, height, emission: direct_emission(scene, opts.seed, opts.spp, opts.pixel_center) }
+    }
+
+    /// The image of the planes that `held` (consecutive partials from plane 0) sum, or `None`
+    /// before any.
+    pub fn image(&self, held: &[Partial]) -> Option<Film> {
+        let (first, rest) = held.split_first()?;
+        let mut sums = first.sums.clone();
+        for p in rest {
+            for (s, x) in sums.iter_mut().zip(&p.sums) {
+                *s += *x;
+            }
+        }
+        let planes = held.last().map_or(0, |p| p.end) - first.start;
+        Some(Film::finish(self.width, self.height, &sums, planes, &self.emission))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The frontier is what the post-order of the canonical tree holds after each chunk: a node
+    /// is added as soon as its right child is, and nothing else is alive.
+    #[test]
+    fn the_frontier_is_what_the_post_order_holds() {
+        fn walk(node: Range<usize>, held: &mut Vec<Range<usize>>, seen: &mut Vec<Vec<Range<usize>>>) {
+            if node.len() == 1 {
+                held.push(node);
+                seen.push(held.clone());
+                return;
+            }
+            let m = node.start + split(node.len());
+            walk(node.start..m, held, seen);
+            walk(m..node.end, held, seen);
+            let (r, l) = (held.pop().unwrap(), held.pop().unwrap());
+            assert_eq!((l.end, l.start, r.end), (r.start, node.start, node.end));
+            held.push(node);
+            // The snapshot after a chunk is taken once its additions are done.
+            *seen.last_mut().unwrap() = held.clone();
+        }
+        for root in [0..1, 0..2, 0..7, 0..16, 3..12, 5..38] {
+            let (mut held, mut seen) = (Vec::new(), Vec::new());
+            walk(root.clone(), &mut held, &mut seen);
+            assert_eq!(frontier(root.clone(), root.start), Vec::<Range<usize>>::new());
+            for (i, snapshot) in seen.iter().enumerate() {
+                assert_eq!(&frontier(root.clone(), root.start + i + 1), snapshot, "{root:?} after {i}");
+            }
+            assert_eq!(frontier(root.clone(), root.end), std::slice::from_ref(&root));
+        }
+        assert_eq!(frontier(0..7, 5), [0..4, 4..5]);
+        assert_eq!(frontier(0..7, 6), [0..4, 4..6]);
+        assert_eq!(chunk_planes(40_960, &(1..3)), 16_384..40_960);
+    }
 
     #[test]
     fn the_canonical_tree_splits_at_the_largest_power_of_two_below() {
