@@ -28,10 +28,19 @@ pub enum Error {
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
     /// Partial renders that do not make up one render (another scene or other settings,
-    /// overlapping or missing plane ranges), or a plane range that is not one of a render's
-    /// chunks.
+    /// overlapping or missing plane ranges), a plane range that is not one of a render's
+    /// chunks, or sums no render can make (see [`crate::partial::Partial::check`]).
     #[error("{0}")]
     Partial(String),
+    /// An array the library made and was given back (a reference's pilot pass, its per-pixel
+    /// sample counts) holding what the library never makes: `name` is the array as the caller
+    /// passes it (`pilot`, `counts`).
+    #[error("{name}: {message}")]
+    BadArray { name: &'static str, message: String },
+    /// An image and a reference that were made to measure different things (another pixel
+    /// filter), as their recorded metadata says ([`crate::film::ImageInfo`]).
+    #[error("{0}")]
+    NotComparable(String),
     /// The caller stopped the work (through the flag of its [`crate::control::Control`]).
     #[error("cancelled")]
     Cancelled,
@@ -215,6 +224,24 @@ pub struct NonFinitePixel {
     /// 0, 1, 2 for R, G, B.
     pub channel: usize,
     pub value: f32,
+}
+
+/// A pixel channel holding what it cannot hold (not a number, infinite, negative, or beyond
+/// what the image's making allows): where it is and what it holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelValue {
+    pub x: u32,
+    pub y: u32,
+    /// 0, 1, 2 for R, G, B.
+    pub channel: usize,
+    pub value: f64,
+}
+
+impl std::fmt::Display for PixelValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let channel = ["R", "G", "B"][self.channel];
+        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
+    }
 }
 
 impl std::fmt::Display for NonFinitePixel {

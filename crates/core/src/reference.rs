@@ -9,8 +9,8 @@
 //! measures its own per-pixel standard error.
 
 use crate::control::Control;
-use crate::error::Result;
-use crate::film::Film;
+use crate::error::{Error, Result};
+use crate::film::{Film, ImageInfo};
 use crate::medium::PHASE;
 use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
@@ -29,6 +29,19 @@ pub struct ReferenceOptions {
     pub uniform: bool,
     pub seed: u64,
     pub pixel_center: bool,
+}
+
+impl ReferenceOptions {
+    /// What the reference image of `scene` (its standard error with `stderr`) records of how
+    /// it was made ([`ImageInfo`]).
+    pub fn image_info(&self, scene: &Scene, stderr: bool) -> ImageInfo {
+        let what = if stderr { "reference standard error" } else { "reference" };
+        let cam = &scene.camera;
+        ImageInfo::new(what, &scene.name, scene.fingerprint(), (cam.width, cam.height), self.pixel_center)
+            .with("spp", self.spp)
+            .with("seed", self.seed)
+            .with("samples", if self.uniform { "uniform" } else { "adaptive" })
+    }
 }
 
 /// A reference image with its per-pixel standard error.
@@ -111,7 +124,7 @@ pub fn render_reference(scene: &Scene, opts: &ReferenceOptions, control: Control
         None
     } else {
         let pilot = reference_pilot_rows(scene, opts, all.clone(), control)?;
-        Some(reference_counts(opts, &pilot.pixels))
+        Some(reference_counts(opts, &pilot.pixels, scene.camera.width)?)
     };
     let (mean, stderr) = reference_rows(scene, opts, all, counts.as_deref(), control)?;
     Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
@@ -137,13 +150,7 @@ pub fn reference_rows(
     check_rows(scene, &rows)?;
     match counts {
         Some(c) => {
-            let pixels = scene.camera.width as usize * scene.camera.height as usize;
-            if c.len() != pixels {
-                return Err(crate::Error::Partial(format!(
-                    "{} sample counts for an image of {pixels} pixels",
-                    c.len()
-                )));
-            }
+            check_counts(scene, opts, c)?;
             render_pixels(scene, opts.seed, opts.pixel_center, rows, &|p| c[p], control)
         }
         None => render_pixels(scene, opts.seed, opts.pixel_center, rows, &|_| opts.spp, control),
@@ -163,6 +170,31 @@ pub fn reference_pilot_rows(
     Ok(render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, rows, &|_| spp, control)?.1)
 }
 
+/// The most samples the adaptive reference gives a pixel, per sample of the average `spp`.
+pub const MOST_SAMPLES_PER_SPP: u32 = 64;
+
+/// Per-pixel sample counts given back for `scene` with `opts` (Python's `counts`) are what
+/// [`reference_counts`] can make: one per pixel, each at least 1 (a pixel of none would be
+/// 0/0) and at most [`MOST_SAMPLES_PER_SPP`] times `opts.spp` (its cap, which bounds the work
+/// as `spp`'s own limit does).
+pub fn check_counts(scene: &Scene, opts: &ReferenceOptions, counts: &[u32]) -> Result<()> {
+    let (w, pixels) = (scene.camera.width as usize, scene.camera.width as usize * scene.camera.height as usize);
+    let bad = |message: String| Error::BadArray { name: "counts", message };
+    if counts.len() != pixels {
+        return Err(bad(format!("{} sample counts for an image of {pixels} pixels", counts.len())));
+    }
+    let most = MOST_SAMPLES_PER_SPP.saturating_mul(opts.spp);
+    if let Some((i, &c)) = counts.iter().enumerate().find(|&(_, &c)| c == 0 || c > most) {
+        return Err(bad(format!(
+            "pixel (x {}, y {}) has {c} samples; a pixel has between 1 and {most} ({MOST_SAMPLES_PER_SPP} x spp {})",
+            i % w,
+            i / w,
+            opts.spp
+        )));
+    }
+    Ok(())
+}
+
 /// The rows `rows` lie in the image and are not empty.
 fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
     let h = scene.camera.height;
@@ -176,24 +208,33 @@ fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
 }
 
 /// The adaptive reference's sample count of every pixel from the whole pilot's standard errors
-/// `pilot` (row-major): the allocation described at [`render_reference`].
-pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3]) -> Vec<u32> {
+/// `pilot` (row-major, `width` wide): the allocation described at [`render_reference`].
+/// Refuses a pilot holding what no pilot pass makes (a standard error that is negative, NaN or
+/// infinite would give its pixel no samples, or every other pixel none), naming the pixel.
+pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3], width: u32) -> Result<Vec<u32>> {
+    let values = pilot.iter().map(|p| p.as_dvec3().to_array());
+    if let Some(p) = crate::film::first_outside(values, width, f32::MAX as f64) {
+        return Err(Error::BadArray {
+            name: "pilot",
+            message: format!("{p}: a pilot pass holds standard errors, finite and non-negative"),
+        });
+    }
     let pixels = pilot.len();
     let pilot_spp = pilot_spp(opts);
     // Standard deviation of one sample, the mean over channels.
     let sigma: Vec<f64> = pilot.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
     let total_sigma: f64 = sigma.iter().sum();
     let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
-    let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
+    let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), MOST_SAMPLES_PER_SPP as f64 * opts.spp as f64);
     // The floor is taken first; the rest goes by need.
     let budget = (budget - floor * pixels as f64).max(0.0);
-    sigma
+    Ok(sigma
         .iter()
         .map(|&s| {
             let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
             (floor + share).min(cap).round() as u32
         })
-        .collect()
+        .collect())
 }
 
 /// Seed offset of the pilot pass, so that it shares no samples with the final one.
