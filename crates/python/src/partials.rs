@@ -114,21 +114,26 @@ impl PyPartial {
         if state.len() != 9 {
             return Err(not_a_state(&format!("{} items, not 9", state.len())));
         }
-        fn item<'py, T: FromPyObjectOwned<'py>>(state: &Bound<'py, PyTuple>, k: usize) -> PyResult<T> {
+        // Item `k`, named `name`, of the type of its place (a bool is no count).
+        fn item<'py, T: FromPyObjectOwned<'py>>(state: &Bound<'py, PyTuple>, k: usize, name: &str) -> PyResult<T> {
             let v = state.get_item(k)?;
+            let wrong = || -> PyResult<PyErr> {
+                let (repr, type_name) = (v.repr()?, v.get_type().name()?);
+                Ok(PyValueError::new_err(format!(
+                    "not the state of a fogplanes.Partial: {name}={repr}: expected {}, got {type_name}",
+                    std::any::type_name::<T>().rsplit("::").next().unwrap_or("a value")
+                )))
+            };
             if v.is_instance_of::<pyo3::types::PyBool>() {
-                return Err(PyTypeError::new_err("a bool"));
+                return Err(wrong()?);
             }
-            v.extract::<T>().map_err(Into::into)
+            v.extract::<T>().or_else(|_| Err(wrong()?))
         }
-        let fields = || -> PyResult<_> {
-            let (width, height): (u32, u32) = (item(state, 0)?, item(state, 1)?);
-            let (start, end, planes_total): (usize, usize, usize) = (item(state, 3)?, item(state, 4)?, item(state, 5)?);
-            let (fingerprint, hits, seconds): (String, u64, f64) = (item(state, 6)?, item(state, 7)?, item(state, 8)?);
-            Ok((width, height, start, end, planes_total, fingerprint, hits, seconds))
-        };
-        let (width, height, start, end, planes_total, fingerprint, hits, seconds) =
-            fields().map_err(|e| not_a_state(&e))?;
+        let (width, height): (u32, u32) = (item(state, 0, "width")?, item(state, 1, "height")?);
+        let (start, end, planes_total): (usize, usize, usize) =
+            (item(state, 3, "start")?, item(state, 4, "end")?, item(state, 5, "planes_total")?);
+        let (fingerprint, hits, seconds): (String, u64, f64) =
+            (item(state, 6, "fingerprint")?, item(state, 7, "hits")?, item(state, 8, "seconds")?);
         let sums = state.get_item(2)?;
         let sums = sums.cast::<PyBytes>().map_err(|_| not_a_state(&"the sums are not bytes"))?.as_bytes();
         if sums.len() as u64 != width as u64 * height as u64 * 24 {

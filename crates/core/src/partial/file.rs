@@ -128,7 +128,7 @@ impl Array {
     /// The string of a 0-d unicode array.
     pub fn as_text(&self) -> std::result::Result<String, String> {
         if !self.descr.starts_with("<U") || !self.shape.is_empty() {
-            return Err(format!("{}: expected a string, got {} of shape {:?}", self.name, self.descr, self.shape));
+            return Err(format!("{}: expected a string, got {:?} of shape {:?}", self.name, self.descr, self.shape));
         }
         let chars: std::result::Result<String, String> = self
             .data
@@ -144,7 +144,7 @@ impl Array {
     pub fn check(&self, descr: &str, shape: &[usize]) -> std::result::Result<(), String> {
         if self.descr != descr || self.shape != shape {
             return Err(format!(
-                "{}: expected {descr} of shape {shape:?}, got {} of shape {:?}",
+                "{}: expected {descr} of shape {shape:?}, got {:?} of shape {:?}",
                 self.name, self.descr, self.shape
             ));
         }
@@ -220,7 +220,7 @@ fn parse_npy(name: &str, bytes: &[u8]) -> std::result::Result<Array, String> {
         "<f8" => 8,
         "<f4" => 4,
         d if d.starts_with("<U") => 4 * d[2..].parse::<usize>().map_err(|_| bad("a bad dtype"))?,
-        d => return Err(bad(&format!("dtype {d} is not supported"))),
+        d => return Err(bad(&format!("dtype {d:?} is not supported"))),
     };
     let data = &bytes[at + len..];
     let expected = shape.iter().try_fold(item, |a: usize, &n| a.checked_mul(n));
@@ -459,7 +459,7 @@ pub fn meta(array: &Array) -> std::result::Result<PartMeta, String> {
         serde_json::from_str(&text).map_err(|e| format!("its metadata is not a fogplanes partial's: {e}"))?;
     if meta.format != FORMAT || meta.version != VERSION {
         return Err(format!(
-            "format {} version {}: not a partial file this fogplanes reads",
+            "format {:?} version {}: not a partial file this fogplanes reads",
             meta.format, meta.version
         ));
     }

@@ -144,7 +144,7 @@ impl Partial {
                 "a sum of contributions is a non-negative number".to_string()
             } else {
                 let k = self.chunk_count();
-                format!("beyond {most:e}, the most {k} chunk{} of planes can sum to", if k == 1 { "" } else { "s" })
+                format!("beyond {most:.4e}, the most {k} chunk{} of planes can sum to", if k == 1 { "" } else { "s" })
             };
             return bad(format!("sums: {p}: {why}"));
         }

@@ -226,10 +226,11 @@ pub fn read_part(path: &Path) -> Result<Part> {
             part.partial()?;
         }
         PartKind::Reference | PartKind::Pilot => {
+            let holds = if part.meta.kind == PartKind::Pilot { "standard errors" } else { "means and standard errors" };
             for (name, _, _) in file::expected_arrays(&part.meta) {
                 if let Some(p) = part.film(name)?.first_outside(f32::MAX as f64) {
                     return Err(part.bad(format!(
-                        "{name}: {p} (rows {}:{}): a reference holds finite, non-negative values",
+                        "{name}: {p} (of the band of rows {}:{}): a band holds {holds}, finite and non-negative",
                         part.meta.start, part.meta.end
                     )));
                 }
