@@ -578,6 +578,39 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// What an EXR records of how it was made comes back in order, UTF-8 included; an image
+    /// without a record has none; the pixels are the same bits either way.
+    #[test]
+    fn an_exr_records_how_it_was_made() {
+        let dir = std::env::temp_dir().join(format!("fogplanes-film-info-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut film = Film::new(3, 2);
+        film.pixels[4] = Vec3::new(0.1, 2.0, 1e-30);
+        let info = ImageInfo::new("render", "brouillard é", "0123abcd".into(), (3, 2), false)
+            .with("planes", 40960)
+            .with("zz_extra", "kept");
+        let (with, without) = (dir.join("with.exr"), dir.join("without.exr"));
+        film.save_with_info(&with, 0.0, Some(&info)).unwrap();
+        film.save(&without, 0.0).unwrap();
+        let (back, read) = Film::load_exr_with_info(&with).unwrap();
+        assert_eq!((back, read.as_ref()), (film.clone(), Some(&info)));
+        assert_eq!(read_image_info(&with).unwrap(), (Some(info.clone()), (3, 2)));
+        assert_eq!(Film::load_exr_with_info(&without).unwrap(), (film, None));
+        assert_eq!(info.to_string().lines().next(), Some("image: render"));
+        // A reference is checked against the image's record, when both have one.
+        let centre = ImageInfo::new("reference", "brouillard é", "0123abcd".into(), (3, 2), true);
+        let e = ImageInfo::check_reference(Some(&info), Some(&centre)).unwrap_err();
+        assert!(e.is_input() && e.to_string().contains("pixel filter center, the image with box"), "{e}");
+        let bigger = ImageInfo::new("reference", "x", "0123abcd".into(), (6, 4), false);
+        assert!(ImageInfo::check_reference(Some(&info), Some(&bigger)).unwrap_err().to_string().contains("6x4"));
+        let other = ImageInfo::new("reference", "other", "ffff".into(), (3, 2), false);
+        let warning = ImageInfo::check_reference(Some(&info), Some(&other)).unwrap().unwrap();
+        assert!(warning.contains("different scenes (brouillard é and other)"), "{warning}");
+        assert_eq!(ImageInfo::check_reference(Some(&info), None).unwrap(), None);
+        assert_eq!(ImageInfo::check_reference(None, Some(&centre)).unwrap(), None);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn unknown_extensions_and_missing_directories_are_refused() {
         assert!(check_image_output(Path::new("out.jpg")).is_err());

@@ -331,6 +331,37 @@ mod tests {
     use crate::error::Error;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
+    /// Sample counts and pilots given back are what the library makes: counts of at least one
+    /// sample (none was 0/0, a NaN pixel) and at most its cap (2^32 - 1 ran for 20 minutes),
+    /// pilots finite and non-negative (a negative one gave its pixel no sample).
+    #[test]
+    fn counts_and_pilots_given_back_are_what_the_library_makes() {
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(4, 2).unwrap();
+        let opts = ReferenceOptions { spp: 16, uniform: false, seed: 1, pixel_center: false };
+        let pilot = reference_pilot_rows(&scene, &opts, 0..2, Control::none()).unwrap();
+        let counts = reference_counts(&opts, &pilot.pixels, 4).unwrap();
+        assert!(check_counts(&scene, &opts, &counts).is_ok());
+        assert!(reference_rows(&scene, &opts, 0..1, Some(&counts), Control::none()).is_ok());
+        for (pixel, count, says) in [
+            (5, 0, "counts: pixel (x 1, y 1) has 0 samples"),
+            (0, 1025, "counts: pixel (x 0, y 0) has 1025 samples; a pixel has between 1 and 1024"),
+            (7, u32::MAX, "counts: pixel (x 3, y 1) has 4294967295 samples"),
+        ] {
+            let mut c = counts.clone();
+            c[pixel] = count;
+            let e = reference_rows(&scene, &opts, 0..1, Some(&c), Control::none()).unwrap_err();
+            assert!(e.is_input() && e.to_string().starts_with(says), "{e}");
+        }
+        assert!(check_counts(&scene, &opts, &counts[1..]).unwrap_err().to_string().contains("7 sample counts"));
+        for value in [-1.0, f32::NAN, f32::INFINITY] {
+            let mut p = pilot.pixels.clone();
+            p[6].y = value;
+            let e = reference_counts(&opts, &p, 4).unwrap_err().to_string();
+            assert!(e.starts_with("pilot: pixel (x 2, y 1) channel G is"), "{e}");
+        }
+    }
+
     /// Cancelled when the first row ends: on one thread no other row runs; on two, the other
     /// thread's row stops before its next pixel (it may have finished just before the flag).
     #[test]

@@ -420,6 +420,62 @@ mod tests {
         assert_eq!(merge_plan(8192, 1).unwrap().len(), 2 * 8192 - 1);
     }
 
+    /// What a render can make passes; the first value or count beyond it is refused, named.
+    #[test]
+    fn a_partial_is_held_to_what_a_render_can_make() {
+        let planes = 3 * CHUNK_PLANES;
+        let valid = Partial {
+            width: 2,
+            height: 1,
+            sums: vec![DVec3::ZERO; 2],
+            start: CHUNK_PLANES,
+            end: planes,
+            planes_total: planes,
+            fingerprint: "f".into(),
+            hits: 2 * 2 * CHUNK_PLANES as u64,
+            seconds: 0.5,
+        };
+        let most = 2.0 * f32::MAX as f64;
+        assert_eq!(valid.most_per_channel(), most);
+        let with = |f: &dyn Fn(&mut Partial)| {
+            let mut p = valid.clone();
+            f(&mut p);
+            p.check().map_err(|e| e.to_string())
+        };
+        assert!(with(&|p| p.sums[1].z = most).is_ok());
+        for (value, says) in [
+            (f64::NAN, "channel B is NaN: a sum of contributions is a non-negative number"),
+            (-1.0, "channel B is -1: "),
+            (f64::INFINITY, "is inf: beyond 6.8056e38, the most 2 chunks"),
+            (most.next_up(), "beyond"),
+            (1e308, "channel B is 1e308: beyond"),
+        ] {
+            let e = with(&|p| p.sums[1].z = value).unwrap_err();
+            assert!(e.starts_with("planes 16384:49152: sums: pixel (x 1, y 0) ") && e.contains(says), "{value}: {e}");
+        }
+        let changes: [(fn(&mut Partial), &str); 7] = [
+            (|p| p.hits += 1, "hits, more than one per plane and pixel"),
+            (|p| p.planes_total = usize::MAX, "the plane count must be between"),
+            (|p| (p.end, p.planes_total) = (usize::MAX, usize::MAX), "plane count"),
+            (|p| p.start = 1, "not a union of the render's chunks"),
+            (|p| p.width = 3, "2 sums for 3x1 pixels"),
+            (|p| p.width = 0, "each side must be between"),
+            (|p| p.seconds = f64::NAN, "NaN seconds"),
+        ];
+        for (f, says) in changes {
+            let e = with(&f).unwrap_err();
+            assert!(e.contains(says), "{says}: {e}");
+        }
+        // The merge and the addition refuse one before adding anything.
+        let first = Partial { start: 0, end: CHUNK_PLANES, hits: 0, ..valid.clone() };
+        let mut bad = valid.clone();
+        bad.sums[0].x = f64::NAN;
+        assert!(merge_in_canonical_order(vec![first.clone(), bad.clone()]).unwrap_err().to_string().contains("NaN"));
+        assert!(combine(&first, &bad).is_err() && combine(&first, &valid).is_ok());
+        let wrapped = Partial { start: 0, end: usize::MAX, planes_total: usize::MAX, ..valid };
+        assert!(merge_in_canonical_order(vec![wrapped]).unwrap_err().to_string().contains("plane count"));
+    }
+
     #[test]
     fn chunks_cover_the_planes_in_order() {
         assert_eq!(chunks(40_960), vec![0..16_384, 16_384..32_768, 32_768..40_960]);
