@@ -5,11 +5,12 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fogplanes::accel::Accelerator;
+use fogplanes::film::ImageFormat;
 use fogplanes::kernel::Kernel;
 use fogplanes::sampling::Sampler;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
 use fogplanes::weights::Estimator;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Renders single scattering in fog lit by rectangular lights, with photon planes weighted by
 /// continuous and stochastic multiple importance sampling (West et al. 2020, Section 6), and
@@ -59,12 +60,24 @@ pub(crate) enum Command {
     /// Renders over a grid of plane counts and resolutions and writes scaling.md, scaling.json
     /// and seconds_vs_hits.png (and .svg) to --out.
     Scaling(ScalingArgs),
+    /// Print what an image records of how it was made (fogplanes writes it into the header of
+    /// every EXR of a render or reference: estimator, planes, seed, sampler, ray sets, pixel
+    /// filter, resolution, scene fingerprint, version).
+    ///
+    /// An image made elsewhere (Mitsuba's) records nothing: then only its size is printed.
+    Info(InfoArgs),
     /// Write the scene for another renderer, to check fogplanes against it.
     ///
     /// mitsuba: a Mitsuba 3 XML file rendering direct emission plus single scattering (volpath,
     /// max_depth 2, no Russian roulette); resolution, samples and seed are its parameters resx,
     /// resy, spp and seed. tests/mitsuba/check_export.py compares it with `reference`.
     Export(ExportArgs),
+}
+
+#[derive(Args)]
+pub(crate) struct InfoArgs {
+    /// The image (EXR).
+    pub(crate) image: PathBuf,
 }
 
 #[derive(Args)]
@@ -301,13 +314,13 @@ pub(crate) struct TableArgs {
     #[arg(long)]
     pub(crate) pixel_center: bool,
     /// Plane counts of the error-versus-time sweep, comma separated.
-    #[arg(long, value_delimiter = ',', default_values_t = settings::TABLE_SWEEP)]
+    #[arg(long, value_delimiter = ',', default_values_t = settings::TABLE_SWEEP, conflicts_with = "no_sweep")]
     pub(crate) sweep: Vec<u64>,
     /// Skip the error-versus-time sweep (no plot).
     #[arg(long)]
     pub(crate) no_sweep: bool,
     /// Seeds per plane count in the sweep.
-    #[arg(long, default_value_t = settings::TABLE_SWEEP_SEEDS)]
+    #[arg(long, default_value_t = settings::TABLE_SWEEP_SEEDS, conflicts_with = "no_sweep")]
     pub(crate) sweep_seeds: u32,
     /// Also render every estimator for this many seconds each and compare at equal time.
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
@@ -376,6 +389,64 @@ pub(crate) fn parse_range(s: &str) -> Result<(u64, u64), String> {
         return Err(format!("{s:?}: the start must be below the end"));
     }
     Ok((a, b))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Every option is used or refused. clap's `requires` is skipped when an option that conflicts
+// with the required one is given (`render --plane-range 0:16384 -o x.exr` rendered the whole
+// image), and an option may mean nothing in some uses (`--exposure` for an EXR): each command
+// that has such options says here which one a command line would not use.
+
+/// Whether `path` names a PNG (the one output `--exposure` changes).
+fn is_png(path: &Path) -> bool {
+    matches!(ImageFormat::from_path(path), Ok(ImageFormat::Png))
+}
+
+fn exposure_unused(writes: &str) -> String {
+    format!("--exposure: sets the tone of a PNG, and this command writes {writes}: give a .png output or no --exposure")
+}
+
+impl RenderArgs {
+    /// The first option given that the command would not use.
+    pub(crate) fn unused(&self) -> Option<String> {
+        if self.plane_range.is_some() && self.partial.is_none() {
+            return Some("--plane-range: renders planes A:B into a partial file: give --partial PART.npz".into());
+        }
+        if self.exposure.is_some() && !self.output.as_deref().is_some_and(is_png) {
+            let writes = if self.partial.is_some() { "a partial file" } else { "a linear EXR" };
+            return Some(exposure_unused(writes));
+        }
+        None
+    }
+}
+
+impl ReferenceArgs {
+    /// The first option given that the command would not use.
+    pub(crate) fn unused(&self) -> Option<String> {
+        if self.partial.is_none() {
+            if self.rows.is_some() {
+                return Some("--rows: renders rows J0:J1 into a partial file: give --partial PART.npz".into());
+            }
+            if self.pilot_pass || self.pilot.is_some() {
+                return Some("--pilot and --pilot-pass make partial files: give --partial PART.npz".into());
+            }
+        }
+        let pngs = self.output.iter().chain(&self.stderr_image).any(|p| is_png(p));
+        if self.exposure.is_some() && (self.partial.is_some() || !pngs) {
+            let writes = if self.partial.is_some() { "a partial file" } else { "linear EXRs" };
+            return Some(exposure_unused(writes));
+        }
+        None
+    }
+}
+
+impl MergeArgs {
+    /// The first option given that the command would not use (the kind of the parts decides
+    /// the rest: `--stderr-image` for reference parts only).
+    pub(crate) fn unused(&self) -> Option<String> {
+        let pngs = std::iter::once(&self.output).chain(&self.stderr_image).any(|p| is_png(p));
+        (self.exposure.is_some() && !pngs).then(|| exposure_unused("no PNG"))
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ use crate::watch::{ReferenceWatch, RenderWatch};
 use crate::{page, system};
 use anyhow::{Context, Result, anyhow};
 use fogplanes::control::Control;
-use fogplanes::film::{Film, check_writable, write_file_atomically};
+use fogplanes::film::{Film, ImageInfo, check_writable, read_image_info, write_file_atomically};
 use fogplanes::merge::{Merged, merge_parts};
 use fogplanes::metrics::compare;
 use fogplanes::options::RenderOptions;
@@ -20,7 +20,7 @@ use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Prints a line to standard output; a closed pipe (`fogplanes ... | head`) is not an error.
 macro_rules! say {
@@ -64,6 +64,12 @@ fn film_pixels(scene: &Scene) -> f64 {
     scene.camera.width as f64 * scene.camera.height as f64
 }
 
+/// Refuses an option the command would not use ([`RenderArgs::unused`] and the others), before
+/// any work.
+fn refuse_unused(unused: Option<String>) -> Result<(), Failure> {
+    unused.map_or(Ok(()), |m| Err(input(anyhow!(m))))
+}
+
 /// A partial file's name ends in .npz (numpy loads it by that name).
 fn check_partial_output(path: &std::path::Path) -> Result<(), Failure> {
     if path.extension().and_then(|e| e.to_str()) != Some("npz") {
@@ -100,6 +106,7 @@ fn default_output(scene: &Scene, suffix: &str) -> PathBuf {
 }
 
 pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
+    refuse_unused(a.unused())?;
     let scene = Scene::load(&a.scene).map_err(input)?;
     let r = settings::resolve_render(&scene, &Overrides::from(&a))?;
     let (scene, opts) = (&r.scene, &r.options);
@@ -138,7 +145,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
-    film.save(&output, r.exposure)?;
+    film.save_with_info(&output, r.exposure, Some(&opts.image_info(scene, stats.planes)))?;
     watch.finish(&film);
     let mut summary = stats.summary();
     if r.time_budget.is_some() {
@@ -179,15 +186,16 @@ fn render_part(
 }
 
 pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
+    refuse_unused(a.unused())?;
     let merged = merge_parts(&a.parts)?;
     let exposure = settings::exposure(a.exposure)?;
     match merged {
-        Merged::Render { partial, image, .. } => {
+        Merged::Render { scene, options, partial, image } => {
             if a.stderr_image.is_some() {
                 return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
             }
             check_outputs(&[Output::Image(&a.output)])?;
-            image.save(&a.output, exposure)?;
+            image.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, partial.planes_total)))?;
             if !a.quiet {
                 say!(
                     "merged {} parts: {} planes, {} hits, {:.3} s of rendering",
@@ -206,13 +214,13 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                 );
             }
         }
-        Merged::Reference { mean, stderr, seconds, .. } => {
+        Merged::Reference { scene, options, mean, stderr, seconds } => {
             let mut outputs = vec![Output::Image(&a.output)];
             outputs.extend(a.stderr_image.as_deref().map(Output::Image));
             check_outputs(&outputs)?;
-            mean.save(&a.output, exposure)?;
+            mean.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, false)))?;
             if let Some(p) = &a.stderr_image {
-                stderr.save(p, exposure)?;
+                stderr.save_with_info(p, exposure, Some(&options.image_info(&scene, true)))?;
             }
             if !a.quiet {
                 say!("merged {} reference bands ({:.3} s of rendering)", a.parts.len(), seconds);
@@ -255,10 +263,10 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
     }
     let counts = match (&a.pilot, opts.uniform) {
         (_, true) => None,
-        (Some(p), false) => Some(reference_counts(opts, &read_pilot(p, scene, opts)?.pixels)),
+        (Some(p), false) => Some(reference_counts(opts, &read_pilot(p, scene, opts)?.pixels, scene.camera.width)?),
         (None, false) if rows.len() as u32 == scene.camera.height => {
             let pilot = reference_pilot_rows(scene, opts, 0..scene.camera.height, control)?;
-            Some(reference_counts(opts, &pilot.pixels))
+            Some(reference_counts(opts, &pilot.pixels, scene.camera.width)?)
         }
         (None, false) => {
             return Err(input(anyhow!(
@@ -275,13 +283,11 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
 }
 
 pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
+    refuse_unused(a.unused())?;
     let scene = Scene::load(&a.scene).map_err(input)?;
     let r = settings::resolve_reference(&scene, &ReferenceOverrides::from(&a))?;
     if let Some(part) = &a.partial {
         return reference_part(&a, &r, part);
-    }
-    if a.pilot_pass || a.pilot.is_some() {
-        return Err(input(anyhow!("--pilot and --pilot-pass make partial files: give --partial PART.npz")));
     }
     let scene = &r.scene;
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
@@ -301,9 +307,9 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let control = Control::with_progress(&tick);
     let reference = render_reference_from(scene, &r.options, control, done, &mut |step| watch.step(step))?;
     bar.finish_and_clear();
-    reference.mean.save(&output, r.exposure)?;
+    reference.mean.save_with_info(&output, r.exposure, Some(&r.options.image_info(scene, false)))?;
     if let Some(p) = &a.stderr_image {
-        reference.stderr.save(p, r.exposure)?;
+        reference.stderr.save_with_info(p, r.exposure, Some(&r.options.image_info(scene, true)))?;
     }
     watch.finish(&reference);
     say!(
@@ -318,9 +324,22 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// Refuses a reference whose record says it was made for another pixel filter or resolution
+/// than the image's ([`ImageInfo::check_reference`]), naming its file; warns on stderr when
+/// they record different scenes. Images that record nothing (made elsewhere) pass.
+fn check_reference(image: Option<&ImageInfo>, reference: Option<&ImageInfo>, path: &Path) -> Result<(), Failure> {
+    let warning =
+        ImageInfo::check_reference(image, reference).map_err(|e| input(anyhow!("{}: {e}", path.display())))?;
+    if let Some(w) = warning {
+        let _ = writeln!(std::io::stderr(), "warning: {}: {w}", path.display());
+    }
+    Ok(())
+}
+
 pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
-    let image = Film::load_exr(&a.image).map_err(input)?;
-    let reference = Film::load_exr(&a.reference).map_err(input)?;
+    let (image, image_info) = Film::load_exr_with_info(&a.image).map_err(input)?;
+    let (reference, reference_info) = Film::load_exr_with_info(&a.reference).map_err(input)?;
+    check_reference(image_info.as_ref(), reference_info.as_ref(), &a.reference)?;
     let m = compare(&image, &reference)?;
     if a.json {
         say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
@@ -341,8 +360,12 @@ pub(crate) fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     let scene = Scene::load(&a.scene).map_err(input)?;
     let r = settings::resolve_table(&scene, &TableOverrides::from(&a))?;
     let scene = &r.scene;
-    let reference = Film::load_exr(&a.reference).map_err(input)?;
+    let (reference, reference_info) = Film::load_exr_with_info(&a.reference).map_err(input)?;
     reference.check_finite("reference").map_err(|e| input(anyhow!("{}: {e}", a.reference.display())))?;
+    // The table's images record what `render` with its settings would.
+    let cam = &scene.camera;
+    let made = ImageInfo::new("render", &scene.name, scene.fingerprint(), (cam.width, cam.height), r.pixel_center);
+    check_reference(Some(&made), reference_info.as_ref(), &a.reference)?;
     if (reference.width, reference.height) != (scene.camera.width, scene.camera.height) {
         return Err(input(anyhow!(
             "{}: the reference is {}x{} but the scene renders at {}x{} (use --resolution)",
@@ -397,6 +420,15 @@ pub(crate) fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
     start_threads(r.threads)?;
     let md = experiments::run_scaling(&scene, &r, &a.out, a.common.quiet)?;
     say!("{md}");
+    Ok(())
+}
+
+pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), Failure> {
+    let (info, (w, h)) = read_image_info(&a.image).map_err(input)?;
+    match info {
+        Some(info) => say!("{}", info.to_string().trim_end()),
+        None => say!("{}: {w}x{h}, no record of how it was made (not written by fogplanes)", a.image.display()),
+    }
     Ok(())
 }
 

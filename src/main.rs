@@ -35,6 +35,7 @@ fn main() -> ExitCode {
         Command::Merge(a) => cmd_merge(a),
         Command::Table(a) => cmd_table(a),
         Command::Scaling(a) => cmd_scaling(a),
+        Command::Info(a) => cmd_info(a),
         Command::Export(a) => cmd_export(a),
     };
     match result {

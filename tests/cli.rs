@@ -260,7 +260,7 @@ fn a_render_on_a_time_budget_reports_its_planes_and_passes() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A small EXR of the scene, rendered at pixel centres (a stand-in reference for `table`).
+/// A small EXR of the scene, of whole pixels as the table's (a stand-in reference for `table`).
 fn small_reference(dir: &Path) -> PathBuf {
     let path = dir.join("ref.exr");
     let o = fogplanes(&[
@@ -270,7 +270,6 @@ fn small_reference(dir: &Path) -> PathBuf {
         "32x18",
         "--planes",
         "200",
-        "--pixel-center",
         "--quiet",
         "-o",
         path.to_str().unwrap(),

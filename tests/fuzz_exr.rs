@@ -76,6 +76,14 @@ fn compression_code(bytes: &[u8]) -> u8 {
     bytes.windows(key.len() + 1).find(|w| &w[..key.len()] == key).map_or(0, |w| w[key.len()])
 }
 
+/// What `f` returns and the largest allocation this thread made meanwhile (also used by
+/// tests/fuzz_parts.rs).
+pub(crate) fn largest_allocation<T>(f: impl FnOnce() -> T) -> (T, usize) {
+    LARGEST.with(|l| l.set(Some(0)));
+    let out = f();
+    (out, LARGEST.with(|l| l.take()).unwrap_or(0))
+}
+
 /// Loads `bytes` from a file; returns the result and the largest allocation this thread made
 /// meanwhile.
 fn load(bytes: &[u8]) -> (fogplanes::Result<Film>, usize) {
@@ -83,9 +91,7 @@ fn load(bytes: &[u8]) -> (fogplanes::Result<Film>, usize) {
     let n = FILES.fetch_add(1, Ordering::Relaxed);
     let path = std::env::temp_dir().join(format!("fogplanes-fuzz-exr-{}-{n}.exr", std::process::id()));
     std::fs::write(&path, bytes).unwrap();
-    LARGEST.with(|l| l.set(Some(0)));
-    let film = Film::load_exr(&path);
-    let largest = LARGEST.with(|l| l.take()).unwrap_or(0);
+    let (film, largest) = largest_allocation(|| Film::load_exr(&path));
     let _ = std::fs::remove_file(&path);
     (film, largest)
 }

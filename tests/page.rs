@@ -103,7 +103,7 @@ fn table_writes_a_self_contained_comparison_page() {
     };
     let scene = "media_scenes/six_lights.toml";
     let r = reference.to_str().unwrap();
-    run(&["reference", scene, "--resolution", "32x18", "--pixel-center", "--spp", "16", "--quiet", "-o", r]);
+    run(&["reference", scene, "--resolution", "32x18", "--spp", "16", "--quiet", "-o", r]);
     run(&[
         "table",
         scene,
@@ -224,7 +224,7 @@ fn the_viewer_script_parses() {
 fn small_page(scene: &Path, reference: &Path, out: &Path) -> String {
     let (s, r) = (scene.to_str().unwrap(), reference.to_str().unwrap());
     for args in [
-        vec!["reference", s, "--resolution", "16x9", "--pixel-center", "--spp", "4", "--quiet", "-o", r],
+        vec!["reference", s, "--resolution", "16x9", "--spp", "4", "--quiet", "-o", r],
         vec!["table", s, "--resolution", "16x9", "--reference", r, "--planes", "200", "--no-sweep", "--quiet"],
     ] {
         let mut c = Command::new(env!("CARGO_BIN_EXE_fogplanes"));

@@ -145,7 +145,7 @@ fn reference_bands_equal_the_whole_reference() {
             for b in bands.clone() {
                 pilot.extend(reference_pilot_rows(&s, &o, b, Control::none()).unwrap().pixels);
             }
-            reference_counts(&o, &pilot)
+            reference_counts(&o, &pilot, s.camera.width).unwrap()
         });
         let (mut mean, mut stderr) = (Vec::new(), Vec::new());
         for b in bands.clone() {

@@ -93,18 +93,7 @@ fn table_writes_every_file_and_the_json_parses() {
         assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
     };
     let scene = "media_scenes/six_lights.toml";
-    run(&[
-        "reference",
-        scene,
-        "--resolution",
-        "48x27",
-        "--pixel-center",
-        "--spp",
-        "64",
-        "--quiet",
-        "-o",
-        reference.to_str().unwrap(),
-    ]);
+    run(&["reference", scene, "--resolution", "48x27", "--spp", "64", "--quiet", "-o", reference.to_str().unwrap()]);
     let out = dir.join("report");
     run(&[
         "table",

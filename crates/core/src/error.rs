@@ -15,8 +15,8 @@ pub enum Error {
     /// [`Error::worded`]); `origin` says whether the caller gave the value or the scene did.
     #[error("{}: {message}", origin.describe(*setting))]
     InvalidSetting { setting: Setting, origin: Origin, message: String },
-    /// An input file (an image) that cannot be read or used.
-    #[error("{}: {message}", path.display())]
+    /// An input file (an image, a part) that cannot be read or used.
+    #[error("{}: {message}", one_line(&path.display().to_string()))]
     BadInput { path: PathBuf, message: String },
     /// Two images that cannot be compared.
     #[error("the images differ in size: {}x{} against a {}x{} reference", image.0, image.1, reference.0, reference.1)]
@@ -25,13 +25,22 @@ pub enum Error {
     #[error("the {image} holds a value that is not a finite number: {pixel}")]
     NonFinitePixel { image: &'static str, pixel: NonFinitePixel },
     /// An output that cannot be written (the destination keeps its old contents).
-    #[error("{}: {message}", path.display())]
+    #[error("{}: {message}", one_line(&path.display().to_string()))]
     Write { path: PathBuf, message: String },
     /// Partial renders that do not make up one render (another scene or other settings,
-    /// overlapping or missing plane ranges), or a plane range that is not one of a render's
-    /// chunks.
+    /// overlapping or missing plane ranges), a plane range that is not one of a render's
+    /// chunks, or sums no render can make (see [`crate::partial::Partial::check`]).
     #[error("{0}")]
     Partial(String),
+    /// An array the library made and was given back (a reference's pilot pass, its per-pixel
+    /// sample counts) holding what the library never makes: `name` is the array as the caller
+    /// passes it (`pilot`, `counts`).
+    #[error("{name}: {message}")]
+    BadArray { name: &'static str, message: String },
+    /// An image and a reference that were made to measure different things (another pixel
+    /// filter), as their recorded metadata says ([`crate::film::ImageInfo`]).
+    #[error("{0}")]
+    NotComparable(String),
     /// The caller stopped the work (through the flag of its [`crate::control::Control`]).
     #[error("cancelled")]
     Cancelled,
@@ -61,8 +70,10 @@ impl Error {
         Error::InvalidSetting { setting, origin: Origin::Given, message: message.into() }
     }
 
+    /// What is wrong with the input file `path`; whatever of the file the message quotes
+    /// stays on its line ([`one_line`]).
     pub(crate) fn bad_input(path: &Path, message: impl Into<String>) -> Self {
-        Error::BadInput { path: path.to_path_buf(), message: message.into() }
+        Error::BadInput { path: path.to_path_buf(), message: one_line(&message.into()) }
     }
 
     pub(crate) fn write(path: &Path, message: impl std::fmt::Display) -> Self {
@@ -71,6 +82,15 @@ impl Error {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// `text` on one line: control characters (a newline in a file's name, or in a string a file
+/// holds and an error quotes) written as escapes, so that an error is always one line.
+pub fn one_line(text: &str) -> String {
+    if !text.chars().any(char::is_control) {
+        return text.to_string();
+    }
+    text.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
+}
 
 /// A problem with a scene file or with the render settings derived from it.
 #[derive(Debug, Clone, PartialEq)]
@@ -215,6 +235,31 @@ pub struct NonFinitePixel {
     /// 0, 1, 2 for R, G, B.
     pub channel: usize,
     pub value: f32,
+}
+
+/// A pixel channel holding what it cannot hold (not a number, infinite, negative, or beyond
+/// what the image's making allows): where it is and what it holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelValue {
+    pub x: u32,
+    pub y: u32,
+    /// 0, 1, 2 for R, G, B.
+    pub channel: usize,
+    pub value: f64,
+}
+
+impl std::fmt::Display for PixelValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let channel = ["R", "G", "B"][self.channel];
+        write!(f, "pixel (x {}, y {}) channel {channel} is ", self.x, self.y)?;
+        // 1e308 as 1e308, not as its 309 digits.
+        let v = self.value;
+        if v.is_finite() && v != 0.0 && !(1e-4..1e16).contains(&v.abs()) {
+            write!(f, "{v:e}")
+        } else {
+            write!(f, "{v}")
+        }
+    }
 }
 
 impl std::fmt::Display for NonFinitePixel {

@@ -2,8 +2,9 @@
 //!
 //! Every file is written to a temporary name beside its destination and renamed over it, so a
 //! destination holds either its old contents or the complete new image, never part of one.
+//! An EXR written by fogplanes records how it was made in its header ([`ImageInfo`]).
 
-use crate::error::{Error, NonFinitePixel, Result};
+use crate::error::{Error, NonFinitePixel, PixelValue, Result};
 use glam::{DVec3, Vec3};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -58,6 +59,11 @@ impl Film {
         Film { width, height, pixels }
     }
 
+    /// The first pixel channel that is not a number in `[0, max]` (see [`first_outside`]).
+    pub fn first_outside(&self, max: f64) -> Option<PixelValue> {
+        first_outside(self.pixels.iter().map(|p| p.as_dvec3().to_array()), self.width, max)
+    }
+
     /// Refuses an image holding a NaN or infinite value, naming the first one; `image` says
     /// which image it is ("image", "reference").
     pub fn check_finite(&self, image: &'static str) -> Result<()> {
@@ -66,6 +72,166 @@ impl Film {
             None => Ok(()),
         }
     }
+}
+
+/// The first pixel channel of `pixels` (row-major, `width` wide; R, G, B) that is not a number
+/// in `[0, max]`: what every array of pixels the library reads back from a file or a caller
+/// is held to (NaN, infinities and negative values included).
+pub fn first_outside(pixels: impl IntoIterator<Item = [f64; 3]>, width: u32, max: f64) -> Option<PixelValue> {
+    let w = width.max(1) as usize;
+    pixels.into_iter().enumerate().find_map(|(i, p)| {
+        let channel = (0..3).find(|&c| !(p[c] >= 0.0 && p[c] <= max))?;
+        Some(PixelValue { x: (i % w) as u32, y: (i / w) as u32, channel, value: p[channel] })
+    })
+}
+
+/// How an image was made, recorded in its EXR header as pbrt-v4 records a render's settings:
+/// named text fields, in the order given, each written as the header attribute `fogplanes.KEY`.
+/// fogplanes writes them into every EXR of a render or a reference ([`Film::save_with_info`]),
+/// and `compare` and `table` read them back ([`Film::load_exr_with_info`]) to refuse a
+/// reference of another pixel filter. An image made elsewhere (Mitsuba's) has none.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ImageInfo {
+    pub fields: Vec<(String, String)>,
+}
+
+impl ImageInfo {
+    /// The prefix of the header attributes that hold the fields.
+    pub const PREFIX: &'static str = "fogplanes.";
+    /// What the image is: `render`, `reference` or `reference standard error`.
+    pub const IMAGE: &'static str = "image";
+    /// `box` (the mean over the pixel's square) or `center` (the pixel's centre).
+    pub const PIXEL_FILTER: &'static str = "pixel_filter";
+    /// `WIDTHxHEIGHT`.
+    pub const RESOLUTION: &'static str = "resolution";
+    /// [`crate::scene::Scene::fingerprint`]: the scene's content.
+    pub const SCENE: &'static str = "scene";
+    /// The order fields are printed in; others follow, sorted.
+    const ORDER: [&'static str; 17] = [
+        "image",
+        "fogplanes",
+        "scene_name",
+        "scene",
+        "resolution",
+        "pixel_filter",
+        "estimator",
+        "orientations",
+        "planes",
+        "seed",
+        "sampler",
+        "spp",
+        "ray_sets",
+        "accelerator",
+        "samples",
+        "seconds",
+        "hits",
+    ];
+
+    /// The fields every image of fogplanes records: what it is, the fogplanes version, the
+    /// scene (name and fingerprint), the resolution and the pixel filter.
+    pub fn new(image: &str, scene_name: &str, scene: String, (width, height): (u32, u32), pixel_center: bool) -> Self {
+        ImageInfo::default()
+            .with(Self::IMAGE, image)
+            .with("fogplanes", env!("CARGO_PKG_VERSION"))
+            .with("scene_name", scene_name)
+            .with(Self::SCENE, scene)
+            .with(Self::RESOLUTION, format!("{width}x{height}"))
+            .with(Self::PIXEL_FILTER, pixel_filter_name(pixel_center))
+    }
+
+    /// The fields with `key` set to `value` (replaced if present).
+    pub fn with(mut self, key: &str, value: impl std::fmt::Display) -> Self {
+        let value = value.to_string();
+        match self.fields.iter_mut().find(|(k, _)| k == key) {
+            Some(field) => field.1 = value,
+            None => self.fields.push((key.to_string(), value)),
+        }
+        self
+    }
+
+    pub fn get(&self, key: &str) -> Option<&str> {
+        self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+    }
+
+    /// The fields in the order of [`ImageInfo::ORDER`], then the others by name.
+    fn sorted(mut self) -> Self {
+        let rank = |k: &str| Self::ORDER.iter().position(|o| *o == k).unwrap_or(Self::ORDER.len());
+        self.fields.sort_by(|(a, _), (b, _)| (rank(a), a).cmp(&(rank(b), b)));
+        self
+    }
+
+    /// The header attributes that record the fields (text, UTF-8).
+    fn attributes(
+        &self,
+    ) -> std::collections::HashMap<exr::meta::attribute::Text, exr::meta::attribute::AttributeValue> {
+        use exr::meta::attribute::{AttributeValue, Text};
+        self.fields
+            .iter()
+            .map(|(k, v)| {
+                let name = Text::from_slice_unchecked(format!("{}{k}", Self::PREFIX).as_bytes());
+                (name, AttributeValue::Text(Text::from_slice_unchecked(v.as_bytes())))
+            })
+            .collect()
+    }
+
+    /// The fields an EXR header records, if it records any.
+    fn of_header(header: &exr::meta::header::Header) -> Option<ImageInfo> {
+        use exr::meta::attribute::AttributeValue;
+        let fields: Vec<(String, String)> = header
+            .own_attributes
+            .other
+            .iter()
+            .filter_map(|(name, value)| {
+                let key = std::str::from_utf8(name.as_slice()).ok()?.strip_prefix(Self::PREFIX)?;
+                let AttributeValue::Text(text) = value else { return None };
+                Some((key.to_string(), String::from_utf8_lossy(text.as_slice()).into_owned()))
+            })
+            .collect();
+        (!fields.is_empty()).then(|| ImageInfo { fields }.sorted())
+    }
+
+    /// Whether `reference` can be the reference of `image`, as far as what they record says
+    /// (an image without a record says nothing): refuses another pixel filter or resolution;
+    /// returns a warning when they record different scenes.
+    pub fn check_reference(image: Option<&ImageInfo>, reference: Option<&ImageInfo>) -> Result<Option<String>> {
+        let (Some(image), Some(reference)) = (image, reference) else { return Ok(None) };
+        let differ = |key: &str| match (image.get(key), reference.get(key)) {
+            (Some(a), Some(b)) if a != b => Some((a.to_string(), b.to_string())),
+            _ => None,
+        };
+        if let Some((a, b)) = differ(Self::PIXEL_FILTER) {
+            return Err(Error::NotComparable(format!(
+                "the reference was made with the pixel filter {b}, the image with {a}: an error between them \
+                 measures the filters (make both with --pixel-center, or neither)"
+            )));
+        }
+        if let Some((a, b)) = differ(Self::RESOLUTION) {
+            return Err(Error::NotComparable(format!("the reference is {b} pixels, the image {a}")));
+        }
+        Ok(match (image.get(Self::SCENE), reference.get(Self::SCENE)) {
+            (Some(a), Some(b)) if a != b => Some(format!(
+                "the image and the reference record different scenes ({} and {})",
+                image.get("scene_name").unwrap_or("?"),
+                reference.get("scene_name").unwrap_or("?")
+            )),
+            _ => None,
+        })
+    }
+}
+
+impl std::fmt::Display for ImageInfo {
+    /// One `key: value` line per field.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (k, v) in &self.fields {
+            writeln!(f, "{k}: {v}")?;
+        }
+        Ok(())
+    }
+}
+
+/// The pixel filter as images record it.
+pub fn pixel_filter_name(pixel_center: bool) -> &'static str {
+    if pixel_center { "center" } else { "box" }
 }
 
 /// The image formats, chosen by file extension.
@@ -193,22 +359,36 @@ pub fn to_srgb8(x: f32, exposure: f32) -> u8 {
 impl Film {
     /// Writes the image by the path's extension; PNG is tone-mapped by `exposure` stops.
     pub fn save(&self, path: &Path, exposure: f32) -> Result<()> {
+        self.save_with_info(path, exposure, None)
+    }
+
+    /// [`Film::save`], an EXR recording `info` in its header (a PNG records nothing).
+    pub fn save_with_info(&self, path: &Path, exposure: f32, info: Option<&ImageInfo>) -> Result<()> {
         match ImageFormat::from_path(path)? {
-            ImageFormat::Exr => self.save_exr(path),
+            ImageFormat::Exr => self.write_exr(path, info),
             ImageFormat::Png => self.save_png(path, exposure),
         }
     }
 
     pub fn save_exr(&self, path: &Path) -> Result<()> {
-        use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+        self.write_exr(path, None)
+    }
+
+    fn write_exr(&self, path: &Path, info: Option<&ImageInfo>) -> Result<()> {
+        use exr::prelude::{Encoding, Image, Layer, LayerAttributes, SpecificChannels, Vec2, WritableImage};
         write_atomically(path, |file| {
             let w = self.width as usize;
-            // What exr::prelude::write_rgb_file writes, into the file already open.
+            // What exr::prelude::write_rgb_file writes, into the file already open, with the
+            // record of how the image was made among the layer's attributes.
             let rgb = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
                 let p = self.pixels[y * w + x];
                 (p.x, p.y, p.z)
             });
-            Image::from_channels((w, self.height as usize), rgb)
+            let mut attributes = LayerAttributes::default();
+            if let Some(info) = info {
+                attributes.other = info.attributes();
+            }
+            Image::from_layer(Layer::new((w, self.height as usize), attributes, Encoding::default(), rgb))
                 .write()
                 .to_unbuffered(file)
                 .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
@@ -234,14 +414,15 @@ impl Film {
     /// fallibly, so that an image the machine cannot hold (under a memory limit) is an input
     /// error, not an abort.
     pub fn load_exr(path: &Path) -> Result<Film> {
+        Film::load_exr_with_info(path).map(|(film, _)| film)
+    }
+
+    /// [`Film::load_exr`], with what the header records of how the image was made, if it
+    /// records anything ([`ImageInfo`]).
+    pub fn load_exr_with_info(path: &Path) -> Result<(Film, Option<ImageInfo>)> {
         let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
-        let file = std::fs::metadata(path).map_err(|e| bad(&e))?;
-        if !file.is_file() {
-            return Err(Error::bad_input(path, "not a regular file"));
-        }
-        let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
-        exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
-        check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
+        let meta = read_exr_headers(path)?;
+        let info = meta.headers.first().and_then(ImageInfo::of_header);
         let unavailable = |size: (usize, usize)| {
             let gib = (size.0 * size.1 * std::mem::size_of::<Vec3>()) as f64 / (1u64 << 30) as f64;
             bad(&format!("{}x{} pixels need {gib:.1} GiB, which this machine cannot allocate now", size.0, size.1))
@@ -276,8 +457,30 @@ impl Film {
         if film.pixels.len() != size.0 * size.1 {
             return Err(unavailable(size));
         }
-        Ok(film)
+        Ok((film, info))
     }
+}
+
+/// The headers of an EXR file, read and checked ([`check_exr_headers`]) before any pixel.
+fn read_exr_headers(path: &Path) -> Result<exr::meta::MetaData> {
+    let bad = |e: &dyn std::fmt::Display| Error::bad_input(path, format!("cannot read as an EXR image: {e}"));
+    let file = std::fs::metadata(path).map_err(|e| bad(&e))?;
+    if !file.is_file() {
+        return Err(Error::bad_input(path, "not a regular file"));
+    }
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
+    exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
+    check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
+    Ok(meta)
+}
+
+/// What an EXR file's header records of how the image was made ([`ImageInfo`], `None` if
+/// nothing), and its size, reading no pixel.
+pub fn read_image_info(path: &Path) -> Result<(Option<ImageInfo>, (u32, u32))> {
+    let meta = read_exr_headers(path)?;
+    let header = meta.headers.first().ok_or_else(|| Error::bad_input(path, "an EXR file without a header"))?;
+    let size = (header.layer_size.width() as u32, header.layer_size.height() as u32);
+    Ok((ImageInfo::of_header(header), size))
 }
 
 /// The most bytes of samples that one byte of a chunk can decode to under `compression`, or
@@ -372,6 +575,39 @@ mod tests {
         film.save(&dir.join("a.png"), 0.0).unwrap();
         let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names.len(), 2, "{names:?}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// What an EXR records of how it was made comes back in order, UTF-8 included; an image
+    /// without a record has none; the pixels are the same bits either way.
+    #[test]
+    fn an_exr_records_how_it_was_made() {
+        let dir = std::env::temp_dir().join(format!("fogplanes-film-info-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut film = Film::new(3, 2);
+        film.pixels[4] = Vec3::new(0.1, 2.0, 1e-30);
+        let info = ImageInfo::new("render", "brouillard é", "0123abcd".into(), (3, 2), false)
+            .with("planes", 40960)
+            .with("zz_extra", "kept");
+        let (with, without) = (dir.join("with.exr"), dir.join("without.exr"));
+        film.save_with_info(&with, 0.0, Some(&info)).unwrap();
+        film.save(&without, 0.0).unwrap();
+        let (back, read) = Film::load_exr_with_info(&with).unwrap();
+        assert_eq!((back, read.as_ref()), (film.clone(), Some(&info)));
+        assert_eq!(read_image_info(&with).unwrap(), (Some(info.clone()), (3, 2)));
+        assert_eq!(Film::load_exr_with_info(&without).unwrap(), (film, None));
+        assert_eq!(info.to_string().lines().next(), Some("image: render"));
+        // A reference is checked against the image's record, when both have one.
+        let centre = ImageInfo::new("reference", "brouillard é", "0123abcd".into(), (3, 2), true);
+        let e = ImageInfo::check_reference(Some(&info), Some(&centre)).unwrap_err();
+        assert!(e.is_input() && e.to_string().contains("pixel filter center, the image with box"), "{e}");
+        let bigger = ImageInfo::new("reference", "x", "0123abcd".into(), (6, 4), false);
+        assert!(ImageInfo::check_reference(Some(&info), Some(&bigger)).unwrap_err().to_string().contains("6x4"));
+        let other = ImageInfo::new("reference", "other", "ffff".into(), (3, 2), false);
+        let warning = ImageInfo::check_reference(Some(&info), Some(&other)).unwrap().unwrap();
+        assert!(warning.contains("different scenes (brouillard é and other)"), "{warning}");
+        assert_eq!(ImageInfo::check_reference(Some(&info), None).unwrap(), None);
+        assert_eq!(ImageInfo::check_reference(None, Some(&centre)).unwrap(), None);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -47,10 +47,17 @@ pub enum Merged {
 pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     let parts = paths.iter().map(|p| read_part(p)).collect::<Result<Vec<_>>>()?;
     let first = parts.first().ok_or_else(|| Error::Partial("no parts to merge".into()))?;
+    // Each part's recorded scene and settings, not only its fingerprint, are the first's: a
+    // band whose recorded width had been changed was stacked as it was, shifting every later
+    // row (or indexing past the image).
     for p in &parts[1..] {
-        if p.meta.kind != first.meta.kind
-            || p.meta.fingerprint != first.meta.fingerprint
-            || p.meta.total != first.meta.total
+        let (a, b) = (&first.meta, &p.meta);
+        if b.kind != a.kind
+            || b.fingerprint != a.fingerprint
+            || b.total != a.total
+            || b.scene != a.scene
+            || b.render != a.render
+            || b.reference != a.reference
         {
             return Err(Error::Partial(format!(
                 "{} and {} are parts of different images (another scene, other settings or another kind)",
@@ -68,6 +75,15 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
                 return Err(
                     first.bad("its settings do not give its fingerprint (written by another fogplanes version?)")
                 );
+            }
+            if first.meta.total != options.planes() {
+                return Err(first.bad(format!(
+                    "its planes {}:{} of {}: its settings render {} planes",
+                    first.meta.start,
+                    first.meta.end,
+                    first.meta.total,
+                    options.planes()
+                )));
             }
             let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
             let partial = merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
@@ -111,7 +127,13 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
                 let mut film = Film::new(scene.camera.width, scene.camera.height);
                 film.pixels.clear();
                 for p in &order {
-                    film.pixels.extend(p.film(name)?.pixels);
+                    let band = p.film(name)?;
+                    if band.width != scene.camera.width {
+                        return Err(
+                            p.bad(format!("its rows are {} wide, the image {}", band.width, scene.camera.width))
+                        );
+                    }
+                    film.pixels.extend(band.pixels);
                 }
                 Ok(film)
             };

@@ -6,10 +6,12 @@
 //! [`crate::limits`]; the renderers below trust it and check nothing again (ripgrep's `HiArgs`).
 
 use crate::accel::Accelerator;
+use crate::film::ImageInfo;
 use crate::gather::GatherStats;
 use crate::kernel::Kernel;
 use crate::photon_plane::PlaneSet;
 use crate::sampling::Sampler;
+use crate::scene::Scene;
 use crate::weights::Weighting;
 
 /// Settings of one render, resolved ([`crate::settings::resolve_render`]).
@@ -67,6 +69,22 @@ impl RenderOptions {
     /// The set the planes come from.
     pub fn plane_set(&self) -> PlaneSet {
         PlaneSet { sampler: self.sampler, seed: self.seed }
+    }
+
+    /// What an image of this render of `scene` records of how it was made ([`ImageInfo`]);
+    /// `planes` is the count it gathered (a render on a time budget chooses its own).
+    pub fn image_info(&self, scene: &Scene, planes: usize) -> ImageInfo {
+        let (cam, w) = (&scene.camera, &self.weighting);
+        let info =
+            ImageInfo::new("render", &scene.name, scene.fingerprint(), (cam.width, cam.height), self.pixel_center)
+                .with("estimator", w.estimator.name());
+        let info = if w.estimator.has_orientations() { info.with("orientations", w.orientations) } else { info };
+        info.with("planes", planes)
+            .with("seed", self.seed)
+            .with("sampler", self.sampler.name())
+            .with("spp", self.spp)
+            .with("ray_sets", self.ray_sets())
+            .with("accelerator", self.accelerator.name())
     }
 }
 

@@ -9,8 +9,8 @@
 //! measures its own per-pixel standard error.
 
 use crate::control::Control;
-use crate::error::Result;
-use crate::film::Film;
+use crate::error::{Error, Result};
+use crate::film::{Film, ImageInfo};
 use crate::medium::PHASE;
 use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
@@ -30,6 +30,19 @@ pub struct ReferenceOptions {
     pub uniform: bool,
     pub seed: u64,
     pub pixel_center: bool,
+}
+
+impl ReferenceOptions {
+    /// What the reference image of `scene` (its standard error with `stderr`) records of how
+    /// it was made ([`ImageInfo`]).
+    pub fn image_info(&self, scene: &Scene, stderr: bool) -> ImageInfo {
+        let what = if stderr { "reference standard error" } else { "reference" };
+        let cam = &scene.camera;
+        ImageInfo::new(what, &scene.name, scene.fingerprint(), (cam.width, cam.height), self.pixel_center)
+            .with("spp", self.spp)
+            .with("seed", self.seed)
+            .with("samples", if self.uniform { "uniform" } else { "adaptive" })
+    }
 }
 
 /// A reference image with its per-pixel standard error.
@@ -155,11 +168,11 @@ pub fn render_reference_from(
     let sized = |f: &Film, rows: u32| f.width == w && f.height == rows && f.pixels.len() == (w * rows) as usize;
     let counts = match (opts.uniform, done.pilot) {
         (true, None) => None,
-        (false, Some(pilot)) if sized(&pilot, h) => Some(reference_counts(opts, &pilot.pixels)),
+        (false, Some(pilot)) if sized(&pilot, h) => Some(reference_counts(opts, &pilot.pixels, w)?),
         (false, None) => {
             let pilot = reference_pilot_rows(scene, opts, 0..h, control)?;
             observer(ReferenceStep::Pilot(&pilot))?;
-            Some(reference_counts(opts, &pilot.pixels))
+            Some(reference_counts(opts, &pilot.pixels, w)?)
         }
         _ => return Err(crate::Error::Partial("the pilot pass to resume from is not this reference's".into())),
     };
@@ -229,13 +242,7 @@ pub fn reference_rows(
     check_rows(scene, &rows)?;
     match counts {
         Some(c) => {
-            let pixels = scene.camera.width as usize * scene.camera.height as usize;
-            if c.len() != pixels {
-                return Err(crate::Error::Partial(format!(
-                    "{} sample counts for an image of {pixels} pixels",
-                    c.len()
-                )));
-            }
+            check_counts(scene, opts, c)?;
             render_pixels(scene, opts.seed, opts.pixel_center, rows, &|p| c[p], control)
         }
         None => render_pixels(scene, opts.seed, opts.pixel_center, rows, &|_| opts.spp, control),
@@ -255,6 +262,31 @@ pub fn reference_pilot_rows(
     Ok(render_pixels(scene, opts.seed ^ PILOT_SEED, opts.pixel_center, rows, &|_| spp, control)?.1)
 }
 
+/// The most samples the adaptive reference gives a pixel, per sample of the average `spp`.
+pub const MOST_SAMPLES_PER_SPP: u32 = 64;
+
+/// Per-pixel sample counts given back for `scene` with `opts` (Python's `counts`) are what
+/// [`reference_counts`] can make: one per pixel, each at least 1 (a pixel of none would be
+/// 0/0) and at most [`MOST_SAMPLES_PER_SPP`] times `opts.spp` (its cap, which bounds the work
+/// as `spp`'s own limit does).
+pub fn check_counts(scene: &Scene, opts: &ReferenceOptions, counts: &[u32]) -> Result<()> {
+    let (w, pixels) = (scene.camera.width as usize, scene.camera.width as usize * scene.camera.height as usize);
+    let bad = |message: String| Error::BadArray { name: "counts", message };
+    if counts.len() != pixels {
+        return Err(bad(format!("{} sample counts for an image of {pixels} pixels", counts.len())));
+    }
+    let most = MOST_SAMPLES_PER_SPP.saturating_mul(opts.spp);
+    if let Some((i, &c)) = counts.iter().enumerate().find(|&(_, &c)| c == 0 || c > most) {
+        return Err(bad(format!(
+            "pixel (x {}, y {}) has {c} samples; a pixel has between 1 and {most} ({MOST_SAMPLES_PER_SPP} x spp {})",
+            i % w,
+            i / w,
+            opts.spp
+        )));
+    }
+    Ok(())
+}
+
 /// The rows `rows` lie in the image and are not empty.
 fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
     let h = scene.camera.height;
@@ -268,24 +300,33 @@ fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
 }
 
 /// The adaptive reference's sample count of every pixel from the whole pilot's standard errors
-/// `pilot` (row-major): the allocation described at [`render_reference`].
-pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3]) -> Vec<u32> {
+/// `pilot` (row-major, `width` wide): the allocation described at [`render_reference`].
+/// Refuses a pilot holding what no pilot pass makes (a standard error that is negative, NaN or
+/// infinite would give its pixel no samples, or every other pixel none), naming the pixel.
+pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3], width: u32) -> Result<Vec<u32>> {
+    let values = pilot.iter().map(|p| p.as_dvec3().to_array());
+    if let Some(p) = crate::film::first_outside(values, width, f32::MAX as f64) {
+        return Err(Error::BadArray {
+            name: "pilot",
+            message: format!("{p}: a pilot pass holds standard errors, finite and non-negative"),
+        });
+    }
     let pixels = pilot.len();
     let pilot_spp = pilot_spp(opts);
     // Standard deviation of one sample, the mean over channels.
     let sigma: Vec<f64> = pilot.iter().map(|s| (s.x + s.y + s.z) as f64 / 3.0 * (pilot_spp as f64).sqrt()).collect();
     let total_sigma: f64 = sigma.iter().sum();
     let budget = (opts.spp as f64 - pilot_spp as f64).max(REPLICATES as f64) * pixels as f64;
-    let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), 64.0 * opts.spp as f64);
+    let (floor, cap) = ((opts.spp as f64 / 4.0).max(REPLICATES as f64), MOST_SAMPLES_PER_SPP as f64 * opts.spp as f64);
     // The floor is taken first; the rest goes by need.
     let budget = (budget - floor * pixels as f64).max(0.0);
-    sigma
+    Ok(sigma
         .iter()
         .map(|&s| {
             let share = if total_sigma > 0.0 { budget * s / total_sigma } else { budget / pixels as f64 };
             (floor + share).min(cap).round() as u32
         })
-        .collect()
+        .collect())
 }
 
 /// Seed offset of the pilot pass, so that it shares no samples with the final one.
@@ -433,6 +474,37 @@ mod tests {
             let overlapping =
                 ReferenceDone { pilot: done.pilot.clone(), bands: vec![done.bands[1].clone(), done.bands[1].clone()] };
             assert!(render_reference_from(&scene, &opts, Control::none(), overlapping, &mut |_| Ok(())).is_err());
+        }
+    }
+
+    /// Sample counts and pilots given back are what the library makes: counts of at least one
+    /// sample (none was 0/0, a NaN pixel) and at most its cap (2^32 - 1 ran for 20 minutes),
+    /// pilots finite and non-negative (a negative one gave its pixel no sample).
+    #[test]
+    fn counts_and_pilots_given_back_are_what_the_library_makes() {
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(4, 2).unwrap();
+        let opts = ReferenceOptions { spp: 16, uniform: false, seed: 1, pixel_center: false };
+        let pilot = reference_pilot_rows(&scene, &opts, 0..2, Control::none()).unwrap();
+        let counts = reference_counts(&opts, &pilot.pixels, 4).unwrap();
+        assert!(check_counts(&scene, &opts, &counts).is_ok());
+        assert!(reference_rows(&scene, &opts, 0..1, Some(&counts), Control::none()).is_ok());
+        for (pixel, count, says) in [
+            (5, 0, "counts: pixel (x 1, y 1) has 0 samples"),
+            (0, 1025, "counts: pixel (x 0, y 0) has 1025 samples; a pixel has between 1 and 1024"),
+            (7, u32::MAX, "counts: pixel (x 3, y 1) has 4294967295 samples"),
+        ] {
+            let mut c = counts.clone();
+            c[pixel] = count;
+            let e = reference_rows(&scene, &opts, 0..1, Some(&c), Control::none()).unwrap_err();
+            assert!(e.is_input() && e.to_string().starts_with(says), "{e}");
+        }
+        assert!(check_counts(&scene, &opts, &counts[1..]).unwrap_err().to_string().contains("7 sample counts"));
+        for value in [-1.0, f32::NAN, f32::INFINITY] {
+            let mut p = pilot.pixels.clone();
+            p[6].y = value;
+            let e = reference_counts(&opts, &p, 4).unwrap_err().to_string();
+            assert!(e.starts_with("pilot: pixel (x 2, y 1) channel G is"), "{e}");
         }
     }
 

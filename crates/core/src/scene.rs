@@ -173,12 +173,32 @@ impl Scene {
         Scene::parse(&text, &file, &name)
     }
 
-    /// Parses and validates scene text; `file` names it in errors.
+    /// Parses and validates scene text; `file` names it in errors. Text beyond the size of a
+    /// scene file is refused as the file would be (a scene travels as its text, in part files
+    /// and pickles).
     pub fn parse(text: &str, file: &str, name: &str) -> Result<Scene, SceneError> {
+        if text.len() as u64 > MAX_SCENE_FILE_BYTES {
+            return Err(SceneError {
+                file: file.to_string(),
+                position: None,
+                field: String::new(),
+                message: format!(
+                    "the text is {} bytes; scene files are limited to {MAX_SCENE_FILE_BYTES} bytes",
+                    text.len()
+                ),
+            });
+        }
         let desc = parse_file(text, file)?;
         let mut scene = Scene::from_desc(&desc, file, name)?;
         scene.source = Some(std::sync::Arc::new(SceneSource { text: text.to_string(), file: file.to_string() }));
         Ok(scene)
+    }
+
+    /// Names the scene's content: camera (at its resolution), medium and lights, not its name
+    /// or file; the same in every process and run. What an image records of its scene.
+    pub fn fingerprint(&self) -> String {
+        let description = format!("{:?} | {:?} | {:?}", self.camera, self.medium, self.lights);
+        crate::sampling::stable_hash(&[description.as_bytes()])
     }
 
     /// The text the scene was parsed from ([`Scene::parse`], [`Scene::load`]), if it was.

@@ -7,7 +7,7 @@ use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
 use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBool, PyDict};
 use std::path::{Path, PathBuf};
 
 /// The settings a caller gave, as Python shows them, so that an error names a setting the way
@@ -40,10 +40,13 @@ impl Given {
     }
 
     /// A non-negative integer: a Python int out of range is a `ValueError` naming the setting,
-    /// anything but an int a `TypeError`.
+    /// anything but an int (a bool too: `spp=True` is no count) a `TypeError`.
     pub(crate) fn uint(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
         let Some(v) = value else { return Ok(None) };
         self.note(setting, v)?;
+        if v.is_instance_of::<PyBool>() {
+            return Err(not_a_bool(setting.keyword(), v, "an integer"));
+        }
         match v.extract::<u64>() {
             Ok(n) => Ok(Some(n)),
             Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
@@ -60,23 +63,35 @@ impl Given {
             .transpose()
     }
 
-    /// A number of seconds or stops (a float, or an int).
+    /// A number of seconds or stops (a float, or an int; not a bool).
     pub(crate) fn float(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<f64>> {
         let Some(v) = value else { return Ok(None) };
         self.note(setting, v)?;
+        if v.is_instance_of::<PyBool>() {
+            return Err(not_a_bool(setting.keyword(), v, "a number"));
+        }
         v.extract::<f64>()
             .map(Some)
             .map_err(|e| PyTypeError::new_err(format!("{}: expected a number ({e})", setting.keyword())))
     }
 
-    /// A name from a closed list (estimator, sampler, ...).
+    /// A name from a closed list (estimator, sampler, ...): a `str`, else a `TypeError` naming
+    /// the setting.
     pub(crate) fn named<T: std::str::FromStr<Err = String>>(
         &mut self,
         setting: Setting,
-        value: Option<&str>,
+        value: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Option<T>> {
         let Some(v) = value else { return Ok(None) };
-        self.reprs.push((setting, py_str(v)));
+        let Ok(v) = v.extract::<String>() else {
+            return Err(PyTypeError::new_err(format!(
+                "{}={}: expected a name (a str), got {}",
+                setting.keyword(),
+                v.repr()?,
+                v.get_type().name()?
+            )));
+        };
+        self.reprs.push((setting, py_str(&v)));
         v.parse().map(Some).map_err(|m| self.invalid(setting, m))
     }
 
@@ -137,9 +152,23 @@ pub(crate) enum Front {
     Chunks,
 }
 
-/// A keyword argument that is a flag (None: false).
-pub(crate) fn flag(value: &Option<Bound<'_, PyAny>>) -> PyResult<bool> {
-    Ok(value.as_ref().map(|v| v.extract()).transpose()?.unwrap_or(false))
+/// A `TypeError` for a bool given as `what` (an integer, a number) to argument `name`.
+pub(crate) fn not_a_bool(name: &str, v: &Bound<'_, PyAny>, what: &str) -> PyErr {
+    PyTypeError::new_err(format!(
+        "{name}={}: expected {what}, got bool",
+        v.repr().map(|r| r.to_string()).unwrap_or_default()
+    ))
+}
+
+/// The keyword argument `name`, a flag (None: false): True or False, else a `TypeError`
+/// naming it.
+pub(crate) fn flag(name: &str, value: &Option<Bound<'_, PyAny>>) -> PyResult<bool> {
+    let Some(v) = value else { return Ok(false) };
+    v.extract().map_err(|_| {
+        let repr = v.repr().map(|r| r.to_string()).unwrap_or_default();
+        let type_name = v.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        PyTypeError::new_err(format!("{name}={repr}: expected True or False, got {type_name}"))
+    })
 }
 
 /// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names,
@@ -154,24 +183,22 @@ pub(crate) fn render_overrides(
     for (key, value) in kwargs.iter() {
         let key: String = key.extract()?;
         let value = (!value.is_none()).then_some(value);
-        let text =
-            |v: &Option<Bound<'_, PyAny>>| -> PyResult<Option<String>> { v.as_ref().map(|v| v.extract()).transpose() };
         match key.as_str() {
-            "estimator" => o.estimator = given.named(Setting::Estimator, text(&value)?.as_deref())?,
+            "estimator" => o.estimator = given.named(Setting::Estimator, value.as_ref())?,
             "orientations" => o.orientations = given.uint32(Setting::Orientations, value.as_ref())?,
             "planes" => o.planes = given.uint(Setting::Planes, value.as_ref())?,
             "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
-            "sampler" => o.sampler = given.named(Setting::Sampler, text(&value)?.as_deref())?,
+            "sampler" => o.sampler = given.named(Setting::Sampler, value.as_ref())?,
             "spp" => o.spp = given.uint32(Setting::Spp, value.as_ref())?,
-            "pixel_center" => o.pixel_center = flag(&value)?,
-            "accelerator" => o.accelerator = given.named(Setting::Accelerator, text(&value)?.as_deref())?,
-            "kernel" => o.kernel = given.named(Setting::Kernel, text(&value)?.as_deref())?,
+            "pixel_center" => o.pixel_center = flag("pixel_center", &value)?,
+            "accelerator" => o.accelerator = given.named(Setting::Accelerator, value.as_ref())?,
+            "kernel" => o.kernel = given.named(Setting::Kernel, value.as_ref())?,
             "resolution" => o.resolution = given.resolution(value.as_ref())?,
             "threads" => o.threads = given.threads(value.as_ref())?,
             "time_budget" if front == Front::Render => {
                 o.time_budget = given.float(Setting::TimeBudget, value.as_ref())?;
             }
-            "return_stats" if front == Front::Render => return_stats = flag(&value)?,
+            "return_stats" if front == Front::Render => return_stats = flag("return_stats", &value)?,
             "time_budget" if value.is_some() => {
                 return Err(PyValueError::new_err(
                     "time_budget: a render in chunks has a plane count; give planes= instead",
@@ -218,8 +245,8 @@ pub(crate) fn resolve_reference_args(
         }
         let value = (!value.is_none()).then_some(value);
         match key.as_str() {
-            "pixel_center" => o.pixel_center = flag(&value)?,
-            "uniform" => o.uniform = flag(&value)?,
+            "pixel_center" => o.pixel_center = flag("pixel_center", &value)?,
+            "uniform" => o.uniform = flag("uniform", &value)?,
             "resolution" => o.resolution = given.resolution(value.as_ref())?,
             "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
             _ => o.threads = given.threads(value.as_ref())?,
@@ -237,6 +264,7 @@ pub(crate) fn index_pair(value: &Bound<'_, PyAny>, name: &str, what: &str) -> Py
     let not_a_pair = || PyTypeError::new_err(format!("{name}={repr}: expected a (start, end) pair of {what}"));
     let (start, end): (Bound<'_, PyAny>, Bound<'_, PyAny>) = value.extract().map_err(|_| not_a_pair())?;
     let index = |v: &Bound<'_, PyAny>| match v.extract::<i128>() {
+        _ if v.is_instance_of::<PyBool>() => Err(not_a_pair()),
         Ok(n) => usize::try_from(n).map_err(|_| {
             PyValueError::new_err(format!("{name}={repr}: {what} must be non-negative integers below 2**64"))
         }),

@@ -105,28 +105,46 @@ impl PyPartial {
 
     /// Rebuilds a pickled partial from its state, the tuple `__reduce__` gives: (width, height,
     /// sums as little-endian f64 bytes, start, end, planes_total, fingerprint, hits, seconds).
+    /// A state is trusted no more than a file: anything a render cannot make is a ValueError
+    /// (the core's `Partial::check`, naming the pixel).
     #[staticmethod]
     fn _from_state(state: &Bound<'_, PyTuple>) -> PyResult<Self> {
-        let not_a_state = || PyValueError::new_err("not the state of a fogplanes.Partial");
+        let not_a_state =
+            |why: &dyn std::fmt::Display| PyValueError::new_err(format!("not the state of a fogplanes.Partial: {why}"));
         if state.len() != 9 {
-            return Err(not_a_state());
+            return Err(not_a_state(&format!("{} items, not 9", state.len())));
         }
-        let item = |k: usize| state.get_item(k);
-        let (width, height): (u32, u32) = (item(0)?.extract()?, item(1)?.extract()?);
-        let sums = item(2)?;
-        let sums = sums.cast::<PyBytes>().map_err(|_| not_a_state())?.as_bytes();
+        // Item `k`, named `name`, of the type of its place (a bool is no count).
+        fn item<'py, T: FromPyObjectOwned<'py>>(state: &Bound<'py, PyTuple>, k: usize, name: &str) -> PyResult<T> {
+            let v = state.get_item(k)?;
+            let wrong = || -> PyResult<PyErr> {
+                let (repr, type_name) = (v.repr()?, v.get_type().name()?);
+                Ok(PyValueError::new_err(format!(
+                    "not the state of a fogplanes.Partial: {name}={repr}: expected {}, got {type_name}",
+                    std::any::type_name::<T>().rsplit("::").next().unwrap_or("a value")
+                )))
+            };
+            if v.is_instance_of::<pyo3::types::PyBool>() {
+                return Err(wrong()?);
+            }
+            v.extract::<T>().or_else(|_| Err(wrong()?))
+        }
+        let (width, height): (u32, u32) = (item(state, 0, "width")?, item(state, 1, "height")?);
         let (start, end, planes_total): (usize, usize, usize) =
-            (item(3)?.extract()?, item(4)?.extract()?, item(5)?.extract()?);
+            (item(state, 3, "start")?, item(state, 4, "end")?, item(state, 5, "planes_total")?);
         let (fingerprint, hits, seconds): (String, u64, f64) =
-            (item(6)?.extract()?, item(7)?.extract()?, item(8)?.extract()?);
-        let pixels = width as usize * height as usize;
-        if sums.len() != pixels * 24 || start >= end || end > planes_total {
-            return Err(not_a_state());
+            (item(state, 6, "fingerprint")?, item(state, 7, "hits")?, item(state, 8, "seconds")?);
+        let sums = state.get_item(2)?;
+        let sums = sums.cast::<PyBytes>().map_err(|_| not_a_state(&"the sums are not bytes"))?.as_bytes();
+        if sums.len() as u64 != width as u64 * height as u64 * 24 {
+            return Err(not_a_state(&format!("{} bytes of sums for {width}x{height} pixels", sums.len())));
         }
         let values: Vec<f64> =
             sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
         let sums = values.chunks_exact(3).map(|c| glam::DVec3::new(c[0], c[1], c[2])).collect();
-        Ok(PyPartial { inner: Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds } })
+        let inner = Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds };
+        inner.check().map_err(|e| not_a_state(&e))?;
+        Ok(PyPartial { inner })
     }
 
     fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {

@@ -53,12 +53,13 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 pub(crate) fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
-    estimator: Option<&str>,
+    estimator: Option<&Bound<'py, PyAny>>,
     kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let scene = scene_arg(scene)?;
     let mut given = Given::default();
     let (mut overrides, return_stats) = render_overrides(kwargs, &mut given, Front::Render)?;
+    let estimator = estimator.filter(|e| !e.is_none());
     overrides.estimator = given.named::<Estimator>(Setting::Estimator, estimator)?.or(overrides.estimator);
     let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
     let (film, stats) = run_interruptible(py, pool(r.threads)?, |cancel| match r.time_budget {

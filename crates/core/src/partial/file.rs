@@ -16,6 +16,7 @@
 //! Without zip64, an entry is at most 4 GiB (a 16,000 x 11,000 image of sums).
 
 use crate::error::{Error, Result};
+use crate::limits::{MAX_SCENE_FILE_BYTES, check_planes, check_resolution};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -127,7 +128,7 @@ impl Array {
     /// The string of a 0-d unicode array.
     pub fn as_text(&self) -> std::result::Result<String, String> {
         if !self.descr.starts_with("<U") || !self.shape.is_empty() {
-            return Err(format!("{}: expected a string, got {} of shape {:?}", self.name, self.descr, self.shape));
+            return Err(format!("{}: expected a string, got {:?} of shape {:?}", self.name, self.descr, self.shape));
         }
         let chars: std::result::Result<String, String> = self
             .data
@@ -139,10 +140,11 @@ impl Array {
         chars
     }
 
-    fn check(&self, descr: &str, shape: &[usize]) -> std::result::Result<(), String> {
+    /// Refuses an array of another dtype or shape, naming both.
+    pub fn check(&self, descr: &str, shape: &[usize]) -> std::result::Result<(), String> {
         if self.descr != descr || self.shape != shape {
             return Err(format!(
-                "{}: expected {descr} of shape {shape:?}, got {} of shape {:?}",
+                "{}: expected {descr} of shape {shape:?}, got {:?} of shape {:?}",
                 self.name, self.descr, self.shape
             ));
         }
@@ -218,7 +220,7 @@ fn parse_npy(name: &str, bytes: &[u8]) -> std::result::Result<Array, String> {
         "<f8" => 8,
         "<f4" => 4,
         d if d.starts_with("<U") => 4 * d[2..].parse::<usize>().map_err(|_| bad("a bad dtype"))?,
-        d => return Err(bad(&format!("dtype {d} is not supported"))),
+        d => return Err(bad(&format!("dtype {d:?} is not supported"))),
     };
     let data = &bytes[at + len..];
     let expected = shape.iter().try_fold(item, |a: usize, &n| a.checked_mul(n));
@@ -292,83 +294,217 @@ fn u32_at(b: &[u8], at: usize) -> Option<usize> {
     Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?) as usize)
 }
 
-/// Reads every array of an `.npz` file whose entries are stored (numpy's `savez`, and what
-/// [`write_npz`] writes; not `savez_compressed`).
-pub fn read_npz(path: &Path) -> Result<Vec<Array>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::bad_input(path, format!("cannot read: {e}")))?;
-    parse_npz(&bytes).map_err(|m| Error::bad_input(path, m))
+/// The largest central directory read: a part has three entries, numpy's archives a few
+/// (each entry's record is 46 bytes and its name).
+const MAX_DIRECTORY_BYTES: usize = 1 << 20;
+
+/// The most bytes of a `.npy` header (format 1.0 counts them in 16 bits) and its preamble.
+pub const MAX_NPY_HEADER_BYTES: u64 = 12 + u16::MAX as u64;
+
+/// One stored entry of an `.npz`, as its directory describes it.
+struct Entry {
+    name: String,
+    local: u64,
+    size: u64,
+    crc: u32,
 }
 
-fn parse_npz(b: &[u8]) -> std::result::Result<Vec<Array>, String> {
-    let not_zip = || "not a partial file (.npz): no zip directory".to_string();
-    if b.len() < 22 {
-        return Err(not_zip());
+/// An `.npz` opened for reading: its directory read from its end, each array read when asked
+/// for and no larger than the caller allows, so that what a file claims is never allocated
+/// before it is checked. Entries must be stored (numpy's `savez`, and what [`write_npz`]
+/// writes; not `savez_compressed`), the archive without zip64.
+pub struct Npz<R> {
+    source: R,
+    len: u64,
+    entries: Vec<Entry>,
+}
+
+impl Npz<std::fs::File> {
+    /// Opens the `.npz` at `path`: a regular file (an archive is read from its end, which a
+    /// pipe or a device has not; `/dev/zero` was read until memory ran out) of at most 4 GiB.
+    pub fn open(path: &Path) -> Result<Self> {
+        let bad = |m: String| Error::bad_input(path, m);
+        let info = std::fs::metadata(path).map_err(|e| bad(format!("cannot read: {e}")))?;
+        if !info.is_file() {
+            return Err(bad("not a regular file: a partial file (.npz) is read from its end".into()));
+        }
+        if info.len() > ZIP_LIMIT {
+            return Err(bad(format!("{} bytes: a partial file (.npz, without zip64) holds at most 4 GiB", info.len())));
+        }
+        let file = std::fs::File::open(path).map_err(|e| bad(format!("cannot read: {e}")))?;
+        Npz::new(file, info.len()).map_err(bad)
     }
-    // The end of the central directory: its signature, searched back over a comment.
-    let eocd = (0..=b.len() - 22)
-        .rev()
-        .take(22 + 65_535)
-        .find(|&i| b[i..i + 4] == 0x0605_4b50u32.to_le_bytes())
-        .ok_or_else(not_zip)?;
-    let entries = u16_at(b, eocd + 10).ok_or_else(not_zip)?;
-    let mut at = u32_at(b, eocd + 16).ok_or_else(not_zip)?;
-    let truncated = || "truncated or damaged zip entry".to_string();
-    let mut arrays = Vec::with_capacity(entries);
-    for _ in 0..entries {
-        if u32_at(b, at) != Some(0x0201_4b50) {
+}
+
+impl<R: std::io::Read + std::io::Seek> Npz<R> {
+    /// Reads the directory of the archive of `len` bytes that `source` holds.
+    pub fn new(mut source: R, len: u64) -> std::result::Result<Self, String> {
+        let not_zip = || "not a partial file (.npz): no zip directory".to_string();
+        let truncated = || "truncated or damaged zip entry".to_string();
+        // The end of the central directory: its signature, searched back over a comment.
+        let tail_len = len.min(22 + 65_535);
+        let tail = read_at(&mut source, len - tail_len, tail_len).map_err(|_| not_zip())?;
+        if tail.len() < 22 {
+            return Err(not_zip());
+        }
+        let eocd = (0..=tail.len() - 22)
+            .rev()
+            .find(|&i| tail[i..i + 4] == 0x0605_4b50u32.to_le_bytes())
+            .ok_or_else(not_zip)?;
+        let count = u16_at(&tail, eocd + 10).ok_or_else(not_zip)?;
+        let (cd_size, cd_offset) =
+            (u32_at(&tail, eocd + 12).ok_or_else(not_zip)?, u32_at(&tail, eocd + 16).ok_or_else(not_zip)? as u64);
+        if cd_size > MAX_DIRECTORY_BYTES || cd_offset + cd_size as u64 > len {
             return Err(truncated());
         }
-        let method = u16_at(b, at + 10).ok_or_else(truncated)?;
-        let crc = u32_at(b, at + 16).ok_or_else(truncated)? as u32;
-        let size = u32_at(b, at + 20).ok_or_else(truncated)?;
-        let stored = u32_at(b, at + 24).ok_or_else(truncated)?;
-        let (name_len, extra_len, comment_len) = (
-            u16_at(b, at + 28).ok_or_else(truncated)?,
-            u16_at(b, at + 30).ok_or_else(truncated)?,
-            u16_at(b, at + 32).ok_or_else(truncated)?,
-        );
-        let local = u32_at(b, at + 42).ok_or_else(truncated)?;
-        let name = b.get(at + 46..at + 46 + name_len).ok_or_else(truncated)?;
-        let name = String::from_utf8_lossy(name).into_owned();
-        at += 46 + name_len + extra_len + comment_len;
-        if method != 0 || size != stored {
-            return Err(format!("{name}: compressed entries are not supported (numpy.savez, not savez_compressed)"));
+        let b = read_at(&mut source, cd_offset, cd_size as u64).map_err(|_| truncated())?;
+        let mut entries = Vec::with_capacity(count.min(cd_size / 46));
+        let mut at = 0;
+        for _ in 0..count {
+            if u32_at(&b, at) != Some(0x0201_4b50) {
+                return Err(truncated());
+            }
+            let method = u16_at(&b, at + 10).ok_or_else(truncated)?;
+            let crc = u32_at(&b, at + 16).ok_or_else(truncated)? as u32;
+            let size = u32_at(&b, at + 20).ok_or_else(truncated)?;
+            let stored = u32_at(&b, at + 24).ok_or_else(truncated)?;
+            let (name_len, extra_len, comment_len) = (
+                u16_at(&b, at + 28).ok_or_else(truncated)?,
+                u16_at(&b, at + 30).ok_or_else(truncated)?,
+                u16_at(&b, at + 32).ok_or_else(truncated)?,
+            );
+            let local = u32_at(&b, at + 42).ok_or_else(truncated)? as u64;
+            let name = b.get(at + 46..at + 46 + name_len).ok_or_else(truncated)?;
+            let name = String::from_utf8_lossy(name).into_owned();
+            at += 46 + name_len + extra_len + comment_len;
+            if method != 0 || size != stored {
+                return Err(format!(
+                    "{name}: compressed entries are not supported (numpy.savez, not savez_compressed)"
+                ));
+            }
+            entries.push(Entry { name, local, size: size as u64, crc });
         }
-        if u32_at(b, local) != Some(0x0403_4b50) {
+        Ok(Npz { source, len, entries })
+    }
+
+    /// The names of its arrays (without `.npy`).
+    pub fn names(&self) -> Vec<String> {
+        self.entries.iter().map(|e| e.name.strip_suffix(".npy").unwrap_or(&e.name).to_string()).collect()
+    }
+
+    /// The array `name` (without `.npy`), if its entry holds at most `most` bytes: read,
+    /// checked against its checksum, parsed.
+    pub fn read(&mut self, name: &str, most: u64) -> std::result::Result<Array, String> {
+        let truncated = || "truncated or damaged zip entry".to_string();
+        let file_name = format!("{name}.npy");
+        let e = self
+            .entries
+            .iter()
+            .find(|e| e.name == file_name)
+            .ok_or_else(|| format!("no '{name}' array: not a fogplanes partial file"))?;
+        if e.size > most {
+            return Err(format!("{name}: its entry holds {} bytes, more than the {most} such an array can", e.size));
+        }
+        let (local, size, crc) = (e.local, e.size, e.crc);
+        let header = read_at(&mut self.source, local, 30).map_err(|_| truncated())?;
+        if u32_at(&header, 0) != Some(0x0403_4b50) {
             return Err(truncated());
         }
-        let start =
-            local + 30 + u16_at(b, local + 26).ok_or_else(truncated)? + u16_at(b, local + 28).ok_or_else(truncated)?;
-        let data = b.get(start..start.checked_add(size).ok_or_else(truncated)?).ok_or_else(truncated)?;
-        if crc32fast::hash(data) != crc {
-            return Err(format!("{name}: damaged (its checksum does not match)"));
+        let skip =
+            30 + u16_at(&header, 26).ok_or_else(truncated)? as u64 + u16_at(&header, 28).ok_or_else(truncated)? as u64;
+        if local + skip + size > self.len {
+            return Err(truncated());
         }
-        let name = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-        arrays.push(parse_npy(&name, data)?);
+        let data = read_at(&mut self.source, local + skip, size).map_err(|_| truncated())?;
+        if crc32fast::hash(&data) != crc {
+            return Err(format!("{file_name}: damaged (its checksum does not match)"));
+        }
+        parse_npy(name, &data)
     }
-    Ok(arrays)
 }
 
-/// The array named `name` of a part.
-pub fn entry<'a>(arrays: &'a [Array], name: &str) -> std::result::Result<&'a Array, String> {
-    arrays.iter().find(|a| a.name == name).ok_or_else(|| format!("no '{name}' array: not a fogplanes partial file"))
+/// `len` bytes of `source` from `offset`, all of them, in a buffer reserved fallibly.
+fn read_at<R: std::io::Read + std::io::Seek>(source: &mut R, offset: u64, len: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::{Read, SeekFrom};
+    let n = usize::try_from(len).map_err(|_| std::io::Error::other("too large"))?;
+    let mut data = Vec::new();
+    data.try_reserve_exact(n).map_err(|_| std::io::Error::other("cannot allocate"))?;
+    source.seek(SeekFrom::Start(offset))?;
+    source.take(len).read_to_end(&mut data)?;
+    if data.len() != n {
+        return Err(std::io::ErrorKind::UnexpectedEof.into());
+    }
+    Ok(data)
 }
 
-/// The metadata of a part read with [`read_npz`].
-pub fn meta(arrays: &[Array]) -> std::result::Result<PartMeta, String> {
-    let text = entry(arrays, "meta")?.as_text()?;
+/// Every array of an `.npz` held in memory, each at most `most` bytes.
+pub fn parse_npz(bytes: &[u8], most: u64) -> std::result::Result<Vec<Array>, String> {
+    let mut npz = Npz::new(std::io::Cursor::new(bytes), bytes.len() as u64)?;
+    npz.names().iter().map(|name| npz.read(name, most)).collect()
+}
+
+/// The most bytes of a part's `meta` entry: its JSON holds the scene's text (at most
+/// [`MAX_SCENE_FILE_BYTES`], each byte at most 6 once escaped, `\u00XX`) and a few short
+/// fields (under 1 MiB), each character stored in 4 bytes.
+pub const MAX_META_BYTES: u64 = MAX_NPY_HEADER_BYTES + 4 * (6 * MAX_SCENE_FILE_BYTES + (1 << 20));
+
+/// The metadata of a part from its `meta` array, checked before any other array is read:
+/// this format and version, a range `start:end` within `total`, a resolution within the
+/// limits, its kind's settings, and `total` within what its kind can count (a render's planes
+/// within the plane limit, a band's rows the image's), so that no count taken from it can
+/// wrap ([`super::Partial::check`] checks the rest of a render part).
+pub fn meta(array: &Array) -> std::result::Result<PartMeta, String> {
+    let text = array.as_text()?;
     let meta: PartMeta =
         serde_json::from_str(&text).map_err(|e| format!("its metadata is not a fogplanes partial's: {e}"))?;
     if meta.format != FORMAT || meta.version != VERSION {
         return Err(format!(
-            "format {} version {}: not a partial file this fogplanes reads",
+            "format {:?} version {}: not a partial file this fogplanes reads",
             meta.format, meta.version
         ));
     }
     if meta.start >= meta.end || meta.end > meta.total {
         return Err(format!("its range {}:{} of {} is empty or out of bounds", meta.start, meta.end, meta.total));
     }
+    let [w, h] = meta.scene.resolution;
+    check_resolution(w, h).map_err(|m| format!("its resolution: {m}"))?;
+    if !(meta.seconds >= 0.0 && meta.seconds.is_finite()) {
+        return Err(format!("its seconds of rendering: {}", meta.seconds));
+    }
+    match meta.kind {
+        PartKind::Render => {
+            if meta.render.is_none() {
+                return Err("a render part without render settings".into());
+            }
+            check_planes(meta.total as u64).map_err(|m| format!("its plane count: {m}"))?;
+        }
+        PartKind::Reference | PartKind::Pilot => {
+            if meta.reference.is_none() {
+                return Err("a reference part without reference settings".into());
+            }
+            if meta.total != h as usize {
+                return Err(format!("its rows {}:{} of {}: the image has {h} rows", meta.start, meta.end, meta.total));
+            }
+        }
+    }
     Ok(meta)
+}
+
+/// The arrays a part of `meta` holds besides `meta`, each with its dtype and shape.
+pub fn expected_arrays(meta: &PartMeta) -> Vec<(&'static str, &'static str, Vec<usize>)> {
+    let [w, h] = meta.scene.resolution.map(|n| n as usize);
+    let band = vec![meta.end - meta.start, w, 3];
+    match meta.kind {
+        PartKind::Render => vec![("sums", "<f8", vec![h, w, 3])],
+        PartKind::Reference => vec![("mean", "<f4", band.clone()), ("stderr", "<f4", band)],
+        PartKind::Pilot => vec![("pilot", "<f4", band)],
+    }
+}
+
+/// The most bytes of the entry of an array of `descr` and `shape` (its `.npy` header and data).
+pub fn entry_bytes(descr: &str, shape: &[usize]) -> u64 {
+    let item = if descr == "<f8" { 8u64 } else { 4 };
+    shape.iter().fold(item, |a, &n| a.saturating_mul(n as u64)).saturating_add(MAX_NPY_HEADER_BYTES)
 }
 
 #[cfg(test)]
@@ -387,7 +523,8 @@ mod tests {
             Array::text("empty", ""),
         ];
         write_npz(&path, &arrays).unwrap();
-        let back = read_npz(&path).unwrap();
+        let mut npz = Npz::open(&path).unwrap();
+        let back: Vec<Array> = npz.names().iter().map(|n| npz.read(n, 1 << 20).unwrap()).collect();
         assert_eq!(back, arrays);
         assert_eq!(back[0].as_text().unwrap(), "{\"é\": 1}");
         assert_eq!(back[3].as_text().unwrap(), "");
@@ -395,10 +532,16 @@ mod tests {
         assert!(back[1].as_f64s(&[3, 2, 3]).is_err() && back[1].as_f32s(&[2, 3, 3]).is_err());
         // Damaged bytes are found, not read.
         let mut bytes = std::fs::read(&path).unwrap();
+        assert_eq!(parse_npz(&bytes, 1 << 20).unwrap(), arrays);
+        // An entry larger than the caller allows is refused before it is read.
+        assert!(parse_npz(&bytes, 100).unwrap_err().contains("more than the 100"));
         let n = bytes.len();
         bytes[n / 2] ^= 1;
-        assert!(parse_npz(&bytes).is_err());
-        assert!(parse_npz(&bytes[..n - 30]).is_err() && parse_npz(b"").is_err());
+        assert!(parse_npz(&bytes, 1 << 20).is_err());
+        assert!(parse_npz(&bytes[..n - 30], 1 << 20).is_err() && parse_npz(b"", 1 << 20).is_err());
+        // Not a regular file: refused before anything is read.
+        #[cfg(unix)]
+        assert!(Npz::open(Path::new("/dev/zero")).err().unwrap().to_string().contains("not a regular file"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -31,10 +31,11 @@ pub mod parts;
 
 use crate::emission::direct_emission;
 use crate::error::{Error, Result};
-use crate::film::Film;
+use crate::film::{Film, first_outside};
 use crate::limits::CHUNK_PLANES;
 use crate::options::RenderOptions;
 use crate::pixel::plane_group;
+pub use crate::sampling::stable_hash;
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use std::ops::Range;
@@ -55,22 +56,6 @@ pub fn chunk_indices(planes: usize, range: &Range<usize>) -> Result<Range<usize>
         )));
     }
     Ok(range.start / CHUNK_PLANES..range.end.div_ceil(CHUNK_PLANES).min(n))
-}
-
-/// A stable 128-bit hash of `bytes` (FNV-1a): the same in every process, run and machine, as
-/// 32 hex digits. It names contents (scenes, settings), it does not guard against forgery.
-pub fn stable_hash(parts: &[&[u8]]) -> String {
-    const OFFSET: u128 = 0x6c62_272e_07bb_0142_62b8_2175_6295_c58d;
-    const PRIME: u128 = 0x0000_0000_0100_0000_0000_0000_0000_013b;
-    let mut h = OFFSET;
-    for part in parts {
-        // Each part's length first, so that ("ab", "c") and ("a", "bc") differ.
-        for &b in (part.len() as u64).to_le_bytes().iter().chain(part.iter()) {
-            h ^= b as u128;
-            h = h.wrapping_mul(PRIME);
-        }
-    }
-    format!("{h:032x}")
 }
 
 /// What identifies an image: the scene's geometry, medium, lights and camera (its name and
@@ -118,6 +103,54 @@ impl Partial {
     fn describe(&self) -> String {
         format!("planes {}:{}", self.start, self.end)
     }
+
+    /// The canonical chunks the planes `start..end` touch.
+    fn chunk_count(&self) -> usize {
+        self.end.div_ceil(CHUNK_PLANES).saturating_sub(self.start / CHUNK_PLANES)
+    }
+
+    /// The most a channel of one pixel's sums can hold (docs/mathematics.md section 9): each
+    /// chunk's sums are gathered in f32, so a chunk adds at most `f32::MAX`, and `k` chunks at
+    /// most `k f32::MAX` (exactly: the f64 sum of `k <= 8192` values below it is below it).
+    pub fn most_per_channel(&self) -> f64 {
+        self.chunk_count() as f64 * f32::MAX as f64
+    }
+
+    /// Checks what a partial holds against what a render can make, so that one given back by a
+    /// file, a pickle or a caller is trusted no more than an argument: a size within the
+    /// limits and sums for each pixel; a plane count within the limits, planes `start..end` a
+    /// union of its canonical chunks; hits at most one per plane and pixel; seconds finite and
+    /// non-negative; and every sum a number in `[0, most_per_channel]` (contributions are
+    /// non-negative), naming the first that is not. Every count checked here is one that later
+    /// arithmetic (the canonical tree, the division by N) trusts.
+    pub fn check(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Partial(format!("{}: {m}", self.describe())));
+        crate::limits::check_resolution(self.width, self.height).or_else(|m| bad(format!("its size: {m}")))?;
+        let pixels = self.width as usize * self.height as usize;
+        if self.sums.len() != pixels {
+            return bad(format!("{} sums for {}x{} pixels", self.sums.len(), self.width, self.height));
+        }
+        crate::limits::check_planes(self.planes_total as u64).or_else(|m| bad(format!("its render: {m}")))?;
+        chunk_indices(self.planes_total, &(self.start..self.end))?;
+        let most_hits = (self.end - self.start) as u128 * pixels as u128;
+        if self.hits as u128 > most_hits {
+            return bad(format!("{} hits, more than one per plane and pixel ({most_hits})", self.hits));
+        }
+        if !(self.seconds >= 0.0 && self.seconds.is_finite()) {
+            return bad(format!("{} seconds of rendering", self.seconds));
+        }
+        let most = self.most_per_channel();
+        if let Some(p) = first_outside(self.sums.iter().map(|s| s.to_array()), self.width, most) {
+            let why = if p.value.is_nan() || p.value < 0.0 {
+                "a sum of contributions is a non-negative number".to_string()
+            } else {
+                let k = self.chunk_count();
+                format!("beyond {most:.4e}, the most {k} chunk{} of planes can sum to", if k == 1 { "" } else { "s" })
+            };
+            return bad(format!("sums: {p}: {why}"));
+        }
+        Ok(())
+    }
 }
 
 /// Refuses two partials of different renders or sizes.
@@ -136,14 +169,17 @@ fn check_same_render(a: &Partial, b: &Partial) -> Result<()> {
 }
 
 /// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in f64.
+/// Each is checked first ([`Partial::check`]).
 pub fn combine(a: &Partial, b: &Partial) -> Result<Partial> {
+    a.check()?;
+    b.check()?;
     check_same_render(a, b)?;
     if a.end != b.start {
         let how = if a.end > b.start { "overlap" } else { "leave a gap" };
         return Err(Error::Partial(format!("{} and {} are not adjacent: they {how}", a.describe(), b.describe())));
     }
     let sums = a.sums.iter().zip(&b.sums).map(|(x, y)| *x + *y).collect();
-    Ok(Partial { sums, end: b.end, hits: a.hits + b.hits, seconds: a.seconds + b.seconds, ..a.clone() })
+    Ok(Partial { sums, end: b.end, hits: a.hits.saturating_add(b.hits), seconds: a.seconds + b.seconds, ..a.clone() })
 }
 
 /// The largest power of two strictly below `n` (n >= 2): where the canonical tree splits.
@@ -152,15 +188,18 @@ pub(crate) fn split(n: usize) -> usize {
 }
 
 /// Merges partials given in any order into one covering their union, adding along the
-/// canonical tree over chunk indices (module docs). Refuses parts of different renders or
-/// sizes, overlapping parts, gaps and parts that do not reach `0` or `N`, naming them, before
-/// adding anything. Parts that are nodes of the tree (a single chunk, or what [`crate::render::render_chunk`]
+/// canonical tree over chunk indices (module docs). Refuses parts that fail
+/// [`Partial::check`], parts of different renders or sizes, overlapping parts, gaps and parts
+/// that do not reach `0` or `N`, naming them, before adding anything. Parts that are nodes of the tree (a single chunk, or what [`crate::render::render_chunk`]
 /// made of a node's chunks) give the bits of a whole render; where a part straddles a split of
 /// the tree, the parts under that node are added left to right instead (equal within f64
 /// rounding).
 pub fn merge_in_canonical_order(mut parts: Vec<Partial>) -> Result<Partial> {
     if parts.is_empty() {
         return Err(Error::Partial("no partial renders to merge".into()));
+    }
+    for p in &parts {
+        p.check()?;
     }
     parts.sort_by_key(|p| (p.start, p.end));
     let (first, last) = (&parts[0], &parts[parts.len() - 1]);
@@ -187,16 +226,19 @@ pub fn merge_in_canonical_order(mut parts: Vec<Partial>) -> Result<Partial> {
 /// The canonical node over chunks `range` from the `parts` (sorted, adjacent, covering it)
 /// that lie in it, taking them.
 fn merge_node(parts: &mut [Option<Partial>], range: Range<usize>) -> Result<Partial> {
-    let (lo, hi) = (range.start * CHUNK_PLANES, range.end * CHUNK_PLANES);
+    // The plane counts are checked (Partial::check): no product here can wrap.
+    let (lo, hi) = (range.start.saturating_mul(CHUNK_PLANES), range.end.saturating_mul(CHUNK_PLANES));
     let inside: Vec<usize> =
         (0..parts.len()).filter(|&i| parts[i].as_ref().is_some_and(|p| p.start >= lo && p.start < hi)).collect();
     if let [i] = inside[..] {
         return Ok(parts[i].take().expect("present"));
     }
     let m = range.start + split(range.len().max(2));
-    let straddles = inside
-        .iter()
-        .any(|&i| parts[i].as_ref().is_some_and(|p| p.start < m * CHUNK_PLANES && p.end > m * CHUNK_PLANES));
+    let straddles = inside.iter().any(|&i| {
+        parts[i]
+            .as_ref()
+            .is_some_and(|p| p.start < m.saturating_mul(CHUNK_PLANES) && p.end > m.saturating_mul(CHUNK_PLANES))
+    });
     if range.len() >= 2 && !straddles {
         let left = merge_node(parts, range.start..m)?;
         let right = merge_node(parts, m..range.end)?;
@@ -316,9 +358,12 @@ pub fn merge_plan(chunks: usize, block: usize) -> Result<Vec<PlanStep>> {
 
 /// The image of a render from the partial of all its planes: the sums divided by N in f64,
 /// rounded to f32 once, plus the direct emission over each pixel (computed here,
-/// [`crate::emission::direct_emission`]). Refuses a
-/// partial of another render or one that does not cover `0..N`.
+/// [`crate::emission::direct_emission`]). Refuses a partial that fails [`Partial::check`], a
+/// partial of another render or one that does not cover `0..N`, and an image that would hold a
+/// value that is not a finite number (f32 overflow where a pixel's sums divided by N come near
+/// `f32::MAX`), naming the pixel.
 pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<Film> {
+    partial.check()?;
     if partial.fingerprint != fingerprint(scene, opts) {
         return Err(Error::Partial(format!(
             "{} belong to another render (another scene or other settings) than the one to finish",
@@ -341,7 +386,9 @@ pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<
         )));
     }
     let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
-    Ok(Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission))
+    let film = Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission);
+    film.check_finite("image")?;
+    Ok(film)
 }
 
 /// The image of the first planes of a render while it runs (docs/mathematics.md section 8.1, "A
@@ -464,6 +511,62 @@ mod tests {
         assert_eq!(merge_plan(8192, 1).unwrap().len(), 2 * 8192 - 1);
     }
 
+    /// What a render can make passes; the first value or count beyond it is refused, named.
+    #[test]
+    fn a_partial_is_held_to_what_a_render_can_make() {
+        let planes = 3 * CHUNK_PLANES;
+        let valid = Partial {
+            width: 2,
+            height: 1,
+            sums: vec![DVec3::ZERO; 2],
+            start: CHUNK_PLANES,
+            end: planes,
+            planes_total: planes,
+            fingerprint: "f".into(),
+            hits: 2 * 2 * CHUNK_PLANES as u64,
+            seconds: 0.5,
+        };
+        let most = 2.0 * f32::MAX as f64;
+        assert_eq!(valid.most_per_channel(), most);
+        let with = |f: &dyn Fn(&mut Partial)| {
+            let mut p = valid.clone();
+            f(&mut p);
+            p.check().map_err(|e| e.to_string())
+        };
+        assert!(with(&|p| p.sums[1].z = most).is_ok());
+        for (value, says) in [
+            (f64::NAN, "channel B is NaN: a sum of contributions is a non-negative number"),
+            (-1.0, "channel B is -1: "),
+            (f64::INFINITY, "is inf: beyond 6.8056e38, the most 2 chunks"),
+            (most.next_up(), "beyond"),
+            (1e308, "channel B is 1e308: beyond"),
+        ] {
+            let e = with(&|p| p.sums[1].z = value).unwrap_err();
+            assert!(e.starts_with("planes 16384:49152: sums: pixel (x 1, y 0) ") && e.contains(says), "{value}: {e}");
+        }
+        let changes: [(fn(&mut Partial), &str); 7] = [
+            (|p| p.hits += 1, "hits, more than one per plane and pixel"),
+            (|p| p.planes_total = usize::MAX, "the plane count must be between"),
+            (|p| (p.end, p.planes_total) = (usize::MAX, usize::MAX), "plane count"),
+            (|p| p.start = 1, "not a union of the render's chunks"),
+            (|p| p.width = 3, "2 sums for 3x1 pixels"),
+            (|p| p.width = 0, "each side must be between"),
+            (|p| p.seconds = f64::NAN, "NaN seconds"),
+        ];
+        for (f, says) in changes {
+            let e = with(&f).unwrap_err();
+            assert!(e.contains(says), "{says}: {e}");
+        }
+        // The merge and the addition refuse one before adding anything.
+        let first = Partial { start: 0, end: CHUNK_PLANES, hits: 0, ..valid.clone() };
+        let mut bad = valid.clone();
+        bad.sums[0].x = f64::NAN;
+        assert!(merge_in_canonical_order(vec![first.clone(), bad.clone()]).unwrap_err().to_string().contains("NaN"));
+        assert!(combine(&first, &bad).is_err() && combine(&first, &valid).is_ok());
+        let wrapped = Partial { start: 0, end: usize::MAX, planes_total: usize::MAX, ..valid };
+        assert!(merge_in_canonical_order(vec![wrapped]).unwrap_err().to_string().contains("plane count"));
+    }
+
     #[test]
     fn chunks_cover_the_planes_in_order() {
         assert_eq!(chunks(40_960), vec![0..16_384, 16_384..32_768, 32_768..40_960]);
@@ -472,13 +575,5 @@ mod tests {
         for bad in [0..0, 1..16_384, 0..40_961, 16_384..20_000] {
             assert!(chunk_indices(40_960, &bad).is_err(), "{bad:?}");
         }
-    }
-
-    #[test]
-    fn the_stable_hash_is_fnv_1a() {
-        // FNV-1a 128 of the empty string is its offset basis; lengths are hashed first here.
-        assert_eq!(stable_hash(&[]), "6c62272e07bb014262b821756295c58d");
-        assert_ne!(stable_hash(&[b"ab", b"c"]), stable_hash(&[b"a", b"bc"]));
-        assert_eq!(stable_hash(&[b"x"]), stable_hash(&[b"x"]));
     }
 }

@@ -158,7 +158,7 @@ pub fn reference_options_of(r: &ReferenceRecord) -> ReferenceOptions {
     ReferenceOptions { spp: r.spp, seed: r.seed, pixel_center: r.pixel_center, uniform: r.uniform }
 }
 
-/// A part read back.
+/// A part read back: its metadata and arrays checked ([`read_part`]).
 pub struct Part {
     pub path: PathBuf,
     pub meta: PartMeta,
@@ -170,24 +170,24 @@ impl Part {
         Error::bad_input(&self.path, message.to_string())
     }
 
+    /// The band of rows of its array `name` (a reference's `mean`, `stderr`, a `pilot`).
     pub fn film(&self, name: &str) -> Result<Film> {
-        let (w, rows) = (self.meta.scene.resolution[0], (self.meta.end - self.meta.start) as u32);
-        let values = file::entry(&self.arrays, name)
-            .and_then(|a| a.as_f32s(&pixel_shape(rows as usize, w)))
-            .map_err(|m| self.bad(m))?;
-        let mut film = Film::new(w, rows);
+        let array =
+            self.arrays.iter().find(|a| a.name == name).ok_or_else(|| self.bad(format!("no '{name}' array")))?;
+        let (w, rows) = (self.meta.scene.resolution[0], self.meta.end - self.meta.start);
+        let values = array.as_f32s(&pixel_shape(rows, w)).map_err(|m| self.bad(m))?;
+        let mut film = Film::new(w, u32::try_from(rows).map_err(|_| self.bad("too many rows"))?);
         film.pixels = values.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
         Ok(film)
     }
 
-    /// The render partial it holds.
+    /// The render partial it holds, checked ([`Partial::check`]).
     pub fn partial(&self) -> Result<Partial> {
         let m = &self.meta;
         let [w, h] = m.scene.resolution;
-        let sums = file::entry(&self.arrays, "sums")
-            .and_then(|a| a.as_f64s(&pixel_shape(h as usize, w)))
-            .map_err(|e| self.bad(e))?;
-        Ok(Partial {
+        let array = self.arrays.iter().find(|a| a.name == "sums").ok_or_else(|| self.bad("no 'sums' array"))?;
+        let sums = array.as_f64s(&pixel_shape(h as usize, w)).map_err(|e| self.bad(e))?;
+        let partial = Partial {
             width: w,
             height: h,
             sums: sums.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect(),
@@ -197,22 +197,58 @@ impl Part {
             fingerprint: m.fingerprint.clone(),
             hits: m.hits,
             seconds: m.seconds,
-        })
+        };
+        partial.check().map_err(|e| self.bad(e))?;
+        Ok(partial)
     }
 }
 
-/// Reads a part written by this module.
+/// Reads a part written by this module, trusting nothing it claims before checking it: a
+/// regular file; its metadata first ([`file::meta`], at most [`file::MAX_META_BYTES`]); then
+/// the arrays its kind holds, each refused before it is read if its entry is larger than the
+/// shape the metadata records needs, and of that dtype and shape; and their numbers: a band's
+/// values finite and non-negative (means and standard errors of non-negative samples), a
+/// render's sums as [`Partial::check`] has them. Every refusal is one line naming the file
+/// (and the pixel).
 pub fn read_part(path: &Path) -> Result<Part> {
-    let arrays = file::read_npz(path)?;
-    let meta = file::meta(&arrays).map_err(|m| Error::bad_input(path, m))?;
-    Ok(Part { path: path.to_path_buf(), meta, arrays })
+    let bad = |m: String| Error::bad_input(path, m);
+    let mut npz = file::Npz::open(path)?;
+    let meta = file::meta(&npz.read("meta", file::MAX_META_BYTES).map_err(bad)?).map_err(bad)?;
+    let mut arrays = Vec::new();
+    for (name, descr, shape) in file::expected_arrays(&meta) {
+        let array = npz.read(name, file::entry_bytes(descr, &shape)).map_err(bad)?;
+        array.check(descr, &shape).map_err(bad)?;
+        arrays.push(array);
+    }
+    let part = Part { path: path.to_path_buf(), meta, arrays };
+    match part.meta.kind {
+        PartKind::Render => {
+            part.partial()?;
+        }
+        PartKind::Reference | PartKind::Pilot => {
+            let holds = if part.meta.kind == PartKind::Pilot { "standard errors" } else { "means and standard errors" };
+            for (name, _, _) in file::expected_arrays(&part.meta) {
+                if let Some(p) = part.film(name)?.first_outside(f32::MAX as f64) {
+                    return Err(part.bad(format!(
+                        "{name}: {p} (of the band of rows {}:{}): a band holds {holds}, finite and non-negative",
+                        part.meta.start, part.meta.end
+                    )));
+                }
+            }
+        }
+    }
+    Ok(part)
 }
 
 /// The whole pilot of an adaptive reference read from `path` (a merged pilot file), checked
-/// against the reference it is for.
+/// against the reference it is for: its kind, settings, scene and resolution.
 pub fn read_pilot(path: &Path, scene: &Scene, opts: &ReferenceOptions) -> Result<Film> {
     let part = read_part(path)?;
-    if part.meta.kind != PartKind::Pilot || part.meta.fingerprint != reference_fingerprint(scene, opts, true) {
+    let cam = &scene.camera;
+    if part.meta.kind != PartKind::Pilot
+        || part.meta.fingerprint != reference_fingerprint(scene, opts, true)
+        || part.meta.scene.resolution != [cam.width, cam.height]
+    {
         return Err(part.bad("not the pilot pass of this reference (another scene or other settings)"));
     }
     if part.meta.start != 0 || part.meta.end != part.meta.total {

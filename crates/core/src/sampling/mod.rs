@@ -13,7 +13,7 @@ mod kronecker;
 pub mod sobol;
 mod warp;
 
-pub use hash::{rng_for, splitmix64, unit_f64};
+pub use hash::{rng_for, splitmix64, stable_hash, unit_f64};
 pub use kronecker::Kronecker;
 pub use warp::{Discrete, concentric_disk, cosine_hemisphere};
 
