@@ -188,7 +188,6 @@ pub const RAY_LANES: usize = 8;
 /// What every ray of a set shares: the camera's frame and scale, the box, and the set's Sobol
 /// point before its per-pixel scramble.
 struct RayRow {
-    origin: [f64; 3],
     forward: [f64; 3],
     right: [f64; 3],
     up: [f64; 3],
@@ -213,7 +212,6 @@ impl RayRow {
         let (o, m) = (cam.position.to_array(), &scene.medium);
         let (min, max) = (m.min.to_array(), m.max.to_array());
         RayRow {
-            origin: o,
             forward: cam.forward.to_array(),
             right: cam.right.to_array(),
             up: cam.up.to_array(),
