@@ -53,6 +53,63 @@ fn every_kernel_gives_bit_identical_images() {
     }
 }
 
+/// FNV-1a over the bits of every pixel's three channels.
+fn image_hash(pixels: &[glam::Vec3]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for c in pixels.iter().flat_map(|v| v.to_array()) {
+        h = (h ^ c.to_bits() as u64).wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// The images of every estimator and K are those of the build before the kernel's rework
+/// (issue 27: ray sets made in vector blocks, masks as u32 lanes, spans by lanes, one logarithm
+/// per sector of cmis-exact), bit for bit: the hashes below are of that build's EXR files
+/// (`fogplanes render SCENE --resolution 64x36 --planes 1500 --seed 5 -e E [--orientations K]`).
+/// A change of arithmetic that is meant changes them, and says so.
+#[test]
+fn images_are_those_of_the_build_before_the_kernel_rework() {
+    let want: [(&str, &[(Estimator, u32, u64)]); 2] = [
+        (
+            "media_scenes/six_lights.toml",
+            &[
+                (Estimator::Unweighted, 2, 0x0020_4104_f486_c449),
+                (Estimator::CmisCosine, 2, 0xad41_85db_66e3_e43a),
+                (Estimator::SmisCosine, 2, 0xeb76_5ab8_9415_7cfa),
+                (Estimator::SmisExact, 2, 0xdf30_e1f2_4564_0abc),
+                (Estimator::CmisExact, 2, 0x3083_1917_546f_86ad),
+                (Estimator::SmisCosine, 4, 0x182e_2e42_703c_9272),
+                (Estimator::SmisExact, 4, 0x0c15_159a_8c04_cb8b),
+                (Estimator::SmisCosine, 8, 0x5542_f9e0_f0f2_be7b),
+                (Estimator::SmisExact, 8, 0x356f_b219_e942_2bc6),
+            ],
+        ),
+        (
+            "media_scenes/hard/camera_inside_box.toml",
+            &[
+                (Estimator::Unweighted, 2, 0xbfd7_56fb_bda1_a437),
+                (Estimator::CmisCosine, 2, 0x1916_e38a_b770_51b3),
+                (Estimator::SmisCosine, 2, 0x99ba_85f0_dfa4_5385),
+                (Estimator::SmisExact, 2, 0x763d_ba4b_ba23_10bc),
+                (Estimator::CmisExact, 2, 0xffe8_5373_7e3a_38f3),
+                (Estimator::SmisCosine, 4, 0x8fd8_0be5_8748_c375),
+                (Estimator::SmisExact, 4, 0x1545_4353_4a68_6c28),
+                (Estimator::SmisCosine, 8, 0xb829_3b43_3920_558a),
+                (Estimator::SmisExact, 8, 0x785a_52df_21ec_197d),
+            ],
+        ),
+    ];
+    for (file, cases) in want {
+        let s = scene(file, 64, 36);
+        for &(estimator, orientations, hash) in cases {
+            let w = Weighting { estimator, orientations };
+            let (image, _) =
+                render(&s, &with(&s, w, Accelerator::Raster, Kernel::Auto, 1500), Control::none()).unwrap();
+            assert_eq!(image_hash(&image.pixels), hash, "{file} {w}: the image changed");
+        }
+    }
+}
+
 #[test]
 fn a_kernel_the_cpu_lacks_is_a_clear_error() {
     let s = scene("media_scenes/six_lights.toml", 16, 9);

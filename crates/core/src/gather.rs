@@ -185,20 +185,23 @@ impl<D: Denominator> PlaneJob<'_, D> {
         hits: &mut [u32; L],
     ) {
         let view = &self.view;
-        let (mut hit, mut det, mut t, mut a, mut r) = ([false; L], [0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
+        // Hit masks as u32 (0 or 1), not bool: a vector of bools is a vector of bytes, and
+        // every pass between the lane loops packed and unpacked it (a fifth of the AVX2
+        // kernel's instructions).
+        let (mut hit, mut det, mut t, mut a, mut r) = ([0u32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
         for l in 0..L {
             let c = view.crossing([rays.x[l], rays.y[l], rays.z[l]], rays.t0[l], rays.t1[l]);
-            (hit[l], det[l], t[l], a[l], r[l]) = (c.hit, c.det, c.t, c.a, c.r);
-            hits[l] += c.hit as u32;
+            (hit[l], det[l], t[l], a[l], r[l]) = (c.hit as u32, c.det, c.t, c.a, c.r);
+            hits[l] += hit[l];
         }
         // A block without a hit adds nothing (adding +0.0 would not change a sum either).
-        if !CONTRIBUTE || !hit.iter().fold(false, |any, &h| any | h) {
+        if !CONTRIBUTE || hit.iter().fold(0, |any, &h| any | h) == 0 {
             return;
         }
         let mut lit = hit;
         for o in self.occluders {
             for l in 0..L {
-                lit[l] &= !o.blocks(a[l], r[l]);
+                lit[l] &= !o.blocks(a[l], r[l]) as u32;
             }
         }
         let mut det_perp = [0.0f32; L];
@@ -211,7 +214,7 @@ impl<D: Denominator> PlaneJob<'_, D> {
         let sigma_t = self.extinction.sigma_t;
         let [sr, sg, sb] = sums;
         for l in 0..L {
-            let [cr, cg, cb] = view.contribution::<GREY>(sigma_t, (t[l] - rays.t0[l]) + r[l], d[l], lit[l]);
+            let [cr, cg, cb] = view.contribution::<GREY>(sigma_t, (t[l] - rays.t0[l]) + r[l], d[l], lit[l] != 0);
             sr[l] += cr;
             sg[l] += cg;
             sb[l] += cb;

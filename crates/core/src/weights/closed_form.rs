@@ -154,7 +154,7 @@ struct Sector {
 
 #[inline(always)]
 fn sector<const E: usize>(w: f32, h: f32, p: f32, q: f32, zx: f32, zy: f32) -> Sector {
-    use crate::numeric::{atan2_f32, ln_1p_f32, ln_f32};
+    use crate::numeric::{atan2_f32, ln_f32};
     let (a_u, a_v) = (zy, -zx);
     // Corners counter-clockwise from (0, 0), relative to the vertex; edge E runs from corner E
     // to corner E + 1, with outward normal n_E, tangent t_E = n_E turned a quarter, distance
@@ -173,9 +173,14 @@ fn sector<const E: usize>(w: f32, h: f32, p: f32, q: f32, zx: f32, zy: f32) -> S
     // ln(|r_start|^2 / |r_end|^2) as ln(1 + x), x = delta / |r_end|^2, where that is accurate
     // (x small: the ratio would round away its difference from 1), else from the ratio (x near
     // -1: 1 + x would cancel).
+    // One logarithm of the chosen argument, not both forms (branch-free, both were evaluated):
+    // ln_1p_f32(x) is ln_f32(1 + x) plus the rounding of 1 + x, added here (the same bits).
     let inv = 1.0 / r2_end;
     let (x, ratio) = (delta * inv, (start.0 * start.0 + start.1 * start.1) * inv);
-    let ell = 0.5 * if x.abs() < 0.5 { ln_1p_f32(x) } else { ln_f32(ratio) };
+    let near_one = x.abs() < 0.5;
+    let u = 1.0 + x;
+    let (argument, rounding) = if near_one { (u, x - (u - 1.0)) } else { (ratio, 0.0) };
+    let ell = 0.5 * (ln_f32(argument) + rounding);
     let c_start = start.0 * zy - start.1 * zx;
     let c_end = zx * end.1 - zy * end.0;
     Sector {
