@@ -170,16 +170,17 @@ def run(a, np, mi, scene, text):
                 hi = mid
         return 0.5 * (lo + hi)
 
-    ok = True
+    ok, checked, skipped = True, 0, 0
     print(f"scene {a.scene}: distance of Mitsuba's outline from fogplanes' projected edge, pixels, "
           f"outward positive (mean over points {a.step:g} px apart; worst |.|)")
     print(f"{'light':<16}{'edge':>5}{'points':>7}{'no box: Mitsuba':>18}{'worst':>9}"
           f"{'with box: Mitsuba':>19}{'model':>10}{'worst |M-model|':>17}")
     for k, L in enumerate(lights):
+        name = L.get("name", f"light {k}")
         corner, eu, ev = (np.array(L[key], dtype=float) for key in ("corner", "edge_u", "edge_v"))
         world = [corner, corner + eu, corner + eu + ev, corner + ev]
         if any((c - cam.pos) @ cam.f <= 0 for c in world):
-            print(f"{L['name']:<16} reaches behind the camera: skipped")
+            print(f"{name:<16} reaches behind the camera: skipped")
             continue
         quad = [cam.project(c) for c in world]
         centre = np.mean(quad, axis=0)
@@ -200,24 +201,30 @@ def run(a, np, mi, scene, text):
                 if not (0.1 < pt[0] < w - 0.1 and 0.1 < pt[1] < h - 0.1):
                     continue
                 found = [crossing(s, pt, normal) for s in (exact_sees, bare_sees, box_sees, offset_sees)]
-                if found[0] is None or any(f is None for f in found[1:]):
-                    continue  # another panel in front, or the edge is not where the light is seen
+                if any(f is None for f in found):
+                    skipped += 1  # another panel in front, or the edge is not where the light is seen
+                    continue
                 rows.append([f - found[0] for f in found[1:]])
+            checked += len(rows)
             if not rows:
                 continue
             r = np.array(rows)
             bare, box, model = r[:, 0], r[:, 1], r[:, 2]
             worst_bare, worst_model = np.abs(bare).max(), np.abs(box - model).max()
-            print(f"{L['name']:<16}{e:>5}{len(r):>7}{bare.mean():>+18.5f}{worst_bare:>9.5f}"
+            print(f"{name:<16}{e:>5}{len(r):>7}{bare.mean():>+18.5f}{worst_bare:>9.5f}"
                   f"{box.mean():>+19.5f}{model.mean():>+10.5f}{worst_model:>17.5f}")
             if worst_bare > a.tol:
                 ok = False
-                print(f"FAIL: without the box, {L['name']} edge {e} lies {worst_bare:.5f} px from fogplanes' "
+                print(f"FAIL: without the box, {name} edge {e} lies {worst_bare:.5f} px from fogplanes' "
                       f"(limit {a.tol}): the export's camera or panel differs")
             if worst_model > a.tol:
                 ok = False
-                print(f"FAIL: with the box, {L['name']} edge {e} lies {worst_model:.5f} px from the ray-offset "
+                print(f"FAIL: with the box, {name} edge {e} lies {worst_model:.5f} px from the ray-offset "
                       f"model (limit {a.tol})")
+    if checked == 0:
+        ok = False
+        print("FAIL: no outline point could be checked")
+    print(f"{checked} points checked, {skipped} skipped (another panel in front, or no single crossing)")
     print("outlines: OK" if ok else "outlines: FAILED")
     return 0 if ok else 1
 
