@@ -2,12 +2,12 @@
 """Checks `fogplanes export --format mitsuba` against fogplanes' own reference renderer.
 
 Exports SCENE with the fogplanes binary, renders the XML with Mitsuba 3 (scalar_rgb variant) in
-several passes of different seeds, renders fogplanes' jittered reference with its per-pixel
-standard error, and compares the two block by block: for each block of BLOCK x BLOCK pixels and
-each channel, z = (Mitsuba's block mean - the reference's) / the combined standard error. The
-reference's standard error comes from its --stderr-image; Mitsuba's from the spread of each
-pixel over the passes, pooled over the block's pixels (pixels are independent: the box filter
-keeps every sample in its own pixel).
+several passes of different seeds (no two sharing a random stream), renders fogplanes' jittered
+reference with its per-pixel standard error, and compares the two block by block: for each
+block of BLOCK x BLOCK pixels and each channel, z = (Mitsuba's block mean - the reference's) /
+the combined standard error. The reference's standard error comes from its --stderr-image;
+Mitsuba's from the spread of each pixel over the passes, pooled over the block's pixels (pixels
+are independent: the box filter keeps every sample in its own pixel, and no stream is shared).
 
 Exit status: 0 when every block lies within --max-block-z standard errors and every channel's
 image mean within --max-mean-z; 1 when not (or when the image looks mirrored); 2 on bad usage
@@ -100,13 +100,17 @@ def run(a, np, mi, work):
         print(f"error: {e}", file=sys.stderr)
         return 2
 
-    # Mitsuba: one load, then passes with seeds seed, seed + 1, ...
+    # Mitsuba: one load, then passes with seeds seed, seed + stride, ... Mitsuba seeds pixel i of
+    # block b with seed * w * h + b * B^2 + i, its blocks (B <= 32 pixels wide) covering the
+    # film: consecutive seeds would share random streams between pixels of two passes, which
+    # their spread would not show.
     t0 = time.perf_counter()
     per_pass = a.spp // a.passes
     scene = mi.load_file(xml, resx=w, resy=h, spp=per_pass)
+    stride = -(-(w + 32) * (h + 32) // (w * h))
     passes = []
     for k in range(a.passes):
-        img = mi.render(scene, seed=a.seed + k, spp=per_pass)
+        img = mi.render(scene, seed=a.seed + k * stride, spp=per_pass)
         passes.append(np.array(img, dtype=np.float64)[..., :3])
     mi_seconds = time.perf_counter() - t0
     passes = np.stack(passes)  # (passes, h, w, 3)
