@@ -103,10 +103,12 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let r = settings::resolve_render(&scene, &Overrides::from(&a))?;
     let (scene, opts) = (&r.scene, &r.options);
     if let Some(part) = &a.partial {
+        settings::check_exposure_applies(a.exposure, &[])?;
         return render_part(&a, scene, opts, part, r.threads);
     }
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
     check_outputs(&[Output::Image(&output)])?;
+    settings::check_exposure_applies(a.exposure, &[&output])?;
     start_threads(r.threads)?;
 
     let bar =
@@ -173,6 +175,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                 return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
             }
             check_outputs(&[Output::Image(&a.output)])?;
+            settings::check_exposure_applies(a.exposure, &[&a.output])?;
             image.save(&a.output, exposure)?;
             if !a.quiet {
                 say!(
@@ -196,6 +199,8 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             let mut outputs = vec![Output::Image(&a.output)];
             outputs.extend(a.stderr_image.as_deref().map(Output::Image));
             check_outputs(&outputs)?;
+            let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
+            settings::check_exposure_applies(a.exposure, &images)?;
             mean.save(&a.output, exposure)?;
             if let Some(p) = &a.stderr_image {
                 stderr.save(p, exposure)?;
@@ -210,6 +215,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                 return Err(input(anyhow!("--stderr-image: pilot parts merge into one .npz")));
             }
             check_partial_output(&a.output)?;
+            settings::check_exposure_applies(a.exposure, &[])?;
             let rows = 0..scene.camera.height;
             save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
             if !a.quiet {
@@ -264,6 +270,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let scene = Scene::load(&a.scene).map_err(input)?;
     let r = settings::resolve_reference(&scene, &ReferenceOverrides::from(&a))?;
     if let Some(part) = &a.partial {
+        settings::check_exposure_applies(a.exposure, &[])?;
         return reference_part(&a, &r, part);
     }
     if a.pilot_pass || a.pilot.is_some() {
@@ -274,6 +281,8 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
     check_outputs(&outputs)?;
+    let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
+    settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
     let passes = if r.options.uniform { 1 } else { 2 };
     let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
