@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""MSE of Sobol planes against independent planes, for the README's and the notes' figures.
+"""MSE of Sobol planes against independent planes, for the figures of docs/measurements.md.
 
 Uses only the built command line (cargo build --release). Two measures:
 

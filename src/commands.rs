@@ -111,6 +111,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let r = settings::resolve_render(&scene, &Overrides::from(&a))?;
     let (scene, opts) = (&r.scene, &r.options);
     if let Some(part) = &a.partial {
+        settings::check_exposure_applies(a.exposure, &[])?;
         return render_part(&a, scene, opts, part, r.threads);
     }
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
@@ -119,6 +120,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
         return Err(input(anyhow!("{flag}: a render on a time budget has no chunks to follow: give --planes")));
     }
+    settings::check_exposure_applies(a.exposure, &[&output])?;
     start_threads(r.threads)?;
 
     let bar =
@@ -195,6 +197,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                 return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
             }
             check_outputs(&[Output::Image(&a.output)])?;
+            settings::check_exposure_applies(a.exposure, &[&a.output])?;
             image.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, partial.planes_total)))?;
             if !a.quiet {
                 say!(
@@ -218,6 +221,8 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             let mut outputs = vec![Output::Image(&a.output)];
             outputs.extend(a.stderr_image.as_deref().map(Output::Image));
             check_outputs(&outputs)?;
+            let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
+            settings::check_exposure_applies(a.exposure, &images)?;
             mean.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, false)))?;
             if let Some(p) = &a.stderr_image {
                 stderr.save_with_info(p, exposure, Some(&options.image_info(&scene, true)))?;
@@ -232,6 +237,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                 return Err(input(anyhow!("--stderr-image: pilot parts merge into one .npz")));
             }
             check_partial_output(&a.output)?;
+            settings::check_exposure_applies(a.exposure, &[])?;
             let rows = 0..scene.camera.height;
             save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
             if !a.quiet {
@@ -287,6 +293,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let scene = Scene::load(&a.scene).map_err(input)?;
     let r = settings::resolve_reference(&scene, &ReferenceOverrides::from(&a))?;
     if let Some(part) = &a.partial {
+        settings::check_exposure_applies(a.exposure, &[])?;
         return reference_part(&a, &r, part);
     }
     let scene = &r.scene;
@@ -294,6 +301,8 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
     check_outputs(&outputs)?;
+    let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
+    settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
     let passes = if r.options.uniform { 1 } else { 2 };
     let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");

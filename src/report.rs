@@ -188,8 +188,8 @@ pub const SCALING_COLUMNS: [Column; 7] = [
     number("hits"),
     number("total s"),
     number("gather s"),
-    number("ns/hit wall"),
-    number("ns/hit CPU"),
+    number("ns/hit wall, all included"),
+    number("ns/hit CPU, all included"),
 ];
 
 /// A Markdown table's heading and alignment rows, both made from its columns.

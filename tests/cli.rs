@@ -311,6 +311,68 @@ fn a_non_finite_exposure_is_refused_before_any_work() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `--exposure` tone-maps a PNG; with only EXR (or part) outputs it was once ignored without a
+/// word. Now it is one error line before any work, and accepted wherever a PNG is written.
+#[test]
+fn an_exposure_without_a_png_output_is_refused_before_any_work() {
+    let dir = scratch("exposure-exr");
+    let scene = "media_scenes/six_lights.toml";
+    let small = ["--resolution", "32x18", "--quiet", "--exposure", "1.5"];
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let (exr, png, part) = (path("x.exr"), path("x.png"), path("part.npz"));
+    for args in [
+        vec!["render", scene, "--planes", "200", "-o", &exr],
+        vec!["render", scene, "--planes", "200", "--partial", &part],
+        vec!["reference", scene, "--spp", "4", "-o", &exr, "--stderr-image", &path("se.exr")],
+        vec!["reference", scene, "--spp", "4", "--uniform", "--partial", &part],
+    ] {
+        let o = fogplanes(&[&args[..], &small].concat());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.starts_with("error: --exposure: tone-maps PNG images only") && err.lines().count() == 1, "{err}");
+        assert!(o.stdout.is_empty() && files_in(&dir).is_empty(), "{args:?}: work was done");
+    }
+    // The default output is an EXR too.
+    let o = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+        .current_dir(&dir)
+        .args(["render", &std::fs::canonicalize(scene).unwrap().to_string_lossy()])
+        .args(small)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(files_in(&dir).is_empty());
+    // A PNG among the outputs: the exposure applies to it.
+    for args in [
+        vec!["render", scene, "--planes", "200", "-o", &png],
+        vec!["reference", scene, "--spp", "4", "-o", &exr, "--stderr-image", &png],
+    ] {
+        let o = fogplanes(&[&args[..], &small].concat());
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `fogplanes --help` opens with a summary that names every command (it once left out merge
+/// and export).
+#[test]
+fn the_help_summary_names_every_command() {
+    let o = fogplanes(&["--help"]);
+    let help = String::from_utf8_lossy(&o.stdout);
+    let summary = help.lines().next().unwrap();
+    let commands: Vec<&str> = help
+        .lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|c| *c != "help")
+        .collect();
+    assert!(commands.len() >= 7, "{help}");
+    for c in commands {
+        assert!(summary.contains(c), "the summary {summary:?} does not name `{c}`");
+    }
+}
+
 /// Every output is checked before any work: a table whose page cannot be written once
 /// rendered everything and replaced table.md, table.json and panel.png before failing, and a
 /// reference written twice to one file kept only its standard error.

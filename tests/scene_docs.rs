@@ -1,7 +1,7 @@
 //! docs/scenes.md against the loader: the keys it documents are the schema's keys (read from
 //! `fogplanes::scene::SceneFile` through serde, not from a list written here), `required` where
 //! the schema requires them, the `[render]` defaults and the limits are the code's, and every
-//! whole scene in it, and every scene in media_scenes/, loads.
+//! whole scene in it, every whole scene of the README, and every scene in media_scenes/, loads.
 //!
 //! The convention the doc follows (and states in its section "Key tables"): a markdown table
 //! whose first column is headed `key` lists keys, one per row, as a code span holding the key's
@@ -19,6 +19,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
 const DOC: &str = include_str!("../docs/scenes.md");
+const README: &str = include_str!("../README.md");
 
 // ---------------------------------------------------------------------------------------------
 // The schema's keys, through serde
@@ -311,7 +312,7 @@ fn blocks(doc: &str, info: &str) -> Vec<String> {
             Some(None) => {}
         }
     }
-    assert!(inside.is_none(), "docs/scenes.md: a fenced block is not closed");
+    assert!(inside.is_none(), "a fenced block is not closed");
     out
 }
 
@@ -417,6 +418,16 @@ fn the_docs_whole_scenes_load() {
     assert!(scenes.len() >= 2, "docs/scenes.md has {} `toml scene` blocks", scenes.len());
     for (i, text) in scenes.iter().enumerate() {
         load_text(text, &format!("docs/scenes.md's `toml scene` block {}", i + 1));
+    }
+}
+
+/// The README's own scene (which its test saves and renders) is a whole scene too.
+#[test]
+fn the_readmes_whole_scenes_load() {
+    let scenes = blocks(README, "toml scene");
+    assert!(!scenes.is_empty(), "README.md has no `toml scene` block");
+    for (i, text) in scenes.iter().enumerate() {
+        load_text(text, &format!("README.md's `toml scene` block {}", i + 1));
     }
 }
 

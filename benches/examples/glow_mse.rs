@@ -1,6 +1,6 @@
 //! The MSE of images against a reference, over the whole image and over the glow: the pixels
-//! more than two pixels away from any pixel that sees a light directly (the README's "Whole
-//! pixels" figures). The mask comes from the scene's geometry (the direct emission over each
+//! more than two pixels away from any pixel that sees a light directly (the "Whole pixels"
+//! figures of docs/measurements.md). The mask comes from the scene's geometry (the direct emission over each
 //! pixel), not from the images. Also prints the reference's own noise over both regions, the
 //! mean square of its standard-error image, which every MSE against it includes.
 //!

@@ -263,6 +263,10 @@ def test_files_that_cannot_be_opened_raise_os_errors(tmp_path):
         fogplanes.save_image(tmp_path / "x.exr", np.broadcast_to(np.float32(0), (200000, 200000, 3)))
     with pytest.raises(ValueError, match="exposure"):
         fogplanes.save_image(tmp_path / "x.png", np.zeros((2, 2, 3)), exposure=float("nan"))
+    # An EXR holds linear radiance: an exposure would be ignored without a word.
+    with pytest.raises(ValueError, match=r"^exposure=1\.0: tone-maps PNG images only"):
+        fogplanes.save_image(tmp_path / "x.exr", np.zeros((2, 2, 3)), exposure=1.0)
+    assert not (tmp_path / "x.exr").exists()
     assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*.tmp"))
 
 

@@ -10,7 +10,7 @@ pub const DEFAULT_PLANES: u64 = 40_960;
 /// The seed of a render when neither the caller nor the scene says.
 pub const DEFAULT_SEED: u64 = 1;
 /// Ray sets per pixel when neither the command line nor the scene says (`--spp`): chosen by
-/// measurement (README, "Whole pixels").
+/// measurement (docs/measurements.md, "Whole pixels").
 pub const DEFAULT_RAY_SETS: u32 = 16;
 /// Planes per canonical chunk ([`crate::partial`]): a power of two, fixed (it never depends on
 /// the number of workers or of planes), small enough that one chunk is a task of a fraction of

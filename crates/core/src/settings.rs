@@ -13,6 +13,7 @@
 use crate::accel::Accelerator;
 use crate::error::{Error, Result};
 pub use crate::error::{Origin, Setting};
+use crate::film::ImageFormat;
 use crate::kernel::Kernel;
 use crate::limits::{
     MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes, check_render_memory,
@@ -23,6 +24,7 @@ use crate::reference::ReferenceOptions;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::weights::{Estimator, Weighting};
+use std::path::Path;
 
 fn origin<T>(given: &Option<T>) -> Origin {
     if given.is_some() { Origin::Given } else { Origin::Scene }
@@ -68,6 +70,20 @@ pub fn exposure(stops: Option<f32>) -> Result<f32> {
     let stops = stops.unwrap_or(0.0);
     check_exposure(stops).map_err(from_caller(Setting::Exposure))?;
     Ok(stops)
+}
+
+/// An exposure given when none of the images written is a PNG is refused: an EXR (or a part
+/// file) holds linear radiance, so the exposure would be ignored without a word.
+pub fn check_exposure_applies(stops: Option<f32>, images: &[&Path]) -> Result<()> {
+    let png = images.iter().any(|p| matches!(ImageFormat::from_path(p), Ok(ImageFormat::Png)));
+    if stops.is_some() && !png {
+        return Err(Error::option(
+            Setting::Exposure,
+            "tone-maps PNG images only, and nothing written here is one (an EXR holds linear radiance): \
+             write a .png, or leave the exposure out",
+        ));
+    }
+    Ok(())
 }
 
 /// `estimator` with `orientations` K: the caller's K, else the scene's when the scene's
@@ -517,6 +533,19 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// An exposure once went into EXR files without a word, which hold linear radiance.
+    #[test]
+    fn an_exposure_needs_a_png_to_apply_to() {
+        let (exr, png, part) = (Path::new("a.exr"), Path::new("b.PNG"), Path::new("c.npz"));
+        for images in [&[][..], &[exr], &[exr, part]] {
+            let (setting, origin, message) = refused(check_exposure_applies(Some(1.0), images).unwrap_err());
+            assert_eq!((setting, origin), (Setting::Exposure, Origin::Given));
+            assert!(message.starts_with("tone-maps PNG images only"), "{message}");
+            assert!(check_exposure_applies(None, images).is_ok());
+        }
+        assert!(check_exposure_applies(Some(-2.0), &[exr, png]).is_ok());
     }
 
     #[test]

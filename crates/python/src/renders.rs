@@ -126,7 +126,8 @@ pub(crate) fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<
 }
 
 /// Writes an array (height, width, 3) as .exr (linear float32) or .png (tone-mapped sRGB by
-/// `exposure` stops), whole or not at all, as the command line writes its images.
+/// `exposure` stops), whole or not at all, as the command line writes its images; an exposure
+/// with an .exr path is refused, as on the command line.
 #[pyfunction]
 #[pyo3(signature = (path, image, exposure = None))]
 #[pyo3(text_signature = "(path, image, exposure=0.0)")]
@@ -137,9 +138,10 @@ pub(crate) fn save_image(
     exposure: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<()> {
     let mut given = Given::default();
-    let exposure = given.float(Setting::Exposure, exposure)?;
-    let exposure = settings::exposure(exposure.map(|e| e as f32)).map_err(|e| given.error(e))?;
+    let stops = given.float(Setting::Exposure, exposure)?.map(|e| e as f32);
+    let exposure = settings::exposure(stops).map_err(|e| given.error(e))?;
     let film = image_arg(image, "image")?;
     fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)]).map_err(py_error)?;
+    settings::check_exposure_applies(stops, &[&path]).map_err(|e| given.error(e))?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)
 }

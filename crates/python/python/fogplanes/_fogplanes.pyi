@@ -254,7 +254,8 @@ def load_image(path: PathLike) -> Image:
 
 def save_image(path: PathLike, image: npt.ArrayLike, exposure: float = 0.0) -> None:
     """Writes an image (height, width, 3) as .exr (linear float32) or .png (sRGB, tone-mapped
-    by `exposure` stops), whole or not at all. The shape is checked before any conversion."""
+    by `exposure` stops), whole or not at all. The shape is checked before any conversion; an
+    `exposure` with an .exr path is a ValueError (an EXR holds linear radiance)."""
 
 # Renders in chunks and references in row bands (the cluster layer: fogplanes.distributed).
 # `**render_kwargs` are the keyword arguments of `render` (not time_budget, not return_stats).
