@@ -69,7 +69,8 @@ fn image_hash(pixels: &[glam::Vec3]) -> u64 {
 /// A change of arithmetic that is meant changes them, and says so.
 #[test]
 fn images_are_those_of_the_build_before_the_kernel_rework() {
-    let want: [(&str, &[(Estimator, u32, u64)]); 2] = [
+    type Expected<'a> = (&'a str, &'a [(Estimator, u32, u64)]);
+    let want: [Expected; 2] = [
         (
             "media_scenes/six_lights.toml",
             &[

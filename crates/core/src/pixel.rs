@@ -169,8 +169,8 @@ pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec
         for i in (0..blocks).step_by(RAY_LANES) {
             maker.run_block(j, i, (&mut row[i..i + RAY_LANES]).try_into().unwrap());
         }
-        for i in blocks..w {
-            row[i] = ray_set_ray(scene, &footprints, seed, k, pixel_center, j * w + i);
+        for (i, ray) in row.iter_mut().enumerate().skip(blocks) {
+            *ray = ray_set_ray(scene, &footprints, seed, k, pixel_center, j * w + i);
         }
         let columns = footprints.columns_over(j as u32);
         for i in columns.start..columns.end.min(w as u32) {
@@ -261,6 +261,7 @@ impl RayRow {
     /// [`crate::camera::Camera::direction`], `normalize`, [`crate::medium::Medium::clip_ray`]
     /// and [`camera_ray`], operation for operation, as loops over lanes.
     #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // lane loops index several arrays in step, as the vector code they become
     fn block(&self, j: usize, i: usize, out: &mut [CameraRay; RAY_LANES]) {
         const L: usize = RAY_LANES;
         let (mut sx, mut sy) = ([0.5f64; L], [0.5f64; L]);
@@ -281,8 +282,8 @@ impl RayRow {
             let py = (1.0 - 2.0 * y / self.height) * self.tan_half_fov;
             let v: [f64; 3] = std::array::from_fn(|a| (self.forward[a] + px * self.right[a]) + py * self.up[a]);
             let recip = 1.0 / ((v[0] * v[0]) + (v[1] * v[1]) + (v[2] * v[2])).sqrt();
-            for a in 0..3 {
-                d[a][l] = v[a] * recip;
+            for (d, v) in d.iter_mut().zip(v) {
+                d[l] = v * recip;
             }
         }
         let (mut t0, mut t1, mut inside) = ([0.0f64; L], [f64::INFINITY; L], [true; L]);

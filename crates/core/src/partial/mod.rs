@@ -544,7 +544,8 @@ mod tests {
             let e = with(&|p| p.sums[1].z = value).unwrap_err();
             assert!(e.starts_with("planes 16384:49152: sums: pixel (x 1, y 0) ") && e.contains(says), "{value}: {e}");
         }
-        let changes: [(fn(&mut Partial), &str); 7] = [
+        type Change = (fn(&mut Partial), &'static str);
+        let changes: [Change; 7] = [
             (|p| p.hits += 1, "hits, more than one per plane and pixel"),
             (|p| p.planes_total = usize::MAX, "the plane count must be between"),
             (|p| (p.end, p.planes_total) = (usize::MAX, usize::MAX), "plane count"),
