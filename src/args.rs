@@ -5,12 +5,11 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fogplanes::accel::Accelerator;
-use fogplanes::film::ImageFormat;
 use fogplanes::kernel::Kernel;
 use fogplanes::sampling::Sampler;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
 use fogplanes::weights::Estimator;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Renders single scattering in fog lit by rectangular lights, with photon planes weighted by
 /// continuous and stochastic multiple importance sampling (West et al. 2020, Section 6), and
@@ -394,27 +393,15 @@ pub(crate) fn parse_range(s: &str) -> Result<(u64, u64), String> {
 // ---------------------------------------------------------------------------------------------
 // Every option is used or refused. clap's `requires` is skipped when an option that conflicts
 // with the required one is given (`render --plane-range 0:16384 -o x.exr` rendered the whole
-// image), and an option may mean nothing in some uses (`--exposure` for an EXR): each command
-// that has such options says here which one a command line would not use.
-
-/// Whether `path` names a PNG (the one output `--exposure` changes).
-fn is_png(path: &Path) -> bool {
-    matches!(ImageFormat::from_path(path), Ok(ImageFormat::Png))
-}
-
-fn exposure_unused(writes: &str) -> String {
-    format!("--exposure: sets the tone of a PNG, and this command writes {writes}: give a .png output or no --exposure")
-}
+// image): each command
+// that has such options says here which one a command line would not use (`--exposure` without a
+// PNG is the library's check, `settings::check_exposure_applies`, shared with Python).
 
 impl RenderArgs {
     /// The first option given that the command would not use.
     pub(crate) fn unused(&self) -> Option<String> {
         if self.plane_range.is_some() && self.partial.is_none() {
             return Some("--plane-range: renders planes A:B into a partial file: give --partial PART.npz".into());
-        }
-        if self.exposure.is_some() && !self.output.as_deref().is_some_and(is_png) {
-            let writes = if self.partial.is_some() { "a partial file" } else { "a linear EXR" };
-            return Some(exposure_unused(writes));
         }
         None
     }
@@ -431,21 +418,7 @@ impl ReferenceArgs {
                 return Some("--pilot and --pilot-pass make partial files: give --partial PART.npz".into());
             }
         }
-        let pngs = self.output.iter().chain(&self.stderr_image).any(|p| is_png(p));
-        if self.exposure.is_some() && (self.partial.is_some() || !pngs) {
-            let writes = if self.partial.is_some() { "a partial file" } else { "linear EXRs" };
-            return Some(exposure_unused(writes));
-        }
         None
-    }
-}
-
-impl MergeArgs {
-    /// The first option given that the command would not use (the kind of the parts decides
-    /// the rest: `--stderr-image` for reference parts only).
-    pub(crate) fn unused(&self) -> Option<String> {
-        let pngs = std::iter::once(&self.output).chain(&self.stderr_image).any(|p| is_png(p));
-        (self.exposure.is_some() && !pngs).then(|| exposure_unused("no PNG"))
     }
 }
 

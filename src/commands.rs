@@ -188,7 +188,9 @@ fn render_part(
 }
 
 pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
-    refuse_unused(a.unused())?;
+    // Before any part is read: an exposure needs a PNG among the outputs.
+    let images: Vec<&std::path::Path> = std::iter::once(a.output.as_path()).chain(a.stderr_image.as_deref()).collect();
+    settings::check_exposure_applies(a.exposure, &images)?;
     let merged = merge_parts(&a.parts)?;
     let exposure = settings::exposure(a.exposure)?;
     match merged {
