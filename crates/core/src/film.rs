@@ -52,11 +52,15 @@ impl Film {
     /// The image of a photon-plane render (docs/mathematics.md section 8), the one place an
     /// image is finished: per pixel, the sum of every plane's contribution (each weighted 1,
     /// added in f64) divided by the plane count N in f64, rounded to f32 once, plus the direct
-    /// emission over the pixel.
-    pub fn finish(width: u32, height: u32, sums: &[DVec3], planes: usize, emission: &[Vec3]) -> Film {
+    /// emission over the pixel. Refuses an image that would hold a value that is not a finite
+    /// number (f32 overflow, where sums divided by N come near `f32::MAX`), naming the pixel:
+    /// no image holds NaN or infinity.
+    pub fn finish(width: u32, height: u32, sums: &[DVec3], planes: usize, emission: &[Vec3]) -> Result<Film> {
         let n = planes as f64;
         let pixels = sums.iter().zip(emission).map(|(s, e)| (*s / n).as_vec3() + *e).collect();
-        Film { width, height, pixels }
+        let film = Film { width, height, pixels };
+        film.check_finite("image")?;
+        Ok(film)
     }
 
     /// The first pixel channel that is not a number in `[0, max]` (see [`first_outside`]).

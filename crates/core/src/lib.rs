@@ -29,7 +29,7 @@
 //! | [`kernel`] | the span kernels (AVX-512, AVX2, portable) and the choice between them |
 //! | [`raster`] | the intersection structure: planes rasterised in screen space |
 //! | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
-//! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all |
+//! | [`film`] | pixel buffers and EXR / PNG files, written whole or not at all, each EXR recording how it was made |
 //! | [`render`] | the photon-plane renderer and its options |
 //! | [`partial`] | partial renders: canonical chunks of the plane set, their f64 sums, the canonical merge |
 //! | [`control`] | following and stopping a long job: progress callback and cancel flag |

@@ -333,8 +333,7 @@ pub fn merge_plan(chunks: usize, block: usize) -> Result<Vec<PlanStep>> {
 /// rounded to f32 once, plus the direct emission over each pixel (computed here,
 /// [`crate::emission::direct_emission`]). Refuses a partial that fails [`Partial::check`], a
 /// partial of another render or one that does not cover `0..N`, and an image that would hold a
-/// value that is not a finite number (f32 overflow where a pixel's sums divided by N come near
-/// `f32::MAX`), naming the pixel.
+/// value that is not a finite number ([`Film::finish`]).
 pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<Film> {
     partial.check()?;
     if partial.fingerprint != fingerprint(scene, opts) {
@@ -359,9 +358,7 @@ pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<
         )));
     }
     let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
-    let film = Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission);
-    film.check_finite("image")?;
-    Ok(film)
+    Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission)
 }
 
 #[cfg(test)]
@@ -453,7 +450,8 @@ mod tests {
             let e = with(&|p| p.sums[1].z = value).unwrap_err();
             assert!(e.starts_with("planes 16384:49152: sums: pixel (x 1, y 0) ") && e.contains(says), "{value}: {e}");
         }
-        let changes: [(fn(&mut Partial), &str); 7] = [
+        type Change = fn(&mut Partial);
+        let changes: [(Change, &str); 7] = [
             (|p| p.hits += 1, "hits, more than one per plane and pixel"),
             (|p| p.planes_total = usize::MAX, "the plane count must be between"),
             (|p| (p.end, p.planes_total) = (usize::MAX, usize::MAX), "plane count"),
