@@ -95,7 +95,7 @@ fn measure(settings: &ResolvedTable, planes: usize, seed: u64) -> Result<Vec<Mea
             let before = prepared.stats().clone();
             let t = Instant::now();
             let partial = prepared.render_with(weighting, 0..planes)?;
-            let film = Film::finish(scene.camera.width, scene.camera.height, &partial.sums, planes, &emission);
+            let film = Film::finish(scene.camera.width, scene.camera.height, &partial.sums, planes, &emission)?;
             let gather_seconds = t.elapsed().as_secs_f64();
             let after = prepared.stats();
             let stats = GatherStats { tests: after.tests - before.tests, hits: after.hits - before.hits };

@@ -52,11 +52,15 @@ impl Film {
     /// The image of a photon-plane render (docs/mathematics.md section 8), the one place an
     /// image is finished: per pixel, the sum of every plane's contribution (each weighted 1,
     /// added in f64) divided by the plane count N in f64, rounded to f32 once, plus the direct
-    /// emission over the pixel.
-    pub fn finish(width: u32, height: u32, sums: &[DVec3], planes: usize, emission: &[Vec3]) -> Film {
+    /// emission over the pixel. Refuses an image that would hold a value that is not a finite
+    /// number (f32 overflow, where sums divided by N come near `f32::MAX`), naming the pixel:
+    /// no image holds NaN or infinity.
+    pub fn finish(width: u32, height: u32, sums: &[DVec3], planes: usize, emission: &[Vec3]) -> Result<Film> {
         let n = planes as f64;
         let pixels = sums.iter().zip(emission).map(|(s, e)| (*s / n).as_vec3() + *e).collect();
-        Film { width, height, pixels }
+        let film = Film { width, height, pixels };
+        film.check_finite("image")?;
+        Ok(film)
     }
 
     /// The first pixel channel that is not a number in `[0, max]` (see [`first_outside`]).
@@ -364,6 +368,7 @@ impl Film {
 
     /// [`Film::save`], an EXR recording `info` in its header (a PNG records nothing).
     pub fn save_with_info(&self, path: &Path, exposure: f32, info: Option<&ImageInfo>) -> Result<()> {
+        self.check_size(path)?;
         match ImageFormat::from_path(path)? {
             ImageFormat::Exr => self.write_exr(path, info),
             ImageFormat::Png => self.save_png(path, exposure),
@@ -371,7 +376,20 @@ impl Film {
     }
 
     pub fn save_exr(&self, path: &Path) -> Result<()> {
+        self.check_size(path)?;
         self.write_exr(path, None)
+    }
+
+    /// A film assembled from pieces (bands of rows) that do not make it up is refused before it
+    /// is written, not found by an index past its end.
+    fn check_size(&self, path: &Path) -> Result<()> {
+        if self.pixels.len() != self.width as usize * self.height as usize {
+            return Err(Error::write(
+                path,
+                format!("{} pixels for an image of {}x{}", self.pixels.len(), self.width, self.height),
+            ));
+        }
+        Ok(())
     }
 
     fn write_exr(&self, path: &Path, info: Option<&ImageInfo>) -> Result<()> {
@@ -592,6 +610,10 @@ mod tests {
         let (with, without) = (dir.join("with.exr"), dir.join("without.exr"));
         film.save_with_info(&with, 0.0, Some(&info)).unwrap();
         film.save(&without, 0.0).unwrap();
+        let short = Film { pixels: film.pixels[1..].to_vec(), ..film.clone() };
+        assert!(
+            short.save(&dir.join("short.exr"), 0.0).unwrap_err().to_string().contains("5 pixels for an image of 3x2")
+        );
         let (back, read) = Film::load_exr_with_info(&with).unwrap();
         assert_eq!((back, read.as_ref()), (film.clone(), Some(&info)));
         assert_eq!(read_image_info(&with).unwrap(), (Some(info.clone()), (3, 2)));

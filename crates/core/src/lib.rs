@@ -31,7 +31,7 @@
 //! | | [`accel`] | the prepared planes of a render behind one gather, whatever the structure |
 //! | pixels and film | [`pixel`] | the pixel: the ray sets that sample it, their plane groups, the one cache of ray sets (section 8.1) |
 //! | | [`emission`] | direct emission integrated over the pixel (section 8.2) |
-//! | | [`film`] | pixel buffers, the one place an image is finished ([`film::Film::finish`]), EXR / PNG files written whole or not at all |
+//! | | [`film`] | pixel buffers, the one place an image is finished ([`film::Film::finish`]), EXR / PNG files written whole or not at all, each EXR recording how it was made |
 //! | | [`display`] | a live view of a running job in the tev image viewer, over its TCP protocol |
 //! | | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | | [`outputs`] | every output path checked before any work |

@@ -382,10 +382,7 @@ pub fn render_in_passes(
     stats.seconds_rays += t.elapsed().as_secs_f64();
     stats.planes = done;
     stats.seconds_total = start.elapsed().as_secs_f64();
-    let film = Film::finish(width, height, &total, done, &emission);
-    // As crate::partial::finish: no image holds a value that is not a finite number.
-    film.check_finite("image")?;
-    Ok((film, stats))
+    Ok((Film::finish(width, height, &total, done, &emission)?, stats))
 }
 
 #[cfg(test)]
