@@ -386,9 +386,7 @@ pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<
         )));
     }
     let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
-    let film = Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission);
-    film.check_finite("image")?;
-    Ok(film)
+    Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission)
 }
 
 /// The image of the first planes of a render while it runs (docs/mathematics.md section 8.1, "A
@@ -408,7 +406,8 @@ impl RunningImage {
     }
 
     /// The image of the planes that `held` (consecutive partials from plane 0) sum, or `None`
-    /// before any.
+    /// before any (or if it would hold a value that is not a finite number: a live view shows
+    /// nothing rather than that).
     pub fn image(&self, held: &[Partial]) -> Option<Film> {
         let (first, rest) = held.split_first()?;
         let mut sums = first.sums.clone();
@@ -418,7 +417,7 @@ impl RunningImage {
             }
         }
         let planes = held.last().map_or(0, |p| p.end) - first.start;
-        Some(Film::finish(self.width, self.height, &sums, planes, &self.emission))
+        Film::finish(self.width, self.height, &sums, planes, &self.emission).ok()
     }
 }
 
