@@ -1,117 +1,14 @@
 //! Argument parsing: the settings a caller gave, named as Python names them, and the keyword arguments of each function, parsed in one place for all.
 
 use crate::errors::*;
+use crate::given::*;
 use crate::scene::*;
-use fogplanes::Error;
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
 use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict};
 use std::path::{Path, PathBuf};
-
-/// The settings a caller gave, as Python shows them, so that an error names a setting the way
-/// the caller wrote it (`planes=0: ...`), and never a command-line flag.
-#[derive(Default)]
-pub(crate) struct Given {
-    pub(crate) reprs: Vec<(Setting, String)>,
-}
-
-impl Given {
-    /// `keyword=value` of a setting given, the keyword alone of one not given.
-    pub(crate) fn name(&self, setting: Setting) -> String {
-        match self.reprs.iter().rev().find(|(s, _)| *s == setting) {
-            Some((_, repr)) => format!("{}={repr}", setting.keyword()),
-            None => setting.keyword().to_string(),
-        }
-    }
-
-    pub(crate) fn error(&self, e: Error) -> PyErr {
-        py_error_named(e, |s| self.name(s))
-    }
-
-    pub(crate) fn invalid(&self, setting: Setting, message: impl std::fmt::Display) -> PyErr {
-        PyValueError::new_err(format!("{}: {message}", self.name(setting)))
-    }
-
-    pub(crate) fn note(&mut self, setting: Setting, value: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.reprs.push((setting, value.repr()?.to_string()));
-        Ok(())
-    }
-
-    /// A non-negative integer: a Python int out of range is a `ValueError` naming the setting,
-    /// anything but an int (a bool too: `spp=True` is no count) a `TypeError`.
-    pub(crate) fn uint(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
-        let Some(v) = value else { return Ok(None) };
-        self.note(setting, v)?;
-        if v.is_instance_of::<PyBool>() {
-            return Err(not_a_bool(setting.keyword(), v, "an integer"));
-        }
-        match v.extract::<u64>() {
-            Ok(n) => Ok(Some(n)),
-            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
-                Err(self.invalid(setting, "out of range (a non-negative integer below 2**64)"))
-            }
-            Err(e) => Err(PyTypeError::new_err(format!("{}: expected an integer ({e})", setting.keyword()))),
-        }
-    }
-
-    /// A `u32` (out of range as in [`Given::uint`]).
-    pub(crate) fn uint32(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u32>> {
-        self.uint(setting, value)?
-            .map(|n| u32::try_from(n).map_err(|_| self.invalid(setting, "out of range (an integer below 2**32)")))
-            .transpose()
-    }
-
-    /// A number of seconds or stops (a float, or an int; not a bool).
-    pub(crate) fn float(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<f64>> {
-        let Some(v) = value else { return Ok(None) };
-        self.note(setting, v)?;
-        if v.is_instance_of::<PyBool>() {
-            return Err(not_a_bool(setting.keyword(), v, "a number"));
-        }
-        v.extract::<f64>()
-            .map(Some)
-            .map_err(|e| PyTypeError::new_err(format!("{}: expected a number ({e})", setting.keyword())))
-    }
-
-    /// A name from a closed list (estimator, sampler, ...): a `str`, else a `TypeError` naming
-    /// the setting.
-    pub(crate) fn named<T: std::str::FromStr<Err = String>>(
-        &mut self,
-        setting: Setting,
-        value: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<Option<T>> {
-        let Some(v) = value else { return Ok(None) };
-        let Ok(v) = v.extract::<String>() else {
-            return Err(PyTypeError::new_err(format!(
-                "{}={}: expected a name (a str), got {}",
-                setting.keyword(),
-                v.repr()?,
-                v.get_type().name()?
-            )));
-        };
-        self.reprs.push((setting, py_str(&v)));
-        v.parse().map(Some).map_err(|m| self.invalid(setting, m))
-    }
-
-    /// `(width, height)`.
-    pub(crate) fn resolution(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
-        let Some(v) = value else { return Ok(None) };
-        let (w, h): (Bound<PyAny>, Bound<PyAny>) =
-            v.extract().map_err(|_| PyTypeError::new_err(format!("resolution: expected (width, height), got {v}")))?;
-        let (w, h) = (self.uint32(Setting::Resolution, Some(&w))?, self.uint32(Setting::Resolution, Some(&h))?);
-        self.note(Setting::Resolution, v)?;
-        Ok(w.zip(h))
-    }
-
-    /// A thread count (its range is the core's to check).
-    pub(crate) fn threads(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<usize>> {
-        self.uint(Setting::Threads, value)?
-            .map(|t| usize::try_from(t).map_err(|_| self.invalid(Setting::Threads, "out of range")))
-            .transpose()
-    }
-}
 
 pub(crate) fn load(path: &Path) -> PyResult<Scene> {
     Scene::load(path).map_err(|e| file_error(path, e.to_string()))
@@ -150,14 +47,6 @@ pub(crate) enum Front {
     Render,
     /// The chunked functions (`plan_render`, `render_chunk`, `finish_render`): a plane count.
     Chunks,
-}
-
-/// A `TypeError` for a bool given as `what` (an integer, a number) to argument `name`.
-pub(crate) fn not_a_bool(name: &str, v: &Bound<'_, PyAny>, what: &str) -> PyErr {
-    PyTypeError::new_err(format!(
-        "{name}={}: expected {what}, got bool",
-        v.repr().map(|r| r.to_string()).unwrap_or_default()
-    ))
 }
 
 /// The keyword argument `name`, a flag (None: false): True or False, else a `TypeError`

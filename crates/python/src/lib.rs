@@ -13,6 +13,7 @@
 mod args;
 mod arrays;
 mod errors;
+mod given;
 mod interrupt;
 mod partials;
 mod references;

@@ -3,6 +3,7 @@
 use crate::args::*;
 use crate::arrays::*;
 use crate::errors::*;
+use crate::given::*;
 use crate::interrupt::*;
 use crate::scene::*;
 use crate::*;

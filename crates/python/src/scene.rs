@@ -1,7 +1,7 @@
 //! The scene classes: `Scene` (picklable, as its text) and its read-only views.
 
-use crate::args::*;
 use crate::errors::*;
+use crate::given::*;
 use crate::*;
 use fogplanes::partial::stable_hash;
 use fogplanes::scene::Scene;
@@ -75,12 +75,6 @@ pub(crate) struct PyRenderDefaults {
     pub(crate) orientations: u32,
     pub(crate) seed: u64,
     pub(crate) spp: u32,
-}
-
-/// A string as Python's repr writes it (for names without quotes or escapes, which is all of them
-/// in practice; others are shown Rust's way).
-pub(crate) fn py_str(s: &str) -> String {
-    if s.chars().all(|c| c != '\'' && c != '\\' && !c.is_control()) { format!("'{s}'") } else { format!("{s:?}") }
 }
 
 pub(crate) fn fmt3(v: Vec3) -> String {
