@@ -18,33 +18,15 @@ fn fogplanes(args: &[&str]) -> Output {
 /// As [`fogplanes`], but a run longer than `seconds` is killed and fails the test (the table
 /// once hung after rendering against a NaN reference).
 fn fogplanes_within(seconds: u64, args: &[&str]) -> Output {
-    use std::process::Stdio;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("the binary runs");
-    let start = std::time::Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed().as_secs() >= seconds {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            panic!("{args:?} did not finish within {seconds} s");
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    child.wait_with_output().unwrap()
+    let mut command = Command::new(env!("CARGO_BIN_EXE_fogplanes"));
+    command.args(args);
+    crate::common::output_within(seconds, command, &format!("{args:?}"))
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fogplanes-hostile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    crate::common::scratch_dir(&format!("hostile-{name}"))
 }
 
-/// Exit code 2, one line on stderr holding `expected`, nothing on stdout, no panic.
 fn assert_refused(o: &Output, what: &str, expected: &str) {
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{what}: {err}");

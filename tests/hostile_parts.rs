@@ -34,31 +34,13 @@ fn fogplanes(args: &[&str]) -> Output {
 /// `fogplanes args` under an address-space limit of about 1 GB, killed (and the test failed)
 /// after `seconds`: a read without end fails instead of filling the machine's memory.
 fn fogplanes_bounded(seconds: u64, args: &[&str]) -> Output {
-    use std::process::Stdio;
-    let mut child = Command::new("sh")
-        .args(["-c", "ulimit -v 1000000 && exec \"$@\"", "sh", env!("CARGO_BIN_EXE_fogplanes")])
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("the binary runs");
-    let start = std::time::Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if start.elapsed().as_secs() >= seconds {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            panic!("{args:?} did not finish within {seconds} s");
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    child.wait_with_output().unwrap()
+    let mut command = Command::new("sh");
+    command.args(["-c", "ulimit -v 1000000 && exec \"$@\"", "sh", env!("CARGO_BIN_EXE_fogplanes")]).args(args);
+    crate::common::output_within(seconds, command, &format!("{args:?}"))
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fogplanes-hostile-parts-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    crate::common::scratch_dir(&format!("hostile-parts-{name}"))
 }
 
 fn s(p: &Path) -> &str {

@@ -8,6 +8,8 @@ use fogplanes::options::RenderOptions;
 use fogplanes::scene::Scene;
 use fogplanes::settings::Overrides;
 use fogplanes::weights::{Denominator, WithDenominator};
+use std::path::PathBuf;
+use std::process::{Command, Output, Stdio};
 
 /// The options `given` resolve to for `scene`: the one way to make render options, as every
 /// front end makes them.
@@ -118,4 +120,28 @@ fn the_standard_error_of_known_samples() {
     assert!((m.mean() - 2.5).abs() < 1e-15);
     assert!((m.stderr() - (5.0f64 / 12.0).sqrt()).abs() < 1e-15);
     assert!((m.z(2.0, 0.0) - 0.5 / (5.0f64 / 12.0).sqrt()).abs() < 1e-12);
+}
+
+/// Runs `command` with its output captured; kills it and fails the test if it runs longer than
+/// `seconds` (a hostile input must be refused, not read forever).
+pub fn output_within(seconds: u64, mut command: Command, what: &str) -> Output {
+    let mut child = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the binary runs");
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed().as_secs() >= seconds {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{what} did not finish within {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// An empty directory of this test process's own, named `name`.
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fogplanes-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
 }
