@@ -328,7 +328,7 @@ fn resumed_from(stdout: &str) -> Option<u64> {
 
 /// Runs `args` and SIGKILLs it a random moment after `ready` appears in `ck` (or lets it end);
 /// returns what it printed.
-fn kill_at_random(args: &[&str], ck: &Path, ready: &str, rng: &mut impl Rng) -> String {
+fn kill_at_random(args: &[&str], ck: &Path, ready: &str, rng: &mut impl Rng, within: Duration) -> String {
     let mut child = Command::new(env!("CARGO_BIN_EXE_fogplanes"))
         .args(args)
         .stdout(Stdio::piped())
@@ -341,7 +341,10 @@ fn kill_at_random(args: &[&str], ck: &Path, ready: &str, rng: &mut impl Rng) -> 
     while !has_ready() && child.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(60) {
         std::thread::sleep(Duration::from_millis(2));
     }
-    std::thread::sleep(Duration::from_millis(rng.random_range(0..400)));
+    // Within a fraction of an uninterrupted run's time, so that the kill lands mid-job on a
+    // fast machine as on a slow one.
+    let most = within.as_millis().clamp(2, 400) as u64;
+    std::thread::sleep(Duration::from_millis(rng.random_range(0..most)));
     let _ = child.kill();
     let o = child.wait_with_output().unwrap();
     String::from_utf8_lossy(&o.stdout).into_owned()
@@ -362,12 +365,14 @@ fn a_render_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
         v.extend(ck.map(|c| ["--checkpoint".to_string(), path(c).into()]).into_iter().flatten());
         v
     };
+    let t = Instant::now();
     succeeded(&fogplanes(&strs(&args(&dir.join("whole.exr"), None))), "the uninterrupted render");
+    let within = t.elapsed() / 4;
     let out = dir.join("out.exr");
     let mut rng = rand_pcg::Pcg64::seed_from_u64(28);
     let mut resumed = Vec::new();
     for _ in 0..3 {
-        let stdout = kill_at_random(&strs(&args(&out, Some(&ck))), &ck, "planes_", &mut rng);
+        let stdout = kill_at_random(&strs(&args(&out, Some(&ck))), &ck, "planes_", &mut rng, within);
         resumed.extend(resumed_from(&stdout));
     }
     let stdout = succeeded(&fogplanes(&strs(&args(&out, Some(&ck)))), "the last run");
@@ -399,11 +404,13 @@ fn a_reference_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
         v.extend(ck.map(|c| ["--checkpoint".to_string(), path(c).into()]).into_iter().flatten());
         v
     };
+    let t = Instant::now();
     succeeded(&fogplanes(&strs(&args("whole", None))), "the uninterrupted reference");
+    let within = t.elapsed() / 4;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(28);
     let mut said = Vec::new();
     for _ in 0..2 {
-        said.push(kill_at_random(&strs(&args("out", Some(&ck))), &ck, "pilot", &mut rng));
+        said.push(kill_at_random(&strs(&args("out", Some(&ck))), &ck, "pilot", &mut rng, within));
     }
     said.push(succeeded(&fogplanes(&strs(&args("out", Some(&ck)))), "the last run"));
     let resumed: Vec<&str> = said.iter().flat_map(|s| s.lines()).filter(|l| l.starts_with("resuming from")).collect();
