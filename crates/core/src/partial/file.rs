@@ -14,6 +14,10 @@
 //! self-contained: `merge` remakes the scene and the settings from it, checks that they give the
 //! part's fingerprint, and refuses parts of different renders, overlapping ranges and gaps.
 //! Without zip64, an entry is at most 4 GiB (a 16,000 x 11,000 image of sums).
+//!
+//! A part is read as a file of unknown origin ([`Npz`], [`meta`]): a regular file, its directory
+//! from its end, its metadata first and checked, then only the arrays its metadata says it holds,
+//! each refused before it is read if its entry is larger than their recorded shape needs.
 
 use crate::error::{Error, Result};
 use crate::limits::{MAX_SCENE_FILE_BYTES, check_planes, check_resolution};
