@@ -332,7 +332,16 @@ fn bytes_of(part: &PartFile, changes: &[Change], path: &Path) -> Vec<u8> {
     bytes
 }
 
-fn scratch() -> PathBuf {
+/// A directory of one case, removed when the case ends however it ends.
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn scratch() -> Scratch {
     static CASES: AtomicUsize = AtomicUsize::new(0);
     let n = CASES.fetch_add(1, Ordering::Relaxed);
     // In memory where the machine has it: every part is written whole (synced to disk) first.
@@ -340,7 +349,7 @@ fn scratch() -> PathBuf {
     let base = if shm.is_dir() { shm.to_path_buf() } else { std::env::temp_dir() };
     let dir = base.join(format!("fogplanes-fuzz-parts-{}-{n}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 fn check_error(e: &fogplanes::Error) -> Result<(), TestCaseError> {
@@ -387,7 +396,8 @@ proptest! {
     ) {
         thread_local!(static SETS: Vec<Vec<PartFile>> = sets());
         let parts = SETS.with(|s| s[set].clone());
-        let dir = scratch();
+        let scratch = scratch();
+        let dir = &scratch.0;
         let which = which % parts.len();
         let mut paths = Vec::new();
         let mut bytes = 0;
@@ -417,7 +427,6 @@ proptest! {
             }
             Ok(Merged::Pilot { scene, pilot, .. }) => check_film(&pilot, (scene.camera.width, scene.camera.height))?,
         }
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// Partials of hostile fields (as a pickle or a caller could give them) through the merge,
@@ -478,7 +487,8 @@ proptest! {
 #[test]
 fn the_unchanged_parts_merge() {
     for parts in sets() {
-        let dir = scratch();
+        let scratch = scratch();
+        let dir = &scratch.0;
         let paths: Vec<PathBuf> = parts
             .iter()
             .enumerate()
@@ -489,6 +499,5 @@ fn the_unchanged_parts_merge() {
             })
             .collect();
         assert!(merge_parts(&paths).is_ok(), "{:?}", merge_parts(&paths).err().map(|e| e.to_string()));
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -45,6 +45,10 @@ pub const MAX_EQUAL_TIME_SECONDS: f64 = 1e5;
 /// The most seeds per plane count in the table's error-versus-time sweep.
 pub const MAX_SWEEP_SEEDS: u32 = 1000;
 
+/// The most seconds of rendering a part may record (about 32 years): what a merge adds up stays
+/// finite.
+pub const MAX_RECORDED_SECONDS: f64 = 1e9;
+
 /// Memory refused up front: a render that would need more than this is an input error.
 pub const MEMORY_BUDGET_BYTES: u64 = 16 << 30;
 /// Bytes per plane held while rendering (sampled plane, prepared view, screen polygon, bins).
@@ -84,6 +88,15 @@ pub fn check_threads(threads: usize) -> Result<(), String> {
 pub fn check_seconds(seconds: f64, max: f64) -> Result<(), String> {
     if !(seconds > 0.0 && seconds <= max) {
         return Err(format!("must be a positive number of seconds up to {max:e}, got {seconds}"));
+    }
+    Ok(())
+}
+
+/// Seconds of rendering recorded by a part (a file, a pickle): non-negative, at most
+/// [`MAX_RECORDED_SECONDS`] (NaN refused).
+pub fn check_recorded_seconds(seconds: f64) -> Result<(), String> {
+    if !(0.0..=MAX_RECORDED_SECONDS).contains(&seconds) {
+        return Err(format!("{seconds}, not between 0 and {MAX_RECORDED_SECONDS:e}"));
     }
     Ok(())
 }

@@ -14,9 +14,13 @@
 //! self-contained: `merge` remakes the scene and the settings from it, checks that they give the
 //! part's fingerprint, and refuses parts of different renders, overlapping ranges and gaps.
 //! Without zip64, an entry is at most 4 GiB (a 16,000 x 11,000 image of sums).
+//!
+//! A part is read as a file of unknown origin ([`Npz`], [`meta`]): a regular file, its directory
+//! from its end, its metadata first and checked, then only the arrays its metadata says it holds,
+//! each refused before it is read if its entry is larger than their recorded shape needs.
 
 use crate::error::{Error, Result};
-use crate::limits::{MAX_SCENE_FILE_BYTES, check_planes, check_resolution};
+use crate::limits::{MAX_SCENE_FILE_BYTES, check_planes, check_recorded_seconds, check_resolution};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -219,7 +223,9 @@ fn parse_npy(name: &str, bytes: &[u8]) -> std::result::Result<Array, String> {
     let item = match descr.as_str() {
         "<f8" => 8,
         "<f4" => 4,
-        d if d.starts_with("<U") => 4 * d[2..].parse::<usize>().map_err(|_| bad("a bad dtype"))?,
+        d if d.starts_with("<U") => {
+            d[2..].parse::<usize>().ok().and_then(|n| n.checked_mul(4)).ok_or_else(|| bad("a bad dtype"))?
+        }
         d => return Err(bad(&format!("dtype {d:?} is not supported"))),
     };
     let data = &bytes[at + len..];
@@ -468,9 +474,7 @@ pub fn meta(array: &Array) -> std::result::Result<PartMeta, String> {
     }
     let [w, h] = meta.scene.resolution;
     check_resolution(w, h).map_err(|m| format!("its resolution: {m}"))?;
-    if !(meta.seconds >= 0.0 && meta.seconds.is_finite()) {
-        return Err(format!("its seconds of rendering: {}", meta.seconds));
-    }
+    check_recorded_seconds(meta.seconds).map_err(|m| format!("its seconds of rendering: {m}"))?;
     match meta.kind {
         PartKind::Render => {
             if meta.render.is_none() {

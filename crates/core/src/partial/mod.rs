@@ -136,9 +136,8 @@ impl Partial {
         if self.hits as u128 > most_hits {
             return bad(format!("{} hits, more than one per plane and pixel ({most_hits})", self.hits));
         }
-        if !(self.seconds >= 0.0 && self.seconds.is_finite()) {
-            return bad(format!("{} seconds of rendering", self.seconds));
-        }
+        crate::limits::check_recorded_seconds(self.seconds)
+            .or_else(|m| bad(format!("its seconds of rendering: {m}")))?;
         let most = self.most_per_channel();
         if let Some(p) = first_outside(self.sums.iter().map(|s| s.to_array()), self.width, most) {
             let why = if p.value.is_nan() || p.value < 0.0 {
@@ -551,7 +550,7 @@ mod tests {
             (|p| p.start = 1, "not a union of the render's chunks"),
             (|p| p.width = 3, "2 sums for 3x1 pixels"),
             (|p| p.width = 0, "each side must be between"),
-            (|p| p.seconds = f64::NAN, "NaN seconds"),
+            (|p| p.seconds = f64::NAN, "its seconds of rendering: NaN"),
         ];
         for (f, says) in changes {
             let e = with(&f).unwrap_err();
