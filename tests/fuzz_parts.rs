@@ -18,8 +18,8 @@ use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::limits::CHUNK_PLANES;
 use fogplanes::merge::{Merged, merge_parts};
-use fogplanes::partial::file::{Array, PartKind, PartMeta, ReferenceRecord, RenderRecord, SceneRecord, write_npz};
-use fogplanes::partial::parts::{read_part, reference_fingerprint};
+use fogplanes::partial::file::{Array, PartKind, PartMeta, ReferenceRecord, write_npz};
+use fogplanes::partial::parts::{meta_of, read_part, reference_fingerprint, render_record};
 use fogplanes::partial::{Partial, combine, finish, merge_in_canonical_order};
 use fogplanes::reference::{ReferenceOptions, reference_pilot_rows, reference_rows};
 use fogplanes::render::render_chunk;
@@ -46,27 +46,7 @@ struct PartFile {
 }
 
 fn meta(kind: PartKind, fingerprint: String, scene: &Scene, range: (usize, usize, usize)) -> PartMeta {
-    let source = scene.source().unwrap();
-    PartMeta {
-        format: "fogplanes-partial".into(),
-        version: 1,
-        fogplanes: env!("CARGO_PKG_VERSION").into(),
-        kind,
-        fingerprint,
-        scene: SceneRecord {
-            name: scene.name.clone(),
-            file: source.file.clone(),
-            text: source.text.clone(),
-            resolution: [W, H],
-        },
-        start: range.0,
-        end: range.1,
-        total: range.2,
-        hits: 0,
-        seconds: 0.5,
-        render: None,
-        reference: None,
-    }
+    PartMeta { seconds: 0.5, ..meta_of(kind, fingerprint, scene, range).unwrap() }
 }
 
 fn f32s(name: &str, film: &Film) -> Array {
@@ -85,17 +65,7 @@ fn sets() -> Vec<Vec<PartFile>> {
             let p = render_chunk(&scene, &o, r, Control::none()).unwrap().0;
             let mut m = meta(PartKind::Render, p.fingerprint.clone(), &scene, (p.start, p.end, p.planes_total));
             m.hits = p.hits;
-            m.render = Some(RenderRecord {
-                planes: o.planes(),
-                estimator: o.weighting().estimator.name().into(),
-                orientations: o.weighting().orientations,
-                seed: o.seed(),
-                sampler: o.sampler().name().into(),
-                spp: o.spp(),
-                pixel_center: o.pixel_center(),
-                accelerator: o.accelerator().name().into(),
-                kernel: o.kernel().name().into(),
-            });
+            m.render = Some(render_record(&o));
             let sums = Array::f64s("sums", vec![H as usize, W as usize, 3], p.sums.iter().flat_map(|s| s.to_array()));
             PartFile { meta: serde_json::to_value(&m).unwrap(), arrays: vec![sums] }
         })

@@ -14,8 +14,8 @@ use fogplanes::film::Film;
 use fogplanes::limits::CHUNK_PLANES;
 use fogplanes::options::RenderOptions;
 use fogplanes::partial::Partial;
-use fogplanes::partial::file::{Array, PartKind, PartMeta, ReferenceRecord, RenderRecord, SceneRecord, write_npz};
-use fogplanes::partial::parts::reference_fingerprint;
+use fogplanes::partial::file::{Array, PartKind, PartMeta, ReferenceRecord, write_npz};
+use fogplanes::partial::parts::{meta_of, reference_fingerprint, render_record};
 use fogplanes::reference::{ReferenceOptions, reference_pilot_rows, reference_rows};
 use fogplanes::render::render_chunk;
 use fogplanes::scene::Scene;
@@ -72,49 +72,15 @@ fn render_options(scene: &Scene) -> RenderOptions {
     options(scene, Overrides { planes: Some(PLANES as u64), ..Overrides::default() })
 }
 
-fn scene_record(scene: &Scene) -> SceneRecord {
-    let source = scene.source().unwrap();
-    SceneRecord {
-        name: scene.name.clone(),
-        file: source.file.clone(),
-        text: source.text.clone(),
-        resolution: [scene.camera.width, scene.camera.height],
-    }
-}
-
-fn meta(kind: PartKind, fingerprint: String, scene: &Scene, (start, end, total): (usize, usize, usize)) -> PartMeta {
-    PartMeta {
-        format: "fogplanes-partial".into(),
-        version: 1,
-        fogplanes: env!("CARGO_PKG_VERSION").into(),
-        kind,
-        fingerprint,
-        scene: scene_record(scene),
-        start,
-        end,
-        total,
-        hits: 0,
-        seconds: 0.0,
-        render: None,
-        reference: None,
-    }
+fn meta(kind: PartKind, fingerprint: String, scene: &Scene, range: (usize, usize, usize)) -> PartMeta {
+    meta_of(kind, fingerprint, scene, range).unwrap()
 }
 
 /// The part file of a render partial, as `render --plane-range --partial` writes it.
 fn render_part(scene: &Scene, o: &RenderOptions, p: &Partial) -> (PartMeta, Vec<f64>) {
     let mut m = meta(PartKind::Render, p.fingerprint.clone(), scene, (p.start, p.end, p.planes_total));
     m.hits = p.hits;
-    m.render = Some(RenderRecord {
-        planes: o.planes(),
-        estimator: o.weighting().estimator.name().into(),
-        orientations: o.weighting().orientations,
-        seed: o.seed(),
-        sampler: o.sampler().name().into(),
-        spp: o.spp(),
-        pixel_center: o.pixel_center(),
-        accelerator: o.accelerator().name().into(),
-        kernel: o.kernel().name().into(),
-    });
+    m.render = Some(render_record(o));
     (m, p.sums.iter().flat_map(|v| v.to_array()).collect())
 }
 

@@ -81,12 +81,15 @@ impl Kernel {
         Kernel::ALL.into_iter().filter(|&k| k != Kernel::Auto && k.is_available()).collect()
     }
 
+    /// The widest vector kernel this CPU has: what `auto` runs.
+    pub fn widest() -> Kernel {
+        [Kernel::Avx512, Kernel::Avx2].into_iter().find(|k| k.is_available()).unwrap_or(Kernel::Portable)
+    }
+
     /// The kernel that runs: `auto` becomes the widest available; one the CPU lacks is an error.
     pub fn resolve(self) -> Result<Kernel> {
         match self {
-            Kernel::Auto => {
-                Ok([Kernel::Avx512, Kernel::Avx2].into_iter().find(|k| k.is_available()).unwrap_or(Kernel::Portable))
-            }
+            Kernel::Auto => Ok(Kernel::widest()),
             k if k.is_available() => Ok(k),
             k => Err(Error::option(crate::error::Setting::Kernel, format!("this CPU cannot run the {k} kernel"))),
         }

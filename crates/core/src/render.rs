@@ -49,25 +49,37 @@ impl<'a> Gatherer<'a> {
         prepared: &[(Range<usize>, PreparedPlanes)],
         sums: &mut [Vec3],
     ) -> Result<()> {
-        let (scene, opts, control) = (self.scene, self.opts, self.control);
+        let (scene, kernel, control) = (self.scene, self.opts.kernel, self.control);
         for (k, piece) in pieces {
             let made;
             let planes = match prepared.iter().find(|(r, _)| *r == piece) {
                 Some((_, p)) => p,
                 None => {
-                    made = PreparedPlanes::new(scene, opts.plane_set(), piece, opts.accelerator, control)?;
-                    self.stats.seconds_sampling += made.seconds_sampling;
-                    self.stats.seconds_build += made.seconds_build;
+                    made = self.prepare(piece)?;
                     &made
                 }
             };
             let rays = self.rays.rays(scene, k);
             let t = Instant::now();
-            let s = planes.gather(weighting, opts.kernel, rays, sums, control)?;
+            let s = planes.gather(weighting, kernel, rays, sums, control)?;
             self.stats.add_gather(s, t.elapsed().as_secs_f64());
         }
-        (self.stats.rays, self.stats.seconds_rays) = (self.rays.made, self.rays.seconds);
+        self.count_rays();
         Ok(())
+    }
+
+    /// Samples and prepares the planes `piece`, counting the time it took.
+    fn prepare(&mut self, piece: Range<usize>) -> Result<PreparedPlanes> {
+        let (scene, opts) = (self.scene, self.opts);
+        let planes = PreparedPlanes::new(scene, opts.plane_set(), piece, opts.accelerator, self.control)?;
+        self.stats.seconds_sampling += planes.seconds_sampling;
+        self.stats.seconds_build += planes.seconds_build;
+        Ok(planes)
+    }
+
+    /// The rays made so far, and their time, into the statistics.
+    fn count_rays(&mut self) {
+        (self.stats.rays, self.stats.seconds_rays) = (self.rays.made, self.rays.seconds);
     }
 }
 
@@ -102,14 +114,12 @@ impl<'a> ChunkRenderer<'a> {
         };
         for c in chunks(opts.planes) {
             for (k, piece) in pieces(opts.planes, opts.ray_sets(), c) {
-                let p = PreparedPlanes::new(scene, opts.plane_set(), piece.clone(), opts.accelerator, control)?;
-                r.gatherer.stats.seconds_sampling += p.seconds_sampling;
-                r.gatherer.stats.seconds_build += p.seconds_build;
+                let planes = r.gatherer.prepare(piece.clone())?;
                 r.gatherer.rays.rays(scene, k);
-                r.prepared.push((piece, p));
+                r.prepared.push((piece, planes));
             }
         }
-        (r.gatherer.stats.rays, r.gatherer.stats.seconds_rays) = (r.gatherer.rays.made, r.gatherer.rays.seconds);
+        r.gatherer.count_rays();
         Ok(r)
     }
 

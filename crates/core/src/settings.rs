@@ -361,7 +361,7 @@ impl ResolvedTable {
             spp: self.spp,
             pixel_center: self.pixel_center,
             accelerator: Accelerator::default(),
-            kernel: Kernel::Auto.resolve().unwrap_or(Kernel::Portable),
+            kernel: Kernel::widest(),
         }
     }
 }
@@ -407,7 +407,7 @@ impl ResolvedScaling {
             spp: crate::limits::DEFAULT_RAY_SETS,
             pixel_center: false,
             accelerator: Accelerator::default(),
-            kernel: Kernel::Auto.resolve().unwrap_or(Kernel::Portable),
+            kernel: Kernel::widest(),
         }
     }
 }

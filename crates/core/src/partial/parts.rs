@@ -30,7 +30,8 @@ pub fn scene_of(r: &SceneRecord) -> Result<Scene> {
     Scene::parse(&r.text, &r.file, &r.name)?.with_resolution(r.resolution[0], r.resolution[1])
 }
 
-fn render_record(o: &RenderOptions) -> RenderRecord {
+/// The settings of a render as its parts record them.
+pub fn render_record(o: &RenderOptions) -> RenderRecord {
     RenderRecord {
         planes: o.planes,
         estimator: o.weighting.estimator.name().into(),
@@ -67,7 +68,9 @@ pub fn reference_fingerprint(scene: &Scene, o: &ReferenceOptions, pilot: bool) -
     stable_hash(&[description.as_bytes()])
 }
 
-fn meta_of(kind: PartKind, fingerprint: String, scene: &Scene, range: (usize, usize, usize)) -> Result<PartMeta> {
+/// The metadata of a part of `kind` over `range` = (start, end, total) of the image
+/// `fingerprint` names, with the scene it carries; no counts, no settings yet.
+pub fn meta_of(kind: PartKind, fingerprint: String, scene: &Scene, range: (usize, usize, usize)) -> Result<PartMeta> {
     Ok(PartMeta {
         format: file::FORMAT.into(),
         version: file::VERSION,
