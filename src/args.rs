@@ -204,6 +204,15 @@ pub(crate) struct RenderArgs {
     /// count: planes in passes, each extending the set, until the budget is spent.
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub(crate) time_budget: Option<f64>,
+    /// Render in passes until the estimated relative RMS error of the image (the RMS of the
+    /// error image over the image's mean) falls below R, e.g. 0.01; with --time-budget, stop
+    /// at whichever comes first. The report says which.
+    #[arg(long, value_name = "R", allow_negative_numbers = true)]
+    pub(crate) target_error: Option<f64>,
+    /// Also write the estimated standard error of each pixel, from the spread of the render's
+    /// plane groups (.exr or .png; docs/mathematics.md section 10).
+    #[arg(long, value_name = "SE.exr", conflicts_with = "partial")]
+    pub(crate) stderr_image: Option<PathBuf>,
     /// Pixel centres instead of whole pixels (the box filter, by default): compare with
     /// `reference --pixel-center`.
     #[arg(long)]
@@ -223,11 +232,11 @@ pub(crate) struct RenderArgs {
     pub(crate) exposure: Option<f32>,
     /// Render only planes A to B (excluded) of the N, for a job array: A and B multiples of
     /// the canonical chunk size or N. Needs --partial; `fogplanes merge` adds the parts.
-    #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with = "time_budget")]
+    #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with_all = ["time_budget", "target_error"])]
     pub(crate) plane_range: Option<(u64, u64)>,
     /// Write the unnormalised sums of the planes rendered (all, or --plane-range) to this .npz
     /// file instead of an image (numpy loads it: `sums` and a JSON `meta`).
-    #[arg(long, value_name = "PART.npz", conflicts_with = "time_budget")]
+    #[arg(long, value_name = "PART.npz", conflicts_with_all = ["time_budget", "target_error"])]
     pub(crate) partial: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) watch: WatchArgs,
@@ -289,6 +298,22 @@ pub(crate) struct CompareArgs {
     pub(crate) image: PathBuf,
     /// The reference (EXR).
     pub(crate) reference: PathBuf,
+    /// The reference's standard error per pixel (EXR: `reference --stderr-image`, or another
+    /// renderer's): subtract its noise from the MSE, and give z-scores and the regions the noise
+    /// does not explain.
+    #[arg(long, value_name = "REF_SE.exr")]
+    pub(crate) ref_stderr: Option<PathBuf>,
+    /// The image's own standard error per pixel (`render --stderr-image`): its noise counts in
+    /// the z-scores, and the excess over both noises is reported. Needs --ref-stderr.
+    #[arg(long, value_name = "SE.exr", requires = "ref_stderr")]
+    pub(crate) stderr: Option<PathBuf>,
+    /// Write the z-score of each pixel and channel, (image - reference) / noise, to this EXR.
+    /// Needs --ref-stderr.
+    #[arg(long, value_name = "Z.exr", requires = "ref_stderr")]
+    pub(crate) z_image: Option<PathBuf>,
+    /// How many regions to list, those whose excess over the noise is largest.
+    #[arg(long, value_name = "N", default_value_t = 5, requires = "ref_stderr")]
+    pub(crate) regions: usize,
     /// Print JSON instead of text.
     #[arg(long)]
     pub(crate) json: bool,
@@ -439,6 +464,8 @@ impl From<&RenderArgs> for Overrides {
             accelerator: a.accelerator,
             kernel: a.kernel,
             time_budget: a.time_budget,
+            target_error: a.target_error,
+            stderr: a.stderr_image.is_some(),
             resolution: a.common.resolution,
             threads: a.common.threads,
             exposure: a.exposure,

@@ -10,12 +10,12 @@ use anyhow::{Context, Result, anyhow};
 use fogplanes::control::Control;
 use fogplanes::film::{Film, ImageInfo, check_writable, read_image_info, write_file_atomically};
 use fogplanes::merge::{Merged, merge_parts};
-use fogplanes::metrics::compare;
+use fogplanes::metrics::{compare, compare_noisy};
 use fogplanes::options::RenderOptions;
 use fogplanes::outputs::{Output, check_outputs};
 use fogplanes::partial::parts::{read_pilot, save_pilot_part, save_reference_part, save_render_part};
 use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference_from};
-use fogplanes::render::{progress_units, render_chunk, render_for, render_from};
+use fogplanes::render::{Until, progress_units, render_chunk, render_from, render_until};
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -115,12 +115,22 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         return render_part(&a, scene, opts, part, r.threads);
     }
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
-    check_outputs(&[Output::Image(&output)])?;
-    if r.time_budget.is_some() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
+    let mut outputs = vec![Output::Image(&output)];
+    outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    check_outputs(&outputs)?;
+    if r.in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
-        return Err(input(anyhow!("{flag}: a render on a time budget has no chunks to follow: give --planes")));
+        return Err(input(anyhow!(
+            "{flag}: a render in passes (on a time budget or to a target error) has no chunks to follow: give --planes"
+        )));
     }
-    settings::check_exposure_applies(a.exposure, &[&output])?;
+    if a.stderr_image.is_some() && a.watch.checkpoint.is_some() {
+        return Err(input(anyhow!(
+            "--stderr-image: not with --checkpoint: a resumed render no longer holds the plane groups of its first chunks, which the error image is made from"
+        )));
+    }
+    let images: Vec<&Path> = outputs.iter().map(|o| o.path()).collect();
+    settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
 
     let bar =
@@ -131,27 +141,39 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         say!("resuming from {}: {resumed} of {} planes are done", ck.display(), opts.planes());
     }
     let cpu = system::cpu_seconds();
-    let (film, stats) = match r.time_budget {
-        None => {
-            let held = watch.take_resumed();
-            render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h| watch.chunk_done(h))?
-        }
-        Some(seconds) => {
+    let (film, stats) = if !r.in_passes() {
+        let held = watch.take_resumed();
+        render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h| watch.chunk_done(h))?
+    } else {
+        {
             bar.set_length(u64::MAX);
             // What the command spent before rendering, and what writing the file will take.
             let reserve = 0.02 + 5e-8 * film_pixels(scene);
-            let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
-            let budget = std::time::Duration::from_secs_f64(left.max(0.0));
-            render_for(scene, opts, budget, Control::with_progress(&|| bar.inc(1)))?
+            let budget = r.time_budget.map(|seconds| {
+                let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
+                std::time::Duration::from_secs_f64(left.max(0.0))
+            });
+            let until = Until { budget, target_error: r.target_error };
+            render_until(scene, opts, until, Control::with_progress(&|| bar.inc(1)))?
         }
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
-    film.save_with_info(&output, r.exposure, Some(&opts.image_info(scene, stats.planes)))?;
+    let info = opts.image_info(scene, stats.planes);
+    film.save_with_info(&output, r.exposure, Some(&info))?;
+    if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
+        se.save_with_info(path, r.exposure, Some(&info.clone().with(ImageInfo::IMAGE, "render standard error")))?;
+    }
     watch.finish(&film);
     let mut summary = stats.summary();
-    if r.time_budget.is_some() {
+    if r.in_passes() {
         summary += &format!(", {} plane passes", stats.plane_passes);
+    }
+    if let Some(stop) = stats.stopped_by {
+        summary += &format!(", stopped by the {stop}");
+    }
+    if let Some(e) = stats.relative_error {
+        summary += &format!(", estimated relative RMS error {e:.2e}");
     }
     if let Some(c) = cpu.filter(|_| stats.hits > 0) {
         summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
@@ -161,6 +183,9 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     }
     say!("{summary}");
     say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", output.display(), film.width, film.height, film.mean(), film.max());
+    if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
+        say!("wrote {} (standard error: mean {:.3e}, max {:.3e})", path.display(), se.mean(), se.max());
+    }
     Ok(())
 }
 
@@ -352,15 +377,63 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     let (reference, reference_info) = Film::load_exr_with_info(&a.reference).map_err(input)?;
     check_reference(image_info.as_ref(), reference_info.as_ref(), &a.reference)?;
     let m = compare(&image, &reference)?;
+    let Some(ref_se_path) = &a.ref_stderr else {
+        if a.json {
+            say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
+        } else {
+            print_metrics(&m);
+        }
+        return Ok(());
+    };
+    if let Some(z) = &a.z_image {
+        check_outputs(&[Output::Image(z)])?;
+    }
+    let load_se = |path: &Path| Film::load_exr(path).map_err(|e| input(anyhow!("{}: {e}", path.display())));
+    let ref_se = load_se(ref_se_path)?;
+    let image_se = a.stderr.as_deref().map(load_se).transpose()?;
+    let (noisy, z) = compare_noisy(&image, &reference, &ref_se, image_se.as_ref(), a.regions).map_err(input)?;
+    if let Some(path) = &a.z_image {
+        z.save_with_info(path, 0.0, None)?;
+    }
     if a.json {
-        say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
-    } else {
-        say!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
-        say!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
-        say!("relMSE       {:.6e}", m.rel_mse);
-        say!("max |error|  {:.6e}", m.max_abs_error);
+        let both = serde_json::json!({ "metrics": m, "noise": noisy });
+        say!("{}", serde_json::to_string_pretty(&both).context("cannot format JSON")?);
+        return Ok(());
+    }
+    print_metrics(&m);
+    say!("reference noise, mean s_r^2         {:.6e}", noisy.reference_noise);
+    say!(
+        "MSE - reference noise               {:.6e}  (the image's MSE against the truth, estimated)",
+        noisy.mse_minus_reference_noise
+    );
+    if let (Some(noise), Some(excess)) = (noisy.image_noise, noisy.excess) {
+        say!("image noise, mean s_e^2             {noise:.6e}");
+        say!(
+            "excess over both noises             {excess:.6e}  ({:+.1}% of the image's noise)",
+            100.0 * excess / noise.max(f64::MIN_POSITIVE)
+        );
+    }
+    say!("mean z^2                            {:.4}  (1 when the noise explains the difference)", noisy.mean_z2);
+    say!("|z| > 3                             {:.3}%  (0.27% for normal noise)", 100.0 * noisy.beyond_3);
+    if !noisy.regions.is_empty() {
+        say!("regions the noise does not explain (|z| > 2, connected), largest excess first:");
+        say!("  {:>17}  {:>6}  {:>11}  {:>11}  {:>7}", "pixels x, y", "count", "excess", "noise", "mean z");
+        for r in &noisy.regions {
+            let area = format!("{}-{}, {}-{}", r.x0, r.x1, r.y0, r.y1);
+            say!("  {area:>17}  {:>6}  {:>11.4e}  {:>11.4e}  {:>+7.2}", r.pixels, r.excess, r.noise, r.mean_z);
+        }
+    }
+    if let Some(path) = &a.z_image {
+        say!("wrote {} (z per pixel and channel)", path.display());
     }
     Ok(())
+}
+
+fn print_metrics(m: &fogplanes::metrics::ErrorMetrics) {
+    say!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
+    say!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
+    say!("relMSE       {:.6e}", m.rel_mse);
+    say!("max |error|  {:.6e}", m.max_abs_error);
 }
 
 /// The files `table` writes into its directory; the plot's only with a sweep.

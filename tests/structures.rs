@@ -184,7 +184,7 @@ fn a_render_in_passes_is_the_render_of_its_planes() {
             let opts = Overrides { seed: Some(3), sampler: Some(sampler), spp: Some(spp), ..Overrides::default() };
             let mut pass = schedule.iter();
             let (passes, ps) =
-                render_in_passes(&s, &options(&s, opts.clone()), Control::none(), &mut |_, _| *pass.next().unwrap())
+                render_in_passes(&s, &options(&s, opts.clone()), Control::none(), &mut |_| *pass.next().unwrap())
                     .unwrap();
             let planes = schedule.iter().sum();
             assert_eq!((ps.planes, ps.plane_passes), (planes, schedule.len() as u32 - 1));

@@ -334,7 +334,7 @@ fn a_render_in_passes_matches_the_reference() {
     let failures = against_reference("passes", &s, false, 24, &|seed| {
         let opts = options(&s, Overrides { seed: Some(70 + seed), ..Overrides::default() });
         let mut schedule = [256usize, 256, 512, 3000, 0].into_iter();
-        render_in_passes(&s, &opts, Control::none(), &mut |_, _| schedule.next().unwrap()).unwrap().0
+        render_in_passes(&s, &opts, Control::none(), &mut |_| schedule.next().unwrap()).unwrap().0
     });
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -41,11 +41,35 @@ const TINY_AREA: f64 = 1e-9;
 /// the pixel centre when `pixel_center`. `ray_sets` and `seed` fix the positions that pixels
 /// without an outline average over (those of the render's ray sets).
 pub fn direct_emission(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool) -> Vec<Vec3> {
-    direct_emission_with(scene, seed, ray_sets, pixel_center, OUTLINE_GRID)
+    emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID).0
 }
 
 /// [`direct_emission`] with a `grid x grid` jittered grid in the pixels that need one.
 pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool, grid: u32) -> Vec<Vec3> {
+    emission_with_variance(scene, seed, ray_sets, pixel_center, grid).0
+}
+
+/// [`direct_emission`] and, per pixel, an estimate of its variance (docs/mathematics.md section
+/// 10.3): the strata of each jittered grid (and the ray-set positions) collapsed in pairs of
+/// neighbours, `sum over pairs of (v_a - v_b)^2 / n^2` for `n` samples of mean `(1/n) sum v`.
+/// It counts the pair's difference of means as noise, so it errs high, never low, and is 0
+/// where the value is exact (no panel, pixel centres).
+pub fn direct_emission_and_variance(
+    scene: &Scene,
+    seed: u64,
+    ray_sets: u32,
+    pixel_center: bool,
+) -> (Vec<Vec3>, Vec<Vec3>) {
+    emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID)
+}
+
+fn emission_with_variance(
+    scene: &Scene,
+    seed: u64,
+    ray_sets: u32,
+    pixel_center: bool,
+    grid: u32,
+) -> (Vec<Vec3>, Vec<Vec3>) {
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
     let footprints = PanelFootprints::new(scene);
@@ -57,37 +81,82 @@ pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_cente
         .map(|p| {
             let (i, j) = (p % w, p / w);
             if !footprints.any_over(i, j) {
-                return Vec3::ZERO;
+                return (Vec3::ZERO, Vec3::ZERO);
             }
             let lights = footprints.over(i, j);
             let at = |x: f64, y: f64| emission_at(scene, cam, x, y, lights.clone());
             let (x, y) = (i as f64, j as f64);
             if pixel_center {
-                return at(x + 0.5, y + 0.5).as_vec3();
+                return (at(x + 0.5, y + 0.5).as_vec3(), Vec3::ZERO);
             }
             let mut jitter = Jitter { x, y, rng: rng_for(seed, OUTLINE_STREAM, p as u64) };
-            let value = match meeting(&projected, lights.clone(), i, j) {
-                Meeting::None => DVec3::ZERO,
+            let mean = match meeting(&projected, lights.clone(), i, j) {
+                Meeting::None => Mean::default(),
                 Meeting::One(l, region) => covered(scene, l, &region, &mut jitter),
                 Meeting::Several if outline[p as usize] => {
-                    let mut sum = DVec3::ZERO;
-                    jitter.grid(grid, |x, y| sum += at(x, y));
-                    sum / (grid * grid) as f64
+                    let mut m = Mean::default();
+                    jitter.grid(grid, |x, y| m.add(at(x, y)));
+                    m
                 }
                 // No outline crosses the pixel: the same panel is first along all its rays.
                 Meeting::Several => {
-                    let sum: DVec3 = (0..ray_sets)
-                        .map(|k| {
-                            let (sx, sy) = ray_set_position(seed, p as u64, k);
-                            at(x + sx, y + sy)
-                        })
-                        .sum();
-                    sum / ray_sets as f64
+                    let mut m = Mean::default();
+                    for k in 0..ray_sets {
+                        let (sx, sy) = ray_set_position(seed, p as u64, k);
+                        m.add(at(x + sx, y + sy));
+                    }
+                    m
                 }
             };
-            value.as_vec3()
+            (mean.value().as_vec3(), mean.variance().as_vec3())
         })
-        .collect()
+        .unzip()
+}
+
+/// The mean of samples taken one per stratum, with the strata collapsed in consecutive pairs
+/// for its variance (neighbouring cells of a grid, consecutive ray sets).
+#[derive(Default)]
+struct Mean {
+    sum: DVec3,
+    n: u32,
+    /// The sample waiting for its pair's other half.
+    first: Option<DVec3>,
+    /// Sum over complete pairs of the squared difference.
+    pairs: DVec3,
+}
+
+impl Mean {
+    fn add(&mut self, v: DVec3) {
+        self.sum += v;
+        self.n += 1;
+        match self.first.take() {
+            Some(a) => self.pairs += (a - v) * (a - v),
+            None => self.first = Some(v),
+        }
+    }
+
+    fn value(&self) -> DVec3 {
+        if self.n == 0 { DVec3::ZERO } else { self.sum / self.n as f64 }
+    }
+
+    /// `sum over pairs (v_a - v_b)^2 / n^2`: each pair's sum has variance `E (v_a - v_b)^2`
+    /// when its two strata share a mean, more when they do not (section 10.3). An odd last
+    /// sample, with no pair, is counted as its pair's neighbour would be: the pairs' mean.
+    fn variance(&self) -> DVec3 {
+        let pairs = self.n / 2;
+        if pairs == 0 {
+            return DVec3::ZERO;
+        }
+        let per_sample = self.pairs / (2 * pairs) as f64;
+        per_sample * self.n as f64 / (self.n as f64 * self.n as f64)
+    }
+
+    fn scaled(mut self, by: DVec3) -> Self {
+        self.sum *= by;
+        self.first = self.first.map(|f| f * by);
+        self.pairs *= by * by;
+        self
+    }
 }
 
 /// Jittered samples over the pixel with corner `(x, y)`, from the pixel's own random stream.
@@ -141,26 +210,25 @@ fn meeting(projected: &[Option<Polygon<DVec2>>], lights: impl Iterator<Item = us
 /// region, one per cell of a jittered grid mapped onto it ([`point_in_region`]). Every point of
 /// the region sees the panel, so no term jumps at its outline: only the transmittance's
 /// variation across the region is sampled. Never negative.
-fn covered(scene: &Scene, l: usize, region: &Polygon<DVec2>, jitter: &mut Jitter) -> DVec3 {
+fn covered(scene: &Scene, l: usize, region: &Polygon<DVec2>, jitter: &mut Jitter) -> Mean {
     let (cam, light) = (&scene.camera, &scene.lights[l]);
     let o = cam.position;
     // The camera sees the panel's back (black) or its front, the same for every ray.
     let depth = (light.corner - o).dot(light.n);
     if !(depth < 0.0) {
-        return DVec3::ZERO;
+        return Mean::default();
     }
     let medium = &scene.medium;
     let (x0, y0) = (jitter.x, jitter.y);
-    let mut sum = DVec3::ZERO;
+    let mut mean = Mean::default();
     jitter.grid(SAMPLES_GRID, |x, y| {
         let s = point_in_region(region, x - x0, y - y0);
         let we = cam.direction(s.x, s.y).normalize();
         // On the panel's plane (inside the panel but for rounding: the region is its image).
         let t = (depth / we.dot(light.n)).max(0.0);
-        sum += medium.transmittance(medium.length_inside(o, o + t * we));
+        mean.add(medium.transmittance(medium.length_inside(o, o + t * we)));
     });
-    let n = (SAMPLES_GRID * SAMPLES_GRID) as f64;
-    light.radiance * area(region) * sum / n
+    mean.scaled(light.radiance * area(region))
 }
 
 /// The point of the convex `region` that `(u, v)` in `[0, 1)^2` maps to: uniform in the region

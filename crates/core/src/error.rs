@@ -131,6 +131,8 @@ pub enum Setting {
     Accelerator,
     Kernel,
     TimeBudget,
+    /// The relative RMS error a render in passes stops at.
+    TargetError,
     Resolution,
     Threads,
     Exposure,
@@ -145,7 +147,7 @@ pub enum Setting {
 }
 
 impl Setting {
-    pub const ALL: [Setting; 17] = [
+    pub const ALL: [Setting; 18] = [
         Setting::Estimator,
         Setting::Orientations,
         Setting::Planes,
@@ -155,6 +157,7 @@ impl Setting {
         Setting::Accelerator,
         Setting::Kernel,
         Setting::TimeBudget,
+        Setting::TargetError,
         Setting::Resolution,
         Setting::Threads,
         Setting::Exposure,
@@ -177,6 +180,7 @@ impl Setting {
             Setting::Accelerator => "accelerator",
             Setting::Kernel => "kernel",
             Setting::TimeBudget => "time_budget",
+            Setting::TargetError => "target_error",
             Setting::Resolution => "resolution",
             Setting::Threads => "threads",
             Setting::Exposure => "exposure",

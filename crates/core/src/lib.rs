@@ -32,6 +32,7 @@
 //! | pixels and film | [`pixel`] | the pixel: the ray sets that sample it, their plane groups, the one cache of ray sets (section 8.1) |
 //! | | [`emission`] | direct emission integrated over the pixel (section 8.2) |
 //! | | [`film`] | pixel buffers, the one place an image is finished ([`film::Film::finish`]), EXR / PNG files written whole or not at all, each EXR recording how it was made |
+//! | | [`spread`] | a render's error image, from the spread of its plane groups (section 10) |
 //! | | [`display`] | a live view of a running job in the tev image viewer, over its TCP protocol |
 //! | | [`metrics`] | SMAPE, MSE and friends (section 5) |
 //! | | [`outputs`] | every output path checked before any work |
@@ -94,6 +95,7 @@ pub mod render;
 pub mod sampling;
 pub mod scene;
 pub mod settings;
+pub mod spread;
 pub mod weights;
 
 pub use error::{Error, Result};

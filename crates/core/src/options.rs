@@ -6,13 +6,16 @@
 //! [`crate::limits`]; the renderers below trust it and check nothing again (ripgrep's `HiArgs`).
 
 use crate::accel::Accelerator;
-use crate::film::ImageInfo;
+use crate::error::{Error, Result, Setting};
+use crate::film::{Film, ImageInfo};
 use crate::gather::GatherStats;
 use crate::kernel::Kernel;
 use crate::photon_plane::PlaneSet;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
+use crate::spread::{relative_rms_error, stderr_film};
 use crate::weights::Weighting;
+use glam::DVec3;
 
 /// Settings of one render, resolved ([`crate::settings::resolve_render`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -29,6 +32,9 @@ pub struct RenderOptions {
     pub(crate) accelerator: Accelerator,
     /// The kernel that runs (`auto` resolved on this CPU).
     pub(crate) kernel: Kernel,
+    /// Whether the render estimates its error image ([`crate::spread`]); never with fewer than
+    /// two ray sets.
+    pub(crate) stderr: bool,
 }
 
 impl RenderOptions {
@@ -58,6 +64,10 @@ impl RenderOptions {
     /// The kernel that runs: resolved, never [`Kernel::Auto`].
     pub fn kernel(&self) -> Kernel {
         self.kernel
+    }
+    /// Whether the render estimates its error image (in [`RenderStats::stderr`]).
+    pub fn stderr(&self) -> bool {
+        self.stderr
     }
 
     /// Ray sets per pixel: `spp`, or one at pixel centres (where every set would be the same
@@ -105,6 +115,14 @@ pub struct RenderStats {
     pub seconds_rays: f64,
     pub seconds_gather: f64,
     pub seconds_total: f64,
+    /// The estimated standard error of each pixel, when the options asked for it
+    /// (docs/mathematics.md section 10).
+    #[serde(skip)]
+    pub stderr: Option<Film>,
+    /// The estimated relative RMS error of the image, with the error image (section 10.2).
+    pub relative_error: Option<f64>,
+    /// Why a render in passes stopped: "time budget", "target error" or "plane limit".
+    pub stopped_by: Option<&'static str>,
 }
 
 impl RenderStats {
@@ -117,6 +135,17 @@ impl RenderStats {
             plane_passes: 1,
             ..Default::default()
         }
+    }
+
+    /// Records the error image of `image` from its pixels' `variance` (`None`: too few plane
+    /// groups to measure a spread).
+    pub fn add_error_image(&mut self, image: &Film, variance: Option<Vec<DVec3>>) -> Result<()> {
+        let variance = variance.ok_or_else(|| {
+            Error::option(Setting::Planes, "an error image needs planes in at least two groups: give more planes")
+        })?;
+        self.relative_error = Some(relative_rms_error(image, &variance));
+        self.stderr = Some(stderr_film(image.width, image.height, &variance)?);
+        Ok(())
     }
 
     /// Counts one gathering that found `s` in `seconds`.

@@ -11,7 +11,7 @@
 
 use crate::accel::PreparedPlanes;
 use crate::control::Control;
-use crate::emission::direct_emission;
+use crate::emission::direct_emission_and_variance;
 use crate::error::{Error, Result, Setting};
 use crate::film::Film;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
@@ -19,6 +19,7 @@ use crate::options::{RenderOptions, RenderStats};
 use crate::partial::{Partial, chunk_indices, chunk_planes, chunks, combine, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::scene::Scene;
+use crate::spread::{GroupSpread, relative_rms_error};
 use crate::weights::Weighting;
 use glam::{DVec3, Vec3};
 use std::ops::Range;
@@ -31,26 +32,34 @@ struct Gatherer<'a> {
     control: Control<'a>,
     rays: RaySets,
     stats: RenderStats,
+    /// The plane groups' spread, for the error image ([`crate::spread`]), when it is asked.
+    spread: Option<GroupSpread>,
+    /// The sums before the piece being gathered (the spread's pieces are differences).
+    before: Vec<Vec3>,
 }
 
 impl<'a> Gatherer<'a> {
     fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>, keep: Keep) -> Self {
         let rays = RaySets::new(opts.seed, opts.ray_sets(), opts.pixel_center, keep);
-        Gatherer { scene, opts, control, rays, stats: RenderStats::new(opts) }
+        let pixels = scene.camera.width as usize * scene.camera.height as usize;
+        let spread = opts.stderr.then(|| GroupSpread::new(pixels));
+        Gatherer { scene, opts, control, rays, stats: RenderStats::new(opts), spread, before: Vec::new() }
     }
 
-    /// Gathers each piece `(k, planes)` along ray set `k` with `weighting`, adding into `sums`
-    /// (f32, each plane weighted 1): its planes taken from `prepared` if they are there, else
-    /// sampled and prepared now (one piece's planes exist at a time).
+    /// Gathers each piece `(k, planes, quarter)` along ray set `k` with `weighting`, adding
+    /// into `sums` (f32, each plane weighted 1): its planes taken from `prepared` if they are
+    /// there, else sampled and prepared now (one piece's planes exist at a time). With an error
+    /// image, each piece's sums also go to the group spread, in `quarter` of the render.
     fn gather(
         &mut self,
-        pieces: impl IntoIterator<Item = (u32, Range<usize>)>,
+        pieces: impl IntoIterator<Item = (u32, Range<usize>, usize)>,
         weighting: Weighting,
         prepared: &[(Range<usize>, PreparedPlanes)],
         sums: &mut [Vec3],
     ) -> Result<()> {
         let (scene, kernel, control) = (self.scene, self.opts.kernel, self.control);
-        for (k, piece) in pieces {
+        for (k, piece, quarter) in pieces {
+            let count = piece.len();
             let made;
             let planes = match prepared.iter().find(|(r, _)| *r == piece) {
                 Some((_, p)) => p,
@@ -59,10 +68,17 @@ impl<'a> Gatherer<'a> {
                     &made
                 }
             };
+            if self.spread.is_some() {
+                self.before.clear();
+                self.before.extend_from_slice(sums);
+            }
             let rays = self.rays.rays(scene, k);
             let t = Instant::now();
             let s = planes.gather(weighting, kernel, rays, sums, control)?;
             self.stats.add_gather(s, t.elapsed().as_secs_f64());
+            if let Some(spread) = &mut self.spread {
+                spread.add(k, quarter, count, &self.before, sums);
+            }
         }
         self.count_rays();
         Ok(())
@@ -136,7 +152,8 @@ impl<'a> ChunkRenderer<'a> {
         let range = c * CHUNK_PLANES..((c + 1) * CHUNK_PLANES).min(opts.planes);
         let cam = &scene.camera;
         let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
-        let pieces = pieces(opts.planes, opts.ray_sets(), range.clone());
+        let sets = opts.ray_sets();
+        let pieces = pieces(opts.planes, sets, range.clone()).map(|(k, p)| (k, p, quarter_of(k, sets, 0)));
         self.gatherer.gather(pieces, weighting, &self.prepared, &mut sums)?;
         Ok(Partial {
             width: cam.width,
@@ -253,13 +270,31 @@ pub fn render_from(
     let resumed = held.last().map_or(0, |p| p.end);
     let mut chunks = ChunkRenderer::new(scene, opts, control);
     let partial = chunks.render_from(opts.weighting, 0..opts.planes, held, observer)?;
-    let mut stats = chunks.gatherer.stats;
+    let (mut stats, spread) = (chunks.gatherer.stats, chunks.gatherer.spread);
     stats.planes = opts.planes - resumed;
     let t = Instant::now();
-    let film = crate::partial::finish(scene, opts, &partial)?;
+    let (emission, emission_variance) = direct_emission_and_variance(scene, opts.seed, opts.spp, opts.pixel_center);
+    let film = crate::partial::finish_with(scene, opts, &partial, &emission)?;
+    if let Some(mut spread) = spread {
+        if resumed > 0 {
+            return Err(Error::Partial(
+                "an error image cannot be made by a resumed render: its first chunks' groups are not held".into(),
+            ));
+        }
+        stats.add_error_image(&film, spread.variance(&partial.sums, &emission_variance))?;
+    }
     stats.seconds_rays += t.elapsed().as_secs_f64();
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+/// Which quarter of a render's plane groups group `g` of `groups` (in plane order) is in
+/// (section 10.1): consecutive groups make each quarter, so that the first half of the planes
+/// is the first two. With fewer than four groups, each half's groups go to one of its quarters
+/// by `turn` (a render in passes: the pass's number), so that over passes both quarters fill.
+fn quarter_of(g: u32, groups: u32, turn: u32) -> usize {
+    let groups = groups.max(1);
+    if groups >= 4 { (4 * g / groups) as usize } else { (2 * (2 * g / groups) + turn % 2) as usize }
 }
 
 /// Renders planes `range` of the render `opts` describes (a union of consecutive canonical
@@ -293,34 +328,77 @@ pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: Range<usize>) 
 /// the last is sized from the measured time per plane.
 const FIRST_PASS_PLANES: usize = 256;
 
-/// Renders the scene within `budget` of wall time: planes in passes, each extending the plane
-/// set by the next points of the sampler (for Sobol, further points of the same sequence), until
-/// the next pass would not fit; the last pass is sized from the measured time per plane to use
-/// what remains. The image is the estimate of the N planes gathered, N = the total over passes:
-/// the same planes as a render of N planes; each pass splits its planes among the `opts.spp` ray
-/// sets (fewer for small passes, taken in turn), so every plane is still gathered with a ray set
-/// uniform over the pixel, and the estimate is unbiased (docs/mathematics.md section 8.1).
-/// `opts.planes` is ignored. Returns as soon as
-/// `budget` would be exceeded by more work; the caller's own time (loading, writing) is not in
-/// it. `control` as for [`render`]: cancelled, it stops mid-pass.
+/// Renders the scene within `budget` of wall time: [`render_until`] with the budget alone.
 pub fn render_for(
     scene: &Scene,
     opts: &RenderOptions,
     budget: std::time::Duration,
     control: Control,
 ) -> Result<(Film, RenderStats)> {
+    render_until(scene, opts, Until { budget: Some(budget), target_error: None }, control)
+}
+
+/// When a render in passes stops ([`render_until`]): whichever comes first.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Until {
+    /// Wall time of the whole render.
+    pub budget: Option<std::time::Duration>,
+    /// The estimated relative RMS error of the image (docs/mathematics.md section 10.2); needs
+    /// `opts.stderr`.
+    pub target_error: Option<f64>,
+}
+
+/// Renders the scene in plane passes until `until`: each pass extends the plane set by the
+/// next points of the sampler (for Sobol, further points of the same sequence), until the time
+/// budget would not fit the next pass, or the image's estimated relative RMS error falls below
+/// the target, or the plane limit is reached; [`RenderStats::stopped_by`] says which. The
+/// passes double the planes; the last on a budget is sized from the measured time per plane
+/// to use what remains, and with a target error no pass is larger than the error's `1/sqrt(N)`
+/// decay says is needed. The image is the estimate of the N planes gathered, N = the total over
+/// passes: the same planes as a render of N planes; each pass splits its planes among the
+/// `opts.spp` ray sets (fewer for small passes, taken in turn), so every plane is still
+/// gathered with a ray set uniform over the pixel, and the estimate is unbiased
+/// (docs/mathematics.md section 8.1). (Stopping at an error estimated from the image itself
+/// can bias it by the correlation of the estimate with the image; the stopping rule only sees
+/// the image-wide error, whose noise is small, section 10.2.) `opts.planes` is ignored.
+/// `control` as for [`render`]: cancelled, it stops mid-pass.
+pub fn render_until(
+    scene: &Scene,
+    opts: &RenderOptions,
+    until: Until,
+    control: Control,
+) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
-    let deadline = budget.as_secs_f64();
-    render_in_passes(scene, opts, control, &mut |done, seconds_per_plane| {
-        if done == 0 {
+    let deadline = until.budget.map(|b| b.as_secs_f64());
+    let mut stopped_by = "plane limit";
+    let (film, mut stats) = render_in_passes(scene, opts, control, &mut |pass| {
+        if pass.planes == 0 {
             return FIRST_PASS_PLANES;
         }
-        // A pass's cost is close to proportional to its planes; keep a tenth in hand.
-        let remaining = deadline - start.elapsed().as_secs_f64();
-        let affordable = (0.9 * remaining / seconds_per_plane.max(1e-12)).floor().max(0.0) as usize;
-        let next = affordable.min(done).min(MAX_PASS_PLANES);
-        if next < FIRST_PASS_PLANES / 4 { 0 } else { next }
-    })
+        let mut next = pass.planes.min(MAX_PASS_PLANES);
+        if let (Some(target), Some(error)) = (until.target_error, pass.relative_error) {
+            if error <= target {
+                stopped_by = "target error";
+                return 0;
+            }
+            // The error falls as 1/sqrt(N): the planes still needed, and a tenth more.
+            let needed = pass.planes as f64 * ((error / target).powi(2) - 1.0) * 1.1;
+            next = next.min(needed.ceil().max(FIRST_PASS_PLANES as f64) as usize);
+        }
+        if let Some(deadline) = deadline {
+            // A pass's cost is close to proportional to its planes; keep a tenth in hand.
+            let remaining = deadline - start.elapsed().as_secs_f64();
+            let affordable = (0.9 * remaining / pass.seconds_per_plane.max(1e-12)).floor().max(0.0) as usize;
+            next = next.min(affordable);
+            if next < FIRST_PASS_PLANES / 4 {
+                stopped_by = "time budget";
+                return 0;
+            }
+        }
+        next
+    })?;
+    stats.stopped_by = Some(stopped_by);
+    Ok((film, stats))
 }
 
 /// The fewest planes a pass of a render on a time budget gives each ray set it gathers with:
@@ -331,18 +409,30 @@ const MIN_PASS_GROUP: usize = 1024;
 /// them near 0.5 GB whatever the budget).
 const MAX_PASS_PLANES: usize = 1 << 20;
 
+/// Where a render in passes stands after a pass: what sizes the next.
+#[derive(Clone, Copy, Debug)]
+pub struct PassReport {
+    /// Planes gathered so far (0 before the first pass).
+    pub planes: usize,
+    /// Seconds per plane of the last pass.
+    pub seconds_per_plane: f64,
+    /// The image's estimated relative RMS error now, with an error image
+    /// (docs/mathematics.md section 10.2).
+    pub relative_error: Option<f64>,
+}
+
 /// Renders planes in passes, each extending the set by the next planes of the sampler:
-/// `next_pass(planes so far, seconds per plane of the last pass)` sizes the next pass, 0 ends
-/// the render. The image is the estimate of all the planes gathered, the same set as a render
-/// of that many planes (with one pass of at least 1024 planes per ray set, the same image up to
-/// f32 summation order). The ray sets are made when first needed and kept. `opts.planes` is
-/// ignored. `control` as for [`render`]: cancelled, it stops mid-pass (while sampling or
-/// gathering) and no further pass starts.
+/// `next_pass(where the render stands)` sizes the next pass, 0 ends the render. The image is
+/// the estimate of all the planes gathered, the same set as a render of that many planes
+/// (with one pass of at least 1024 planes per ray set, the same image up to f32 summation
+/// order). The ray sets are made when first needed and kept. `opts.planes` is ignored.
+/// `control` as for [`render`]: cancelled, it stops mid-pass (while sampling or gathering) and
+/// no further pass starts.
 pub fn render_in_passes(
     scene: &Scene,
     opts: &RenderOptions,
     control: Control,
-    next_pass: &mut dyn FnMut(usize, f64) -> usize,
+    next_pass: &mut dyn FnMut(PassReport) -> usize,
 ) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
     let (width, height) = (scene.camera.width, scene.camera.height);
@@ -353,25 +443,34 @@ pub fn render_in_passes(
     let mut gatherer = Gatherer::new(scene, opts, control, Keep::All);
     gatherer.stats.plane_passes = 0;
     let pixels = width as usize * height as usize;
+    let t = Instant::now();
+    let (emission, emission_variance) = direct_emission_and_variance(scene, opts.seed, opts.spp, opts.pixel_center);
+    let seconds_emission = t.elapsed().as_secs_f64();
     // Each pass sums its planes in f32 weighted 1 (N is known only at the end); the passes add
     // up in f64, so that the sums stay as far from f32 overflow as a single pass's.
     let mut total = vec![DVec3::ZERO; pixels];
-    let (mut done, mut per_plane, mut next_set) = (0usize, 0.0, 0u32);
+    let mut report = PassReport { planes: 0, seconds_per_plane: 0.0, relative_error: None };
+    let mut next_set = 0u32;
     loop {
         control.check()?;
-        let next = next_pass(done, per_plane).min(MAX_PLANES as usize - done);
+        let next = next_pass(report).min(MAX_PLANES as usize - report.planes);
         if next == 0 {
             break;
         }
+        let done = report.planes;
         check_memory(width, height, next as u64 + rays_as_planes).map_err(|m| Error::option(Setting::TimeBudget, m))?;
         let pass_start = Instant::now();
         // The pass's planes split into groups, each gathered along the next ray set in turn
         // (section 8.1): as many groups as ray sets once a pass has MIN_PASS_GROUP planes per
-        // set, fewer before (a gather costs something per pixel).
+        // set, fewer before (a gather costs something per pixel). For the error image, each
+        // pass's groups fill the render's quarters in order, a pass of fewer than four groups
+        // as its number says (section 10.1).
         let used = (next / MIN_PASS_GROUP).clamp(1, ray_sets as usize) as u32;
+        let passes = gatherer.stats.plane_passes;
         let pass = (0..used).map(|g| {
             let group = plane_group(g, next, used);
-            ((next_set + g) % ray_sets, done + group.start..done + group.end)
+            let quarter = if used == 1 { (passes % 4) as usize } else { quarter_of(g, used, passes) };
+            ((next_set + g) % ray_sets, done + group.start..done + group.end, quarter)
         });
         let mut sums = vec![Vec3::ZERO; pixels];
         gatherer.gather(pass, opts.weighting, &[], &mut sums)?;
@@ -380,19 +479,26 @@ pub fn render_in_passes(
             *t += s.as_dvec3();
         }
         gatherer.stats.plane_passes += 1;
-        done += next;
-        per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
+        report.planes += next;
+        report.seconds_per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
+        if let Some(spread) = &mut gatherer.spread {
+            spread.close();
+            let image = Film::finish(width, height, &total, report.planes, &emission)?;
+            report.relative_error = spread.variance(&total, &emission_variance).map(|v| relative_rms_error(&image, &v));
+        }
     }
-    if done == 0 {
+    if report.planes == 0 {
         return Err(Error::option(Setting::TimeBudget, "no plane pass was made"));
     }
-    let mut stats = gatherer.stats;
-    let t = Instant::now();
-    let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
-    stats.seconds_rays += t.elapsed().as_secs_f64();
-    stats.planes = done;
+    let (mut stats, spread) = (gatherer.stats, gatherer.spread);
+    stats.planes = report.planes;
+    let film = Film::finish(width, height, &total, report.planes, &emission)?;
+    if let Some(mut spread) = spread {
+        stats.add_error_image(&film, spread.variance(&total, &emission_variance))?;
+    }
+    stats.seconds_rays += seconds_emission;
     stats.seconds_total = start.elapsed().as_secs_f64();
-    Ok((Film::finish(width, height, &total, done, &emission)?, stats))
+    Ok((film, stats))
 }
 
 #[cfg(test)]
@@ -502,7 +608,7 @@ mod tests {
         let control = Control::new(&progress, &cancel);
         // Passes of 4096 planes, each of 12 bands: set after the first band of the first pass.
         let mut passes = 0;
-        let mut next = |_: usize, _: f64| {
+        let mut next = |_: PassReport| {
             passes += 1;
             4096
         };
@@ -514,8 +620,8 @@ mod tests {
         let count = || {
             units.fetch_add(1, Ordering::Relaxed);
         };
-        let mut next = |done: usize, _: f64| {
-            if done > 0 {
+        let mut next = |pass: PassReport| {
+            if pass.planes > 0 {
                 cancel.store(true, Ordering::Relaxed);
             }
             256

@@ -131,6 +131,11 @@ pub struct Overrides {
     pub kernel: Option<Kernel>,
     /// Render in plane passes for this many seconds instead of a plane count.
     pub time_budget: Option<f64>,
+    /// Render in plane passes until the estimated relative RMS error of the image falls below
+    /// this (docs/mathematics.md section 10.2), or the time budget runs out.
+    pub target_error: Option<f64>,
+    /// Estimate the render's error image ([`crate::spread`]).
+    pub stderr: bool,
     /// (width, height), overriding the scene's camera.
     pub resolution: Option<(u32, u32)>,
     /// Worker threads (`None`: every core).
@@ -148,8 +153,19 @@ pub struct ResolvedRender {
     pub options: RenderOptions,
     /// Seconds of a render in plane passes ([`crate::render::render_for`]), if one was asked.
     pub time_budget: Option<f64>,
+    /// The relative RMS error a render in passes stops at ([`crate::render::render_until`]),
+    /// if one was asked (then `options.stderr` is on).
+    pub target_error: Option<f64>,
     pub exposure: f32,
     pub threads: Option<usize>,
+}
+
+impl ResolvedRender {
+    /// Whether the render goes in plane passes (on a time budget or to a target error) rather
+    /// than over `options.planes`.
+    pub fn in_passes(&self) -> bool {
+        self.time_budget.is_some() || self.target_error.is_some()
+    }
 }
 
 /// Resolves a photon-plane render: the scene's `[render]` defaults where `given` has none,
@@ -172,10 +188,32 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
             ));
         }
     }
+    if let Some(r) = given.target_error {
+        if !(r > 0.0 && r < 1.0) {
+            return Err(Error::option(
+                Setting::TargetError,
+                format!("must be a relative error between 0 and 1 (0.01 for 1%), got {r}"),
+            ));
+        }
+        if given.planes.is_some() {
+            return Err(Error::option(
+                Setting::Planes,
+                "a render to a target error chooses its own plane count: give one or the other",
+            ));
+        }
+    }
+    let stderr = given.stderr || given.target_error.is_some();
+    let ray_sets = if given.pixel_center { 1 } else { spp };
+    if stderr && ray_sets < 2 {
+        // The error is the spread of the ray sets' plane groups (section 10).
+        let why = "an error image (and a target error) needs two ray sets or more, whose plane groups it compares: give --spp 2 or more, without --pixel-center";
+        return Err(Error::option(Setting::Spp, why));
+    }
     // A render holds one chunk's planes at a time, so what can exceed the memory is the image:
     // the resolution is at fault, the caller's or the scene's. A render on a time budget sizes
     // its passes to fit (each checks its own memory).
-    let held = if given.time_budget.is_some() { 1 } else { planes };
+    let in_passes = given.time_budget.is_some() || given.target_error.is_some();
+    let held = if in_passes { 1 } else { planes };
     check_render_memory(scene.camera.width, scene.camera.height, held)
         .map_err(invalid(Setting::Resolution, origin(&given.resolution)))?;
     let options = RenderOptions {
@@ -187,11 +225,13 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
         pixel_center: given.pixel_center,
         accelerator: given.accelerator.unwrap_or_default(),
         kernel: given.kernel.unwrap_or_default().resolve()?,
+        stderr,
     };
     Ok(ResolvedRender {
         scene,
         options,
         time_budget: given.time_budget,
+        target_error: given.target_error,
         exposure: exposure(given.exposure)?,
         threads: threads(given.threads)?,
     })
@@ -362,6 +402,7 @@ impl ResolvedTable {
             pixel_center: self.pixel_center,
             accelerator: Accelerator::default(),
             kernel: Kernel::widest(),
+            stderr: false,
         }
     }
 }
@@ -408,6 +449,7 @@ impl ResolvedScaling {
             pixel_center: false,
             accelerator: Accelerator::default(),
             kernel: Kernel::widest(),
+            stderr: false,
         }
     }
 }
@@ -467,6 +509,7 @@ mod tests {
             pixel_center: false,
             accelerator: Accelerator::Raster,
             kernel: Kernel::Auto.resolve().unwrap(),
+            stderr: false,
         };
         assert_eq!(r.options, expected);
         assert_eq!((r.time_budget, r.exposure, r.threads), (None, 0.0, None));
@@ -483,6 +526,8 @@ mod tests {
             accelerator: Some(Accelerator::Bvh),
             kernel: Some(Kernel::PerHit),
             time_budget: None,
+            target_error: None,
+            stderr: false,
             resolution: Some((8, 4)),
             threads: Some(3),
             exposure: Some(-1.5),
@@ -497,10 +542,35 @@ mod tests {
             pixel_center: true,
             accelerator: Accelerator::Bvh,
             kernel: Kernel::PerHit,
+            stderr: false,
         };
         assert_eq!(r.options, expected);
         assert_eq!((r.exposure, r.threads), (-1.5, Some(3)));
         assert_eq!((r.scene.camera.width, r.scene.camera.height), (8, 4));
+    }
+
+    /// An error image needs two ray sets; a target error is a fraction in (0, 1) and, like a
+    /// time budget, chooses its own plane count; it turns the error image on.
+    #[test]
+    fn error_images_and_target_errors_are_checked() {
+        let s = scene("");
+        for given in [
+            Overrides { stderr: true, pixel_center: true, ..Default::default() },
+            Overrides { stderr: true, spp: Some(1), ..Default::default() },
+            Overrides { target_error: Some(0.01), pixel_center: true, ..Default::default() },
+        ] {
+            let (setting, _, message) = refused(resolve_render(&s, &given).unwrap_err());
+            assert_eq!(setting, Setting::Spp, "{given:?}");
+            assert!(message.contains("two ray sets"), "{message}");
+        }
+        for r in [0.0, 1.0, -0.1, f64::NAN, f64::INFINITY] {
+            let given = Overrides { target_error: Some(r), ..Default::default() };
+            assert_eq!(refused(resolve_render(&s, &given).unwrap_err()).0, Setting::TargetError, "{r}");
+        }
+        let given = Overrides { target_error: Some(0.01), planes: Some(100), ..Default::default() };
+        assert_eq!(refused(resolve_render(&s, &given).unwrap_err()).0, Setting::Planes);
+        let r = resolve_render(&s, &Overrides { target_error: Some(0.01), ..Default::default() }).unwrap();
+        assert!(r.options.stderr && r.in_passes());
     }
 
     /// The scene's K belongs to the scene's estimator: over every estimator of the scene and of

@@ -60,15 +60,24 @@ pub(crate) fn flag(name: &str, value: &Option<Bound<'_, PyAny>>) -> PyResult<boo
     })
 }
 
+/// What `render` returns and shows besides the image (its own keywords).
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Returns {
+    pub(crate) stats: bool,
+    pub(crate) stderr: bool,
+    pub(crate) progress: bool,
+}
+
 /// The render settings of `**kwargs`: the keyword arguments of `render`, by the same names,
-/// parsed in one place for every function that takes them; and `return_stats` (`render` only).
+/// parsed in one place for every function that takes them; and what `render` alone takes:
+/// `time_budget`, `target_error`, `return_stats`, `return_stderr`, `progress`.
 pub(crate) fn render_overrides(
     kwargs: Option<&Bound<'_, PyDict>>,
     given: &mut Given,
     front: Front,
-) -> PyResult<(Overrides, bool)> {
-    let (mut o, mut return_stats) = (Overrides::default(), false);
-    let Some(kwargs) = kwargs else { return Ok((o, return_stats)) };
+) -> PyResult<(Overrides, Returns)> {
+    let (mut o, mut returns) = (Overrides::default(), Returns::default());
+    let Some(kwargs) = kwargs else { return Ok((o, returns)) };
     for (key, value) in kwargs.iter() {
         let key: String = key.extract()?;
         let value = (!value.is_none()).then_some(value);
@@ -87,17 +96,25 @@ pub(crate) fn render_overrides(
             "time_budget" if front == Front::Render => {
                 o.time_budget = given.float(Setting::TimeBudget, value.as_ref())?;
             }
-            "return_stats" if front == Front::Render => return_stats = flag("return_stats", &value)?,
-            "time_budget" if value.is_some() => {
-                return Err(PyValueError::new_err(
-                    "time_budget: a render in chunks has a plane count; give planes= instead",
-                ));
+            "target_error" if front == Front::Render => {
+                o.target_error = given.float(Setting::TargetError, value.as_ref())?;
             }
-            "time_budget" => {}
+            "return_stats" if front == Front::Render => returns.stats = flag("return_stats", &value)?,
+            "return_stderr" if front == Front::Render => {
+                returns.stderr = flag("return_stderr", &value)?;
+                o.stderr = returns.stderr;
+            }
+            "progress" if front == Front::Render => returns.progress = flag("progress", &value)?,
+            "time_budget" | "target_error" if value.is_some() => {
+                return Err(PyValueError::new_err(format!(
+                    "{key}: a render in chunks has a plane count; give planes= instead"
+                )));
+            }
+            "time_budget" | "target_error" => {}
             other => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{other}'"))),
         }
     }
-    Ok((o, return_stats))
+    Ok((o, returns))
 }
 
 /// The render `scene` and `**kwargs` describe, resolved as `render` resolves it.

@@ -1,5 +1,6 @@
 //! Running work interruptibly: on a worker thread with the GIL released, Ctrl-C setting the core's cancel flag.
 
+use crate::progress::Progress;
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -14,6 +15,17 @@ pub(crate) fn run_interruptible<T: Send>(
     py: Python<'_>,
     pool: Option<rayon::ThreadPool>,
     work: impl FnOnce(&AtomicBool) -> fogplanes::Result<T> + Send,
+) -> PyResult<fogplanes::Result<T>> {
+    run_showing(py, pool, work, &Progress::hidden())
+}
+
+/// [`run_interruptible`], showing `progress` (which the work ticks) on Python's standard error
+/// from this thread every 50 ms: Python's own stream, so that a notebook shows it too.
+pub(crate) fn run_showing<T: Send>(
+    py: Python<'_>,
+    pool: Option<rayon::ThreadPool>,
+    work: impl FnOnce(&AtomicBool) -> fogplanes::Result<T> + Send,
+    progress: &Progress,
 ) -> PyResult<fogplanes::Result<T>> {
     let cancel = AtomicBool::new(false);
     let (tx, rx) = mpsc::channel();
@@ -36,7 +48,10 @@ pub(crate) fn run_interruptible<T: Send>(
             let (received, back) = py.detach(move || (rx.recv_timeout(Duration::from_millis(50)), rx));
             rx = back;
             match received {
-                Ok(Ok(result)) => return Ok(result),
+                Ok(Ok(result)) => {
+                    progress.show(py, true);
+                    return Ok(result);
+                }
                 Ok(Err(panic)) => {
                     let what = panic
                         .downcast_ref::<&str>()
@@ -46,6 +61,7 @@ pub(crate) fn run_interruptible<T: Send>(
                     return Err(PyRuntimeError::new_err(format!("fogplanes: internal error: {what}")));
                 }
                 Err(mpsc::RecvTimeoutError::Timeout) => {
+                    progress.show(py, false);
                     if let Err(signal) = py.check_signals() {
                         cancel.store(true, Ordering::Relaxed);
                         py.detach(move || {

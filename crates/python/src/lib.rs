@@ -16,6 +16,7 @@ mod errors;
 mod given;
 mod interrupt;
 mod partials;
+mod progress;
 mod references;
 mod renders;
 mod scene;

@@ -5,13 +5,14 @@ use crate::arrays::*;
 use crate::errors::*;
 use crate::given::*;
 use crate::interrupt::*;
+use crate::progress::Progress;
 use crate::scene::*;
 use crate::*;
 use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::metrics::compare as compare_films;
 use fogplanes::reference::render_reference;
-use fogplanes::render::render_for;
+use fogplanes::render::{Until, progress_units, render_until};
 use fogplanes::settings::{self, Setting};
 use fogplanes::weights::Estimator;
 use pyo3::prelude::*;
@@ -38,10 +39,15 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// over each pixel's square (box filter), with `spp` camera samples per pixel (the scene's, else
 /// 16) sharing the planes; `pixel_center=True` takes the centres. `time_budget` renders for
 /// that many seconds instead of a plane count: planes in passes, each extending the set (the
-/// stats give "planes" and "plane_passes"). `threads` runs the render in a pool of that many
+/// stats give "planes" and "plane_passes"); `target_error` renders passes until the estimated
+/// relative RMS error of the image falls below it (with `time_budget`, whichever comes first;
+/// the stats' "stopped_by" says which). `threads` runs the render in a pool of that many
 /// threads (None: all cores); the image depends on the seed alone. The image is bit-identical
-/// to the EXR that `fogplanes render` writes for the same
-/// arguments. With `return_stats=True`, returns (image, stats).
+/// to the EXR that `fogplanes render` writes for the same arguments. With
+/// `return_stderr=True`, also the estimated standard error of each pixel (as `render
+/// --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
+/// `progress=True` shows a progress bar on standard error (a line per tenth when it is not a
+/// terminal, as in a notebook or a log).
 ///
 /// Raises ValueError for bad input (the command line's message, the setting named as given
 /// here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
@@ -50,7 +56,7 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 #[pyo3(signature = (scene, estimator = None, **kwargs))]
 #[pyo3(text_signature = "(scene, estimator=None, planes=None, seed=None, spp=None, pixel_center=False, \
     resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', return_stats=False, \
-    sampler=None, time_budget=None)")]
+    sampler=None, time_budget=None, target_error=None, return_stderr=False, progress=False)")]
 pub(crate) fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
@@ -59,19 +65,43 @@ pub(crate) fn render<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let scene = scene_arg(scene)?;
     let mut given = Given::default();
-    let (mut overrides, return_stats) = render_overrides(kwargs, &mut given, Front::Render)?;
+    let (mut overrides, returns) = render_overrides(kwargs, &mut given, Front::Render)?;
     let estimator = estimator.filter(|e| !e.is_none());
     overrides.estimator = given.named::<Estimator>(Setting::Estimator, estimator)?.or(overrides.estimator);
     let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
-    let (film, stats) = run_interruptible(py, pool(r.threads)?, |cancel| match r.time_budget {
-        None => fogplanes::render::render(&r.scene, &r.options, Control::with_cancel(cancel)),
-        Some(seconds) => {
-            render_for(&r.scene, &r.options, Duration::from_secs_f64(seconds), Control::with_cancel(cancel))
-        }
-    })?
+    let (scene, opts) = (&r.scene, &r.options);
+    let label = opts.weighting().label();
+    let progress = if !returns.progress {
+        Progress::hidden()
+    } else if r.in_passes() {
+        Progress::passes(&label)
+    } else {
+        Progress::planes(&label, progress_units(scene, opts, 0..opts.planes()), opts.planes() as u64)
+    };
+    let tick = || progress.tick();
+    let (film, stats) = run_showing(
+        py,
+        pool(r.threads)?,
+        |cancel| {
+            let control = Control::new(&tick, cancel);
+            if r.in_passes() {
+                let until = Until { budget: r.time_budget.map(Duration::from_secs_f64), target_error: r.target_error };
+                render_until(scene, opts, until, control)
+            } else {
+                fogplanes::render::render(scene, opts, control)
+            }
+        },
+        &progress,
+    )?
     .map_err(|e| given.error(e))?;
-    let image = film_to_array(py, &film).into_any();
-    if return_stats { Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any()) } else { Ok(image) }
+    let mut out = vec![film_to_array(py, &film).into_any()];
+    if let Some(se) = stats.stderr.as_ref().filter(|_| returns.stderr) {
+        out.push(film_to_array(py, se).into_any());
+    }
+    if returns.stats {
+        out.push(stats_dict(py, &stats)?.into_any());
+    }
+    if out.len() == 1 { Ok(out.pop().expect("the image")) } else { Ok(PyTuple::new(py, out)?.into_any()) }
 }
 
 /// Renders the independent reference: (image, per-pixel standard error), both float32.

@@ -362,6 +362,12 @@ pub fn merge_plan(chunks: usize, block: usize) -> Result<Vec<PlanStep>> {
 /// value that is not a finite number (f32 overflow where a pixel's sums divided by N come near
 /// `f32::MAX`), naming the pixel.
 pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<Film> {
+    finish_with(scene, opts, partial, &direct_emission(scene, opts.seed, opts.spp, opts.pixel_center))
+}
+
+/// [`finish`] with the direct emission already computed (by a render that also wants its
+/// variance, [`crate::emission::direct_emission_and_variance`]).
+pub fn finish_with(scene: &Scene, opts: &RenderOptions, partial: &Partial, emission: &[Vec3]) -> Result<Film> {
     partial.check()?;
     if partial.fingerprint != fingerprint(scene, opts) {
         return Err(Error::Partial(format!(
@@ -384,8 +390,7 @@ pub fn finish(scene: &Scene, opts: &RenderOptions, partial: &Partial) -> Result<
             partial.width, partial.height, cam.width, cam.height
         )));
     }
-    let emission = direct_emission(scene, opts.seed, opts.spp, opts.pixel_center);
-    Film::finish(cam.width, cam.height, &partial.sums, opts.planes, &emission)
+    Film::finish(cam.width, cam.height, &partial.sums, opts.planes, emission)
 }
 
 /// The image of the first planes of a render while it runs (docs/mathematics.md section 8.1, "A

@@ -1,0 +1,194 @@
+//! The error image (`render --stderr-image`, docs/mathematics.md section 10): calibrated against
+//! the measured error over seeds, on the whole image and on the glow; and a render to a target
+//! error stops there.
+
+use crate::common::{MeanEstimate, options};
+use fogplanes::control::Control;
+use fogplanes::emission::direct_emission;
+use fogplanes::film::Film;
+use fogplanes::render::{Until, render, render_until};
+use fogplanes::scene::Scene;
+use fogplanes::settings::Overrides;
+use fogplanes::weights::Estimator;
+
+fn benchmark(width: u32, height: u32) -> Scene {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/media_scenes/six_lights.toml");
+    Scene::load(std::path::Path::new(path)).unwrap().with_resolution(width, height).unwrap()
+}
+
+/// The glow: the pixels more than two pixels (in x or y) from any pixel that sees a light.
+fn glow_mask(scene: &Scene) -> Vec<bool> {
+    let (w, h) = (scene.camera.width as i64, scene.camera.height as i64);
+    let lit = direct_emission(scene, 1, 16, false);
+    let mut glow = vec![true; lit.len()];
+    for y in 0..h {
+        for x in 0..w {
+            if lit[(y * w + x) as usize].max_element() > 0.0 {
+                for dy in -2..=2 {
+                    for dx in -2..=2 {
+                        let (nx, ny) = (x + dx, y + dy);
+                        if (0..w).contains(&nx) && (0..h).contains(&ny) {
+                            glow[(ny * w + nx) as usize] = false;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    glow
+}
+
+/// Over `mask`, the mean over pixels and channels of `f(pixel index, channel)`.
+fn masked_mean(mask: &[bool], f: impl Fn(usize, usize) -> f64) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+        for c in 0..3 {
+            sum += f(p, c);
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f64
+}
+
+/// What one calibration measured, over `mask`: the mean predicted variance (the error image
+/// squared) and the measured squared error, each a mean over seeds with its standard error.
+struct Calibration {
+    predicted: MeanEstimate,
+    measured: MeanEstimate,
+}
+
+impl Calibration {
+    fn ratio(&self) -> f64 {
+        self.predicted.mean() / self.measured.mean()
+    }
+
+    /// The ratio's standard error, to first order (the two means' relative errors combined;
+    /// they come from the same renders and are positively correlated, so this errs high).
+    fn ratio_stderr(&self) -> f64 {
+        let rel = |m: &MeanEstimate| m.stderr() / m.mean();
+        self.ratio() * rel(&self.predicted).hypot(rel(&self.measured))
+    }
+}
+
+/// Renders `seeds` images of `given` with their error images and measures, over the whole image
+/// and over the glow, the mean predicted variance against the squared error: against `truth`
+/// if given (minus its own predicted variance), else against the mean of the renders (the
+/// unbiased across-seed variance, no reference needed).
+fn calibrate(scene: &Scene, given: &Overrides, seeds: u64, truth: Option<(&Film, &Film)>) -> [Calibration; 2] {
+    let images: Vec<(Film, Film)> = (0..seeds)
+        .map(|s| {
+            let o = options(scene, Overrides { seed: Some(100 + s), stderr: true, ..given.clone() });
+            let (film, stats) = render(scene, &o, Control::none()).unwrap();
+            (film, stats.stderr.unwrap())
+        })
+        .collect();
+    let pixels = images[0].0.pixels.len();
+    let s = seeds as f64;
+    let mean: Vec<[f64; 3]> = (0..pixels)
+        .map(|p| std::array::from_fn(|c| images.iter().map(|(f, _)| f.pixels[p][c] as f64).sum::<f64>() / s))
+        .collect();
+    let glow = glow_mask(scene);
+    let whole = vec![true; pixels];
+    [whole, glow].map(|mask| {
+        let mut cal = Calibration { predicted: MeanEstimate::default(), measured: MeanEstimate::default() };
+        for (film, se) in &images {
+            cal.predicted.add(masked_mean(&mask, |p, c| (se.pixels[p][c] as f64).powi(2)));
+            cal.measured.add(match truth {
+                Some((t, t_se)) => masked_mean(&mask, |p, c| {
+                    (film.pixels[p][c] as f64 - t.pixels[p][c] as f64).powi(2) - (t_se.pixels[p][c] as f64).powi(2)
+                }),
+                // E[(x - mean)^2] = var (1 - 1/S) for each seed's image.
+                None => masked_mean(&mask, |p, c| (film.pixels[p][c] as f64 - mean[p][c]).powi(2)) * s / (s - 1.0),
+            });
+        }
+        cal
+    })
+}
+
+/// Over 24 seeds of the benchmark at 160x90, the mean predicted variance is within 0.7-1.4 of
+/// the measured variance of the renders (across seeds: unbiased, so the MSE against the truth),
+/// for the whole image and the glow, for smis-exact and cmis-cosine (a cosine weight, heavier
+/// tails). The ratio's own standard error is stated and must be small enough (below 0.1) for
+/// the interval to mean something.
+#[test]
+fn the_error_image_is_calibrated() {
+    let scene = benchmark(160, 90);
+    for estimator in [Estimator::SmisExact, Estimator::CmisCosine] {
+        let given = Overrides { estimator: Some(estimator), ..Overrides::default() };
+        let [whole, glow] = calibrate(&scene, &given, 24, None);
+        for (what, cal) in [("whole image", whole), ("glow", glow)] {
+            let (r, se) = (cal.ratio(), cal.ratio_stderr());
+            eprintln!("{estimator} {what}: predicted / measured variance {r:.3} +- {se:.3}");
+            assert!(se < 0.1, "{estimator} {what}: the ratio {r:.3} is too noisy to test (+- {se:.3})");
+            assert!((0.7..=1.4).contains(&r), "{estimator} {what}: predicted / measured {r:.3} +- {se:.3}");
+        }
+    }
+}
+
+/// The figures of the closing note (not run by CI: minutes): 8 seeds at 160x90 and 640x360,
+/// two estimators, against a render of 64 times the planes (its own predicted variance
+/// subtracted). `cargo test --release -- --ignored error_image::calibration_figures --nocapture`
+#[test]
+#[ignore]
+fn calibration_figures() {
+    for (w, h) in [(160, 90), (640, 360)] {
+        let scene = benchmark(w, h);
+        for estimator in [Estimator::SmisExact, Estimator::Unweighted, Estimator::CmisCosine] {
+            let given = Overrides { estimator: Some(estimator), ..Overrides::default() };
+            let reference = Overrides { planes: Some(64 * 40_960), seed: Some(9), stderr: true, ..given.clone() };
+            let (truth, stats) = render(&scene, &options(&scene, reference), Control::none()).unwrap();
+            let truth_se = stats.stderr.unwrap();
+            let [whole, glow] = calibrate(&scene, &given, 8, Some((&truth, &truth_se)));
+            for (what, cal) in [("whole", whole), ("glow", glow)] {
+                println!(
+                    "{w}x{h} {estimator} {what}: predicted {:.4e}, measured {:.4e} +- {:.1e}, ratio {:.3} +- {:.3}",
+                    cal.predicted.mean(),
+                    cal.measured.mean(),
+                    cal.measured.stderr(),
+                    cal.ratio(),
+                    cal.ratio_stderr()
+                );
+            }
+        }
+    }
+}
+
+/// A render to a target error stops when its estimated relative RMS error is below it, and
+/// says so; an unreachable target within a budget stops at the budget, and says so.
+#[test]
+fn a_render_to_a_target_error_stops_there() {
+    let scene = benchmark(80, 45);
+    let o = options(&scene, Overrides { target_error: Some(0.02), ..Overrides::default() });
+    let until = Until { budget: None, target_error: Some(0.02) };
+    let (_, stats) = render_until(&scene, &o, until, Control::none()).unwrap();
+    assert_eq!(stats.stopped_by, Some("target error"));
+    let e = stats.relative_error.unwrap();
+    assert!(e <= 0.02, "{e}");
+    assert!(stats.plane_passes >= 2 && stats.stderr.is_some());
+    let o = options(&scene, Overrides { target_error: Some(1e-6), time_budget: Some(0.3), ..Overrides::default() });
+    let until = Until { budget: Some(std::time::Duration::from_secs_f64(0.3)), target_error: Some(1e-6) };
+    let (_, stats) = render_until(&scene, &o, until, Control::none()).unwrap();
+    assert_eq!(stats.stopped_by, Some("time budget"));
+    assert!(stats.relative_error.unwrap() > 1e-6);
+}
+
+/// The error image is a side output: the image with it is bit for bit the image without it,
+/// and every error is finite and non-negative.
+#[test]
+fn the_error_image_leaves_the_image_unchanged() {
+    let scene = benchmark(96, 54);
+    for estimator in [Estimator::SmisExact, Estimator::Unweighted] {
+        let plain =
+            options(&scene, Overrides { estimator: Some(estimator), planes: Some(20_000), ..Overrides::default() });
+        let with = options(
+            &scene,
+            Overrides { estimator: Some(estimator), planes: Some(20_000), stderr: true, ..Overrides::default() },
+        );
+        let (a, sa) = render(&scene, &plain, Control::none()).unwrap();
+        let (b, sb) = render(&scene, &with, Control::none()).unwrap();
+        assert!(a == b, "{estimator}: the image changed");
+        assert!(sa.stderr.is_none());
+        let se = sb.stderr.unwrap();
+        assert!(se.all_finite_non_negative() && se.max() > 0.0);
+    }
+}
