@@ -299,9 +299,11 @@ mod tests {
         // about (0.5 / 0.0224)^2 = 500 each to 196,608).
         let expected_z2 = 1.0 + 90.0 * (b * b / (sr * sr + se * se)) / n;
         assert!((m.mean_z2 - expected_z2).abs() < 0.05 * expected_z2, "{} against {expected_z2}", m.mean_z2);
+        // The largest region holds the block (and perhaps a few noisy neighbours, |z| > 2 in
+        // one channel of 4.5% of values), and its excess is the block's 90 values of b^2.
         let top = &m.regions[0];
-        assert_eq!((top.x0, top.y0, top.x1, top.y1, top.pixels), (100, 40, 105, 44, 30), "{top:?}");
-        assert!(top.mean_z > 15.0 && top.excess > 50.0 * top.noise, "{top:?}");
+        assert!(top.x0 <= 100 && top.y0 <= 40 && top.x1 >= 105 && top.y1 >= 44 && top.pixels <= 45, "{top:?}");
+        assert!((top.excess - 90.0 * b * b).abs() < 0.1 * 90.0 * b * b && top.mean_z > 15.0, "{top:?}");
         assert!(m.regions.len() <= 5 && m.regions.windows(2).all(|r| r[0].excess >= r[1].excess));
         assert_eq!((z.width, z.height), (w, h));
         // A standard error of another size, or negative, is refused.
