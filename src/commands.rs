@@ -87,16 +87,40 @@ fn start_threads(threads: Option<usize>) -> Result<(), Failure> {
     Ok(())
 }
 
-fn progress_bar(quiet: bool, total: u64, what: &str) -> ProgressBar {
+/// What a progress bar counts, as it is shown.
+enum Unit {
+    /// The planes of a render (its units of work, shown as the planes they stand for).
+    Planes(u64),
+    /// Rows of a reference (of each of its passes).
+    Rows,
+    /// A render in passes, whose end is not known: elapsed time and passes.
+    Passes,
+}
+
+/// The command's progress bar on standard error (hidden off a terminal, or with --quiet):
+/// `total` units of work, shown in `unit`, with the time left.
+fn progress_bar(quiet: bool, total: u64, what: &str, unit: Unit) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();
     }
-    let bar = ProgressBar::new(total);
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} (eta {eta})")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
+    let bar = ProgressBar::new(total.max(1));
+    let style = match unit {
+        Unit::Planes(planes) => {
+            ProgressStyle::with_template("{msg} [{elapsed_precise}] {wide_bar} {planes} planes (eta {eta})")
+                .expect("a valid template")
+                .with_key("planes", move |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let done = (s.fraction() as f64 * planes as f64).round() as u64;
+                    let _ = write!(w, "{done}/{planes}");
+                })
+        }
+        Unit::Rows => ProgressStyle::with_template("{msg} [{elapsed_precise}] {wide_bar} {pos}/{len} rows (eta {eta})")
+            .expect("a valid template"),
+        Unit::Passes => ProgressStyle::with_template(
+            "{msg} [{elapsed_precise}] {spinner} plane passes until the budget or the target error",
+        )
+        .expect("a valid template"),
+    };
+    bar.set_style(style.progress_chars("=> "));
     bar.set_message(what.to_string());
     bar
 }
@@ -133,8 +157,9 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
 
+    let unit = if r.in_passes() { Unit::Passes } else { Unit::Planes(opts.planes() as u64) };
     let bar =
-        progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes()), opts.weighting().label().as_str());
+        progress_bar(a.common.quiet, progress_units(scene, opts, 0..opts.planes()), &opts.weighting().label(), unit);
     let mut watch = RenderWatch::start(&a.watch, scene, opts, &bar)?;
     if let (Some(ck), resumed @ 1..) = (&a.watch.checkpoint, watch.resumed_planes()) {
         bar.set_position(progress_units(scene, opts, 0..resumed));
@@ -146,7 +171,6 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h| watch.chunk_done(h))?
     } else {
         {
-            bar.set_length(u64::MAX);
             // What the command spent before rendering, and what writing the file will take.
             let reserve = 0.02 + 5e-8 * film_pixels(scene);
             let budget = r.time_budget.map(|seconds| {
@@ -203,7 +227,8 @@ fn render_part(
     fogplanes::partial::chunk_indices(opts.planes(), &range)?;
     start_threads(threads)?;
     let units = progress_units(scene, opts, range.clone());
-    let bar = progress_bar(a.common.quiet, units, opts.weighting().label().as_str());
+    let planes = (range.end - range.start) as u64;
+    let bar = progress_bar(a.common.quiet, units, &opts.weighting().label(), Unit::Planes(planes));
     let (partial, stats) = render_chunk(scene, opts, range, Control::with_progress(&|| bar.inc(1)))?;
     bar.finish_and_clear();
     save_render_part(part, scene, opts, &partial)?;
@@ -283,7 +308,7 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
     let (j0, j1) = a.rows.unwrap_or((0, scene.camera.height as u64));
     let rows = u32::try_from(j0).unwrap_or(u32::MAX)..u32::try_from(j1).unwrap_or(u32::MAX);
     start_threads(r.threads)?;
-    let bar = progress_bar(a.common.quiet, rows.len() as u64, "reference");
+    let bar = progress_bar(a.common.quiet, rows.len() as u64, "reference", Unit::Rows);
     let tick = || bar.inc(1);
     let control = Control::with_progress(&tick);
     let start = std::time::Instant::now();
@@ -332,7 +357,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
     let passes = if r.options.uniform { 1 } else { 2 };
-    let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference");
+    let bar = progress_bar(a.common.quiet, passes * scene.camera.height as u64, "reference", Unit::Rows);
     let mut watch = ReferenceWatch::start(&a.watch, scene, &r.options, &bar)?;
     if let (Some(ck), 1..) = (&a.watch.checkpoint, watch.units_done()) {
         bar.set_position(watch.units_done());

@@ -155,6 +155,10 @@ class RenderStats(TypedDict):
     seconds_total: float
     hits_per_ray: float
     gather_ns_per_hit: float
+    #: The estimated relative RMS error of the image, with an error image (else None).
+    relative_error: float | None
+    #: Why a render in passes stopped: "time budget", "target error", "plane limit" (else None).
+    stopped_by: str | None
     summary: str
 
 Metrics = TypedDict(
@@ -185,6 +189,9 @@ def render(
     return_stats: Literal[False] = False,
     sampler: str | None = None,
     time_budget: float | None = None,
+    target_error: float | None = None,
+    return_stderr: Literal[False] = False,
+    progress: bool = False,
 ) -> Image:
     """Renders a scene with photon planes: the image, shape (height, width, 3), float32.
 
@@ -195,12 +202,17 @@ def render(
     height). Pixels are whole: the mean over each pixel's square (box filter), with `spp` camera
     samples per pixel (the scene's, else 16) sharing the planes; `pixel_center=True` takes the
     centres. `time_budget` renders for that many seconds instead of a plane count: planes in
-    passes, each extending the set (the stats give "planes" and "plane_passes"). `threads` runs
-    the render in a pool of that many threads (None: all cores); the image depends on the seed
-    alone. The image is bit-identical to the EXR that `fogplanes render` writes for the same
-    arguments. `sampler` is where the planes' random numbers come from: "sobol" (randomised
-    quasi-Monte Carlo) or "independent" (None: the scene's, else sobol). With
-    `return_stats=True`, returns (image, stats).
+    passes, each extending the set (the stats give "planes" and "plane_passes");
+    `target_error` renders passes until the estimated relative RMS error of the image falls
+    below it (with `time_budget`, whichever comes first; the stats' "stopped_by" says which).
+    `threads` runs the render in a pool of that many threads (None: all cores); the image
+    depends on the seed alone. The image is bit-identical to the EXR that `fogplanes render`
+    writes for the same arguments. `sampler` is where the planes' random numbers come from:
+    "sobol" (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol).
+    With `return_stderr=True`, also the estimated standard error of each pixel (as `render
+    --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
+    `progress=True` shows progress on standard error (one line redrawn on a terminal, else a
+    line per tenth of the work).
 
     Raises ValueError for bad input (the command line's message, the setting named as given
     here: `planes=0: ...`), OSError for a scene file that cannot be opened, KeyboardInterrupt
@@ -224,7 +236,54 @@ def render(
     return_stats: Literal[True],
     sampler: str | None = None,
     time_budget: float | None = None,
+    target_error: float | None = None,
+    return_stderr: Literal[False] = False,
+    progress: bool = False,
 ) -> tuple[Image, RenderStats]: ...
+
+@overload
+def render(
+    scene: Scene | PathLike,
+    estimator: str | None = None,
+    planes: int | None = None,
+    seed: int | None = None,
+    spp: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    orientations: int | None = None,
+    threads: int | None = None,
+    accelerator: str = "raster",
+    kernel: str = "auto",
+    return_stats: Literal[False] = False,
+    sampler: str | None = None,
+    time_budget: float | None = None,
+    target_error: float | None = None,
+    *,
+    return_stderr: Literal[True],
+    progress: bool = False,
+) -> tuple[Image, Image]: ...
+
+@overload
+def render(
+    scene: Scene | PathLike,
+    estimator: str | None = None,
+    planes: int | None = None,
+    seed: int | None = None,
+    spp: int | None = None,
+    pixel_center: bool = False,
+    resolution: tuple[int, int] | None = None,
+    orientations: int | None = None,
+    threads: int | None = None,
+    accelerator: str = "raster",
+    kernel: str = "auto",
+    *,
+    return_stats: Literal[True],
+    sampler: str | None = None,
+    time_budget: float | None = None,
+    target_error: float | None = None,
+    return_stderr: Literal[True],
+    progress: bool = False,
+) -> tuple[Image, Image, RenderStats]: ...
 
 def reference(
     scene: Scene | PathLike,

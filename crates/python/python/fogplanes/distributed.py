@@ -256,24 +256,34 @@ def _session(client: Client | None, workers: int, threads: int | None) -> Iterat
 
 
 class _StderrProgressBar(TextProgressBar):
-    """Dask's text progress bar on stderr (stdout stays the caller's), labelled."""
+    """Dask's text progress bar on stderr (stdout stays the caller's), labelled. On a terminal
+    it is redrawn in place; elsewhere (a log file, a batch job's output) it writes a line per
+    tenth of the tasks, never a carriage return."""
 
     def __init__(self, keys: Sequence[Any], label: str, **kwargs: Any) -> None:
         self.label = label
+        self.tty = bool(getattr(sys.stderr, "isatty", lambda: False)())
+        self.last_tenth = -1
         super().__init__(keys, **kwargs)
 
     def _draw_bar(self, remaining: int, all: int, **kwargs: Any) -> None:  # noqa: A002 (Dask's name)
         frac = (1 - remaining / all) if all else 1.0
-        bar = "#" * int(self.width * frac)
-        sys.stderr.write(
-            f"\r{self.label} [{bar:<{self.width}}] {all - remaining}/{all} tasks"
-            f" | {self.elapsed:.1f} s"
-        )
+        counts = f"{all - remaining}/{all} tasks | {self.elapsed:.1f} s"
+        if self.tty:
+            bar = "#" * int(self.width * frac)
+            sys.stderr.write(f"\r{self.label} [{bar:<{self.width}}] {counts}")
+        else:
+            tenth = int(10 * frac)
+            if tenth == self.last_tenth:
+                return
+            self.last_tenth = tenth
+            sys.stderr.write(f"{self.label}: {100 * frac:3.0f}%, {counts}\n")
         sys.stderr.flush()
 
     def _draw_stop(self, **kwargs: Any) -> None:
-        sys.stderr.write("\n")
-        sys.stderr.flush()
+        if self.tty:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
 
 
 def _wait(future: Future, progress: bool, label: str) -> Any:
