@@ -50,10 +50,9 @@ pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_cente
 }
 
 /// [`direct_emission`] and, per pixel, an estimate of its variance (docs/mathematics.md section
-/// 10.3): the strata of each jittered grid (and the ray-set positions) collapsed in pairs of
-/// neighbours, `sum over pairs of (v_a - v_b)^2 / n^2` for `n` samples of mean `(1/n) sum v`.
-/// It counts the pair's difference of means as noise, so it errs high, never low, and is 0
-/// where the value is exact (no panel, pixel centres).
+/// 10.3), from the differences of neighbouring strata: second differences along the lines of
+/// each jittered grid, differences of consecutive pairs of the ray-set positions. 0 where the
+/// value is exact (no panel, pixel centres).
 pub fn direct_emission_and_variance(
     scene: &Scene,
     seed: u64,
@@ -91,16 +90,16 @@ fn emission_with_variance(
             }
             let mut jitter = Jitter { x, y, rng: rng_for(seed, OUTLINE_STREAM, p as u64) };
             let mean = match meeting(&projected, lights.clone(), i, j) {
-                Meeting::None => Mean::default(),
+                Meeting::None => Mean::pairs(),
                 Meeting::One(l, region) => covered(scene, l, &region, &mut jitter),
                 Meeting::Several if outline[p as usize] => {
-                    let mut m = Mean::default();
+                    let mut m = Mean::grid(grid);
                     jitter.grid(grid, |x, y| m.add(at(x, y)));
                     m
                 }
                 // No outline crosses the pixel: the same panel is first along all its rays.
                 Meeting::Several => {
-                    let mut m = Mean::default();
+                    let mut m = Mean::pairs();
                     for k in 0..ray_sets {
                         let (sx, sy) = ray_set_position(seed, p as u64, k);
                         m.add(at(x + sx, y + sy));
@@ -113,48 +112,72 @@ fn emission_with_variance(
         .unzip()
 }
 
-/// The mean of samples taken one per stratum, with the strata collapsed in consecutive pairs
-/// for its variance (neighbouring cells of a grid, consecutive ray sets).
-#[derive(Default)]
+/// The mean of samples taken one per stratum, and its variance from the differences of
+/// neighbouring strata (section 10.3): second differences along the lines of a grid, which a
+/// linear trend across the pixel does not bias, or differences of consecutive pairs.
 struct Mean {
     sum: DVec3,
     n: u32,
-    /// The sample waiting for its pair's other half.
-    first: Option<DVec3>,
-    /// Sum over complete pairs of the squared difference.
-    pairs: DVec3,
+    /// Strata per line of the grid (the samples come line by line); 2 for pairs.
+    line: u32,
+    /// Samples so far in the current line, and the last two.
+    in_line: u32,
+    last: [DVec3; 2],
+    /// Sum of the squared differences, each scaled to estimate one stratum's variance, and
+    /// their count.
+    squares: DVec3,
+    terms: u32,
 }
 
 impl Mean {
+    /// Samples of a grid, `line` strata per line.
+    fn grid(line: u32) -> Self {
+        Mean {
+            sum: DVec3::ZERO,
+            n: 0,
+            line: line.max(2),
+            in_line: 0,
+            last: [DVec3::ZERO; 2],
+            squares: DVec3::ZERO,
+            terms: 0,
+        }
+    }
+
+    /// Samples compared in consecutive pairs (strata with no line to follow).
+    fn pairs() -> Self {
+        Mean::grid(2)
+    }
+
     fn add(&mut self, v: DVec3) {
         self.sum += v;
         self.n += 1;
-        match self.first.take() {
-            Some(a) => self.pairs += (a - v) * (a - v),
-            None => self.first = Some(v),
+        if self.line >= 3 && self.in_line >= 2 {
+            // E (a - 2b + c)^2 = s_a^2 + 4 s_b^2 + s_c^2: six strata's worth.
+            let d = self.last[0] - 2.0 * self.last[1] + v;
+            self.squares += d * d / 6.0;
+            self.terms += 1;
+        } else if self.line == 2 && self.in_line == 1 {
+            let d = self.last[1] - v;
+            self.squares += d * d / 2.0;
+            self.terms += 1;
         }
+        self.last = [self.last[1], v];
+        self.in_line = (self.in_line + 1) % self.line;
     }
 
     fn value(&self) -> DVec3 {
         if self.n == 0 { DVec3::ZERO } else { self.sum / self.n as f64 }
     }
 
-    /// `sum over pairs (v_a - v_b)^2 / n^2`: each pair's sum has variance `E (v_a - v_b)^2`
-    /// when its two strata share a mean, more when they do not (section 10.3). An odd last
-    /// sample, with no pair, is counted as its pair's neighbour would be: the pairs' mean.
+    /// The mean stratum's variance over `n`: `sum of the strata's variances / n^2`.
     fn variance(&self) -> DVec3 {
-        let pairs = self.n / 2;
-        if pairs == 0 {
-            return DVec3::ZERO;
-        }
-        let per_sample = self.pairs / (2 * pairs) as f64;
-        per_sample * self.n as f64 / (self.n as f64 * self.n as f64)
+        if self.terms == 0 { DVec3::ZERO } else { self.squares / self.terms as f64 / self.n as f64 }
     }
 
     fn scaled(mut self, by: DVec3) -> Self {
         self.sum *= by;
-        self.first = self.first.map(|f| f * by);
-        self.pairs *= by * by;
+        self.last = self.last.map(|l| l * by);
+        self.squares *= by * by;
         self
     }
 }
@@ -216,11 +239,11 @@ fn covered(scene: &Scene, l: usize, region: &Polygon<DVec2>, jitter: &mut Jitter
     // The camera sees the panel's back (black) or its front, the same for every ray.
     let depth = (light.corner - o).dot(light.n);
     if !(depth < 0.0) {
-        return Mean::default();
+        return Mean::pairs();
     }
     let medium = &scene.medium;
     let (x0, y0) = (jitter.x, jitter.y);
-    let mut mean = Mean::default();
+    let mut mean = Mean::grid(SAMPLES_GRID);
     jitter.grid(SAMPLES_GRID, |x, y| {
         let s = point_in_region(region, x - x0, y - y0);
         let we = cam.direction(s.x, s.y).normalize();

@@ -289,7 +289,7 @@ pub fn render_from(
 }
 
 /// Which quarter of a render's plane groups group `g` of `groups` (in plane order) is in
-/// (section 10.1): consecutive groups make each quarter, so that the first half of the planes
+/// (section 10.2): consecutive groups make each quarter, so that the first half of the planes
 /// is the first two. With fewer than four groups, each half's groups go to one of its quarters
 /// by `turn` (a render in passes: the pass's number), so that over passes both quarters fill.
 fn quarter_of(g: u32, groups: u32, turn: u32) -> usize {
@@ -464,7 +464,7 @@ pub fn render_in_passes(
         // (section 8.1): as many groups as ray sets once a pass has MIN_PASS_GROUP planes per
         // set, fewer before (a gather costs something per pixel). For the error image, each
         // pass's groups fill the render's quarters in order, a pass of fewer than four groups
-        // as its number says (section 10.1).
+        // as its number says (section 10.2).
         let used = (next / MIN_PASS_GROUP).clamp(1, ray_sets as usize) as u32;
         let passes = gatherer.stats.plane_passes;
         let pass = (0..used).map(|g| {
