@@ -168,7 +168,9 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let cpu = system::cpu_seconds();
     let (film, stats) = if !r.in_passes() {
         let held = watch.take_resumed();
-        render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h| watch.chunk_done(h))?
+        render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h, spread| {
+            watch.chunk_done(h, spread)
+        })?
     } else {
         {
             // What the command spent before rendering, and what writing the file will take.
@@ -188,7 +190,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
         se.save_with_info(path, r.exposure, Some(&info.clone().with(ImageInfo::IMAGE, "render standard error")))?;
     }
-    watch.finish(&film);
+    watch.finish(&film, stats.stderr.as_ref());
     let mut summary = stats.summary();
     if r.in_passes() {
         summary += &format!(", {} plane passes", stats.plane_passes);

@@ -11,6 +11,7 @@ use fogplanes::partial::checkpoint::Checkpoint;
 use fogplanes::partial::{Partial, RunningImage};
 use fogplanes::reference::{ReferenceDone, ReferenceImage, ReferenceOptions, ReferenceStep};
 use fogplanes::scene::Scene;
+use fogplanes::spread::GroupSpread;
 use indicatif::ProgressBar;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -77,14 +78,19 @@ impl<'a> RenderWatch<'a> {
                 name: format!("{} {} {} planes", scene.name, opts.weighting().label(), opts.planes()),
                 width: scene.camera.width,
                 height: scene.camera.height,
-                layers: vec![String::new()],
+                // With an error image, its running estimate as the layer `stderr`.
+                layers: if opts.stderr() { vec![String::new(), "stderr".into()] } else { vec![String::new()] },
             };
             (LiveView::start(spec, warner(bar)), RunningImage::new(scene, opts))
         });
         // The image is created at once: black, or what the checkpoint holds.
         if let Some((view, image)) = &live {
             let (w, h) = (scene.camera.width, scene.camera.height);
-            view.show(vec![image.image(&resumed).unwrap_or_else(|| Film::new(w, h))], 0..h);
+            let mut layers = vec![image.image(&resumed).unwrap_or_else(|| Film::new(w, h))];
+            if opts.stderr() {
+                layers.push(Film::new(w, h));
+            }
+            view.show(layers, 0..h);
         }
         Ok(RenderWatch { scene, opts, checkpoint, live, resumed })
     }
@@ -100,8 +106,9 @@ impl<'a> RenderWatch<'a> {
     }
 
     /// After each chunk: the checkpoint saves what the render holds, the view shows the image
-    /// of its planes so far (unless the last is still being sent).
-    pub(crate) fn chunk_done(&mut self, held: &[Partial]) -> fogplanes::Result<()> {
+    /// of its planes so far, and its error image from the plane groups closed so far (unless
+    /// the last frame is still being sent).
+    pub(crate) fn chunk_done(&mut self, held: &[Partial], spread: Option<&GroupSpread>) -> fogplanes::Result<()> {
         if let Some(ck) = &mut self.checkpoint {
             let (scene, opts) = (self.scene, self.opts);
             saving(|| {
@@ -110,23 +117,29 @@ impl<'a> RenderWatch<'a> {
                 Ok(resume_note(ck, &format!("{done} of {} planes", opts.planes())))
             })?;
         }
-        self.show(held);
+        self.show(held, spread);
         Ok(())
     }
 
-    fn show(&self, held: &[Partial]) {
+    fn show(&self, held: &[Partial], spread: Option<&GroupSpread>) {
         if let Some((view, image)) = &self.live
             && view.ready()
             && let Some(film) = image.image(held)
         {
-            view.show(vec![film], 0..self.scene.camera.height);
+            let (w, h) = (film.width, film.height);
+            let mut layers = vec![film];
+            if self.opts.stderr() {
+                let planes = held.last().map_or(0, |p| p.end);
+                layers.push(spread.and_then(|s| image.stderr(s, planes)).unwrap_or_else(|| Film::new(w, h)));
+            }
+            view.show(layers, 0..h);
         }
     }
 
-    /// Shows the finished image and waits until it is sent.
-    pub(crate) fn finish(self, film: &Film) {
+    /// Shows the finished image (and error image) and waits until it is sent.
+    pub(crate) fn finish(self, film: &Film, stderr: Option<&Film>) {
         if let Some((view, _)) = self.live {
-            view.show(vec![film.clone()], 0..film.height);
+            view.show(std::iter::once(film).chain(stderr).cloned().collect(), 0..film.height);
             view.finish();
         }
     }

@@ -235,7 +235,7 @@ fn a_render_shown_in_tev_is_created_once_and_updated_until_its_image() {
     let opts = options(&scene, Overrides { planes: Some(planes as u64), ..Overrides::default() });
     let running = RunningImage::new(&scene, &opts);
     let mut after_chunks = Vec::new();
-    render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held| {
+    render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held, _| {
         after_chunks.push(running.image(held).unwrap());
         Ok(())
     })
@@ -278,6 +278,32 @@ fn a_reference_shown_in_tev_is_updated_band_by_band_until_its_images() {
     assert!(canvas.rows[1..].iter().any(|&(a, b)| a % 16 == 0 && b - a <= 16), "{:?}", canvas.rows);
     assert!(same_bits(&canvas.film(&canvas.values, 0), &Film::load_exr(&mean).unwrap()));
     assert!(same_bits(&canvas.film(&canvas.values, 3), &Film::load_exr(&stderr).unwrap()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A render with an error image shows it in tev as the layer `stderr`: created black, then
+/// (once two plane groups are closed) the running estimate, non-negative and finite, and at the
+/// end the error image written, bit for bit, beside the image.
+#[test]
+fn a_renders_error_image_is_shown_in_tev_as_a_layer() {
+    let dir = scratch("tev-stderr");
+    let (out, se) = (dir.join("out.exr"), dir.join("se.exr"));
+    let (address, received) = listen();
+    let planes = (6 * CHUNK_PLANES).to_string();
+    let run = ["render", SCENE, "--resolution", "60x30", "--planes", &planes, "-q", "--display-server", &address];
+    let o = fogplanes(&[&run[..], &["-o", path(&out), "--stderr-image", path(&se)]].concat());
+    succeeded(&o, "render");
+    let canvas = Canvas::of(&decode(&received.join().unwrap()));
+    let rgb = ["R", "G", "B"].map(String::from);
+    let channels: Vec<String> = rgb.iter().cloned().chain(rgb.iter().map(|c| format!("stderr.{c}"))).collect();
+    assert_eq!((canvas.width, canvas.height, &canvas.channels), (60, 30, &channels));
+    let frames: Vec<Film> = canvas.frames.iter().map(|f| canvas.film(f, 3)).collect();
+    assert!(frames.len() >= 3, "{} frames", frames.len());
+    assert!(frames[0].pixels.iter().all(|p| *p == glam::Vec3::ZERO), "created black");
+    assert!(frames.iter().all(|f| f.all_finite_non_negative()));
+    assert!(frames[1..frames.len() - 1].iter().any(|f| f.max() > 0.0), "no running error image was shown");
+    assert!(same_bits(frames.last().unwrap(), &Film::load_exr(&se).unwrap()));
+    assert!(same_bits(&canvas.film(&canvas.values, 0), &Film::load_exr(&out).unwrap()));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -177,7 +177,7 @@ impl<'a> ChunkRenderer<'a> {
     /// [`ChunkRenderer::render`] with another weighting than the options' (the same planes,
     /// the same rays: the table).
     pub fn render_with(&mut self, weighting: Weighting, range: Range<usize>) -> Result<Partial> {
-        self.render_from(weighting, range, Vec::new(), &mut |_| Ok(()))
+        self.render_from(weighting, range, Vec::new(), &mut |_, _| Ok(()))
     }
 
     /// [`ChunkRenderer::render_with`] resumed from `held`, the nodes an earlier render of the
@@ -205,7 +205,7 @@ impl<'a> ChunkRenderer<'a> {
                 let left = held.pop().expect("its left sibling");
                 held.push(combine(&left, &right)?);
             }
-            observer(&held)?;
+            observer(&held, self.gatherer.spread.as_ref())?;
         }
         Ok(held.pop().expect("the root node, checked or made above"))
     }
@@ -238,8 +238,9 @@ impl<'a> ChunkRenderer<'a> {
 
 /// What a render tells its caller after each finished chunk: the nodes it holds then
 /// ([`frontier`]: consecutive partials from its first plane), for a checkpoint to save or a
-/// running image to add up ([`crate::partial::RunningImage`]). An error stops the render.
-pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial]) -> Result<()>;
+/// running image to add up ([`crate::partial::RunningImage`]), and the spread of its plane
+/// groups so far when it makes an error image. An error stops the render.
+pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial], Option<&GroupSpread>) -> Result<()>;
 
 /// Renders the scene: the mean over each pixel of the direct emission (integrated over the
 /// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
@@ -251,7 +252,7 @@ pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial]) -> Result<()>;
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
 /// bit; only one chunk's planes exist at a time.
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
-    render_from(scene, opts, control, Vec::new(), &mut |_| Ok(()))
+    render_from(scene, opts, control, Vec::new(), &mut |_, _| Ok(()))
 }
 
 /// [`render`] resumed from `held`, the nodes an earlier render of the same scene and options
@@ -281,7 +282,8 @@ pub fn render_from(
                 "an error image cannot be made by a resumed render: its first chunks' groups are not held".into(),
             ));
         }
-        stats.add_error_image(&film, spread.variance(&partial.sums, &emission_variance))?;
+        spread.close();
+        stats.add_error_image(&film, spread.variance(&emission_variance))?;
     }
     stats.seconds_rays += t.elapsed().as_secs_f64();
     stats.seconds_total = start.elapsed().as_secs_f64();
@@ -484,7 +486,7 @@ pub fn render_in_passes(
         if let Some(spread) = &mut gatherer.spread {
             spread.close();
             let image = Film::finish(width, height, &total, report.planes, &emission)?;
-            report.relative_error = spread.variance(&total, &emission_variance).map(|v| relative_rms_error(&image, &v));
+            report.relative_error = spread.variance(&emission_variance).map(|v| relative_rms_error(&image, &v));
         }
     }
     if report.planes == 0 {
@@ -493,8 +495,8 @@ pub fn render_in_passes(
     let (mut stats, spread) = (gatherer.stats, gatherer.spread);
     stats.planes = report.planes;
     let film = Film::finish(width, height, &total, report.planes, &emission)?;
-    if let Some(mut spread) = spread {
-        stats.add_error_image(&film, spread.variance(&total, &emission_variance))?;
+    if let Some(spread) = spread {
+        stats.add_error_image(&film, spread.variance(&emission_variance))?;
     }
     stats.seconds_rays += seconds_emission;
     stats.seconds_total = start.elapsed().as_secs_f64();
@@ -558,7 +560,7 @@ mod tests {
             .unwrap()
             .options;
         let mut snapshots: Vec<Vec<Partial>> = Vec::new();
-        let (whole, _) = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held| {
+        let (whole, _) = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held, _| {
             snapshots.push(held.to_vec());
             Ok(())
         })
@@ -570,7 +572,7 @@ mod tests {
             let nodes: Vec<_> = frontier(0..6, i + 1).iter().map(|c| chunk_planes(planes, c)).collect();
             assert_eq!(ranges, nodes, "after chunk {i}");
             let mut later = 0;
-            let (resumed, stats) = render_from(&scene, &opts, Control::none(), held.clone(), &mut |_| {
+            let (resumed, stats) = render_from(&scene, &opts, Control::none(), held.clone(), &mut |_, _| {
                 later += 1;
                 Ok(())
             })
@@ -586,11 +588,11 @@ mod tests {
         let mut small = snapshots[2].clone();
         small[1].sums.pop();
         for held in [snapshots[2][1..].to_vec(), foreign, small] {
-            let e = render_from(&scene, &opts, Control::none(), held, &mut |_| Ok(())).unwrap_err();
+            let e = render_from(&scene, &opts, Control::none(), held, &mut |_, _| Ok(())).unwrap_err();
             assert!(e.to_string().contains("not what a render of planes 0:82020 holds"), "{e}");
         }
         // An observer's error stops the render with it.
-        let e = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |_| Err(Error::Cancelled)).unwrap_err();
+        let e = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |_, _| Err(Error::Cancelled)).unwrap_err();
         assert!(matches!(e, Error::Cancelled));
     }
 

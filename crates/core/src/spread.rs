@@ -22,8 +22,8 @@ pub struct GroupSpread {
     /// Sum over the closed groups of `G^2 / n` (`G` a group's sum of planes weighted 1, `n`
     /// its planes), per channel.
     squares: Vec<DVec3>,
-    /// Sums of the closed groups of each of the first three quarters (the fourth's is the rest).
-    quarters: [Vec<DVec3>; 3],
+    /// Sums of the closed groups of each quarter.
+    quarters: [Vec<DVec3>; 4],
     /// The open group's sum so far.
     open: Vec<DVec3>,
     /// The open group's ray set and quarter, and its planes so far.
@@ -48,7 +48,7 @@ impl GroupSpread {
     }
 
     /// Memory per pixel, in bytes (for the memory rule).
-    pub const BYTES_PER_PIXEL: u64 = 5 * 24;
+    pub const BYTES_PER_PIXEL: u64 = 6 * 24;
 
     /// Adds a piece of `planes` planes gathered along ray set `k` in `quarter` (0 to 3) of the
     /// render, whose sums per pixel were `after - before` (the gather's buffer after it and
@@ -72,11 +72,9 @@ impl GroupSpread {
         if n == 0 {
             return;
         }
-        for (p, o) in self.open.iter_mut().enumerate() {
-            self.squares[p] += *o * *o / n as f64;
-            if quarter < 3 {
-                self.quarters[quarter][p] += *o;
-            }
+        for ((s, q), o) in self.squares.iter_mut().zip(&mut self.quarters[quarter]).zip(&mut self.open) {
+            *s += *o * *o / n as f64;
+            *q += *o;
             *o = DVec3::ZERO;
         }
         self.groups += 1;
@@ -88,28 +86,37 @@ impl GroupSpread {
         self.groups
     }
 
-    /// The error estimate of the image whose scattering sums (every plane weighted 1, all the
-    /// closed groups' planes) are `sums`, plus the direct emission's `emission_variance`: the
-    /// variance of each pixel (section 10). Closes the open group. `None` with fewer than two
-    /// groups, or no plane in one of the halves (no spread to measure).
-    pub fn variance(&mut self, sums: &[DVec3], emission_variance: &[Vec3]) -> Option<Vec<DVec3>> {
-        self.close();
+    /// Planes of the closed groups.
+    pub fn planes(&self) -> usize {
+        self.planes.iter().sum()
+    }
+
+    /// The error estimate of the image of the closed groups' planes (the whole render's, once
+    /// the last group is closed), plus the direct emission's `emission_variance`: the variance
+    /// of each pixel (section 10). `None` with fewer than two groups. While one half of the
+    /// render has no closed group (the first half of a render's chunks), the groups are taken
+    /// as independent (scale 1, which errs high).
+    pub fn variance(&self, emission_variance: &[Vec3]) -> Option<Vec<DVec3>> {
         let n = self.planes.map(|p| p as f64);
         let total: f64 = n.iter().sum();
         let (h1, h2) = (n[0] + n[1], n[2] + n[3]);
-        if self.groups < 2 || h1 == 0.0 || h2 == 0.0 {
+        if self.groups < 2 {
             return None;
         }
-        // sigma^2 per plane (eq. 10.1): sum over groups of n_g (Y_g - S)^2 / (G - 1), with
-        // Y_g = G_g / n_g, S = sums / N; written as sum G_g^2 / n_g - N S^2 (no second pass).
+        let halves = h1 > 0.0 && h2 > 0.0;
+        // The closed groups' sums per pixel (every plane weighted 1).
+        let sums: Vec<DVec3> = (0..self.squares.len()).map(|p| self.quarters.iter().map(|q| q[p]).sum()).collect();
         let dof = (self.groups - 1) as f64;
         let sigma2 = |p: usize| ((self.squares[p] - sums[p] * sums[p] / total) / dof).max(DVec3::ZERO);
         // The spreads of the halves and of the quarters within them, measured against what
         // the groups predict for them if they were independent (eqs. 10.2, 10.3).
         let quartered = n.iter().all(|&q| q > 0.0);
+        if !halves {
+            return Some((0..sums.len()).map(|p| sigma2(p) / total + emission_variance[p].as_dvec3()).collect());
+        }
         let (mut halves, mut halves_iid, mut quarters, mut quarters_iid) = [DVec3::ZERO; 4].into();
         for (p, sum) in sums.iter().enumerate() {
-            let q = [self.quarters[0][p], self.quarters[1][p], self.quarters[2][p]];
+            let q = [self.quarters[0][p], self.quarters[1][p], self.quarters[2][p], self.quarters[3][p]];
             let first = q[0] + q[1];
             let d = first / h1 - (*sum - first) / h2;
             let s2 = sigma2(p);
@@ -117,7 +124,7 @@ impl GroupSpread {
             halves_iid += s2 * (1.0 / h1 + 1.0 / h2);
             if quartered {
                 let a = q[0] / n[0] - q[1] / n[1];
-                let b = q[2] / n[2] - (*sum - first - q[2]) / n[3];
+                let b = q[2] / n[2] - q[3] / n[3];
                 quarters += a * a + b * b;
                 quarters_iid += s2 * (1.0 / n[0] + 1.0 / n[1] + 1.0 / n[2] + 1.0 / n[3]);
             }
@@ -181,7 +188,6 @@ mod tests {
         let (runs, mut estimates) = (300, Vec::new());
         for _ in 0..runs {
             let mut spread = GroupSpread::new(pixels);
-            let mut sums = vec![DVec3::ZERO; pixels];
             for (g, &size) in sizes.iter().enumerate() {
                 // A group's sum of `size` planes of mean 1 and deviation sigma, in two pieces.
                 let quarter = g / 2;
@@ -192,13 +198,11 @@ mod tests {
                         .map(|b| *b + Vec3::splat((piece as f64 + sigma * (piece as f64).sqrt() * gauss()) as f32))
                         .collect();
                     spread.add(g as u32, quarter, piece, &before, &after);
-                    for (s, (a, b)) in sums.iter_mut().zip(after.iter().zip(&before)) {
-                        *s += (*a - *b).as_dvec3();
-                    }
                     before = after;
                 }
             }
-            let v = spread.variance(&sums, &vec![Vec3::ZERO; pixels]).unwrap();
+            spread.close();
+            let v = spread.variance(&vec![Vec3::ZERO; pixels]).unwrap();
             estimates.extend(v.iter().map(|v| v.x));
             assert_eq!(spread.groups(), 8);
         }
@@ -214,10 +218,15 @@ mod tests {
     fn too_few_groups_give_no_estimate() {
         let mut spread = GroupSpread::new(1);
         spread.add(0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
-        assert!(spread.variance(&[DVec3::ONE], &[Vec3::ZERO]).is_none());
+        spread.close();
+        assert!(spread.variance(&[Vec3::ZERO]).is_none());
         let mut spread = GroupSpread::new(1);
         spread.add(0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
-        spread.add(1, 1, 10, &[Vec3::ZERO], &[Vec3::ONE]);
-        assert!(spread.variance(&[DVec3::splat(2.0)], &[Vec3::ZERO]).is_none(), "no second half");
+        spread.add(1, 1, 10, &[Vec3::ZERO], &[Vec3::splat(3.0)]);
+        spread.close();
+        // Two groups of the first half: taken as independent. Means 0.1 and 0.3 of 20 planes:
+        // sigma^2 = (10 0.01 + 10 0.01) / 1 = 0.2, over 20 planes.
+        let v = spread.variance(&[Vec3::ZERO]).unwrap()[0];
+        assert!((v - DVec3::splat(0.01)).abs().max_element() < 1e-12, "{v}");
     }
 }

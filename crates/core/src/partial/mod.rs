@@ -29,7 +29,7 @@ pub mod checkpoint;
 pub mod file;
 pub mod parts;
 
-use crate::emission::direct_emission;
+use crate::emission::{direct_emission, direct_emission_and_variance};
 use crate::error::{Error, Result};
 use crate::film::{Film, first_outside};
 use crate::limits::CHUNK_PLANES;
@@ -37,6 +37,7 @@ use crate::options::RenderOptions;
 use crate::pixel::plane_group;
 pub use crate::sampling::stable_hash;
 use crate::scene::Scene;
+use crate::spread::{GroupSpread, stderr_film};
 use glam::{DVec3, Vec3};
 use std::ops::Range;
 
@@ -401,12 +402,29 @@ pub struct RunningImage {
     width: u32,
     height: u32,
     emission: Vec<Vec3>,
+    emission_variance: Vec<Vec3>,
 }
 
 impl RunningImage {
     pub fn new(scene: &Scene, opts: &RenderOptions) -> Self {
         let (width, height) = (scene.camera.width, scene.camera.height);
-        RunningImage { width, height, emission: direct_emission(scene, opts.seed, opts.spp, opts.pixel_center) }
+        let (emission, emission_variance) = direct_emission_and_variance(scene, opts.seed, opts.spp, opts.pixel_center);
+        RunningImage { width, height, emission, emission_variance }
+    }
+
+    /// The error image of the running image of `planes` planes, from the plane groups closed
+    /// so far (docs/mathematics.md section 10): their error, scaled to `planes` as the variance
+    /// falls, as one over the planes. `None` before two groups are closed.
+    pub fn stderr(&self, spread: &GroupSpread, planes: usize) -> Option<Film> {
+        let closed = spread.planes() as f64;
+        let variance = spread.variance(&self.emission_variance)?;
+        let scale = closed / planes.max(1) as f64;
+        let scattering: Vec<DVec3> = variance
+            .iter()
+            .zip(&self.emission_variance)
+            .map(|(v, e)| (*v - e.as_dvec3()) * scale + e.as_dvec3())
+            .collect();
+        stderr_film(self.width, self.height, &scattering).ok()
     }
 
     /// The image of the planes that `held` (consecutive partials from plane 0) sum, or `None`
