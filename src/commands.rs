@@ -148,11 +148,6 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
             "{flag}: a render in passes (on a time budget or to a target error) has no chunks to follow: give --planes"
         )));
     }
-    if a.stderr_image.is_some() && a.watch.checkpoint.is_some() {
-        return Err(input(anyhow!(
-            "--stderr-image: not with --checkpoint: a resumed render no longer holds the plane groups of its first chunks, which the error image is made from"
-        )));
-    }
     let images: Vec<&Path> = outputs.iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;

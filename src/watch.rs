@@ -8,7 +8,7 @@ use fogplanes::display::{LiveView, ViewSpec};
 use fogplanes::film::Film;
 use fogplanes::options::RenderOptions;
 use fogplanes::partial::checkpoint::Checkpoint;
-use fogplanes::partial::{Partial, RunningImage};
+use fogplanes::partial::{Partial, Resume, RunningImage};
 use fogplanes::reference::{ReferenceDone, ReferenceImage, ReferenceOptions, ReferenceStep};
 use fogplanes::scene::Scene;
 use fogplanes::spread::GroupSpread;
@@ -52,7 +52,7 @@ pub(crate) struct RenderWatch<'a> {
     checkpoint: Option<Checkpoint>,
     live: Option<(LiveView, RunningImage)>,
     /// What the checkpoint held at the start, until the render takes it.
-    resumed: Vec<Partial>,
+    resumed: Resume,
 }
 
 impl<'a> RenderWatch<'a> {
@@ -64,13 +64,14 @@ impl<'a> RenderWatch<'a> {
         opts: &'a RenderOptions,
         bar: &ProgressBar,
     ) -> fogplanes::Result<Self> {
-        let (mut checkpoint, mut resumed) = (None, Vec::new());
+        let (mut checkpoint, mut resumed) = (None, Resume::default());
         if let Some(dir) = &a.checkpoint {
             let (ck, held) = Checkpoint::render(dir, scene, opts)?;
             let done = held.last().map_or(0, |p| p.end);
+            let resume = ck.resume(scene, opts, held)?;
             *LEFT.lock().unwrap_or_else(|e| e.into_inner()) =
                 Some(resume_note(&ck, &format!("{done} of {} planes", opts.planes())));
-            (checkpoint, resumed) = (Some(ck), held);
+            (checkpoint, resumed) = (Some(ck), resume);
         }
         let live = a.display_server.as_ref().map(|address| {
             let spec = ViewSpec {
@@ -86,7 +87,7 @@ impl<'a> RenderWatch<'a> {
         // The image is created at once: black, or what the checkpoint holds.
         if let Some((view, image)) = &live {
             let (w, h) = (scene.camera.width, scene.camera.height);
-            let mut layers = vec![image.image(&resumed).unwrap_or_else(|| Film::new(w, h))];
+            let mut layers = vec![image.image(&resumed.held).unwrap_or_else(|| Film::new(w, h))];
             if opts.stderr() {
                 layers.push(Film::new(w, h));
             }
@@ -97,11 +98,11 @@ impl<'a> RenderWatch<'a> {
 
     /// The planes the checkpoint held at the start (0 without one).
     pub(crate) fn resumed_planes(&self) -> usize {
-        self.resumed.last().map_or(0, |p| p.end)
+        self.resumed.held.last().map_or(0, |p| p.end)
     }
 
     /// What the checkpoint held at the start, for the render to resume from.
-    pub(crate) fn take_resumed(&mut self) -> Vec<Partial> {
+    pub(crate) fn take_resumed(&mut self) -> Resume {
         std::mem::take(&mut self.resumed)
     }
 
@@ -112,8 +113,16 @@ impl<'a> RenderWatch<'a> {
         if let Some(ck) = &mut self.checkpoint {
             let (scene, opts) = (self.scene, self.opts);
             saving(|| {
-                ck.save_render(scene, opts, held)?;
                 let done = held.last().map_or(0, |p| p.end);
+                // The spread first: a kill before the nodes leaves the spread of the last
+                // saved nodes beside it (kept until these are saved).
+                if let Some(spread) = spread {
+                    ck.save_spread(scene, opts, done, spread)?;
+                }
+                ck.save_render(scene, opts, held)?;
+                if spread.is_some() {
+                    ck.keep_spread(done)?;
+                }
                 Ok(resume_note(ck, &format!("{done} of {} planes", opts.planes())))
             })?;
         }

@@ -7,7 +7,7 @@ use crate::common::options;
 use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::limits::CHUNK_PLANES;
-use fogplanes::partial::RunningImage;
+use fogplanes::partial::{Resume, RunningImage};
 use fogplanes::render::render_from;
 use fogplanes::scene::Scene;
 use fogplanes::settings::Overrides;
@@ -235,7 +235,7 @@ fn a_render_shown_in_tev_is_created_once_and_updated_until_its_image() {
     let opts = options(&scene, Overrides { planes: Some(planes as u64), ..Overrides::default() });
     let running = RunningImage::new(&scene, &opts);
     let mut after_chunks = Vec::new();
-    render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held, _| {
+    render_from(&scene, &opts, Control::none(), Resume::default(), &mut |held, _| {
         after_chunks.push(running.image(held).unwrap());
         Ok(())
     })
@@ -380,22 +380,40 @@ fn kill_at_random(args: &[&str], ck: &Path, ready: &str, rng: &mut impl Rng, wit
 /// each time resumes from its checkpoint; finished, it is the uninterrupted render bit for bit.
 #[test]
 fn a_render_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
-    let dir = scratch("kill-render");
+    killed_render_resumes(false, 28);
+}
+
+/// The same with an error image: the checkpoint keeps the spread of the plane groups beside
+/// the nodes, and the error image resumed is the uninterrupted one bit for bit. A checkpoint
+/// made without an error image cannot resume one (one line, exit code 2).
+#[test]
+fn a_render_with_an_error_image_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
+    killed_render_resumes(true, 29);
+}
+
+fn killed_render_resumes(stderr: bool, seed: u64) {
+    let dir = scratch(if stderr { "kill-render-se" } else { "kill-render" });
     let ck = dir.join("ck");
     let planes = 16 * CHUNK_PLANES;
     let planes_arg = planes.to_string();
+    let se = |out: &Path| out.with_extension("se.exr");
     let args = |out: &Path, ck: Option<&Path>| -> Vec<String> {
         let mut v: Vec<String> =
             ["render", SCENE, "--resolution", "64x36", "--planes", &planes_arg, "-q", "-o"].map(String::from).into();
         v.push(path(out).into());
+        if stderr {
+            v.extend(["--stderr-image".to_string(), path(&se(out)).into()]);
+        }
         v.extend(ck.map(|c| ["--checkpoint".to_string(), path(c).into()]).into_iter().flatten());
         v
     };
+    let same_files = |a: &Path, b: &Path| same_bits(&Film::load_exr(a).unwrap(), &Film::load_exr(b).unwrap());
+    let whole = dir.join("whole.exr");
     let t = Instant::now();
-    succeeded(&fogplanes(&strs(&args(&dir.join("whole.exr"), None))), "the uninterrupted render");
+    succeeded(&fogplanes(&strs(&args(&whole, None))), "the uninterrupted render");
     let within = t.elapsed() / 4;
     let out = dir.join("out.exr");
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(28);
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut resumed = Vec::new();
     for _ in 0..3 {
         let stdout = kill_at_random(&strs(&args(&out, Some(&ck))), &ck, "planes_", &mut rng, within);
@@ -404,15 +422,38 @@ fn a_render_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
     let stdout = succeeded(&fogplanes(&strs(&args(&out, Some(&ck)))), "the last run");
     resumed.extend(resumed_from(&stdout));
     assert!(resumed.iter().any(|&k| k > 0 && k < planes as u64), "never resumed mid-render: {resumed:?}");
-    assert!(same_bits(&Film::load_exr(&out).unwrap(), &Film::load_exr(&dir.join("whole.exr")).unwrap()));
-    // A finished checkpoint holds one part of all the planes, and a run again just writes the image.
-    let names: Vec<String> =
+    assert!(same_files(&out, &whole));
+    if stderr {
+        assert!(same_files(&se(&out), &se(&whole)), "the error image resumed differs");
+    }
+    // A finished checkpoint holds one part of all the planes (and their spread), and a run
+    // again just writes the image.
+    let mut names: Vec<String> =
         std::fs::read_dir(&ck).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
-    assert_eq!(names.iter().filter(|n| !n.starts_with('.')).collect::<Vec<_>>(), [&format!("planes_0-{planes}.npz")]);
-    let again =
-        succeeded(&fogplanes(&strs(&args(&dir.join("again.exr"), Some(&ck)))), "a run of a finished checkpoint");
-    assert_eq!(resumed_from(&again), Some(planes as u64));
-    assert!(same_bits(&Film::load_exr(&dir.join("again.exr")).unwrap(), &Film::load_exr(&out).unwrap()));
+    names.retain(|n| !n.starts_with('.'));
+    names.sort();
+    let mut expected = vec![format!("planes_0-{planes}.npz")];
+    if stderr {
+        expected.push(format!("spread_{planes}.groups"));
+    }
+    assert_eq!(names, expected);
+    let again = dir.join("again.exr");
+    let stdout = succeeded(&fogplanes(&strs(&args(&again, Some(&ck)))), "a run of a finished checkpoint");
+    assert_eq!(resumed_from(&stdout), Some(planes as u64));
+    assert!(same_files(&again, &out));
+    if stderr {
+        assert!(same_files(&se(&again), &se(&out)));
+        // A spread file that is not one is refused like any part, naming it.
+        let spread = ck.join(format!("spread_{planes}.groups"));
+        std::fs::write(&spread, b"not an archive").unwrap();
+        let e = refused(&strs(&args(&again, Some(&ck))));
+        assert!(e.contains(&format!("spread_{planes}.groups")), "{e}");
+    } else {
+        let mut with_se = args(&again, Some(&ck));
+        with_se.extend(["--stderr-image".to_string(), path(&dir.join("x.exr")).into()]);
+        let e = refused(&strs(&with_se));
+        assert!(e.contains("not the spread of their plane groups"), "{e}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -16,7 +16,7 @@ use crate::error::{Error, Result, Setting};
 use crate::film::Film;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
 use crate::options::{RenderOptions, RenderStats};
-use crate::partial::{Partial, chunk_indices, chunk_planes, chunks, combine, fingerprint, frontier, pieces};
+use crate::partial::{Partial, Resume, chunk_indices, chunk_planes, chunks, combine, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::scene::Scene;
 use crate::spread::{GroupSpread, relative_rms_error};
@@ -252,36 +252,44 @@ pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial], Option<&GroupSpread>)
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
 /// bit; only one chunk's planes exist at a time.
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
-    render_from(scene, opts, control, Vec::new(), &mut |_, _| Ok(()))
+    render_from(scene, opts, control, Resume::default(), &mut |_, _| Ok(()))
 }
 
-/// [`render`] resumed from `held`, the nodes an earlier render of the same scene and options
-/// held after its first chunks (empty: from the start), telling `observer` the nodes it holds
-/// after each further chunk (a checkpoint, [`crate::partial::checkpoint`]; a live view). The
-/// image is [`render`]'s bit for bit, wherever it was resumed; the statistics count this call's
-/// planes and work. Refuses `held` that is not what this render holds after some chunks.
+/// [`render`] resumed from `resume` (nothing: from the start), telling `observer` the nodes it
+/// holds after each further chunk and the spread of its plane groups (a checkpoint,
+/// [`crate::partial::checkpoint`]; a live view). The image is [`render`]'s bit for bit,
+/// wherever it was resumed, and so is the error image when the spread was kept; the
+/// statistics count this call's planes and work. Refuses held nodes that are not what this
+/// render holds after some chunks, and a resumed render with an error image but no spread (or
+/// a spread of other planes) to resume it from.
 pub fn render_from(
     scene: &Scene,
     opts: &RenderOptions,
     control: Control,
-    held: Vec<Partial>,
+    resume: Resume,
     observer: ChunkObserver,
 ) -> Result<(Film, RenderStats)> {
     let start = Instant::now();
-    let resumed = held.last().map_or(0, |p| p.end);
+    let resumed = resume.held.last().map_or(0, |p| p.end);
     let mut chunks = ChunkRenderer::new(scene, opts, control);
-    let partial = chunks.render_from(opts.weighting, 0..opts.planes, held, observer)?;
+    if opts.stderr && resumed > 0 {
+        let pixels = scene.camera.width as usize * scene.camera.height as usize;
+        match resume.spread {
+            Some(s) if s.check(pixels, opts.ray_sets(), resumed).is_ok() => chunks.gatherer.spread = Some(s),
+            _ => {
+                return Err(Error::Partial(format!(
+                    "an error image cannot be resumed after {resumed} planes without the spread of their plane groups"
+                )));
+            }
+        }
+    }
+    let partial = chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)?;
     let (mut stats, spread) = (chunks.gatherer.stats, chunks.gatherer.spread);
     stats.planes = opts.planes - resumed;
     let t = Instant::now();
     let (emission, emission_variance) = direct_emission_and_variance(scene, opts.seed, opts.spp, opts.pixel_center);
     let film = crate::partial::finish_with(scene, opts, &partial, &emission)?;
     if let Some(mut spread) = spread {
-        if resumed > 0 {
-            return Err(Error::Partial(
-                "an error image cannot be made by a resumed render: its first chunks' groups are not held".into(),
-            ));
-        }
         spread.close();
         stats.add_error_image(&film, spread.variance(&emission_variance))?;
     }
@@ -560,7 +568,7 @@ mod tests {
             .unwrap()
             .options;
         let mut snapshots: Vec<Vec<Partial>> = Vec::new();
-        let (whole, _) = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |held, _| {
+        let (whole, _) = render_from(&scene, &opts, Control::none(), Resume::default(), &mut |held, _| {
             snapshots.push(held.to_vec());
             Ok(())
         })
@@ -572,7 +580,8 @@ mod tests {
             let nodes: Vec<_> = frontier(0..6, i + 1).iter().map(|c| chunk_planes(planes, c)).collect();
             assert_eq!(ranges, nodes, "after chunk {i}");
             let mut later = 0;
-            let (resumed, stats) = render_from(&scene, &opts, Control::none(), held.clone(), &mut |_, _| {
+            let resume = Resume { held: held.clone(), spread: None };
+            let (resumed, stats) = render_from(&scene, &opts, Control::none(), resume, &mut |_, _| {
                 later += 1;
                 Ok(())
             })
@@ -588,11 +597,13 @@ mod tests {
         let mut small = snapshots[2].clone();
         small[1].sums.pop();
         for held in [snapshots[2][1..].to_vec(), foreign, small] {
-            let e = render_from(&scene, &opts, Control::none(), held, &mut |_, _| Ok(())).unwrap_err();
+            let resume = Resume { held, spread: None };
+            let e = render_from(&scene, &opts, Control::none(), resume, &mut |_, _| Ok(())).unwrap_err();
             assert!(e.to_string().contains("not what a render of planes 0:82020 holds"), "{e}");
         }
         // An observer's error stops the render with it.
-        let e = render_from(&scene, &opts, Control::none(), Vec::new(), &mut |_, _| Err(Error::Cancelled)).unwrap_err();
+        let e = render_from(&scene, &opts, Control::none(), Resume::default(), &mut |_, _| Err(Error::Cancelled))
+            .unwrap_err();
         assert!(matches!(e, Error::Cancelled));
     }
 

@@ -21,17 +21,17 @@ use glam::{DVec3, Vec3};
 pub struct GroupSpread {
     /// Sum over the closed groups of `G^2 / n` (`G` a group's sum of planes weighted 1, `n`
     /// its planes), per channel.
-    squares: Vec<DVec3>,
+    pub(crate) squares: Vec<DVec3>,
     /// Sums of the closed groups of each quarter.
-    quarters: [Vec<DVec3>; 4],
+    pub(crate) quarters: [Vec<DVec3>; 4],
     /// The open group's sum so far.
-    open: Vec<DVec3>,
+    pub(crate) open: Vec<DVec3>,
     /// The open group's ray set and quarter, and its planes so far.
-    open_key: Option<(u32, usize)>,
-    open_planes: usize,
+    pub(crate) open_key: Option<(u32, usize)>,
+    pub(crate) open_planes: usize,
     /// Planes of each quarter's closed groups.
-    planes: [usize; 4],
-    groups: usize,
+    pub(crate) planes: [usize; 4],
+    pub(crate) groups: usize,
 }
 
 impl GroupSpread {
@@ -84,6 +84,27 @@ impl GroupSpread {
     /// Groups closed so far.
     pub fn groups(&self) -> usize {
         self.groups
+    }
+
+    /// Refuses a spread that a render of `ray_sets` ray sets over `pixels` pixels cannot hold
+    /// after `planes` planes (one read back from a checkpoint): the buffers' sizes, finite
+    /// values, non-negative squares, the counts adding up.
+    pub fn check(&self, pixels: usize, ray_sets: u32, planes: usize) -> std::result::Result<(), String> {
+        let buffers = std::iter::once(&self.squares).chain(&self.quarters).chain(std::iter::once(&self.open));
+        if buffers.clone().any(|b| b.len() != pixels) {
+            return Err(format!("its buffers do not hold the image's {pixels} pixels"));
+        }
+        if buffers.flatten().any(|v| !v.is_finite()) || self.squares.iter().any(|v| v.min_element() < 0.0) {
+            return Err("it holds sums that are not finite, or negative squares".into());
+        }
+        let total = self.planes() + self.open_planes;
+        if total != planes || self.groups > planes || self.open_key.is_some_and(|(k, q)| k >= ray_sets || q > 3) {
+            return Err(format!(
+                "its counts ({total} planes in {} groups) are not those of {planes} planes",
+                self.groups
+            ));
+        }
+        Ok(())
     }
 
     /// Planes of the closed groups.
@@ -228,5 +249,25 @@ mod tests {
         // sigma^2 = (10 0.01 + 10 0.01) / 1 = 0.2, over 20 planes.
         let v = spread.variance(&[Vec3::ZERO]).unwrap()[0];
         assert!((v - DVec3::splat(0.01)).abs().max_element() < 1e-12, "{v}");
+    }
+
+    /// What a checkpoint gives back is checked: sizes, finite values, non-negative squares,
+    /// counts that add up to the planes resumed from.
+    #[test]
+    fn a_spread_read_back_is_checked() {
+        let mut spread = GroupSpread::new(2);
+        spread.add(3, 1, 10, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        spread.close();
+        spread.add(4, 2, 5, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        assert_eq!(spread.check(2, 16, 15), Ok(()));
+        assert!(spread.check(3, 16, 15).is_err(), "another image size");
+        assert!(spread.check(2, 16, 16).is_err(), "other planes");
+        assert!(spread.check(2, 4, 15).is_err(), "a ray set beyond the render's");
+        let mut bad = spread.clone();
+        bad.quarters[1][0].y = f64::NAN;
+        assert!(bad.check(2, 16, 15).unwrap_err().contains("not finite"));
+        let mut bad = spread.clone();
+        bad.squares[1].x = -1.0;
+        assert!(bad.check(2, 16, 15).is_err());
     }
 }

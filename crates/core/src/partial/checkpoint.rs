@@ -6,6 +6,7 @@
 //! | file | holds | written |
 //! |---|---|---|
 //! | `planes_A-B.npz` | a render's sums over planes `A:B`, a node of the canonical tree | as the node is held ([`super::frontier`]) |
+//! | `spread_B.groups` | with an error image, its plane groups' spread after planes `0:B` (an `.npz` by another name, so that `CK/*.npz` names the parts alone) | before the nodes of the chunk ending at `B`; the older one removed after them |
 //! | `pilot.npz` | an adaptive reference's pilot pass, every row | once the pass is finished |
 //! | `rows_J0-J1.npz` | a band of a reference's final pass | as the band is finished |
 //! | `.lock` | nothing: locked while a process uses the directory | at opening |
@@ -20,13 +21,15 @@
 
 use super::file::PartKind;
 use super::parts::{Part, read_part, reference_fingerprint, save_pilot_part, save_reference_part, save_render_part};
-use super::{Partial, chunk_planes, fingerprint, frontier};
+use super::{Partial, Resume, chunk_planes, fingerprint, frontier};
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::limits::CHUNK_PLANES;
 use crate::options::RenderOptions;
 use crate::reference::{ReferenceBand, ReferenceDone, ReferenceOptions};
 use crate::scene::Scene;
+use crate::spread::GroupSpread;
+use glam::DVec3;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -39,6 +42,8 @@ pub struct Checkpoint {
     _lock: std::fs::File,
     /// The files that hold finished work now, with the range of planes or rows each holds.
     files: Vec<(Range<usize>, PathBuf)>,
+    /// The files of a render's plane groups' spread, with the planes each follows.
+    spreads: Vec<(usize, PathBuf)>,
 }
 
 /// The name of the directory's lock file (hidden: `CK/*.npz` never names it).
@@ -107,6 +112,106 @@ impl Checkpoint {
             }
         }
         self.files = kept;
+        Ok(())
+    }
+
+    /// What the render resumes from: the nodes `held` ([`Checkpoint::render`]) and, when it
+    /// makes an error image, the spread of their plane groups, which must be here (a render
+    /// started without an error image has none: refused, with what to do).
+    pub fn resume(&self, scene: &Scene, opts: &RenderOptions, held: Vec<Partial>) -> Result<Resume> {
+        let done = held.last().map_or(0, |p| p.end);
+        if !opts.stderr() || done == 0 {
+            return Ok(Resume { held, spread: None });
+        }
+        let spread = self.spread(scene, opts, done)?.ok_or_else(|| {
+            Error::bad_input(
+                &self.dir,
+                format!(
+                    "holds {done} planes of this render but not the spread of their plane groups, which an error image needs (the render was started without one): resume without it, or remove the checkpoint"
+                ),
+            )
+        })?;
+        Ok(Resume { held, spread: Some(spread) })
+    }
+
+    /// The plane groups' spread of the render's error image after its first `planes` planes
+    /// (what [`Checkpoint::render`] gave back), if the checkpoint holds it: read back and
+    /// checked as any file ([`GroupSpread::check`]); `None` if it holds none for those planes
+    /// (the render was started without an error image, or a kill came between the files).
+    pub fn spread(&self, scene: &Scene, opts: &RenderOptions, planes: usize) -> Result<Option<GroupSpread>> {
+        let Some((_, path)) = self.spreads.iter().find(|(end, _)| *end == planes) else { return Ok(None) };
+        let bad = |m: String| Error::bad_input(path, m);
+        let mut npz = super::file::Npz::open(path)?;
+        let pixels = scene.camera.width as usize * scene.camera.height as usize;
+        let meta = npz.read("meta", 1 << 16).and_then(|a| a.as_text()).map_err(bad)?;
+        let meta: SpreadMeta = serde_json::from_str(&meta).map_err(|e| bad(format!("meta: {e}")))?;
+        if meta.fingerprint != fingerprint(scene, opts) || meta.planes != planes || meta.pixels != pixels {
+            return Err(another(&self.dir, path));
+        }
+        let bytes = super::file::entry_bytes("<f8", &[4, pixels, 3]);
+        let mut vectors = |name: &str, shape: &[usize]| -> Result<Vec<DVec3>> {
+            let values = npz.read(name, bytes).and_then(|a| a.as_f64s(shape)).map_err(bad)?;
+            Ok(values.chunks_exact(3).map(DVec3::from_slice).collect())
+        };
+        let quarters = vectors("quarters", &[4, pixels, 3])?;
+        let spread = GroupSpread {
+            squares: vectors("squares", &[pixels, 3])?,
+            quarters: std::array::from_fn(|q| quarters[q * pixels..(q + 1) * pixels].to_vec()),
+            open: vectors("open", &[pixels, 3])?,
+            open_key: meta.open_key,
+            open_planes: meta.open_planes,
+            planes: meta.quarter_planes,
+            groups: meta.groups,
+        };
+        spread.check(pixels, opts.ray_sets(), planes).map_err(|m| bad(format!("not a spread of this render: {m}")))?;
+        Ok(Some(spread))
+    }
+
+    /// Saves the spread of the render's plane groups after its first `planes` planes: before
+    /// the nodes of the chunk that ends there ([`Checkpoint::save_render`]), so that a kill
+    /// between the two leaves the spread of the nodes saved before.
+    pub fn save_spread(
+        &mut self,
+        scene: &Scene,
+        opts: &RenderOptions,
+        planes: usize,
+        spread: &GroupSpread,
+    ) -> Result<()> {
+        use super::file::{Array, write_npz};
+        let pixels = spread.squares.len();
+        let meta = SpreadMeta {
+            fingerprint: fingerprint(scene, opts),
+            planes,
+            pixels,
+            groups: spread.groups,
+            quarter_planes: spread.planes,
+            open_key: spread.open_key,
+            open_planes: spread.open_planes,
+        };
+        let flat = |v: &[DVec3]| v.iter().flat_map(|d| d.to_array()).collect::<Vec<f64>>();
+        let arrays = [
+            Array::text("meta", &serde_json::to_string(&meta).expect("plain data")),
+            Array::f64s("squares", vec![pixels, 3], flat(&spread.squares).into_iter()),
+            Array::f64s(
+                "quarters",
+                vec![4, pixels, 3],
+                spread.quarters.iter().flat_map(|q| flat(q)).collect::<Vec<_>>().into_iter(),
+            ),
+            Array::f64s("open", vec![pixels, 3], flat(&spread.open).into_iter()),
+        ];
+        let path = self.dir.join(format!("spread_{planes}.groups"));
+        write_npz(&path, &arrays)?;
+        self.spreads.push((planes, path));
+        Ok(())
+    }
+
+    /// Removes the spreads of other planes than `planes` (once the nodes that go with it are
+    /// saved).
+    pub fn keep_spread(&mut self, planes: usize) -> Result<()> {
+        for (_, path) in self.spreads.iter().filter(|(end, _)| *end != planes) {
+            remove(path)?;
+        }
+        self.spreads.retain(|(end, _)| *end == planes);
         Ok(())
     }
 
@@ -212,7 +317,7 @@ impl Checkpoint {
             names.push(entry.file_name().to_string_lossy().into_owned());
         }
         names.sort();
-        let mut found = Vec::new();
+        let (mut found, mut spreads) = (Vec::new(), Vec::new());
         for name in names {
             let path = dir.join(&name);
             let part_name =
@@ -222,10 +327,20 @@ impl Checkpoint {
             }
             // A write a kill cut short (film::temporary_path's names); the lock says no
             // process is writing it now.
-            let interrupted =
-                name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")).and_then(|n| n.split_once(".npz."));
-            if interrupted.is_some_and(|(stem, _)| part_name(&format!("{stem}.npz"))) {
+            let interrupted = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp"));
+            let cut_short = interrupted.is_some_and(|n| {
+                n.split_once(".npz.").is_some_and(|(stem, _)| part_name(&format!("{stem}.npz")))
+                    || n.split_once(".groups.").is_some_and(|(stem, _)| spread_end(&format!("{stem}.groups")).is_some())
+            });
+            if cut_short {
                 remove(&path)?;
+                continue;
+            }
+            if let Some(end) = spread_end(&name) {
+                if !ours.contains(&"planes_") {
+                    return Err(another(dir, &path));
+                }
+                spreads.push((end, path));
                 continue;
             }
             if !part_name(&name) {
@@ -239,8 +354,26 @@ impl Checkpoint {
             let part = read_part(&path)?;
             found.push((path, part));
         }
-        Ok((Checkpoint { dir: dir.to_path_buf(), _lock: lock, files: Vec::new() }, found))
+        Ok((Checkpoint { dir: dir.to_path_buf(), _lock: lock, files: Vec::new(), spreads }, found))
     }
+}
+
+/// What a spread file records besides its buffers.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SpreadMeta {
+    fingerprint: String,
+    planes: usize,
+    pixels: usize,
+    groups: usize,
+    quarter_planes: [usize; 4],
+    open_key: Option<(u32, usize)>,
+    open_planes: usize,
+}
+
+/// The planes a spread file's name says it follows (`spread_B.groups`), if it is one.
+fn spread_end(name: &str) -> Option<usize> {
+    name.strip_prefix("spread_")?.strip_suffix(".groups")?.parse().ok()
 }
 
 /// The error of a checkpoint that holds another job's work.

@@ -394,6 +394,15 @@ pub fn finish_with(scene: &Scene, opts: &RenderOptions, partial: &Partial, emiss
     Film::finish(cam.width, cam.height, &partial.sums, opts.planes, emission)
 }
 
+/// What a render resumes from ([`crate::render::render_from`]): the nodes an earlier render of
+/// the same scene and options held after its first chunks (empty: from the start) and, with an
+/// error image, the spread of its plane groups then ([`checkpoint`] keeps both).
+#[derive(Clone, Debug, Default)]
+pub struct Resume {
+    pub held: Vec<Partial>,
+    pub spread: Option<GroupSpread>,
+}
+
 /// The image of the first planes of a render while it runs (docs/mathematics.md section 8.1, "A
 /// running image"): the sums of the nodes it holds ([`frontier`]) added in order, divided by
 /// their plane count, plus the direct emission (computed once, here). Its last image, from the
