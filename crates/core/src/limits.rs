@@ -122,12 +122,17 @@ pub fn check_sweep_seeds(seeds: u32) -> Result<(), String> {
 /// per level of the canonical tree over its chunks ([`crate::partial`]); so only the image can
 /// exceed the memory.
 pub fn check_render_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
+    check_render_memory_with(width, height, planes, 0)
+}
+
+/// [`check_render_memory`] with `extra` bytes per pixel (an error image's sums).
+pub fn check_render_memory_with(width: u32, height: u32, planes: u64, extra: u64) -> Result<(), String> {
     let chunks = planes.div_ceil(CHUNK_PLANES as u64).max(1);
     let levels = (u64::BITS - chunks.leading_zeros()) as u64 + 1;
     let held = planes.min(CHUNK_PLANES as u64);
-    let bytes = held
-        .saturating_mul(BYTES_PER_PLANE)
-        .saturating_add((width as u64 * height as u64).saturating_mul(BYTES_PER_PIXEL + 24 * levels));
+    let per_pixel = BYTES_PER_PIXEL + 24 * levels + extra;
+    let bytes =
+        held.saturating_mul(BYTES_PER_PLANE).saturating_add((width as u64 * height as u64).saturating_mul(per_pixel));
     budget(width, height, planes, bytes)
 }
 

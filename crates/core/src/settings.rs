@@ -16,13 +16,14 @@ pub use crate::error::{Origin, Setting};
 use crate::film::ImageFormat;
 use crate::kernel::Kernel;
 use crate::limits::{
-    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes, check_render_memory,
-    check_resolution, check_seconds, check_spp, check_sweep_seeds, check_threads,
+    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes,
+    check_render_memory_with, check_resolution, check_seconds, check_spp, check_sweep_seeds, check_threads,
 };
 use crate::options::RenderOptions;
 use crate::reference::ReferenceOptions;
 use crate::sampling::Sampler;
 use crate::scene::Scene;
+use crate::spread::GroupSpread;
 use crate::weights::{Estimator, Weighting};
 use std::path::Path;
 
@@ -214,7 +215,9 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
     // its passes to fit (each checks its own memory).
     let in_passes = given.time_budget.is_some() || given.target_error.is_some();
     let held = if in_passes { 1 } else { planes };
-    check_render_memory(scene.camera.width, scene.camera.height, held)
+    // An error image keeps its plane groups' sums and a copy of the image ([`GroupSpread`]).
+    let extra = if stderr { GroupSpread::BYTES_PER_PIXEL + 12 } else { 0 };
+    check_render_memory_with(scene.camera.width, scene.camera.height, held, extra)
         .map_err(invalid(Setting::Resolution, origin(&given.resolution)))?;
     let options = RenderOptions {
         planes: planes as usize,
