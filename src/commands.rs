@@ -167,16 +167,14 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
             watch.chunk_done(h, spread)
         })?
     } else {
-        {
-            // What the command spent before rendering, and what writing the file will take.
-            let reserve = 0.02 + 5e-8 * film_pixels(scene);
-            let budget = r.time_budget.map(|seconds| {
-                let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
-                std::time::Duration::from_secs_f64(left.max(0.0))
-            });
-            let until = Until { budget, target_error: r.target_error };
-            render_until(scene, opts, until, Control::with_progress(&|| bar.inc(1)))?
-        }
+        // What the command spent before rendering, and what writing the file will take.
+        let reserve = 0.02 + 5e-8 * film_pixels(scene);
+        let budget = r.time_budget.map(|seconds| {
+            let left = seconds - STARTED.get().map_or(0.0, |t| t.elapsed().as_secs_f64()) - reserve;
+            std::time::Duration::from_secs_f64(left.max(0.0))
+        });
+        let until = Until { budget, target_error: r.target_error };
+        render_until(scene, opts, until, Control::with_progress(&|| bar.inc(1)))?
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();

@@ -220,4 +220,3 @@ fn the_emissions_variance_is_calibrated() {
         assert!((0.8..=1.2).contains(&(pred / meas)), "emission {what}: predicted {pred:.4e}, measured {meas:.4e}");
     }
 }
-
