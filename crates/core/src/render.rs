@@ -46,19 +46,20 @@ impl<'a> Gatherer<'a> {
         Gatherer { scene, opts, control, rays, stats: RenderStats::new(opts), spread, before: Vec::new() }
     }
 
-    /// Gathers each piece `(k, planes, quarter)` along ray set `k` with `weighting`, adding
-    /// into `sums` (f32, each plane weighted 1): its planes taken from `prepared` if they are
-    /// there, else sampled and prepared now (one piece's planes exist at a time). With an error
-    /// image, each piece's sums also go to the group spread, in `quarter` of the render.
+    /// Gathers each piece `(k, planes, quarter, whole)` along ray set `k` with `weighting`,
+    /// adding into `sums` (f32, each plane weighted 1): its planes taken from `prepared` if they
+    /// are there, else sampled and prepared now (one piece's planes exist at a time). With an
+    /// error image, each piece's sums also go to the group spread, in `quarter` of the render
+    /// (`whole`: the piece is its whole group).
     fn gather(
         &mut self,
-        pieces: impl IntoIterator<Item = (u32, Range<usize>, usize)>,
+        pieces: impl IntoIterator<Item = (u32, Range<usize>, usize, bool)>,
         weighting: Weighting,
         prepared: &[(Range<usize>, PreparedPlanes)],
         sums: &mut [Vec3],
     ) -> Result<()> {
         let (scene, kernel, control) = (self.scene, self.opts.kernel, self.control);
-        for (k, piece, quarter) in pieces {
+        for (k, piece, quarter, whole) in pieces {
             let count = piece.len();
             let made;
             let planes = match prepared.iter().find(|(r, _)| *r == piece) {
@@ -77,7 +78,7 @@ impl<'a> Gatherer<'a> {
             let s = planes.gather(weighting, kernel, rays, sums, control)?;
             self.stats.add_gather(s, t.elapsed().as_secs_f64());
             if let Some(spread) = &mut self.spread {
-                spread.add(k, quarter, count, &self.before, sums);
+                spread.add(k, quarter, count, whole, &self.before, sums);
             }
         }
         self.count_rays();
@@ -153,7 +154,8 @@ impl<'a> ChunkRenderer<'a> {
         let cam = &scene.camera;
         let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
         let sets = opts.ray_sets();
-        let pieces = pieces(opts.planes, sets, range.clone()).map(|(k, p)| (k, p, quarter_of(k, sets, 0)));
+        let pieces = pieces(opts.planes, sets, range.clone())
+            .map(|(k, p)| (k, p.clone(), quarter_of(k, sets, 0), p == plane_group(k, opts.planes, sets)));
         self.gatherer.gather(pieces, weighting, &self.prepared, &mut sums)?;
         Ok(Partial {
             width: cam.width,
@@ -480,7 +482,7 @@ pub fn render_in_passes(
         let pass = (0..used).map(|g| {
             let group = plane_group(g, next, used);
             let quarter = if used == 1 { (passes % 4) as usize } else { quarter_of(g, used, passes) };
-            ((next_set + g) % ray_sets, done + group.start..done + group.end, quarter)
+            ((next_set + g) % ray_sets, done + group.start..done + group.end, quarter, true)
         });
         let mut sums = vec![Vec3::ZERO; pixels];
         gatherer.gather(pass, opts.weighting, &[], &mut sums)?;

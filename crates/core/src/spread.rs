@@ -54,10 +54,26 @@ impl GroupSpread {
     /// render, whose sums per pixel were `after - before` (the gather's buffer after it and
     /// before: the render's own sums stay bit for bit what they are without an error image). A
     /// piece of another ray set or quarter than the open group's closes it first.
-    pub fn add(&mut self, k: u32, quarter: usize, planes: usize, before: &[Vec3], after: &[Vec3]) {
+    ///
+    /// A piece that is a `whole` group (every piece of a render in passes, most of a render in
+    /// chunks) is closed at once, without going through the open group's buffer.
+    pub fn add(&mut self, k: u32, quarter: usize, planes: usize, whole: bool, before: &[Vec3], after: &[Vec3]) {
+        let quarter = quarter.min(3);
         if self.open_key != Some((k, quarter)) {
             self.close();
-            self.open_key = Some((k, quarter.min(3)));
+            if whole && planes > 0 {
+                let n = planes as f64;
+                for (((s, q), b), a) in self.squares.iter_mut().zip(&mut self.quarters[quarter]).zip(before).zip(after)
+                {
+                    let g = a.as_dvec3() - b.as_dvec3();
+                    *s += g * g / n;
+                    *q += g;
+                }
+                self.groups += 1;
+                self.planes[quarter] += planes;
+                return;
+            }
+            self.open_key = Some((k, quarter));
         }
         self.open_planes += planes;
         for ((o, b), a) in self.open.iter_mut().zip(before).zip(after) {
@@ -218,7 +234,7 @@ mod tests {
                         .iter()
                         .map(|b| *b + Vec3::splat((piece as f64 + sigma * (piece as f64).sqrt() * gauss()) as f32))
                         .collect();
-                    spread.add(g as u32, quarter, piece, &before, &after);
+                    spread.add(g as u32, quarter, piece, false, &before, &after);
                     before = after;
                 }
             }
@@ -238,12 +254,12 @@ mod tests {
     #[test]
     fn too_few_groups_give_no_estimate() {
         let mut spread = GroupSpread::new(1);
-        spread.add(0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
+        spread.add(0, 0, 10, true, &[Vec3::ZERO], &[Vec3::ONE]);
         spread.close();
         assert!(spread.variance(&[Vec3::ZERO]).is_none());
         let mut spread = GroupSpread::new(1);
-        spread.add(0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
-        spread.add(1, 1, 10, &[Vec3::ZERO], &[Vec3::splat(3.0)]);
+        spread.add(0, 0, 10, true, &[Vec3::ZERO], &[Vec3::ONE]);
+        spread.add(1, 1, 10, true, &[Vec3::ZERO], &[Vec3::splat(3.0)]);
         spread.close();
         // Two groups of the first half: taken as independent. Means 0.1 and 0.3 of 20 planes:
         // sigma^2 = (10 0.01 + 10 0.01) / 1 = 0.2, over 20 planes.
@@ -256,9 +272,9 @@ mod tests {
     #[test]
     fn a_spread_read_back_is_checked() {
         let mut spread = GroupSpread::new(2);
-        spread.add(3, 1, 10, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        spread.add(3, 1, 10, false, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
         spread.close();
-        spread.add(4, 2, 5, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        spread.add(4, 2, 5, false, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
         assert_eq!(spread.check(2, 16, 15), Ok(()));
         assert!(spread.check(3, 16, 15).is_err(), "another image size");
         assert!(spread.check(2, 16, 16).is_err(), "other planes");
