@@ -395,6 +395,8 @@ fn check_reference(image: Option<&ImageInfo>, reference: Option<&ImageInfo>, pat
 pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     let (image, image_info) = Film::load_exr_with_info(&a.image).map_err(input)?;
     let (reference, reference_info) = Film::load_exr_with_info(&a.reference).map_err(input)?;
+    ImageInfo::check_is_image(image_info.as_ref(), "--stderr")
+        .map_err(|e| input(anyhow!("{}: {e}", a.image.display())))?;
     check_reference(image_info.as_ref(), reference_info.as_ref(), &a.reference)?;
     let m = compare(&image, &reference)?;
     let Some(ref_se_path) = &a.ref_stderr else {
@@ -408,9 +410,15 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     if let Some(z) = &a.z_image {
         check_outputs(&[Output::Image(z)])?;
     }
-    let load_se = |path: &Path| Film::load_exr(path).map_err(|e| input(anyhow!("{}: {e}", path.display())));
-    let ref_se = load_se(ref_se_path)?;
-    let image_se = a.stderr.as_deref().map(load_se).transpose()?;
+    // Each standard error is checked against what its image records.
+    let load_se = |path: &Path, of: Option<&ImageInfo>| -> Result<Film, Failure> {
+        let bad = |e: fogplanes::Error| input(anyhow!("{}: {e}", path.display()));
+        let (film, info) = Film::load_exr_with_info(path).map_err(bad)?;
+        ImageInfo::check_stderr(info.as_ref(), of).map_err(bad)?;
+        Ok(film)
+    };
+    let ref_se = load_se(ref_se_path, reference_info.as_ref())?;
+    let image_se = a.stderr.as_deref().map(|p| load_se(p, image_info.as_ref())).transpose()?;
     let (noisy, z) = compare_noisy(&image, &reference, &ref_se, image_se.as_ref(), a.regions).map_err(input)?;
     if let Some(path) = &a.z_image {
         z.save_with_info(path, 0.0, None)?;

@@ -353,5 +353,27 @@ fn a_reference_of_another_pixel_filter_is_refused_and_images_record_how_they_wer
     }
     assert!(info("pc_ref.exr").lines().any(|l| l == "pixel_filter: center"));
     assert!(info("bare.exr").contains("16x9, no record"), "{}", info("bare.exr"));
+    // An error image where an image goes, or an image where an error image goes, is refused
+    // naming the file (an image scored against a standard error gave an MSE and exit code 0).
+    run(&["render", SCENE, "--planes", "500", "-o", &p("x.exr"), "--stderr-image", &p("x_se.exr")]);
+    run(&["reference", SCENE, "--spp", "16", "-o", &p("r.exr"), "--stderr-image", &p("r_se.exr")]);
+    for (args, why) in [
+        (
+            vec!["compare", &p("x.exr"), &p("r_se.exr")],
+            ["r_se.exr", "records a reference standard error, not an image"],
+        ),
+        (vec!["compare", &p("x_se.exr"), &p("r.exr")], ["x_se.exr", "records a render standard error, not an image"]),
+        (vec!["compare", &p("x.exr"), &p("r.exr"), "--ref-stderr", &p("r.exr")], ["r.exr", "not a standard error"]),
+        (
+            vec!["compare", &p("x.exr"), &p("r.exr"), "--ref-stderr", &p("pc_ref.exr")],
+            ["pc_ref.exr", "not a standard error"],
+        ),
+    ] {
+        assert_refused(&fogplanes(&args), &format!("{args:?}"), &why);
+    }
+    let table = ["table", SCENE, "--reference", &p("r_se.exr"), "--planes", "200", "--no-sweep", "--out", s(&report)];
+    assert_refused(&fogplanes(&[&table[..], &small].concat()), "table against r_se", &["r_se.exr", "not an image"]);
+    let both = ["compare", &p("x.exr"), &p("r.exr"), "--ref-stderr", &p("r_se.exr"), "--stderr", &p("x_se.exr")];
+    assert_ok(&fogplanes(&both), "compare with both standard errors");
     std::fs::remove_dir_all(&dir).unwrap();
 }

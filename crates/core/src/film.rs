@@ -198,6 +198,8 @@ impl ImageInfo {
     /// (an image without a record says nothing): refuses another pixel filter or resolution;
     /// returns a warning when they record different scenes.
     pub fn check_reference(image: Option<&ImageInfo>, reference: Option<&ImageInfo>) -> Result<Option<String>> {
+        ImageInfo::check_is_image(image, "--stderr")?;
+        ImageInfo::check_is_image(reference, "--ref-stderr")?;
         let (Some(image), Some(reference)) = (image, reference) else { return Ok(None) };
         let differ = |key: &str| match (image.get(key), reference.get(key)) {
             (Some(a), Some(b)) if a != b => Some((a.to_string(), b.to_string())),
@@ -220,6 +222,39 @@ impl ImageInfo {
             )),
             _ => None,
         })
+    }
+}
+
+impl ImageInfo {
+    /// Refuses an error image where an image is measured (`flag`: where its standard error
+    /// goes instead), as far as its record says.
+    pub fn check_is_image(info: Option<&ImageInfo>, flag: &str) -> Result<()> {
+        match info.and_then(|i| i.get(Self::IMAGE)).filter(|k| k.ends_with("standard error")) {
+            Some(kind) => Err(Error::NotComparable(format!(
+                "it records a {kind}, not an image: measure an image (a standard error goes to compare's {flag})"
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// Whether `stderr` can be the standard error of an image that records `image`, as far as
+    /// their records say: it must record a standard error (a render's or a reference's), of the
+    /// same resolution and pixel filter.
+    pub fn check_stderr(stderr: Option<&ImageInfo>, image: Option<&ImageInfo>) -> Result<()> {
+        let Some(stderr) = stderr else { return Ok(()) };
+        if let Some(kind) = stderr.get(Self::IMAGE).filter(|k| !k.ends_with("standard error")) {
+            return Err(Error::NotComparable(format!(
+                "it records a {kind}, not a standard error (`render --stderr-image` or `reference --stderr-image` writes one)"
+            )));
+        }
+        for key in [Self::RESOLUTION, Self::PIXEL_FILTER] {
+            if let (Some(a), Some(b)) = (stderr.get(key), image.and_then(|i| i.get(key)))
+                && a != b
+            {
+                return Err(Error::NotComparable(format!("it records {key} {a}, its image {b}")));
+            }
+        }
+        Ok(())
     }
 }
 
