@@ -131,7 +131,7 @@ fn the_error_image_is_calibrated() {
 #[test]
 fn the_error_image_of_a_render_in_passes_is_calibrated() {
     let scene = benchmark(160, 90);
-    let schedule = [256usize, 256, 512, 1024, 2048, 4096, 8192, 16384, 3000];
+    let schedule = [256usize, 256, 512, 1024, 2048, 4096, 8192, 16384, 9000];
     let opts = |seed: u64| options(&scene, Overrides { seed: Some(seed), stderr: true, ..Overrides::default() });
     let runs: Vec<(Film, Film)> = (0..24)
         .map(|s| {

@@ -155,7 +155,7 @@ impl<'a> ChunkRenderer<'a> {
         let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
         let sets = opts.ray_sets();
         let pieces = pieces(opts.planes, sets, range.clone())
-            .map(|(k, p)| (k, p.clone(), quarter_of(k, sets, 0), p == plane_group(k, opts.planes, sets)));
+            .map(|(k, p)| (k, p.clone(), quarter_of(k, sets), p == plane_group(k, opts.planes, sets)));
         self.gatherer.gather(pieces, weighting, &self.prepared, &mut sums)?;
         Ok(Partial {
             width: cam.width,
@@ -302,11 +302,10 @@ pub fn render_from(
 
 /// Which quarter of a render's plane groups group `g` of `groups` (in plane order) is in
 /// (section 10.2): consecutive groups make each quarter, so that the first half of the planes
-/// is the first two. With fewer than four groups, each half's groups go to one of its quarters
-/// by `turn` (a render in passes: the pass's number), so that over passes both quarters fill.
-fn quarter_of(g: u32, groups: u32, turn: u32) -> usize {
+/// is the first two. With fewer than four groups, each half's groups go to its first quarter.
+fn quarter_of(g: u32, groups: u32) -> usize {
     let groups = groups.max(1);
-    if groups >= 4 { (4 * g / groups) as usize } else { (2 * (2 * g / groups) + turn % 2) as usize }
+    if groups >= 4 { (4 * g / groups) as usize } else { (2 * (2 * g / groups)) as usize }
 }
 
 /// Renders planes `range` of the render `opts` describes (a union of consecutive canonical
@@ -474,14 +473,16 @@ pub fn render_in_passes(
         let pass_start = Instant::now();
         // The pass's planes split into groups, each gathered along the next ray set in turn
         // (section 8.1): as many groups as ray sets once a pass has MIN_PASS_GROUP planes per
-        // set, fewer before (a gather costs something per pixel). For the error image, each
-        // pass's groups fill the render's quarters in order, a pass of fewer than four groups
-        // as its number says (section 10.2).
+        // set, fewer before (a gather costs something per pixel). For the error image, the
+        // pass's groups are the last two quarters, its first and second half; the passes
+        // before it, the first two (section 10.2).
         let used = (next / MIN_PASS_GROUP).clamp(1, ray_sets as usize) as u32;
-        let passes = gatherer.stats.plane_passes;
+        if let Some(spread) = &mut gatherer.spread {
+            spread.next_pass();
+        }
         let pass = (0..used).map(|g| {
             let group = plane_group(g, next, used);
-            let quarter = if used == 1 { (passes % 4) as usize } else { quarter_of(g, used, passes) };
+            let quarter = if 2 * g < used { 2 } else { 3 };
             ((next_set + g) % ray_sets, done + group.start..done + group.end, quarter, true)
         });
         let mut sums = vec![Vec3::ZERO; pixels];

@@ -97,6 +97,22 @@ impl GroupSpread {
         self.planes[quarter] += n;
     }
 
+    /// A render in passes starts another pass (section 10.2): the quarters so far become
+    /// (the passes before the last, the last pass), and the new pass's groups go to quarters 2
+    /// and 3 (its first and second half). So the halves are the planes before the last pass
+    /// and the last pass, consecutive ranges of the sequence as a render in chunks has them.
+    pub fn next_pass(&mut self) {
+        self.close();
+        let [q0, q1, q2, q3] = &mut self.quarters;
+        for (((a, b), c), d) in q0.iter_mut().zip(q1.iter_mut()).zip(q2.iter_mut()).zip(q3.iter_mut()) {
+            *a += *b;
+            *b = *c + *d;
+            (*c, *d) = (DVec3::ZERO, DVec3::ZERO);
+        }
+        let n = self.planes;
+        self.planes = [n[0] + n[1], n[2] + n[3], 0, 0];
+    }
+
     /// Groups closed so far.
     pub fn groups(&self) -> usize {
         self.groups
