@@ -6,9 +6,9 @@
 //! spread of the group means gives the error of the image if the groups were independent;
 //! they are not quite (each is a block of one scrambled Sobol sequence and the ray sets are
 //! stratified over the pixel, so the groups err less together than apart), and the image-wide
-//! ratio of the two halves' measured spread to what the groups predict for it corrects that.
-//! The direct emission's own variance ([`crate::emission::direct_emission_and_variance`]) is
-//! added.
+//! ratio of the two halves' measured spread to what the groups predict for it, carried one level
+//! further with the quarters' ratio, corrects that. The direct emission's own variance
+//! ([`crate::emission::direct_emission_and_variance`]) is added.
 
 use crate::error::Result;
 use crate::film::Film;
@@ -156,7 +156,7 @@ impl GroupSpread {
         if self.groups < 2 {
             return None;
         }
-        let halves = h1 > 0.0 && h2 > 0.0;
+        let both_halves = h1 > 0.0 && h2 > 0.0;
         // The closed groups' sums per pixel (every plane weighted 1).
         let sums: Vec<DVec3> = (0..self.squares.len()).map(|p| self.quarters.iter().map(|q| q[p]).sum()).collect();
         let dof = (self.groups - 1) as f64;
@@ -164,7 +164,7 @@ impl GroupSpread {
         // The spreads of the halves and of the quarters within them, measured against what
         // the groups predict for them if they were independent (eqs. 10.2, 10.3).
         let quartered = n.iter().all(|&q| q > 0.0);
-        if !halves {
+        if !both_halves {
             return Some((0..sums.len()).map(|p| sigma2(p) / total + emission_variance[p].as_dvec3()).collect());
         }
         let (mut halves, mut halves_iid, mut quarters, mut quarters_iid) = [DVec3::ZERO; 4].into();
