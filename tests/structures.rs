@@ -136,15 +136,24 @@ fn bvh_finds_the_same_hits() {
     }
 }
 
+/// Nor on the raster's bands, which are smaller for more workers (`raster::band_rows`): 54
+/// rows make 7 bands of 8 rows for 1 to 3 workers, of 4 rows (14) for 4 to 7, of 2 (27) for
+/// 8 to 13, of 1 (54) for 14 or more. Every estimator, the same bits.
 #[test]
 fn images_do_not_depend_on_the_thread_count() {
     let s = scene("media_scenes/six_lights.toml", 96, 54);
-    let opts = with(&s, Weighting::default(), Accelerator::Raster, Kernel::Auto, 4000);
-    let render_with = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| render(&s, &opts, Control::none()).unwrap().0)
-    };
-    assert!(render_with(1).pixels == render_with(3).pixels);
+    assert_eq!([1, 5, 10, 16].map(|t| fogplanes::raster::band_rows(54, t)), [8, 4, 2, 1]);
+    for estimator in Estimator::ALL {
+        let opts = with(&s, Weighting { estimator, orientations: 2 }, Accelerator::Raster, Kernel::Auto, 4000);
+        let render_with = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| render(&s, &opts, Control::none()).unwrap().0)
+        };
+        let one = render_with(1);
+        for threads in [5, 10, 16] {
+            assert!(render_with(threads).pixels == one.pixels, "{estimator}, {threads} workers");
+        }
+    }
 }
 
 /// The raster's near-plane and image clipping, with the camera inside the box, on its boundary,

@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::gather::{GatherContext, GatherStats};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::photon_plane::{PlaneSet, sample_plane_range};
-use crate::raster::{BAND_ROWS, ScreenRaster};
+use crate::raster::{ScreenRaster, band_rows};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -42,10 +42,11 @@ impl Accelerator {
     }
 
     /// Progress units of one gathering over the image (for sizing a progress bar): a band of
-    /// rows on the raster, a chunk of rays on the per-ray structures.
+    /// rows on the raster (sized for the current thread pool: call it in the pool that
+    /// renders), a chunk of rays on the per-ray structures.
     pub fn units_per_gathering(self, width: u32, height: u32) -> u64 {
         match self {
-            Accelerator::Raster => height.div_ceil(BAND_ROWS) as u64,
+            Accelerator::Raster => height.div_ceil(band_rows(height, rayon::current_num_threads())) as u64,
             _ => (width as u64 * height as u64).div_ceil(RAY_CHUNK as u64),
         }
     }

@@ -71,17 +71,20 @@ pub(crate) fn render<'py>(
     let r = settings::resolve_render(&scene, &overrides).map_err(|e| given.error(e))?;
     let (scene, opts) = (&r.scene, &r.options);
     let label = opts.weighting().label();
+    let pool = pool(r.threads)?;
+    // The units of the pool that renders (the raster's bands are sized for its workers).
+    let units = || progress_units(scene, opts, 0..opts.planes());
     let progress = if !returns.progress {
         Progress::hidden()
     } else if r.in_passes() {
         Progress::passes(&label)
     } else {
-        Progress::planes(&label, progress_units(scene, opts, 0..opts.planes()), opts.planes() as u64)
+        Progress::planes(&label, pool.as_ref().map_or_else(units, |p| p.install(units)), opts.planes() as u64)
     };
     let tick = || progress.tick();
     let (film, stats) = run_showing(
         py,
-        pool(r.threads)?,
+        pool,
         |cancel| {
             let control = Control::new(&tick, cancel);
             if r.in_passes() {
