@@ -1,11 +1,8 @@
 //! The command line: outputs are written whole, bad input gets one clear line and exit code 2.
 
+use crate::common::fogplanes;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn fogplanes(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
-}
+use std::process::Command;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("fogplanes-cli-{name}-{}", std::process::id()));

@@ -4,16 +4,13 @@
 //! by the recipes below (tests/craft/ writes EXR byte by byte); `cargo test --release --test
 //! all -- --ignored hostile::write_the_corpus` writes them again after a recipe changes.
 
+use crate::common::fogplanes;
 use crate::craft;
 use crate::craft::{HALF, Header};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 const DIR: &str = "tests/hostile";
-
-fn fogplanes(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
-}
 
 /// As [`fogplanes`], but a run longer than `seconds` is killed and fails the test (the table
 /// once hung after rendering against a NaN reference).

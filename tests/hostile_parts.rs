@@ -8,6 +8,7 @@
 //! Python doors are held by tests/python/test_hostile.py, the reader and the merge under random
 //! damage by tests/fuzz_parts.rs.
 
+use crate::common::fogplanes;
 use crate::common::options;
 use fogplanes::control::Control;
 use fogplanes::film::Film;
@@ -26,10 +27,6 @@ use std::process::{Command, Output};
 const SCENE: &str = "media_scenes/six_lights.toml";
 /// Two chunks: 0:16384 and 16384:20000.
 const PLANES: usize = 20_000;
-
-fn fogplanes(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
-}
 
 /// `fogplanes args` under an address-space limit of about 1 GB, killed (and the test failed)
 /// after `seconds`: a read without end fails instead of filling the machine's memory.

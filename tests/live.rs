@@ -4,6 +4,7 @@
 //! uninterrupted run; another job's checkpoint is refused with one line.
 
 use crate::common::options;
+use crate::common::{fogplanes, refused};
 use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::limits::CHUNK_PLANES;
@@ -20,10 +21,6 @@ use std::time::{Duration, Instant};
 
 const SCENE: &str = "media_scenes/six_lights.toml";
 
-fn fogplanes(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
-}
-
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("fogplanes-live-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -38,15 +35,6 @@ fn path(p: &Path) -> &str {
 fn succeeded(o: &Output, what: &str) -> String {
     assert!(o.status.success(), "{what}: {}", String::from_utf8_lossy(&o.stderr));
     String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// The one error line and exit code 2 of a refused command.
-fn refused(args: &[&str]) -> String {
-    let o = fogplanes(args);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    err
 }
 
 fn strs(v: &[String]) -> Vec<&str> {

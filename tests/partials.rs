@@ -3,6 +3,7 @@
 //! one image, reference bands give the whole reference, and the command line round-trips.
 
 use crate::common::options;
+use crate::common::{fogplanes, refused};
 use fogplanes::control::Control;
 use fogplanes::film::Film;
 use fogplanes::limits::CHUNK_PLANES;
@@ -16,7 +17,6 @@ use fogplanes::render::render_chunk;
 use fogplanes::scene::Scene;
 use fogplanes::settings::Overrides;
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
 fn scene(w: u32, h: u32) -> Scene {
     Scene::load(std::path::Path::new("media_scenes/six_lights.toml")).unwrap().with_resolution(w, h).unwrap()
@@ -163,10 +163,6 @@ fn reference_bands_equal_the_whole_reference() {
     }
 }
 
-fn fogplanes(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
-}
-
 fn strs(v: &[String]) -> Vec<&str> {
     v.iter().map(String::as_str).collect()
 }
@@ -181,15 +177,6 @@ fn scratch(name: &str) -> PathBuf {
 fn run(args: &[&str]) {
     let o = fogplanes(args);
     assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
-}
-
-/// The one error line and exit code 2 of a refused command.
-fn refused(args: &[&str]) -> String {
-    let o = fogplanes(args);
-    let err = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    err
 }
 
 #[test]

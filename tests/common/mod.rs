@@ -122,6 +122,20 @@ fn the_standard_error_of_known_samples() {
     assert!((m.z(2.0, 0.0) - 0.5 / (5.0f64 / 12.0).sqrt()).abs() < 1e-12);
 }
 
+/// Runs the command line with `args`, its output captured.
+pub fn fogplanes(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fogplanes")).args(args).output().expect("the binary runs")
+}
+
+/// The one error line and exit code 2 of a refused command.
+pub fn refused(args: &[&str]) -> String {
+    let o = fogplanes(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    err
+}
+
 /// Runs `command` with its output captured; kills it and fails the test if it runs longer than
 /// `seconds` (a hostile input must be refused, not read forever).
 pub fn output_within(seconds: u64, mut command: Command, what: &str) -> Output {

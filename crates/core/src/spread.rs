@@ -129,10 +129,12 @@ impl GroupSpread {
         if buffers.flatten().any(|v| !v.is_finite()) || self.squares.iter().any(|v| v.min_element() < 0.0) {
             return Err("it holds sums that are not finite, or negative squares".into());
         }
-        let total = self.planes() + self.open_planes;
-        if total != planes || self.groups > planes || self.open_key.is_some_and(|(k, q)| k >= ray_sets || q > 3) {
+        // Counts read from a file may be anything: added without wrapping.
+        let total = self.planes.iter().chain([&self.open_planes]).try_fold(0usize, |a, &b| a.checked_add(b));
+        if total != Some(planes) || self.groups > planes || self.open_key.is_some_and(|(k, q)| k >= ray_sets || q > 3) {
             return Err(format!(
-                "its counts ({total} planes in {} groups) are not those of {planes} planes",
+                "its counts ({} planes in {} groups) are not those of {planes} planes",
+                total.map_or("more than 2^64".into(), |t| t.to_string()),
                 self.groups
             ));
         }
@@ -295,6 +297,9 @@ mod tests {
         assert!(spread.check(3, 16, 15).is_err(), "another image size");
         assert!(spread.check(2, 16, 16).is_err(), "other planes");
         assert!(spread.check(2, 4, 15).is_err(), "a ray set beyond the render's");
+        let mut wraps = spread.clone();
+        wraps.planes = [usize::MAX, 11, 0, 0];
+        assert!(wraps.check(2, 16, 15).unwrap_err().contains("more than 2^64"), "counts that wrap to 15");
         let mut bad = spread.clone();
         bad.quarters[1][0].y = f64::NAN;
         assert!(bad.check(2, 16, 15).unwrap_err().contains("not finite"));
