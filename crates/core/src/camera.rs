@@ -3,7 +3,8 @@
 use glam::{DVec3, Vec3};
 
 /// A camera ray: unit direction (f32, origin at the camera) and its segment `[t0, t1]` inside
-/// the medium before the first light panel (empty, `t0 > t1`, when there is none).
+/// the medium before the first light panel (empty, `t0 > t1`, when there is none). Both ends
+/// are finite (the medium is a bounded box): the hit test relies on it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CameraRay {
     pub dir: Vec3,
