@@ -41,6 +41,8 @@ pub struct PlaneView {
     pub frame: PlaneFrame,
     /// power / N: the hit-independent factor of C.
     pub scale: Vec3,
+    /// The largest component of `scale`.
+    pub scale_max: f32,
     /// The panels that may shadow the plane: `GatherContext::occluders[start..end]`, empty for
     /// most planes.
     pub occluders_start: u32,
@@ -101,6 +103,7 @@ impl PlaneView {
             t_det: b.dot(normal) as f32,
             frame: PlaneFrame::new(plane.width, plane.alpha, plane.p0, plane.q0, light.width, light.height),
             scale: (plane.power / planes_total as f64).as_vec3(),
+            scale_max: (plane.power / planes_total as f64).as_vec3().max_element(),
             occluders_start: occluders.0,
             occluders_end: occluders.1,
         }
@@ -139,10 +142,15 @@ impl PlaneView {
     #[inline(always)]
     pub fn contribution<const GREY: bool>(&self, sigma_t: Vec3, length: f32, d: f32, lit: bool) -> [f32; 3] {
         let scale = self.scale;
-        let (cr, cg, cb) = if GREY {
+        if GREY {
+            // One check serves the three channels: the scales are finite and non-negative, so
+            // every scale * q is finite exactly when the largest is (rounding is monotone).
             let q = exp_f32(-sigma_t.x * length) / d;
-            (scale.x * q, scale.y * q, scale.z * q)
-        } else {
+            let keep = lit & (d > 0.0) & (self.scale_max * q).is_finite();
+            let q = if keep { q } else { 0.0 };
+            return [scale.x * q, scale.y * q, scale.z * q];
+        }
+        let (cr, cg, cb) = {
             (
                 scale.x * (exp_f32(-sigma_t.x * length) / d),
                 scale.y * (exp_f32(-sigma_t.y * length) / d),
