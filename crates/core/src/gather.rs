@@ -3,26 +3,25 @@
 //! the ray origin, prepared once per plane so that a hit costs a few dot products and one
 //! exponential.
 //!
-//! The per-hit arithmetic is written once, here, branch-free, for L rays at a time:
-//! [`PlaneJob::gather_lanes`] runs [`PlaneView::crossing`] (where the ray meets the plane and
-//! whether that is a hit), the visibility test of planes another panel can shadow
-//! ([`Occluder::blocks`]), the estimator's D ([`Denominator::denominators`]) and
-//! [`PlaneView::contribution`] (the transmittance and the finite check), each as a loop over the
-//! L lanes. The vector kernels of [`crate::kernel`] call it with L = [`crate::kernel::LANES`],
-//! which the compiler turns into vector instructions; the per-hit paths call it with L = 1: the
-//! BVH and the brute-force loop through [`GatherContext::gather_one`], the raster's `per-hit`
-//! kernel through [`PlaneJob::gather_lanes_in`]. Every lane does the same operations in the same order whatever L, so images are
-//! bit-identical whichever path found a hit.
-
-// Lane loops (`for l in 0..L`) index several arrays in step, as the vector code they become.
-#![allow(clippy::needless_range_loop)]
+//! The per-hit arithmetic is written once, here, branch-free, for a block of rays at a time as
+//! a vector of lanes ([`crate::simd::Lanes`]): [`PlaneJob::gather_block`] runs
+//! [`PlaneView::cross`] (where the rays meet the plane and which of them hit), the visibility
+//! test of planes another panel can shadow ([`Occluder::blocks_lanes`]), the estimator's D
+//! ([`Denominator::denominators_of`]) and [`PlaneView::contribution`] (the transmittance and the
+//! finite check). The vector kernels of [`crate::kernel`] call it with 16 lanes in AVX-512 or
+//! AVX2 registers (or an array, for the portable kernel); the per-hit paths with one lane, `f32`:
+//! the BVH and the brute-force loop through [`GatherContext::gather_one`], the raster's
+//! `per-hit` kernel through [`PlaneJob::gather_block_in`]. Every lane does the same operations
+//! in the same order whatever the width, so images are bit-identical whichever path found a
+//! hit.
 
 use crate::camera::CameraRay;
-use crate::numeric::exp_f32;
+use crate::numeric::exp_lanes;
 use crate::occlusion::{Occluder, possible_occluders};
 use crate::photon_plane::PhotonPlane;
 use crate::scene::Scene;
-use crate::weights::{Denominator, HitLanes, PlaneFrame};
+use crate::simd::{Lanes, Mask};
+use crate::weights::{Denominator, PlaneFrame};
 use glam::{DVec3, Vec3};
 
 /// A plane prepared for rays from one origin `o`.
@@ -49,42 +48,43 @@ pub struct PlaneView {
     pub occluders_end: u32,
 }
 
-/// L camera rays, lane by lane: unit directions and segments `[t0, t1]`, borrowed where they
-/// lie (the band's arrays in the vector kernels). Copied arrays went through the stack block by
-/// block, and the cost of that round trip changed with the binary's layout and the caller's
-/// stack depth: up to 25% of the AVX2 kernel's time, moved by edits to unrelated modules.
+/// A block of camera rays, one per lane: unit directions and segments `[t0, t1]`.
 #[derive(Clone, Copy, Debug)]
-pub struct RayLanes<'a, const L: usize> {
-    pub x: &'a [f32; L],
-    pub y: &'a [f32; L],
-    pub z: &'a [f32; L],
-    pub t0: &'a [f32; L],
-    pub t1: &'a [f32; L],
+pub struct RayBlock<V> {
+    pub x: V,
+    pub y: V,
+    pub z: V,
+    pub t0: V,
+    pub t1: V,
 }
 
-impl<'a> RayLanes<'a, 1> {
-    pub fn one(ray: &'a CameraRay) -> Self {
-        use std::array::from_ref;
-        RayLanes {
-            x: from_ref(&ray.dir.x),
-            y: from_ref(&ray.dir.y),
-            z: from_ref(&ray.dir.z),
-            t0: from_ref(&ray.t0),
-            t1: from_ref(&ray.t1),
-        }
+impl<V> RayBlock<V> {
+    /// `dir . v`, summed x, y, z in that order.
+    #[inline(always)]
+    pub fn dot<const L: usize>(&self, v: Vec3) -> V
+    where
+        V: Lanes<L>,
+    {
+        self.x * V::splat(v.x) + self.y * V::splat(v.y) + self.z * V::splat(v.z)
     }
 }
 
-/// Where a ray meets a plane, computed whether or not it hits (the values are then harmless
+impl RayBlock<f32> {
+    pub fn one(ray: &CameraRay) -> Self {
+        RayBlock { x: ray.dir.x, y: ray.dir.y, z: ray.dir.z, t0: ray.t0, t1: ray.t1 }
+    }
+}
+
+/// Where rays meet a plane, computed whether or not they hit (the values are then harmless
 /// and unused): camera distance t, chord parameter a, plane distance r (section 2) and
-/// det(alpha).
+/// det(alpha), with the lanes that hit.
 #[derive(Clone, Copy, Debug)]
-pub struct Crossing {
-    pub hit: bool,
-    pub det: f32,
-    pub t: f32,
-    pub a: f32,
-    pub r: f32,
+pub struct Crossing<V, M = bool> {
+    pub hit: M,
+    pub det: V,
+    pub t: V,
+    pub a: V,
+    pub r: V,
 }
 
 impl PlaneView {
@@ -114,51 +114,62 @@ impl PlaneView {
         self.occluders_end > self.occluders_start
     }
 
-    /// Where the ray with unit direction `dir` meets the plane, and whether that is a hit: inside
-    /// `[t0, t1]`, on the chord (`0 <= a <= width`) and strictly in front of the light (r > 0).
+    /// Where the ray with unit direction `dir` meets the plane: [`PlaneView::cross`] with one
+    /// lane.
+    #[inline(always)]
+    pub fn crossing(&self, dir: [f32; 3], t0: f32, t1: f32) -> Crossing<f32> {
+        self.cross::<1, f32>(&RayBlock { x: dir[0], y: dir[1], z: dir[2], t0, t1 })
+    }
+
+    /// Where each ray of a block meets the plane, and whether that is a hit: inside `[t0, t1]`,
+    /// on the chord (`0 <= a <= width`) and strictly in front of the light (r > 0).
     ///
     /// A hit at r = 0 lies on the light itself: only a camera ray lying in the light's own plane
     /// meets planes there, and along such a ray cos(theta_y) = 0, so the integrand of section 1
     /// vanishes; counting the hit would add light that is not there.
     #[inline(always)]
-    pub fn crossing(&self, dir: [f32; 3], t0: f32, t1: f32) -> Crossing {
-        let [x, y, z] = dir;
-        let det = x * self.normal.x + y * self.normal.y + z * self.normal.z;
-        let inv = 1.0 / det;
-        let t = self.t_det * inv;
-        let a = (x * self.a_axis.x + y * self.a_axis.y + z * self.a_axis.z) * inv;
-        let r = (x * self.r_axis.x + y * self.r_axis.y + z * self.r_axis.z) * inv;
+    pub fn cross<const L: usize, V: Lanes<L>>(&self, ray: &RayBlock<V>) -> Crossing<V, V::Mask> {
+        let s = V::splat;
+        let det = ray.dot(self.normal);
+        let inv = s(1.0) / det;
+        let t = s(self.t_det) * inv;
+        let a = ray.dot(self.a_axis) * inv;
+        let r = ray.dot(self.r_axis) * inv;
         // det = 0 needs no test of its own: t is then infinite or NaN, outside the finite
         // segment [t0, t1].
-        let hit = (t >= t0) & (t <= t1) & (a >= 0.0) & (a <= self.frame.width) & (r > 0.0);
+        let hit = t.ge(ray.t0) & t.le(ray.t1) & a.ge(s(0.0)) & a.le(s(self.frame.width)) & r.gt(s(0.0));
         Crossing { hit, det, t, a, r }
     }
 
-    /// The contribution C of a hit (section 2): `power Tr_cam(t) Tr(x, y') / (N D)` with
+    /// The contribution C of hits (section 2): `power Tr_cam(t) Tr(x, y') / (N D)` with
     /// `Tr_cam(t) Tr(x, y') = exp(-sigma_t length)`, `length = (t - t0) + r` (both segments lie
     /// inside the box). Zero unless `lit` (a hit whose light path no panel blocks) with D > 0 and
     /// a finite value: D vanishes, or underflows to a denormal, only on a set of probability ~0,
     /// and such a hit adds nothing rather than an infinity.
     #[inline(always)]
-    pub fn contribution<const GREY: bool>(&self, sigma_t: Vec3, length: f32, d: f32, lit: bool) -> [f32; 3] {
-        let scale = self.scale;
+    pub fn contribution<const L: usize, V: Lanes<L>, const GREY: bool>(
+        &self,
+        sigma_t: Vec3,
+        length: V,
+        d: V,
+        lit: V::Mask,
+    ) -> [V; 3] {
+        let (s, scale, zero) = (V::splat, self.scale, V::splat(0.0));
+        let lit = lit & d.gt(zero);
         if GREY {
             // One check serves the three channels: the scales are finite and non-negative, so
             // every scale * q is finite exactly when the largest is (rounding is monotone).
-            let q = exp_f32(-sigma_t.x * length) / d;
-            let keep = lit & (d > 0.0) & (self.scale_max * q).is_finite();
-            let q = if keep { q } else { 0.0 };
-            return [scale.x * q, scale.y * q, scale.z * q];
+            let q = exp_lanes::<L, V>(s(-sigma_t.x) * length) / d;
+            let q = V::select(lit & (s(self.scale_max) * q).is_finite(), q, zero);
+            return [s(scale.x) * q, s(scale.y) * q, s(scale.z) * q];
         }
-        let (cr, cg, cb) = {
-            (
-                scale.x * (exp_f32(-sigma_t.x * length) / d),
-                scale.y * (exp_f32(-sigma_t.y * length) / d),
-                scale.z * (exp_f32(-sigma_t.z * length) / d),
-            )
-        };
-        let keep = lit & (d > 0.0) & cr.is_finite() & cg.is_finite() & cb.is_finite();
-        [if keep { cr } else { 0.0 }, if keep { cg } else { 0.0 }, if keep { cb } else { 0.0 }]
+        let (cr, cg, cb) = (
+            s(scale.x) * (exp_lanes::<L, V>(s(-sigma_t.x) * length) / d),
+            s(scale.y) * (exp_lanes::<L, V>(s(-sigma_t.y) * length) / d),
+            s(scale.z) * (exp_lanes::<L, V>(s(-sigma_t.z) * length) / d),
+        );
+        let keep = lit & cr.is_finite() & cg.is_finite() & cb.is_finite();
+        [V::select(keep, cr, zero), V::select(keep, cg, zero), V::select(keep, cb, zero)]
     }
 }
 
@@ -182,68 +193,49 @@ impl<D: Denominator> Clone for PlaneJob<'_, D> {
 }
 
 impl<D: Denominator> PlaneJob<'_, D> {
-    /// L rays against the plane: the per-hit arithmetic, once for every path that gathers.
-    /// Adds each lane's contribution (zero where a panel blocks the light path) to `sums`
-    /// unless `CONTRIBUTE` is off, and counts each lane's hits in `hits`.
+    /// A block of rays against the plane: the per-hit arithmetic, once for every path that
+    /// gathers. Adds each lane's contribution (zero where a panel blocks the light path) to
+    /// `sums` unless `CONTRIBUTE` is off, and returns how many lanes hit.
     /// `GREY`: one exponential serves the three channels (the caller has checked
     /// `extinction.grey`).
     #[inline(always)]
-    pub fn gather_lanes<const L: usize, const GREY: bool, const CONTRIBUTE: bool>(
+    pub fn gather_block<const L: usize, V: Lanes<L>, const GREY: bool, const CONTRIBUTE: bool>(
         &self,
-        rays: &RayLanes<'_, L>,
+        ray: &RayBlock<V>,
         sums: [&mut [f32; L]; 3],
-        hits: &mut [u32; L],
-    ) {
+    ) -> u32 {
         let view = &self.view;
-        // Hit masks as u32 (0 or 1), not bool: a vector of bools is a vector of bytes, and
-        // every pass between the lane loops packed and unpacked it (a fifth of the AVX2
-        // kernel's instructions).
-        let (mut hit, mut det, mut t, mut a, mut r) = ([0u32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
-        for l in 0..L {
-            let c = view.crossing([rays.x[l], rays.y[l], rays.z[l]], rays.t0[l], rays.t1[l]);
-            (hit[l], det[l], t[l], a[l], r[l]) = (c.hit as u32, c.det, c.t, c.a, c.r);
-            hits[l] += hit[l];
-        }
+        let c = view.cross::<L, V>(ray);
         // A block without a hit adds nothing (adding +0.0 would not change a sum either).
-        if !CONTRIBUTE || hit.iter().fold(0, |any, &h| any | h) == 0 {
-            return;
+        if !CONTRIBUTE || !c.hit.any() {
+            return c.hit.count();
         }
-        let mut lit = hit;
+        let mut lit = c.hit;
         for o in self.occluders {
-            for l in 0..L {
-                lit[l] &= !o.blocks(a[l], r[l]) as u32;
-            }
+            lit = lit.and_not(o.blocks_lanes::<L, V>(c.a, c.r));
         }
-        let mut det_perp = [0.0f32; L];
-        let perp = view.normal_perp;
-        for l in 0..L {
-            det_perp[l] = rays.x[l] * perp.x + rays.y[l] * perp.y + rays.z[l] * perp.z;
+        let det_perp = ray.dot(view.normal_perp);
+        let d = self.weights.denominators_of::<L, V>(&self.prepared, c.det, det_perp, c.a);
+        let length = (c.t - ray.t0) + c.r;
+        let contribution = view.contribution::<L, V, GREY>(self.extinction.sigma_t, length, d, lit);
+        for (sum, value) in sums.into_iter().zip(contribution) {
+            (V::load(sum) + value).store(sum);
         }
-        let mut d = [0.0f32; L];
-        self.weights.denominators(&self.prepared, &HitLanes { det, det_perp, a }, &mut d);
-        let sigma_t = self.extinction.sigma_t;
-        let [sr, sg, sb] = sums;
-        for l in 0..L {
-            let [cr, cg, cb] = view.contribution::<GREY>(sigma_t, (t[l] - rays.t0[l]) + r[l], d[l], lit[l] != 0);
-            sr[l] += cr;
-            sg[l] += cg;
-            sb[l] += cb;
-        }
+        c.hit.count()
     }
 
-    /// [`PlaneJob::gather_lanes`] with the grey or RGB case of the medium's extinction chosen
+    /// [`PlaneJob::gather_block`] with the grey or RGB case of the medium's extinction chosen
     /// at run time (the vector kernels choose it once per plane instead).
     #[inline(always)]
-    pub fn gather_lanes_in<const L: usize, const CONTRIBUTE: bool>(
+    pub fn gather_block_in<const L: usize, V: Lanes<L>, const CONTRIBUTE: bool>(
         &self,
-        rays: &RayLanes<'_, L>,
+        ray: &RayBlock<V>,
         sums: [&mut [f32; L]; 3],
-        hits: &mut [u32; L],
-    ) {
+    ) -> u32 {
         if self.extinction.grey {
-            self.gather_lanes::<L, true, CONTRIBUTE>(rays, sums, hits);
+            self.gather_block::<L, V, true, CONTRIBUTE>(ray, sums)
         } else {
-            self.gather_lanes::<L, false, CONTRIBUTE>(rays, sums, hits);
+            self.gather_block::<L, V, false, CONTRIBUTE>(ray, sums)
         }
     }
 }
@@ -356,16 +348,16 @@ impl GatherContext {
     }
 
     /// The per-hit path: one ray against one plane. `None` if it misses; otherwise its
-    /// contribution, zero when another panel blocks the light path: [`PlaneJob::gather_lanes`]
+    /// contribution, zero when another panel blocks the light path: [`PlaneJob::gather_block`]
     /// with one lane.
     #[inline]
     pub fn gather_one<D: Denominator>(&self, weights: &D, view: &PlaneView, ray: &CameraRay) -> Option<Vec3> {
-        let rays = RayLanes::one(ray);
-        if !view.crossing([ray.dir.x, ray.dir.y, ray.dir.z], ray.t0, ray.t1).hit {
+        let rays = RayBlock::one(ray);
+        if !view.cross::<1, f32>(&rays).hit {
             return None;
         }
-        let (mut r, mut g, mut b, mut hits) = ([0.0f32], [0.0f32], [0.0f32], [0u32]);
-        self.job(weights, view).gather_lanes_in::<1, true>(&rays, [&mut r, &mut g, &mut b], &mut hits);
+        let (mut r, mut g, mut b) = ([0.0f32], [0.0f32], [0.0f32]);
+        self.job(weights, view).gather_block_in::<1, f32, true>(&rays, [&mut r, &mut g, &mut b]);
         Some(Vec3::new(r[0], g[0], b[0]))
     }
 

@@ -22,7 +22,10 @@
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::gather::{GatherContext, GatherStats, PlaneJob, RayLanes};
+use crate::gather::{GatherContext, GatherStats, PlaneJob, RayBlock};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{Avx2, Avx512};
+use crate::simd::{Lanes, Portable};
 use crate::weights::Denominator;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -39,7 +42,7 @@ pub enum Kernel {
     Avx2,
     /// What the compiler makes of the loop for the baseline target (4 lanes with SSE2).
     Portable,
-    /// One pixel at a time ([`PlaneJob::gather_lanes`] with one lane): for checking the vector
+    /// One pixel at a time ([`PlaneJob::gather_block`] with one lane): for checking the vector
     /// kernels.
     PerHit,
 }
@@ -200,7 +203,7 @@ pub struct Span {
 }
 
 /// One plane against its spans in a band with a vector kernel (`kernel` resolved, not
-/// [`Kernel::PerHit`]): [`PlaneJob::gather_lanes`] on each block of [`LANES`] pixels. Adds each
+/// [`Kernel::PerHit`]): [`PlaneJob::gather_block`] on each block of [`LANES`] pixels. Adds each
 /// pixel's contribution to the band's sums unless `CONTRIBUTE` is off (then only hits are
 /// counted). Returns the hit count.
 #[inline(always)]
@@ -229,9 +232,10 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     }
 }
 
-/// The compiled copies of [`plane_body`]: one per vector width, chosen at run time.
+/// The compiled copies of [`plane_body`]: one per vector width and lane type, chosen at run
+/// time.
 macro_rules! plane_kernel {
-    ($(#[$attr:meta])* $name:ident) => {
+    ($(#[$attr:meta])* $name:ident, $lanes:ty) => {
         $(#[$attr])*
         #[inline(never)]
         fn $name<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
@@ -239,33 +243,36 @@ macro_rules! plane_kernel {
             spans: &[Span],
             band: &mut Band,
         ) -> u64 {
-            plane_body::<D, GREY, CONTRIBUTE>(job, spans, band)
+            plane_body::<$lanes, D, GREY, CONTRIBUTE>(job, spans, band)
         }
     };
 }
 
 plane_kernel!(
-    /// [`plane_body`] compiled for 16-wide vectors.
+    /// [`plane_body`] in AVX-512 registers.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
-    plane_avx512
+    plane_avx512,
+    Avx512
 );
 plane_kernel!(
-    /// [`plane_body`] compiled for 8-wide vectors.
+    /// [`plane_body`] in pairs of AVX2 registers.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    plane_avx2
+    plane_avx2,
+    Avx2
 );
 plane_kernel!(
     /// [`plane_body`] for the baseline target.
-    plane_portable
+    plane_portable,
+    Portable
 );
 
-/// The kernel proper: the plane's spans block by block. The plane's constants are loaded once
-/// per plane and band (a local copy of the job, not per span), and the hits are counted per
-/// lane and summed once.
+/// The kernel proper: the plane's spans block by block, each block [`PlaneJob::gather_block`]
+/// on `V`, the band's arrays loaded and stored in place. The plane's constants are loaded once
+/// per plane and band (a local copy of the job, not per span).
 #[inline(always)]
-fn plane_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+fn plane_body<V: Lanes<LANES>, D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     job: &PlaneJob<D>,
     spans: &[Span],
     band: &mut Band,
@@ -275,26 +282,26 @@ fn plane_body<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     fn lanes(s: &[f32], i: usize) -> &[f32; LANES] {
         s[i..i + LANES].try_into().unwrap()
     }
-    let mut hits = [0u32; LANES];
+    let mut hits = 0u64;
     for span in spans {
         let (start, end) = (span.start as usize, (span.start + span.len) as usize);
         for i in (start..end).step_by(LANES) {
-            let block = RayLanes {
-                x: lanes(rays.x, i),
-                y: lanes(rays.y, i),
-                z: lanes(rays.z, i),
-                t0: lanes(rays.t0, i),
-                t1: lanes(rays.t1, i),
+            let block = RayBlock {
+                x: V::load(lanes(rays.x, i)),
+                y: V::load(lanes(rays.y, i)),
+                z: V::load(lanes(rays.z, i)),
+                t0: V::load(lanes(rays.t0, i)),
+                t1: V::load(lanes(rays.t1, i)),
             };
             let block_sums: [&mut [f32; LANES]; 3] = [
                 (&mut sums.r[i..i + LANES]).try_into().unwrap(),
                 (&mut sums.g[i..i + LANES]).try_into().unwrap(),
                 (&mut sums.b[i..i + LANES]).try_into().unwrap(),
             ];
-            job.gather_lanes::<LANES, GREY, CONTRIBUTE>(&block, block_sums, &mut hits);
+            hits += job.gather_block::<LANES, V, GREY, CONTRIBUTE>(&block, block_sums) as u64;
         }
     }
-    hits.iter().map(|&h| h as u64).sum()
+    hits
 }
 
 #[cfg(test)]

@@ -95,6 +95,7 @@ pub mod render;
 pub mod sampling;
 pub mod scene;
 pub mod settings;
+pub mod simd;
 pub mod spread;
 pub mod weights;
 

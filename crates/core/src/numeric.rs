@@ -2,6 +2,8 @@
 //! that generic routines need ([`Real`]), three-vectors as arrays for them, and a branch-free
 //! exponential for the gathering kernels.
 
+use crate::simd::Lanes;
+
 /// The arithmetic that the generic geometry routines (chords, ray-rectangle crossings) need, so
 /// that one routine serves the f64 sampling path and the f32 gathering path.
 pub trait Real:
@@ -52,26 +54,31 @@ pub fn dot<T: Real>(a: V3<T>, b: V3<T>) -> T {
 /// (truncation below 6e-9 relative, evaluated by Estrin's scheme), and 2^k written into the exponent bits. Below -87 (where
 /// 2^k would leave the normal range) the result is 0. Within 2e-7 relative of exp (tested).
 #[inline(always)]
-#[allow(clippy::manual_clamp)] // clamp has a panic path, which would stop vectorisation
 pub fn exp_f32(x: f32) -> f32 {
+    exp_lanes::<1, f32>(x)
+}
+
+/// [`exp_f32`] lane by lane, for any width ([`Lanes`]): the same operations.
+#[inline(always)]
+pub fn exp_lanes<const L: usize, V: Lanes<L>>(x: V) -> V {
     const LN2_HI: f32 = 0.693_145_75;
     const LN2_LO: f32 = 1.428_606_8e-6;
     // Adding and subtracting 1.5 * 2^23 rounds to the nearest integer without a call.
     const ROUND: f32 = 12_582_912.0;
-    let xc = x.max(-87.0).min(0.0);
+    let s = V::splat;
+    let xc = x.max(s(-87.0)).min(s(0.0));
     // xc log2(e) + 1.5 * 2^23 holds k in its low mantissa bits: the integer is read from there
     // (no float-to-int conversion, which would not vectorise).
-    let shifted = xc * std::f32::consts::LOG2_E + ROUND;
-    let k = shifted - ROUND;
-    let r = (xc - k * LN2_HI) - k * LN2_LO;
+    let shifted = xc * s(std::f32::consts::LOG2_E) + s(ROUND);
+    let k = shifted - s(ROUND);
+    let r = (xc - k * s(LN2_HI)) - k * s(LN2_LO);
     // The degree-7 Taylor polynomial by Estrin's scheme: the same terms as Horner's rule in
     // a dependency chain of 6 operations instead of 14, so vector lanes wait less.
     let (r2, r4) = (r * r, (r * r) * (r * r));
-    let low = (1.0 + r) + r2 * (0.5 + r * (1.0 / 6.0));
-    let high = (1.0 / 24.0 + r * (1.0 / 120.0)) + r2 * (1.0 / 720.0 + r * (1.0 / 5040.0));
+    let low = (s(1.0) + r) + r2 * (s(0.5) + r * s(1.0 / 6.0));
+    let high = (s(1.0 / 24.0) + r * s(1.0 / 120.0)) + r2 * (s(1.0 / 720.0) + r * s(1.0 / 5040.0));
     let p = low + r4 * high;
-    let scale = f32::from_bits(shifted.to_bits().wrapping_sub(0x4B40_0000 - 127) << 23);
-    if x < -87.0 { 0.0 } else { p * scale }
+    V::select(x.lt(s(-87.0)), s(0.0), p * shifted.exponent_scale())
 }
 
 /// atan2(y, x) in f32, branch-free so that loops over lanes vectorise: the octant reduction to

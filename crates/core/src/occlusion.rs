@@ -5,6 +5,7 @@
 use crate::light::RectLight;
 use crate::photon_plane::{PhotonPlane, clip_segment};
 use crate::scene::Scene;
+use crate::simd::Lanes;
 use glam::{DVec2, DVec3};
 
 /// A light panel that may block the light paths of one plane, as a function of the chord
@@ -57,9 +58,21 @@ impl Occluder {
     /// hit at plane distance `r`.
     #[inline(always)]
     pub fn blocks(&self, a: f32, r: f32) -> bool {
-        let t = self.t0 + a * self.t_a;
-        let (p, q) = (self.p0 + a * self.p_a, self.q0 + a * self.q_a);
-        (t > 1e-6 * r) & (t < r * (1.0 - 1e-6)) & (p >= 0.0) & (p <= self.width) & (q >= 0.0) & (q <= self.height)
+        self.blocks_lanes::<1, f32>(a, r)
+    }
+
+    /// [`Occluder::blocks`] for a block of hits, lane by lane.
+    #[inline(always)]
+    pub fn blocks_lanes<const L: usize, V: Lanes<L>>(&self, a: V, r: V) -> V::Mask {
+        let s = V::splat;
+        let t = s(self.t0) + a * s(self.t_a);
+        let (p, q) = (s(self.p0) + a * s(self.p_a), s(self.q0) + a * s(self.q_a));
+        t.gt(s(1e-6) * r)
+            & t.lt(r * s(1.0 - 1e-6))
+            & p.ge(s(0.0))
+            & p.le(s(self.width))
+            & q.ge(s(0.0))
+            & q.le(s(self.height))
     }
 }
 

@@ -5,7 +5,7 @@
 //! polygon is projected once, clipped to the image, and binned into horizontal bands of rows.
 //! A band walks its planes in index order; for every row it covers, the conservative span of
 //! pixels whose squares meet the polygon is tested exactly with
-//! [`crate::gather::PlaneJob::gather_lanes`]. The exact test decides; the span only has to
+//! [`crate::gather::PlaneJob::gather_block`]. The exact test decides; the span only has to
 //! contain every pixel that can hit, whatever the jitter.
 //!
 //! Each pixel's sum runs over planes in index order whatever the thread count, so images are
@@ -14,7 +14,7 @@
 use crate::camera::Camera;
 use crate::camera::CameraRay;
 use crate::control::Control;
-use crate::gather::{GatherContext, GatherStats, RayLanes};
+use crate::gather::{GatherContext, GatherStats, RayBlock};
 use crate::kernel::{self, Aggregate, Band, Gathering, Kernel, LANES, Span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
@@ -273,24 +273,16 @@ impl ScreenRaster {
             }
             let job = ctx.job(weights, view);
             if kernel == Kernel::PerHit {
-                let mut hits = [0u32];
                 let (rays, sums) = (&kernel_band.rays, &mut kernel_band.sums);
                 for k in spans.iter().flat_map(|s| s.start as usize..(s.start + s.len) as usize) {
-                    let one = RayLanes {
-                        x: std::array::from_ref(&rays.x[k]),
-                        y: std::array::from_ref(&rays.y[k]),
-                        z: std::array::from_ref(&rays.z[k]),
-                        t0: std::array::from_ref(&rays.t0[k]),
-                        t1: std::array::from_ref(&rays.t1[k]),
-                    };
+                    let one = RayBlock { x: rays.x[k], y: rays.y[k], z: rays.z[k], t0: rays.t0[k], t1: rays.t1[k] };
                     let sums = [
                         std::array::from_mut(&mut sums.r[k]),
                         std::array::from_mut(&mut sums.g[k]),
                         std::array::from_mut(&mut sums.b[k]),
                     ];
-                    job.gather_lanes_in::<1, CONTRIBUTE>(&one, sums, &mut hits);
+                    stats.hits += job.gather_block_in::<1, f32, CONTRIBUTE>(&one, sums) as u64;
                 }
-                stats.hits += hits[0] as u64;
             } else {
                 stats.hits += kernel::gather_plane::<D, CONTRIBUTE>(kernel, &job, &spans, &mut kernel_band);
             }

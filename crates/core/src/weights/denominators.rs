@@ -5,7 +5,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::closed_form::cmis_exact_mean_f32;
-use crate::light::{ChordDirection, chord_width};
+use crate::light::ChordDirection;
+use crate::simd::Lanes;
 use std::f64::consts::PI;
 
 /// What the weights need to know about a plane, in its light's local frame (f32, gathered often).
@@ -43,6 +44,15 @@ impl PlaneFrame {
         }
     }
 
+    /// [`PlaneFrame::vertex`] for a block of hits, lane by lane.
+    #[inline(always)]
+    pub fn vertex_lanes<const L: usize, V: Lanes<L>>(&self, a: V) -> (V, V) {
+        let s = V::splat;
+        let p = (s(self.p0) + a * s(self.cos_a)).max(s(0.0)).min(s(self.light_w));
+        let q = (s(self.q0) + a * s(self.sin_a)).max(s(0.0)).min(s(self.light_h));
+        (p, q)
+    }
+
     /// Light-local coordinates of the light vertex y' at chord parameter `a`, kept inside.
     #[inline(always)]
     pub fn vertex(&self, a: f32) -> (f32, f32) {
@@ -77,8 +87,9 @@ pub struct HitLanes<const L: usize> {
 /// (a_u, a_v), undoing the rotation det(alpha) = cos a_u + sin a_v,
 /// det(alpha_perp) = -sin a_u + cos a_v.
 #[inline(always)]
-fn a_uv(f: &PlaneFrame, det: f32, det_perp: f32) -> (f32, f32) {
-    (f.cos_a * det - f.sin_a * det_perp, f.sin_a * det + f.cos_a * det_perp)
+fn a_uv<const L: usize, V: Lanes<L>>(f: &PlaneFrame, det: V, det_perp: V) -> (V, V) {
+    let s = V::splat;
+    (s(f.cos_a) * det - s(f.sin_a) * det_perp, s(f.sin_a) * det + s(f.cos_a) * det_perp)
 }
 
 /// A denominator D, specialised per estimator so that the gathering loop is monomorphised.
@@ -94,8 +105,20 @@ pub trait Denominator: Sync + Send {
 
     fn prepare(&self, f: &PlaneFrame) -> Self::Plane;
 
-    /// D of each of `L` hits on the plane `p` was prepared for.
+    /// D of each of `L` hits on the plane `p` was prepared for, as arrays: loops over the
+    /// lanes, which the compiler vectorises as it can.
     fn denominators<const L: usize>(&self, p: &Self::Plane, h: &HitLanes<L>, out: &mut [f32; L]);
+
+    /// D of a block of hits as a vector of lanes: what the kernels call. By default through
+    /// [`Denominator::denominators`] and arrays; the estimators whose D is a few operations
+    /// write it for [`Lanes`] directly (and their `denominators` as it with one lane).
+    #[inline(always)]
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, p: &Self::Plane, det: V, det_perp: V, a: V) -> V {
+        let mut out = [0.0; L];
+        let h = HitLanes { det: det.to_array(), det_perp: det_perp.to_array(), a: a.to_array() };
+        self.denominators::<L>(p, &h, &mut out);
+        V::from_array(out)
+    }
 
     /// D of one hit (preparing the plane for it): for tests and benchmarks.
     fn denominator(&self, f: &PlaneFrame, h: &HitLocal) -> f32 {
@@ -105,6 +128,22 @@ pub trait Denominator: Sync + Send {
     }
 }
 
+/// A `denominators` that runs `denominators_of` lane by lane with one lane: for the estimators
+/// written for [`Lanes`], so that the arithmetic is written once.
+macro_rules! lane_by_lane {
+    () => {
+        lane_by_lane!(PlaneFrame);
+    };
+    ($plane:ty) => {
+        #[inline(always)]
+        fn denominators<const L: usize>(&self, f: &$plane, h: &HitLanes<L>, out: &mut [f32; L]) {
+            for l in 0..L {
+                out[l] = self.denominators_of::<1, f32>(f, h.det[l], h.det_perp[l], h.a[l]);
+            }
+        }
+    };
+}
+
 /// `unweighted`: D = g(alpha), paper eq. (22).
 pub struct Unweighted;
 impl Denominator for Unweighted {
@@ -112,11 +151,10 @@ impl Denominator for Unweighted {
     fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
         *f
     }
+    lane_by_lane!();
     #[inline(always)]
-    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
-        for l in 0..L {
-            out[l] = f.width * h.det[l].abs();
-        }
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, f: &PlaneFrame, det: V, _: V, _: V) -> V {
+        V::splat(f.width) * det.abs()
     }
 }
 
@@ -128,12 +166,11 @@ impl Denominator for CmisCosine {
     fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
         *f
     }
+    lane_by_lane!();
     #[inline(always)]
-    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
-        for l in 0..L {
-            let (det, det_perp) = (h.det[l], h.det_perp[l]);
-            out[l] = f.width * std::f32::consts::FRAC_2_PI * (det * det + det_perp * det_perp).sqrt();
-        }
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, f: &PlaneFrame, det: V, det_perp: V, _: V) -> V {
+        let s = V::splat;
+        s(f.width) * s(std::f32::consts::FRAC_2_PI) * (det * det + det_perp * det_perp).sqrt()
     }
 }
 
@@ -145,11 +182,11 @@ impl Denominator for SmisCosinePair {
     fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
         *f
     }
+    lane_by_lane!();
     #[inline(always)]
-    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
-        for l in 0..L {
-            out[l] = f.width * 0.5 * (h.det[l].abs() + h.det_perp[l].abs());
-        }
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, f: &PlaneFrame, det: V, det_perp: V, _: V) -> V {
+        let s = V::splat;
+        s(f.width) * s(0.5) * (det.abs() + det_perp.abs())
     }
 }
 
@@ -161,14 +198,26 @@ impl Denominator for SmisExactPair {
     fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
         *f
     }
+    lane_by_lane!();
     #[inline(always)]
-    fn denominators<const L: usize>(&self, f: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
-        for l in 0..L {
-            let (p, q) = f.vertex(h.a[l]);
-            let width_perp = chord_width(f.light_w, f.light_h, p, q, &f.perp);
-            out[l] = 0.5 * (f.width * h.det[l].abs() + width_perp * h.det_perp[l].abs());
-        }
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, f: &PlaneFrame, det: V, det_perp: V, a: V) -> V {
+        let s = V::splat;
+        let (p, q) = f.vertex_lanes::<L, V>(a);
+        let width_perp = chord_width_lanes::<L, V>(f.light_w, f.light_h, p, q, &f.perp);
+        s(0.5) * (s(f.width) * det.abs() + width_perp * det_perp.abs())
     }
+}
+
+/// [`chord_width`](crate::light::chord_width) for a block of points, lane by lane: the same operations as its f32 form
+/// (whose minimum is a compare-and-select, as [`Lanes::min`]).
+#[inline(always)]
+fn chord_width_lanes<const L: usize, V: Lanes<L>>(w: f32, h: f32, p: V, q: V, dir: &ChordDirection<f32>) -> V {
+    let s = V::splat;
+    let (fx, bx) = if dir.cos_positive { (s(w) - p, p) } else { (p, s(w) - p) };
+    let forward = (fx * s(dir.inv_abs_cos)).min((s(h) - q) * s(dir.inv_sin));
+    let backward = (bx * s(dir.inv_abs_cos)).min(q * s(dir.inv_sin));
+    // Rounding can put a point a hair outside; a chord length is never negative.
+    backward.max(s(0.0)) + forward.max(s(0.0))
 }
 
 /// `smis-cosine` and `smis-exact` with K stratified orientations alpha + k pi / K.
@@ -221,28 +270,22 @@ impl Denominator for StratifiedK {
         PlaneOrientations { frame: *f, others }
     }
 
-    /// The orientations run in the outer loop and the lanes in the inner one, so that any K
-    /// vectorises; each lane still sums its orientations in the order k = 0, 1, .., K - 1.
+    lane_by_lane!(PlaneOrientations);
+
+    /// Each lane sums its orientations in the order k = 0, 1, .., K - 1.
     #[inline(always)]
-    fn denominators<const L: usize>(&self, plane: &PlaneOrientations, h: &HitLanes<L>, out: &mut [f32; L]) {
-        let f = &plane.frame;
-        let (mut a_u, mut a_v, mut p, mut q) = ([0.0f32; L], [0.0f32; L], [0.0f32; L], [0.0f32; L]);
-        for l in 0..L {
-            (a_u[l], a_v[l]) = a_uv(f, h.det[l], h.det_perp[l]);
-            (p[l], q[l]) = f.vertex(h.a[l]);
-            out[l] = if self.exact { f.width * h.det[l].abs() } else { h.det[l].abs() };
-        }
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, plane: &PlaneOrientations, det: V, det_perp: V, a: V) -> V {
+        let (f, s) = (&plane.frame, V::splat);
+        let (a_u, a_v) = a_uv::<L, V>(f, det, det_perp);
+        let (p, q) = f.vertex_lanes::<L, V>(a);
+        let mut sum = if self.exact { s(f.width) * det.abs() } else { det.abs() };
         for o in &plane.others {
-            for l in 0..L {
-                let det = (o.cos * a_u[l] + o.sin * a_v[l]).abs();
-                out[l] += if self.exact { chord_width(f.light_w, f.light_h, p[l], q[l], &o.chord) * det } else { det };
-            }
+            let det = (s(o.cos) * a_u + s(o.sin) * a_v).abs();
+            sum = sum
+                + if self.exact { chord_width_lanes::<L, V>(f.light_w, f.light_h, p, q, &o.chord) * det } else { det };
         }
-        let inv_k = 1.0 / (plane.others.len() + 1) as f32;
-        for l in 0..L {
-            let mean = out[l] * inv_k;
-            out[l] = if self.exact { mean } else { f.width * mean };
-        }
+        let mean = sum * s(1.0 / (plane.others.len() + 1) as f32);
+        if self.exact { mean } else { s(f.width) * mean }
     }
 }
 
@@ -271,7 +314,7 @@ impl Denominator for CmisExact {
         let f = &c.frame;
         let (w, hh) = (f.light_w * c.inv_unit, f.light_h * c.inv_unit);
         for l in 0..L {
-            let (a_u, a_v) = a_uv(f, h.det[l], h.det_perp[l]);
+            let (a_u, a_v) = a_uv::<1, f32>(f, h.det[l], h.det_perp[l]);
             let (p, q) = f.vertex(h.a[l]);
             out[l] = cmis_exact_mean_f32(w, hh, p * c.inv_unit, q * c.inv_unit, a_u, a_v) * c.unit;
         }
