@@ -88,6 +88,12 @@ pub fn exp_lanes<const L: usize, V: Lanes<L>>(x: V) -> V {
 /// atan2(0, 0) = 0, and a zero y of either sign gives 0 or pi.
 #[inline(always)]
 pub fn atan2_f32(y: f32, x: f32) -> f32 {
+    atan2_lanes::<1, f32>(y, x)
+}
+
+/// [`atan2_f32`] lane by lane, for any width ([`Lanes`]): the same operations.
+#[inline(always)]
+pub fn atan2_lanes<const L: usize, V: Lanes<L>>(y: V, x: V) -> V {
     use std::f32::consts::{FRAC_PI_2, PI};
     const C: [f32; 9] = [
         1.0,
@@ -100,23 +106,23 @@ pub fn atan2_f32(y: f32, x: f32) -> f32 {
         -0.016_283_017,
         0.002_903_554,
     ];
+    let (s, zero) = (V::splat, V::splat(0.0));
     let (ax, ay) = (x.abs(), y.abs());
-    let steep = ay > ax;
-    let (small, large) = if steep { (ax, ay) } else { (ay, ax) };
-    let t = small / large;
-    let t = if large > 0.0 { t } else { 0.0 };
-    let s = t * t;
-    let (s2, s4) = (s * s, (s * s) * (s * s));
+    let steep = ay.gt(ax);
+    let (small, large) = (V::select(steep, ax, ay), V::select(steep, ay, ax));
+    let t = V::select(large.gt(zero), small / large, zero);
+    let t2 = t * t;
+    let (t4, t8) = (t2 * t2, (t2 * t2) * (t2 * t2));
     // Estrin's scheme, for a short dependency chain.
-    let p01 = C[0] + s * C[1];
-    let p23 = C[2] + s * C[3];
-    let p45 = C[4] + s * C[5];
-    let p67 = C[6] + s * C[7];
-    let p = (p01 + s2 * p23) + s4 * ((p45 + s2 * p67) + s4 * C[8]);
+    let p01 = s(C[0]) + t2 * s(C[1]);
+    let p23 = s(C[2]) + t2 * s(C[3]);
+    let p45 = s(C[4]) + t2 * s(C[5]);
+    let p67 = s(C[6]) + t2 * s(C[7]);
+    let p = (p01 + t4 * p23) + t8 * ((p45 + t4 * p67) + t8 * s(C[8]));
     let a = t * p;
-    let a = if steep { FRAC_PI_2 - a } else { a };
-    let a = if x < 0.0 { PI - a } else { a };
-    if y < 0.0 { -a } else { a }
+    let a = V::select(steep, s(FRAC_PI_2) - a, a);
+    let a = V::select(x.lt(zero), s(PI) - a, a);
+    V::select(y.lt(zero), a.neg(), a)
 }
 
 /// ln(x) in f32 for x >= 0, branch-free: x = m 2^e with m in [sqrt(1/2), sqrt(2)), f = m - 1
@@ -125,20 +131,24 @@ pub fn atan2_f32(y: f32, x: f32) -> f32 {
 /// so that a factor of zero in front of it still gives zero.
 #[inline(always)]
 pub fn ln_f32(x: f32) -> f32 {
+    ln_lanes::<1, f32>(x)
+}
+
+/// [`ln_f32`] lane by lane, for any width ([`Lanes`]): the same operations.
+#[inline(always)]
+pub fn ln_lanes<const L: usize, V: Lanes<L>>(x: V) -> V {
     const C: [f32; 7] =
         [0.333_339_1, -0.250_013_38, 0.199_630_62, -0.165_775_8, 0.149_147_76, -0.142_675_19, 0.087_004_56];
     const LN2_HI: f32 = 0.693_145_75;
     const LN2_LO: f32 = 1.428_606_8e-6;
-    let bits = x.to_bits();
-    let e = ((bits >> 23) & 0xff) as i32 - 127;
-    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
-    let big = m > std::f32::consts::SQRT_2;
-    let (m, e) = (if big { m * 0.5 } else { m }, if big { e + 1 } else { e });
-    let f = m - 1.0;
+    let s = V::splat;
+    let (m, e) = x.split_exponent();
+    let big = m.gt(s(std::f32::consts::SQRT_2));
+    let (m, e) = (V::select(big, m * s(0.5), m), V::select(big, e + s(1.0), e));
+    let f = m - s(1.0);
     let (f2, f4) = (f * f, (f * f) * (f * f));
-    let p = ((C[0] + f * C[1]) + f2 * (C[2] + f * C[3])) + f4 * ((C[4] + f * C[5]) + f2 * C[6]);
-    let ef = e as f32;
-    ((f - 0.5 * f2) + (f2 * f) * p + ef * LN2_LO) + ef * LN2_HI
+    let p = ((s(C[0]) + f * s(C[1])) + f2 * (s(C[2]) + f * s(C[3]))) + f4 * ((s(C[4]) + f * s(C[5])) + f2 * s(C[6]));
+    ((f - s(0.5) * f2) + (f2 * f) * p + e * s(LN2_LO)) + e * s(LN2_HI)
 }
 
 /// ln(1 + x) in f32 for x > -1, accurate also for tiny x: ln(u) of u = 1 + x plus the rounding

@@ -2,6 +2,8 @@
 //! of g(beta) = width(beta) |det(beta)|, in f64 (the reference) and in f32 without branches (the
 //! one the renderer gathers with).
 
+use crate::numeric::{atan2_lanes, ln_lanes};
+use crate::simd::Lanes;
 use std::f64::consts::PI;
 
 /// (1/pi) times the integral over beta in [0, pi) of g(beta) = width(beta, (p, q)) |det(beta)|,
@@ -89,105 +91,114 @@ pub fn cmis_exact_mean(w: f64, h: f64, p: f64, q: f64, a_u: f64, a_v: f64) -> f6
 /// few 1e-7 relative on the benchmark's hits and on random inputs (tests below).
 #[inline(always)]
 pub fn cmis_exact_mean_f32(w: f32, h: f32, p: f32, q: f32, a_u: f32, a_v: f32) -> f32 {
-    use crate::numeric::atan2_f32;
-    let (zx, zy) = (-a_v, a_u);
-    let s = [
-        sector::<0>(w, h, p, q, zx, zy),
-        sector::<1>(w, h, p, q, zx, zy),
-        sector::<2>(w, h, p, q, zx, zy),
-        sector::<3>(w, h, p, q, zx, zy),
+    cmis_exact_mean_lanes::<1, f32>(w, h, p, q, a_u, a_v)
+}
+
+/// [`cmis_exact_mean_f32`] for a block of hits on one light (`w`, `h`), lane by lane, for any
+/// width ([`Lanes`]): the same operations.
+#[inline(always)]
+pub fn cmis_exact_mean_lanes<const L: usize, V: Lanes<L>>(w: f32, h: f32, p: V, q: V, a_u: V, a_v: V) -> V {
+    let (s, zero) = (V::splat, V::splat(0.0));
+    let (zx, zy) = (a_v.neg(), a_u);
+    let sectors = [
+        sector::<0, L, V>(w, h, p, q, zx, zy),
+        sector::<1, L, V>(w, h, p, q, zx, zy),
+        sector::<2, L, V>(w, h, p, q, zx, zy),
+        sector::<3, L, V>(w, h, p, q, zx, zy),
     ];
     // The start corner, (n_e . z)^2 and d_e^2 of the sectors holding z and -z, by selects.
-    let pick = |has: fn(&Sector) -> bool| {
-        let mut chosen = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-        for t in &s {
-            chosen = if has(t) { (t.start.0, t.start.1, t.nz2, t.dist * t.dist) } else { chosen };
+    let (mut at_z, mut at_neg) = ([zero; 4], [zero; 4]);
+    for t in &sectors {
+        let fields = [t.start.0, t.start.1, t.nz2, t.dist * t.dist];
+        for k in 0..4 {
+            at_z[k] = V::select(t.has_z, fields[k], at_z[k]);
+            at_neg[k] = V::select(t.has_neg, fields[k], at_neg[k]);
         }
-        chosen
-    };
+    }
     let z2 = zx * zx + zy * zy;
-    // The arc from a sector's start corner (x, y) to the zero `sign` z: its turn and change of
-    // ln cos.
-    let to_zero = |(x, y, nz2, d2): (f32, f32, f32, f32), sign: f32| {
-        let turn = atan2_f32(sign * (x * zy - y * zx), sign * (x * zx + y * zy));
-        (turn, 0.5 * crate::numeric::ln_f32(nz2 * (x * x + y * y) / (d2 * z2)))
-    };
-    let (z_turn, z_ell) = to_zero(pick(|t| t.has_z), 1.0);
-    let (n_turn, n_ell) = to_zero(pick(|t| t.has_neg), -1.0);
-    let mut total = 0.0f32;
-    for t in &s {
-        let (first_turn, first_ell) = if t.has_z {
-            (z_turn, z_ell)
-        } else if t.has_neg {
-            (n_turn, n_ell)
-        } else {
-            (t.turn, t.ell)
-        };
+    let (z_turn, z_ell) = to_zero::<L, V>(at_z, 1.0, zx, zy, z2);
+    let (n_turn, n_ell) = to_zero::<L, V>(at_neg, -1.0, zx, zy, z2);
+    let mut total = zero;
+    for t in &sectors {
+        let first_turn = V::select(t.has_z, z_turn, V::select(t.has_neg, n_turn, t.turn));
+        let first_ell = V::select(t.has_z, z_ell, V::select(t.has_neg, n_ell, t.ell));
         let first = t.a_n * first_turn - t.a_t * first_ell;
         let second = t.a_n * (t.turn - first_turn) - t.a_t * (t.ell - first_ell);
         let value = t.dist * (first.abs() + second.abs());
         // A sector whose edge passes through the vertex contributes nothing.
-        total += if t.dist > 0.0 { value } else { 0.0 };
+        total = total + V::select(t.dist.gt(zero), value, zero);
     }
-    let mean = total * std::f32::consts::FRAC_1_PI;
-    if mean > 0.0 { mean } else { 0.0 }
+    let mean = total * s(std::f32::consts::FRAC_1_PI);
+    V::select(mean.gt(zero), mean, zero)
 }
 
-/// One sector of [`cmis_exact_mean_f32`]: the part of the circle of directions from the vertex
-/// that meets edge E.
+/// The arc from a sector's start corner (x, y) to the zero `sign` z: its turn and change of ln
+/// cos. (A function, not a closure: a closure is compiled without the kernel's target features,
+/// and the intrinsics in it would not be inlined.)
+#[inline(always)]
+fn to_zero<const L: usize, V: Lanes<L>>([x, y, nz2, d2]: [V; 4], sign: f32, zx: V, zy: V, z2: V) -> (V, V) {
+    let s = V::splat;
+    let turn = atan2_lanes::<L, V>(s(sign) * (x * zy - y * zx), s(sign) * (x * zx + y * zy));
+    (turn, s(0.5) * ln_lanes::<L, V>(nz2 * (x * x + y * y) / (d2 * z2)))
+}
+
+/// One sector of [`cmis_exact_mean_lanes`]: the part of the circle of directions from the
+/// vertex that meets edge E.
 #[derive(Clone, Copy)]
-struct Sector {
+struct Sector<V, M> {
     /// Its turn and the change of ln cos(psi) across it.
-    turn: f32,
-    ell: f32,
+    turn: V,
+    ell: V,
     /// Whether z or -z lies strictly inside.
-    has_z: bool,
-    has_neg: bool,
+    has_z: M,
+    has_neg: M,
     /// Its start corner relative to the vertex, and (n_e . z)^2.
-    start: (f32, f32),
-    nz2: f32,
+    start: (V, V),
+    nz2: V,
     /// d_e, A_n = a . n_e and A_t = a . t_e (a = (a_u, a_v) = (z_y, -z_x)).
-    dist: f32,
-    a_n: f32,
-    a_t: f32,
+    dist: V,
+    a_n: V,
+    a_t: V,
 }
 
 #[inline(always)]
-fn sector<const E: usize>(w: f32, h: f32, p: f32, q: f32, zx: f32, zy: f32) -> Sector {
-    use crate::numeric::{atan2_f32, ln_f32};
-    let (a_u, a_v) = (zy, -zx);
+fn sector<const E: usize, const L: usize, V: Lanes<L>>(w: f32, h: f32, p: V, q: V, zx: V, zy: V) -> Sector<V, V::Mask> {
+    let (s, zero) = (V::splat, V::splat(0.0));
+    let (a_u, a_v) = (zy, zx.neg());
     // Corners counter-clockwise from (0, 0), relative to the vertex; edge E runs from corner E
     // to corner E + 1, with outward normal n_E, tangent t_E = n_E turned a quarter, distance
     // d_E and length len_E.
-    let cx = [-p, w - p, w - p, -p];
-    let cy = [-q, -q, h - q, h - q];
+    let cx = [p.neg(), s(w) - p, s(w) - p, p.neg()];
+    let cy = [q.neg(), q.neg(), s(h) - q, s(h) - q];
     let (start, end) = ((cx[E], cy[E]), (cx[(E + 1) % 4], cy[(E + 1) % 4]));
-    let dist = [q, w - p, h - q, p][E];
+    let dist = [q, s(w) - p, s(h) - q, p][E];
     let len = [w, h, w, h][E];
-    let (a_n, a_t) = [(-a_v, a_u), (a_u, a_v), (a_v, -a_u), (-a_u, -a_v)][E];
+    let (a_n, a_t) = [(a_v.neg(), a_u), (a_u, a_v), (a_v, a_u.neg()), (a_u.neg(), a_v.neg())][E];
     // |r_start|^2 - |r_end|^2 = -E_e . (r_start + r_end).
-    let delta = [-w * (start.0 + end.0), -h * (start.1 + end.1), w * (start.0 + end.0), h * (start.1 + end.1)][E];
-    let nz = [-zy, zx, zy, -zx][E];
+    let delta =
+        [s(-w) * (start.0 + end.0), s(-h) * (start.1 + end.1), s(w) * (start.0 + end.0), s(h) * (start.1 + end.1)][E];
+    let nz = [zy.neg(), zx, zy, zx.neg()][E];
     let r2_end = end.0 * end.0 + end.1 * end.1;
-    let turn = atan2_f32(dist * len, start.0 * end.0 + start.1 * end.1);
+    let turn = atan2_lanes::<L, V>(dist * s(len), start.0 * end.0 + start.1 * end.1);
     // ln(|r_start|^2 / |r_end|^2) as ln(1 + x), x = delta / |r_end|^2, where that is accurate
     // (x small: the ratio would round away its difference from 1), else from the ratio (x near
     // -1: 1 + x would cancel).
     // One logarithm of the chosen argument, not both forms (branch-free, both were evaluated):
     // ln_1p_f32(x) is ln_f32(1 + x) plus the rounding of 1 + x, added here (the same bits).
-    let inv = 1.0 / r2_end;
+    let inv = s(1.0) / r2_end;
     let (x, ratio) = (delta * inv, (start.0 * start.0 + start.1 * start.1) * inv);
-    let near_one = x.abs() < 0.5;
-    let u = 1.0 + x;
-    let (argument, rounding) = if near_one { (u, x - (u - 1.0)) } else { (ratio, 0.0) };
-    let ell = 0.5 * (ln_f32(argument) + rounding);
+    let near_one = x.abs().lt(s(0.5));
+    let u = s(1.0) + x;
+    let argument = V::select(near_one, u, ratio);
+    let rounding = V::select(near_one, x - (u - s(1.0)), zero);
+    let ell = s(0.5) * (ln_lanes::<L, V>(argument) + rounding);
     let c_start = start.0 * zy - start.1 * zx;
     let c_end = zx * end.1 - zy * end.0;
     Sector {
         turn,
         ell,
-        has_z: (c_start > 0.0) & (c_end > 0.0),
-        has_neg: (c_start < 0.0) & (c_end < 0.0),
+        has_z: c_start.gt(zero) & c_end.gt(zero),
+        has_neg: c_start.lt(zero) & c_end.lt(zero),
         start,
         nz2: nz * nz,
         dist,

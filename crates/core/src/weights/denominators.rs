@@ -4,7 +4,7 @@
 // Lane loops (`for l in 0..L`) index several arrays in step, as the vector code they become.
 #![allow(clippy::needless_range_loop)]
 
-use super::closed_form::cmis_exact_mean_f32;
+use super::closed_form::cmis_exact_mean_lanes;
 use crate::light::ChordDirection;
 use crate::simd::Lanes;
 use std::f64::consts::PI;
@@ -309,15 +309,14 @@ impl Denominator for CmisExact {
         let unit = f.light_w + f.light_h;
         CmisPlane { frame: *f, unit, inv_unit: 1.0 / unit }
     }
+    lane_by_lane!(CmisPlane);
     #[inline(always)]
-    fn denominators<const L: usize>(&self, c: &CmisPlane, h: &HitLanes<L>, out: &mut [f32; L]) {
-        let f = &c.frame;
+    fn denominators_of<const L: usize, V: Lanes<L>>(&self, c: &CmisPlane, det: V, det_perp: V, a: V) -> V {
+        let (f, s) = (&c.frame, V::splat);
         let (w, hh) = (f.light_w * c.inv_unit, f.light_h * c.inv_unit);
-        for l in 0..L {
-            let (a_u, a_v) = a_uv::<1, f32>(f, h.det[l], h.det_perp[l]);
-            let (p, q) = f.vertex(h.a[l]);
-            out[l] = cmis_exact_mean_f32(w, hh, p * c.inv_unit, q * c.inv_unit, a_u, a_v) * c.unit;
-        }
+        let (a_u, a_v) = a_uv::<L, V>(f, det, det_perp);
+        let (p, q) = f.vertex_lanes::<L, V>(a);
+        cmis_exact_mean_lanes::<L, V>(w, hh, p * s(c.inv_unit), q * s(c.inv_unit), a_u, a_v) * s(c.unit)
     }
 }
 
