@@ -269,15 +269,13 @@ plane_kernel!(
 );
 
 /// The kernel proper: the plane's spans block by block, each block [`PlaneJob::gather_block`]
-/// on `V`, the band's arrays loaded and stored in place. The plane's constants are loaded once
-/// per plane and band (a local copy of the job, not per span).
+/// on `V`, the band's arrays loaded and stored in place.
 #[inline(always)]
 fn plane_body<V: Lanes<LANES>, D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     job: &PlaneJob<D>,
     spans: &[Span],
     band: &mut Band,
 ) -> u64 {
-    let job = job.clone();
     let (rays, sums) = (&band.rays, &mut band.sums);
     fn lanes(s: &[f32], i: usize) -> &[f32; LANES] {
         s[i..i + LANES].try_into().unwrap()
