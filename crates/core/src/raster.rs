@@ -15,7 +15,7 @@ use crate::camera::Camera;
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::gather::{GatherContext, GatherStats, RayBlock};
-use crate::kernel::{self, Aggregate, Band, Gathering, Kernel, LANES, Span};
+use crate::kernel::{self, Aggregate, Band, Gathering, HALF_LANES, Kernel, LANES, Span};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
@@ -262,9 +262,9 @@ impl ScreenRaster {
                 let Some((first, last)) = span else {
                     continue;
                 };
-                // Whole blocks: the span grown to a multiple of LANES, into the row's padding
-                // if need be (padding rays never hit). Every kernel tests the same pixels.
-                let len = (last - first + 1).next_multiple_of(LANES as u32);
+                // Whole half blocks: the span grown to a multiple of HALF_LANES, into the row's
+                // padding if need be (padding rays never hit). Every kernel tests the same pixels.
+                let len = (last - first + 1).next_multiple_of(HALF_LANES as u32);
                 spans.push(Span { start: (row - first_row) * stride as u32 + first, len });
                 stats.tests += len as u64;
             }

@@ -154,21 +154,21 @@ impl Lanes<1> for f32 {
     }
 }
 
-/// 16 lanes as an array: loops the compiler vectorises as it can (the portable kernel).
+/// N lanes as an array: loops the compiler vectorises as it can (the portable kernel).
 #[derive(Clone, Copy, Debug)]
-pub struct Portable(pub [f32; 16]);
+pub struct Portable<const N: usize>(pub [f32; N]);
 
 /// The mask of [`Portable`]: 0 or 1 per lane as u32 (a vector of bools is a vector of bytes,
 /// which the loops would pack and unpack).
 #[derive(Clone, Copy, Debug)]
-pub struct PortableMask(pub [u32; 16]);
+pub struct PortableMask<const N: usize>(pub [u32; N]);
 
 macro_rules! portable_binary {
     ($trait:ident, $method:ident, $op:tt) => {
-        impl $trait for Portable {
-            type Output = Portable;
+        impl<const N: usize> $trait for Portable<N> {
+            type Output = Portable<N>;
             #[inline(always)]
-            fn $method(self, o: Portable) -> Portable {
+            fn $method(self, o: Portable<N>) -> Portable<N> {
                 Portable(std::array::from_fn(|l| self.0[l] $op o.0[l]))
             }
         }
@@ -179,21 +179,21 @@ portable_binary!(Sub, sub, -);
 portable_binary!(Mul, mul, *);
 portable_binary!(Div, div, /);
 
-impl BitAnd for PortableMask {
-    type Output = PortableMask;
+impl<const N: usize> BitAnd for PortableMask<N> {
+    type Output = PortableMask<N>;
     #[inline(always)]
-    fn bitand(self, o: PortableMask) -> PortableMask {
+    fn bitand(self, o: PortableMask<N>) -> PortableMask<N> {
         PortableMask(std::array::from_fn(|l| self.0[l] & o.0[l]))
     }
 }
-impl BitOr for PortableMask {
-    type Output = PortableMask;
+impl<const N: usize> BitOr for PortableMask<N> {
+    type Output = PortableMask<N>;
     #[inline(always)]
-    fn bitor(self, o: PortableMask) -> PortableMask {
+    fn bitor(self, o: PortableMask<N>) -> PortableMask<N> {
         PortableMask(std::array::from_fn(|l| self.0[l] | o.0[l]))
     }
 }
-impl Mask for PortableMask {
+impl<const N: usize> Mask for PortableMask<N> {
     #[inline(always)]
     fn any(self) -> bool {
         self.0.iter().fold(0, |any, &m| any | m) != 0
@@ -203,88 +203,209 @@ impl Mask for PortableMask {
         self.0.iter().sum()
     }
     #[inline(always)]
-    fn and_not(self, o: PortableMask) -> PortableMask {
+    fn and_not(self, o: PortableMask<N>) -> PortableMask<N> {
         PortableMask(std::array::from_fn(|l| self.0[l] & (o.0[l] ^ 1)))
     }
 }
 
-impl Portable {
+impl<const N: usize> Portable<N> {
     #[inline(always)]
-    fn compare(self, o: Portable, f: impl Fn(f32, f32) -> bool) -> PortableMask {
+    fn compare(self, o: Portable<N>, f: impl Fn(f32, f32) -> bool) -> PortableMask<N> {
         PortableMask(std::array::from_fn(|l| f(self.0[l], o.0[l]) as u32))
     }
     #[inline(always)]
-    fn map(self, f: impl Fn(f32) -> f32) -> Portable {
+    fn map(self, f: impl Fn(f32) -> f32) -> Portable<N> {
         Portable(std::array::from_fn(|l| f(self.0[l])))
     }
 }
 
-impl Lanes<16> for Portable {
-    type Mask = PortableMask;
+impl<const N: usize> Lanes<N> for Portable<N> {
+    type Mask = PortableMask<N>;
     #[inline(always)]
-    fn splat(v: f32) -> Portable {
-        Portable([v; 16])
+    fn splat(v: f32) -> Portable<N> {
+        Portable([v; N])
     }
     #[inline(always)]
-    fn load(a: &[f32; 16]) -> Portable {
+    fn load(a: &[f32; N]) -> Portable<N> {
         Portable(*a)
     }
     #[inline(always)]
-    fn store(self, a: &mut [f32; 16]) {
+    fn store(self, a: &mut [f32; N]) {
         *a = self.0;
     }
     #[inline(always)]
-    fn lt(self, o: Portable) -> PortableMask {
+    fn lt(self, o: Portable<N>) -> PortableMask<N> {
         self.compare(o, |a, b| a < b)
     }
     #[inline(always)]
-    fn le(self, o: Portable) -> PortableMask {
+    fn le(self, o: Portable<N>) -> PortableMask<N> {
         self.compare(o, |a, b| a <= b)
     }
     #[inline(always)]
-    fn gt(self, o: Portable) -> PortableMask {
+    fn gt(self, o: Portable<N>) -> PortableMask<N> {
         self.compare(o, |a, b| a > b)
     }
     #[inline(always)]
-    fn ge(self, o: Portable) -> PortableMask {
+    fn ge(self, o: Portable<N>) -> PortableMask<N> {
         self.compare(o, |a, b| a >= b)
     }
     #[inline(always)]
-    fn select(m: PortableMask, a: Portable, b: Portable) -> Portable {
+    fn select(m: PortableMask<N>, a: Portable<N>, b: Portable<N>) -> Portable<N> {
         Portable(std::array::from_fn(|l| if m.0[l] != 0 { a.0[l] } else { b.0[l] }))
     }
     #[inline(always)]
-    fn min(self, o: Portable) -> Portable {
+    fn min(self, o: Portable<N>) -> Portable<N> {
         Portable(std::array::from_fn(|l| <f32 as Lanes<1>>::min(self.0[l], o.0[l])))
     }
     #[inline(always)]
-    fn max(self, o: Portable) -> Portable {
+    fn max(self, o: Portable<N>) -> Portable<N> {
         Portable(std::array::from_fn(|l| <f32 as Lanes<1>>::max(self.0[l], o.0[l])))
     }
     #[inline(always)]
-    fn abs(self) -> Portable {
+    fn abs(self) -> Portable<N> {
         self.map(f32::abs)
     }
     #[inline(always)]
-    fn sqrt(self) -> Portable {
+    fn sqrt(self) -> Portable<N> {
         self.map(f32::sqrt)
     }
     #[inline(always)]
-    fn exponent_scale(self) -> Portable {
+    fn exponent_scale(self) -> Portable<N> {
         self.map(<f32 as Lanes<1>>::exponent_scale)
     }
     #[inline(always)]
-    fn split_exponent(self) -> (Portable, Portable) {
+    fn split_exponent(self) -> (Portable<N>, Portable<N>) {
         (self.map(|x| <f32 as Lanes<1>>::split_exponent(x).0), self.map(|x| <f32 as Lanes<1>>::split_exponent(x).1))
     }
     #[inline(always)]
-    fn neg(self) -> Portable {
+    fn neg(self) -> Portable<N> {
         self.map(|x| -x)
     }
 }
 
+/// 16 lanes as two halves of 8: every operation on both (AVX2's 16 lanes are two `Ymm`).
+#[derive(Clone, Copy, Debug)]
+pub struct Pair<V>(pub [V; 2]);
+
+/// The mask of a [`Pair`].
+#[derive(Clone, Copy, Debug)]
+pub struct PairMask<M>(pub [M; 2]);
+
+macro_rules! pair_binary {
+    ($trait:ident, $method:ident) => {
+        impl<V: Lanes<8>> $trait for Pair<V> {
+            type Output = Pair<V>;
+            #[inline(always)]
+            fn $method(self, o: Pair<V>) -> Pair<V> {
+                Pair([self.0[0].$method(o.0[0]), self.0[1].$method(o.0[1])])
+            }
+        }
+    };
+}
+pair_binary!(Add, add);
+pair_binary!(Sub, sub);
+pair_binary!(Mul, mul);
+pair_binary!(Div, div);
+
+impl<M: Mask> BitAnd for PairMask<M> {
+    type Output = PairMask<M>;
+    #[inline(always)]
+    fn bitand(self, o: PairMask<M>) -> PairMask<M> {
+        PairMask([self.0[0] & o.0[0], self.0[1] & o.0[1]])
+    }
+}
+impl<M: Mask> BitOr for PairMask<M> {
+    type Output = PairMask<M>;
+    #[inline(always)]
+    fn bitor(self, o: PairMask<M>) -> PairMask<M> {
+        PairMask([self.0[0] | o.0[0], self.0[1] | o.0[1]])
+    }
+}
+impl<M: Mask> Mask for PairMask<M> {
+    #[inline(always)]
+    fn any(self) -> bool {
+        (self.0[0] | self.0[1]).any()
+    }
+    #[inline(always)]
+    fn count(self) -> u32 {
+        self.0[0].count() + self.0[1].count()
+    }
+    #[inline(always)]
+    fn and_not(self, o: PairMask<M>) -> PairMask<M> {
+        PairMask([self.0[0].and_not(o.0[0]), self.0[1].and_not(o.0[1])])
+    }
+}
+
+impl<V: Lanes<8>> Lanes<16> for Pair<V> {
+    type Mask = PairMask<V::Mask>;
+    #[inline(always)]
+    fn splat(v: f32) -> Pair<V> {
+        Pair([V::splat(v); 2])
+    }
+    #[inline(always)]
+    fn load(a: &[f32; 16]) -> Pair<V> {
+        let (lo, hi) = a.split_at(8);
+        Pair([V::load(lo.try_into().unwrap()), V::load(hi.try_into().unwrap())])
+    }
+    #[inline(always)]
+    fn store(self, a: &mut [f32; 16]) {
+        let (lo, hi) = a.split_at_mut(8);
+        self.0[0].store(lo.try_into().unwrap());
+        self.0[1].store(hi.try_into().unwrap());
+    }
+    #[inline(always)]
+    fn lt(self, o: Pair<V>) -> Self::Mask {
+        PairMask([self.0[0].lt(o.0[0]), self.0[1].lt(o.0[1])])
+    }
+    #[inline(always)]
+    fn le(self, o: Pair<V>) -> Self::Mask {
+        PairMask([self.0[0].le(o.0[0]), self.0[1].le(o.0[1])])
+    }
+    #[inline(always)]
+    fn gt(self, o: Pair<V>) -> Self::Mask {
+        PairMask([self.0[0].gt(o.0[0]), self.0[1].gt(o.0[1])])
+    }
+    #[inline(always)]
+    fn ge(self, o: Pair<V>) -> Self::Mask {
+        PairMask([self.0[0].ge(o.0[0]), self.0[1].ge(o.0[1])])
+    }
+    #[inline(always)]
+    fn select(m: Self::Mask, a: Pair<V>, b: Pair<V>) -> Pair<V> {
+        Pair([V::select(m.0[0], a.0[0], b.0[0]), V::select(m.0[1], a.0[1], b.0[1])])
+    }
+    #[inline(always)]
+    fn min(self, o: Pair<V>) -> Pair<V> {
+        Pair([self.0[0].min(o.0[0]), self.0[1].min(o.0[1])])
+    }
+    #[inline(always)]
+    fn max(self, o: Pair<V>) -> Pair<V> {
+        Pair([self.0[0].max(o.0[0]), self.0[1].max(o.0[1])])
+    }
+    #[inline(always)]
+    fn abs(self) -> Pair<V> {
+        Pair([self.0[0].abs(), self.0[1].abs()])
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Pair<V> {
+        Pair([self.0[0].sqrt(), self.0[1].sqrt()])
+    }
+    #[inline(always)]
+    fn exponent_scale(self) -> Pair<V> {
+        Pair([self.0[0].exponent_scale(), self.0[1].exponent_scale()])
+    }
+    #[inline(always)]
+    fn split_exponent(self) -> (Pair<V>, Pair<V>) {
+        let ((m0, e0), (m1, e1)) = (self.0[0].split_exponent(), self.0[1].split_exponent());
+        (Pair([m0, m1]), Pair([e0, e1]))
+    }
+    #[inline(always)]
+    fn neg(self) -> Pair<V> {
+        Pair([self.0[0].neg(), self.0[1].neg()])
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
-pub use x86::{Avx2, Avx512};
+pub use x86::{Avx2, Avx512, Ymm};
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
@@ -300,20 +421,24 @@ mod x86 {
     #[derive(Clone, Copy, Debug)]
     pub struct Mask16(__mmask16);
 
-    /// 16 lanes in two AVX2 registers. Only for code compiled with AVX2 and FMA.
+    /// 8 lanes in one AVX2 register. Only for code compiled with AVX2 and FMA (the AVX2 and
+    /// AVX-512 kernels).
     #[derive(Clone, Copy, Debug)]
-    pub struct Avx2([__m256; 2]);
+    pub struct Ymm(__m256);
 
-    /// The mask of [`Avx2`]: all ones or zero per lane, as compares give.
+    /// The mask of [`Ymm`]: all ones or zero per lane, as compares give.
     #[derive(Clone, Copy, Debug)]
-    pub struct Mask8x2([__m256; 2]);
+    pub struct YmmMask(__m256);
+
+    /// 16 lanes in two AVX2 registers.
+    pub type Avx2 = super::Pair<Ymm>;
 
     // SAFETY (every `unsafe` below): these types are made only inside the kernels compiled for
     // their features (`crate::kernel`), after `Kernel::resolve` checked the CPU; the loads and
-    // stores take whole arrays of 16 lanes.
+    // stores take whole arrays of lanes.
 
     macro_rules! binary {
-        ($ty:ident, $trait:ident, $method:ident, $f512:ident, $f256:ident) => {
+        ($trait:ident, $method:ident, $f512:ident, $f256:ident) => {
             impl $trait for Avx512 {
                 type Output = Avx512;
                 #[inline(always)]
@@ -321,19 +446,19 @@ mod x86 {
                     unsafe { Avx512($f512(self.0, o.0)) }
                 }
             }
-            impl $trait for Avx2 {
-                type Output = Avx2;
+            impl $trait for Ymm {
+                type Output = Ymm;
                 #[inline(always)]
-                fn $method(self, o: Avx2) -> Avx2 {
-                    unsafe { Avx2([$f256(self.0[0], o.0[0]), $f256(self.0[1], o.0[1])]) }
+                fn $method(self, o: Ymm) -> Ymm {
+                    unsafe { Ymm($f256(self.0, o.0)) }
                 }
             }
         };
     }
-    binary!(Avx512, Add, add, _mm512_add_ps, _mm256_add_ps);
-    binary!(Avx512, Sub, sub, _mm512_sub_ps, _mm256_sub_ps);
-    binary!(Avx512, Mul, mul, _mm512_mul_ps, _mm256_mul_ps);
-    binary!(Avx512, Div, div, _mm512_div_ps, _mm256_div_ps);
+    binary!(Add, add, _mm512_add_ps, _mm256_add_ps);
+    binary!(Sub, sub, _mm512_sub_ps, _mm256_sub_ps);
+    binary!(Mul, mul, _mm512_mul_ps, _mm256_mul_ps);
+    binary!(Div, div, _mm512_div_ps, _mm256_div_ps);
 
     impl BitAnd for Mask16 {
         type Output = Mask16;
@@ -364,38 +489,32 @@ mod x86 {
         }
     }
 
-    impl BitAnd for Mask8x2 {
-        type Output = Mask8x2;
+    impl BitAnd for YmmMask {
+        type Output = YmmMask;
         #[inline(always)]
-        fn bitand(self, o: Mask8x2) -> Mask8x2 {
-            unsafe { Mask8x2([_mm256_and_ps(self.0[0], o.0[0]), _mm256_and_ps(self.0[1], o.0[1])]) }
+        fn bitand(self, o: YmmMask) -> YmmMask {
+            unsafe { YmmMask(_mm256_and_ps(self.0, o.0)) }
         }
     }
-    impl BitOr for Mask8x2 {
-        type Output = Mask8x2;
+    impl BitOr for YmmMask {
+        type Output = YmmMask;
         #[inline(always)]
-        fn bitor(self, o: Mask8x2) -> Mask8x2 {
-            unsafe { Mask8x2([_mm256_or_ps(self.0[0], o.0[0]), _mm256_or_ps(self.0[1], o.0[1])]) }
+        fn bitor(self, o: YmmMask) -> YmmMask {
+            unsafe { YmmMask(_mm256_or_ps(self.0, o.0)) }
         }
     }
-    impl Mask8x2 {
-        #[inline(always)]
-        fn bits(self) -> u32 {
-            unsafe { (_mm256_movemask_ps(self.0[0]) as u32) | ((_mm256_movemask_ps(self.0[1]) as u32) << 8) }
-        }
-    }
-    impl Mask for Mask8x2 {
+    impl Mask for YmmMask {
         #[inline(always)]
         fn any(self) -> bool {
-            self.bits() != 0
+            unsafe { _mm256_movemask_ps(self.0) != 0 }
         }
         #[inline(always)]
         fn count(self) -> u32 {
-            self.bits().count_ones()
+            unsafe { (_mm256_movemask_ps(self.0) as u32).count_ones() }
         }
         #[inline(always)]
-        fn and_not(self, o: Mask8x2) -> Mask8x2 {
-            unsafe { Mask8x2([_mm256_andnot_ps(o.0[0], self.0[0]), _mm256_andnot_ps(o.0[1], self.0[1])]) }
+        fn and_not(self, o: YmmMask) -> YmmMask {
+            unsafe { YmmMask(_mm256_andnot_ps(o.0, self.0)) }
         }
     }
 
@@ -485,110 +604,86 @@ mod x86 {
         }
     }
 
-    impl Avx2 {
+    impl Ymm {
         #[inline(always)]
-        fn compare<const P: i32>(self, o: Avx2) -> Mask8x2 {
-            unsafe { Mask8x2([_mm256_cmp_ps::<P>(self.0[0], o.0[0]), _mm256_cmp_ps::<P>(self.0[1], o.0[1])]) }
+        fn compare<const P: i32>(self, o: Ymm) -> YmmMask {
+            unsafe { YmmMask(_mm256_cmp_ps::<P>(self.0, o.0)) }
         }
     }
 
-    impl Lanes<16> for Avx2 {
-        type Mask = Mask8x2;
+    impl Lanes<8> for Ymm {
+        type Mask = YmmMask;
         #[inline(always)]
-        fn splat(v: f32) -> Avx2 {
-            unsafe { Avx2([_mm256_set1_ps(v); 2]) }
+        fn splat(v: f32) -> Ymm {
+            unsafe { Ymm(_mm256_set1_ps(v)) }
         }
         #[inline(always)]
-        fn load(a: &[f32; 16]) -> Avx2 {
-            unsafe { Avx2([_mm256_loadu_ps(a.as_ptr()), _mm256_loadu_ps(a.as_ptr().add(8))]) }
+        fn load(a: &[f32; 8]) -> Ymm {
+            unsafe { Ymm(_mm256_loadu_ps(a.as_ptr())) }
         }
         #[inline(always)]
-        fn store(self, a: &mut [f32; 16]) {
-            unsafe {
-                _mm256_storeu_ps(a.as_mut_ptr(), self.0[0]);
-                _mm256_storeu_ps(a.as_mut_ptr().add(8), self.0[1]);
-            }
+        fn store(self, a: &mut [f32; 8]) {
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) }
         }
         #[inline(always)]
-        fn lt(self, o: Avx2) -> Mask8x2 {
+        fn lt(self, o: Ymm) -> YmmMask {
             self.compare::<_CMP_LT_OQ>(o)
         }
         #[inline(always)]
-        fn le(self, o: Avx2) -> Mask8x2 {
+        fn le(self, o: Ymm) -> YmmMask {
             self.compare::<_CMP_LE_OQ>(o)
         }
         #[inline(always)]
-        fn gt(self, o: Avx2) -> Mask8x2 {
+        fn gt(self, o: Ymm) -> YmmMask {
             self.compare::<_CMP_GT_OQ>(o)
         }
         #[inline(always)]
-        fn ge(self, o: Avx2) -> Mask8x2 {
+        fn ge(self, o: Ymm) -> YmmMask {
             self.compare::<_CMP_GE_OQ>(o)
         }
         #[inline(always)]
-        fn select(m: Mask8x2, a: Avx2, b: Avx2) -> Avx2 {
-            unsafe { Avx2([_mm256_blendv_ps(b.0[0], a.0[0], m.0[0]), _mm256_blendv_ps(b.0[1], a.0[1], m.0[1])]) }
+        fn select(m: YmmMask, a: Ymm, b: Ymm) -> Ymm {
+            unsafe { Ymm(_mm256_blendv_ps(b.0, a.0, m.0)) }
         }
         #[inline(always)]
-        fn min(self, o: Avx2) -> Avx2 {
-            unsafe { Avx2([_mm256_min_ps(self.0[0], o.0[0]), _mm256_min_ps(self.0[1], o.0[1])]) }
+        fn min(self, o: Ymm) -> Ymm {
+            // minps(a, b) is `a < b ? a : b`.
+            unsafe { Ymm(_mm256_min_ps(self.0, o.0)) }
         }
         #[inline(always)]
-        fn max(self, o: Avx2) -> Avx2 {
-            unsafe { Avx2([_mm256_max_ps(self.0[0], o.0[0]), _mm256_max_ps(self.0[1], o.0[1])]) }
+        fn max(self, o: Ymm) -> Ymm {
+            unsafe { Ymm(_mm256_max_ps(self.0, o.0)) }
         }
         #[inline(always)]
-        fn abs(self) -> Avx2 {
+        fn abs(self) -> Ymm {
+            unsafe { Ymm(_mm256_and_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(SIGN)))) }
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Ymm {
+            unsafe { Ymm(_mm256_sqrt_ps(self.0)) }
+        }
+        #[inline(always)]
+        fn exponent_scale(self) -> Ymm {
             unsafe {
-                let m = _mm256_castsi256_ps(_mm256_set1_epi32(SIGN));
-                Avx2([_mm256_and_ps(self.0[0], m), _mm256_and_ps(self.0[1], m)])
+                let bits = _mm256_sub_epi32(_mm256_castps_si256(self.0), _mm256_set1_epi32(EXPONENT_BIAS));
+                Ymm(_mm256_castsi256_ps(_mm256_slli_epi32::<23>(bits)))
             }
         }
         #[inline(always)]
-        fn sqrt(self) -> Avx2 {
-            unsafe { Avx2([_mm256_sqrt_ps(self.0[0]), _mm256_sqrt_ps(self.0[1])]) }
-        }
-        #[inline(always)]
-        fn exponent_scale(self) -> Avx2 {
+        fn split_exponent(self) -> (Ymm, Ymm) {
             unsafe {
-                let bias = _mm256_set1_epi32(EXPONENT_BIAS);
-                let (a, b) = (
-                    _mm256_sub_epi32(_mm256_castps_si256(self.0[0]), bias),
-                    _mm256_sub_epi32(_mm256_castps_si256(self.0[1]), bias),
-                );
-                Avx2([_mm256_castsi256_ps(_mm256_slli_epi32::<23>(a)), _mm256_castsi256_ps(_mm256_slli_epi32::<23>(b))])
-            }
-        }
-        #[inline(always)]
-        fn split_exponent(self) -> (Avx2, Avx2) {
-            unsafe {
-                let (mantissa, one, byte, bias) = (
-                    _mm256_set1_epi32(MANTISSA),
-                    _mm256_set1_epi32(ONE),
-                    _mm256_set1_epi32(0xff),
+                let bits = _mm256_castps_si256(self.0);
+                let m = _mm256_or_si256(_mm256_and_si256(bits, _mm256_set1_epi32(MANTISSA)), _mm256_set1_epi32(ONE));
+                let e = _mm256_sub_epi32(
+                    _mm256_and_si256(_mm256_srli_epi32::<23>(bits), _mm256_set1_epi32(0xff)),
                     _mm256_set1_epi32(127),
                 );
-                let (a, b) = (_mm256_castps_si256(self.0[0]), _mm256_castps_si256(self.0[1]));
-                let (ma, mb) = (
-                    _mm256_or_si256(_mm256_and_si256(a, mantissa), one),
-                    _mm256_or_si256(_mm256_and_si256(b, mantissa), one),
-                );
-                let (ea, eb) = (
-                    _mm256_sub_epi32(_mm256_and_si256(_mm256_srli_epi32::<23>(a), byte), bias),
-                    _mm256_sub_epi32(_mm256_and_si256(_mm256_srli_epi32::<23>(b), byte), bias),
-                );
-                (
-                    Avx2([_mm256_castsi256_ps(ma), _mm256_castsi256_ps(mb)]),
-                    Avx2([_mm256_cvtepi32_ps(ea), _mm256_cvtepi32_ps(eb)]),
-                )
+                (Ymm(_mm256_castsi256_ps(m)), Ymm(_mm256_cvtepi32_ps(e)))
             }
         }
         #[inline(always)]
-        fn neg(self) -> Avx2 {
-            unsafe {
-                let sign = _mm256_castsi256_ps(_mm256_set1_epi32(NEG));
-                Avx2([_mm256_xor_ps(self.0[0], sign), _mm256_xor_ps(self.0[1], sign)])
-            }
+        fn neg(self) -> Ymm {
+            unsafe { Ymm(_mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(NEG)))) }
         }
     }
 }
@@ -646,7 +741,16 @@ mod tests {
         for _ in 0..2000 {
             let (a, b) = (draw(&mut rng), draw(&mut rng));
             let want = bits(one_lane(a, b));
-            assert_eq!(bits(all::<16, Portable>(a, b)), want);
+            assert_eq!(bits(all::<16, Portable<16>>(a, b)), want);
+            // Eight lanes: each half of the sixteen.
+            let halves = |f: &dyn Fn([f32; 8], [f32; 8]) -> Vec<[f32; 8]>| -> Vec<[f32; 16]> {
+                let (lo, hi) = (
+                    f(a[..8].try_into().unwrap(), b[..8].try_into().unwrap()),
+                    f(a[8..].try_into().unwrap(), b[8..].try_into().unwrap()),
+                );
+                lo.iter().zip(&hi).map(|(l, h)| std::array::from_fn(|k| if k < 8 { l[k] } else { h[k - 8] })).collect()
+            };
+            assert_eq!(bits(halves(&|a, b| all::<8, Portable<8>>(a, b))), want);
             #[cfg(target_arch = "x86_64")]
             {
                 let has = |f: &str| match f {
@@ -664,6 +768,7 @@ mod tests {
                 }
                 if has("avx2") {
                     assert_eq!(bits(unsafe { avx2(a, b) }), want);
+                    assert_eq!(bits(halves(&|a, b| unsafe { ymm(a, b) })), want);
                 }
             }
         }
@@ -677,8 +782,13 @@ mod tests {
         unsafe fn avx2(a: [f32; 16], b: [f32; 16]) -> Vec<[f32; 16]> {
             all::<16, Avx2>(a, b)
         }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn ymm(a: [f32; 8], b: [f32; 8]) -> Vec<[f32; 8]> {
+            all::<8, Ymm>(a, b)
+        }
         // Masks count and test alike.
-        let m = PortableMask(std::array::from_fn(|l| (l % 3 == 0) as u32));
+        let m = PortableMask::<16>(std::array::from_fn(|l| (l % 3 == 0) as u32));
         assert_eq!((m.count(), m.any(), m.and_not(m).any()), (6, true, false));
     }
 }
