@@ -1,23 +1,31 @@
 //! The vector kernels: one plane against its runs of pixels in a band of rows, in blocks of
-//! [`LANES`]. The loop body is the per-hit arithmetic of [`crate::gather`]
-//! ([`PlaneJob::gather_lanes`]) and nothing else, written once in `plane_body` and compiled
-//! for each vector width the CPU may have (AVX-512, AVX2 with FMA, the portable baseline),
-//! chosen at run time by [`Kernel`].
+//! [`LANES`] (a span's last [`HALF_LANES`] as a half block). The loop body is the per-hit
+//! arithmetic of [`crate::gather`] ([`PlaneJob::gather_block`]) and nothing else, written once
+//! against the lane type of [`crate::simd`] in `plane_body` and compiled for each vector width
+//! the CPU may have (AVX-512, AVX2 with FMA, the portable baseline), chosen at run time by
+//! [`Kernel`].
 //!
-//! No operation is fused or reordered between them (Rust never contracts `a * b + c`, and
-//! every operation used is exactly rounded), so every kernel gives bit-identical sums.
+//! No operation is fused or reordered between them (every lane type does exactly rounded IEEE
+//! operations, and Rust never contracts `a * b + c`), so every kernel gives bit-identical sums.
 //!
 //! Where a hit's time goes (issue 27; AMD EPYC Zen 4 under KVM, which exposes no hardware
-//! counters, so instruction and cache figures are cachegrind's, of the AVX2 kernel): a block of
-//! 16 pixels is about 130 instructions with AVX-512 (two divisions, an exponential), 33 per hit
-//! with AVX2, of which 11 are loads: the plane's 30-odd constants and the block's intermediates
-//! do not fit 16 registers of two lanes' halves each, and come back from the stack. Every
-//! block's rays and sums (8 cache lines) come from L2 (0.56 L1 misses per hit, no L2 misses):
-//! a band's 170 KB stay there while its planes stream by. The AVX-512 samples pile up behind
-//! the divisions and the exponential's chain: each block is a chain of about 100 cycles of
-//! latency, of which the core overlaps two or three. Narrower blocks (8 lanes for AVX2) and
-//! wider ones (32 for AVX-512) were both slower: the compiler keeps 16 lanes in vectors, and
-//! scalarised 8.
+//! counters): with the lane loops vectorised by the compiler, a 16-pixel block of `smis-exact`
+//! was about 130 instructions with AVX-512 and the core retired about 1.5 a cycle; how fast it
+//! ran moved by 10-20% with edits that did not change the arithmetic (an unused field, the order
+//! of two checks), in opposite directions for different estimators, because the vectoriser's
+//! registers, spills and scalarised remainders changed. Written out as intrinsics behind
+//! [`crate::simd::Lanes`] (the same operations, the same bits), the gathering took 20% less
+//! time for `unweighted` and 23% less for `smis-exact`, and stopped moving. What did not help,
+//! measured: splitting a block into a crossing pass and a weighting pass over batches of blocks
+//! (the stores and loads between them cost more than the shorter chains saved), a cheaper
+//! exponential (degree 5) or arc tangent (reduced at tan(pi/8)), a reciprocal of D taken early,
+//! software prefetch of the next span, blocks of two rows by eight columns (a plane's slant
+//! cost as much as the rounding saved: 1.22 tests per hit), and for `cmis-exact` a two-pass
+//! closed form holding fewer values (slower) and the closed form on the lane types (5% slower
+//! than the compiler's vectorisation of its lane loops, which it keeps: its four sectors' fields
+//! spill either way). Half blocks cut the pixels tested past a span's end (1.12 tests per hit,
+//! from 1.21): 3-5% with AVX2, nothing with AVX-512, where the span's parity is a branch the
+//! predictor misses as often as the half block saves.
 
 use crate::camera::CameraRay;
 use crate::control::Control;
