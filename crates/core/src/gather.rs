@@ -174,12 +174,12 @@ impl PlaneView {
 }
 
 /// One plane ready for the per-hit arithmetic: everything it reads that is the same for every
-/// ray, made once per plane (per band, for the raster) by [`GatherContext::job`]. A new
-/// per-plane constant is one field here.
+/// ray, gathered by [`GatherContext::job`]. A new per-plane constant is one field here.
 pub struct PlaneJob<'a, D: Denominator> {
     pub weights: &'a D,
-    /// `weights.prepare(&view.frame)`: what D needs of the plane.
-    pub prepared: D::Plane,
+    /// `weights.prepare(&view.frame)`: what D needs of the plane, made once per plane and
+    /// gathering call (the raster's planes cross many bands).
+    pub prepared: &'a D::Plane,
     pub view: PlaneView,
     /// The panels that may shadow the plane (empty for most planes).
     pub occluders: &'a [Occluder],
@@ -188,9 +188,10 @@ pub struct PlaneJob<'a, D: Denominator> {
 
 impl<D: Denominator> Clone for PlaneJob<'_, D> {
     fn clone(&self) -> Self {
-        PlaneJob { prepared: self.prepared.clone(), ..*self }
+        *self
     }
 }
+impl<D: Denominator> Copy for PlaneJob<'_, D> {}
 
 impl<D: Denominator> PlaneJob<'_, D> {
     /// A block of rays against the plane: the per-hit arithmetic, once for every path that
@@ -215,7 +216,7 @@ impl<D: Denominator> PlaneJob<'_, D> {
             lit = lit.and_not(o.blocks_lanes::<L, V>(c.a, c.r));
         }
         let det_perp = ray.dot(view.normal_perp);
-        let d = self.weights.denominators_of::<L, V>(&self.prepared, c.det, det_perp, c.a);
+        let d = self.weights.denominators_of::<L, V>(self.prepared, c.det, det_perp, c.a);
         let length = (c.t - ray.t0) + c.r;
         let contribution = view.contribution::<L, V, GREY>(self.extinction.sigma_t, length, d, lit);
         for (sum, value) in sums.into_iter().zip(contribution) {
@@ -335,16 +336,16 @@ impl GatherContext {
         &self.occluders[view.occluders_start as usize..view.occluders_end as usize]
     }
 
-    /// The job of gathering `view` (one of this context's planes) with `weights`.
+    /// The job of gathering `view` (one of this context's planes) with `weights`, which were
+    /// prepared for it (`weights.prepare(&view.frame)`).
     #[inline(always)]
-    pub fn job<'a, D: Denominator>(&'a self, weights: &'a D, view: &PlaneView) -> PlaneJob<'a, D> {
-        PlaneJob {
-            weights,
-            prepared: weights.prepare(&view.frame),
-            view: *view,
-            occluders: self.occluders_of(view),
-            extinction: self.extinction,
-        }
+    pub fn job<'a, D: Denominator>(
+        &'a self,
+        weights: &'a D,
+        view: &PlaneView,
+        prepared: &'a D::Plane,
+    ) -> PlaneJob<'a, D> {
+        PlaneJob { weights, prepared, view: *view, occluders: self.occluders_of(view), extinction: self.extinction }
     }
 
     /// The per-hit path: one ray against one plane. `None` if it misses; otherwise its
@@ -357,7 +358,8 @@ impl GatherContext {
             return None;
         }
         let (mut r, mut g, mut b) = ([0.0f32], [0.0f32], [0.0f32]);
-        self.job(weights, view).gather_block_in::<1, f32, true>(&rays, [&mut r, &mut g, &mut b]);
+        let prepared = weights.prepare(&view.frame);
+        self.job(weights, view, &prepared).gather_block_in::<1, f32, true>(&rays, [&mut r, &mut g, &mut b]);
         Some(Vec3::new(r[0], g[0], b[0]))
     }
 

@@ -212,11 +212,13 @@ impl ScreenRaster {
     ) -> GatherStats {
         let w = self.width as usize;
         let band_pixels = self.band_rows as usize * w;
+        // What the weights need of each plane, once (a plane crosses many bands).
+        let prepared: Vec<D::Plane> = with.ctx.views.par_iter().map(|v| with.weights.prepare(&v.frame)).collect();
         out.par_chunks_mut(band_pixels)
             .zip(rays.par_chunks(band_pixels))
             .enumerate()
             .map(|(band, (sums, rays))| {
-                let stats = self.gather_band::<D, CONTRIBUTE>(with, band, rays, sums, control);
+                let stats = self.gather_band::<D, CONTRIBUTE>(with, &prepared, band, rays, sums, control);
                 if !control.is_cancelled() {
                     control.progress();
                 }
@@ -234,6 +236,7 @@ impl ScreenRaster {
     fn gather_band<D: Denominator, const CONTRIBUTE: bool>(
         &self,
         with: Gathering<D>,
+        prepared: &[D::Plane],
         band: usize,
         rays: &[CameraRay],
         sums: &mut [Vec3],
@@ -271,7 +274,7 @@ impl ScreenRaster {
             if spans.is_empty() {
                 continue;
             }
-            let job = ctx.job(weights, view);
+            let job = ctx.job(weights, view, &prepared[plane as usize]);
             if kernel == Kernel::PerHit {
                 let (rays, sums) = (&kernel_band.rays, &mut kernel_band.sums);
                 for k in spans.iter().flat_map(|s| s.start as usize..(s.start + s.len) as usize) {
