@@ -202,6 +202,7 @@ impl PreparedPlanes {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::raster::BAND_ROWS;
     use crate::sampling::Sampler;
     use crate::weights::{HitLanes, PlaneFrame, Unweighted};
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -210,11 +211,11 @@ mod tests {
         Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap()
     }
 
-    /// The unweighted D, counting the planes prepared (once per plane and band on the raster,
-    /// once per hit on the per-ray paths) and setting `cancel` when the count reaches `after`:
-    /// a flag set in the middle of a band, where no progress is reported.
+    /// The unweighted D, counting the blocks of hits it weighs (a block of up to 16 pixels on
+    /// the raster, one hit on the per-ray paths) and setting `cancel` when the count reaches
+    /// `after`: a flag set in the middle of a plane's work, where no progress is reported.
     struct CancelAfter<'a> {
-        prepared: AtomicUsize,
+        weighed: AtomicUsize,
         after: usize,
         cancel: &'a AtomicBool,
     }
@@ -222,25 +223,27 @@ mod tests {
     impl Denominator for CancelAfter<'_> {
         type Plane = PlaneFrame;
         fn prepare(&self, f: &PlaneFrame) -> PlaneFrame {
-            if self.prepared.fetch_add(1, Ordering::Relaxed) + 1 == self.after {
-                self.cancel.store(true, Ordering::Relaxed);
-            }
             *f
         }
         fn denominators<const L: usize>(&self, p: &PlaneFrame, h: &HitLanes<L>, out: &mut [f32; L]) {
+            if self.weighed.fetch_add(1, Ordering::Relaxed) + 1 == self.after {
+                self.cancel.store(true, Ordering::Relaxed);
+            }
             Unweighted.denominators(p, h, out)
         }
     }
 
-    /// Cancelled in the middle of a band, the raster stops before the next plane: each thread
-    /// prepares at most one plane after the flag is set, with every kernel. The per-ray paths
-    /// stop before the next ray: each thread finishes at most the hits of its ray under way.
-    /// Counted in planes prepared, out of the millions a whole pass prepares.
+    /// Cancelled in the middle of a plane, the raster stops before the next plane: each thread
+    /// weighs at most the rest of the plane under way in its band, with every kernel. The
+    /// per-ray paths stop before the next ray: each thread finishes at most the hits of its ray
+    /// under way. Counted in blocks weighed, out of the thousands a whole pass weighs.
     #[test]
     fn cancelling_stops_gathering_within_a_plane_or_a_ray() {
         let scene = small_scene();
         let rays = crate::pixel::ray_set_rays(&scene, 1, 0, false);
         let (planes, after, threads) = (3000, 20, 2);
+        // The most blocks one plane has in one band: every half block of every row.
+        let band_blocks = (BAND_ROWS * scene.camera.width.div_ceil(crate::kernel::HALF_LANES as u32)) as usize;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         for accelerator in Accelerator::ALL {
             let set = PlaneSet { sampler: Sampler::default(), seed: 1 };
@@ -249,22 +252,22 @@ mod tests {
             for kernel in kernels {
                 let run = |after: usize| {
                     let cancel = AtomicBool::new(false);
-                    let weights = CancelAfter { prepared: AtomicUsize::new(0), after, cancel: &cancel };
+                    let weights = CancelAfter { weighed: AtomicUsize::new(0), after, cancel: &cancel };
                     let mut sums = vec![Vec3::ZERO; rays.len()];
                     let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
                     let stats = pool
                         .install(|| prepared.structure.gather(with, &rays, &mut sums, Control::with_cancel(&cancel)));
-                    (weights.prepared.into_inner(), stats, cancel.into_inner())
+                    (weights.weighed.into_inner(), stats, cancel.into_inner())
                 };
                 let (whole, whole_stats, set) = run(usize::MAX);
-                assert!(!set && whole > 100 * after, "{accelerator} {kernel}: {whole} planes prepared in a pass");
+                assert!(!set && whole > 100 * after, "{accelerator} {kernel}: {whole} blocks weighed in a pass");
                 let (done, stats, set) = run(after);
                 assert!(set);
                 let bound = match accelerator {
-                    Accelerator::Raster => after + (threads - 1),
+                    Accelerator::Raster => after + threads * band_blocks,
                     _ => after + threads * planes,
                 };
-                assert!(done <= bound, "{accelerator} {kernel}: {done} planes prepared, at most {bound} expected");
+                assert!(done <= bound, "{accelerator} {kernel}: {done} blocks weighed, at most {bound} expected");
                 // On the raster the ray-plane tests follow the planes (the per-ray paths test
                 // every plane of a ray whether it hits or not).
                 if accelerator == Accelerator::Raster {

@@ -212,8 +212,18 @@ impl ScreenRaster {
     ) -> GatherStats {
         let w = self.width as usize;
         let band_pixels = self.band_rows as usize * w;
-        // What the weights need of each plane, once (a plane crosses many bands).
-        let prepared: Vec<D::Plane> = with.ctx.views.par_iter().map(|v| with.weights.prepare(&v.frame)).collect();
+        // What the weights need of each plane, once (a plane crosses many bands); stopped, like
+        // the gathering, by a cancel.
+        let prepared: Vec<D::Plane> = with
+            .ctx
+            .views
+            .par_iter()
+            .map(|v| (!control.is_cancelled()).then(|| with.weights.prepare(&v.frame)))
+            .while_some()
+            .collect();
+        if control.is_cancelled() {
+            return GatherStats::default();
+        }
         out.par_chunks_mut(band_pixels)
             .zip(rays.par_chunks(band_pixels))
             .enumerate()
