@@ -15,17 +15,21 @@
 //! of two checks), in opposite directions for different estimators, because the vectoriser's
 //! registers, spills and scalarised remainders changed. Written out as intrinsics behind
 //! [`crate::simd::Lanes`] (the same operations, the same bits), the gathering took 20% less
-//! time for `unweighted` and 23% less for `smis-exact`, and stopped moving. What did not help,
+//! time for `unweighted` and 23% less for `smis-exact`. The speed still moves with the
+//! compiler's register allocation, less: AVX2's smis-exact by up to 7% between builds that
+//! differ in where one value is read (16 registers hold few of a plane's constants), and
+//! cmis-exact, which keeps the compiler's vectorisation, by up to 9%. What did not help,
 //! measured: splitting a block into a crossing pass and a weighting pass over batches of blocks
-//! (the stores and loads between them cost more than the shorter chains saved), a cheaper
-//! exponential (degree 5) or arc tangent (reduced at tan(pi/8)), a reciprocal of D taken early,
+//! (the stores and loads between them cost more than the shorter chains saved), an arc tangent
+//! reduced at tan(pi/8) (slower, cause not found), a reciprocal of D taken early,
 //! software prefetch of the next span, blocks of two rows by eight columns (a plane's slant
 //! cost as much as the rounding saved: 1.22 tests per hit), and for `cmis-exact` a two-pass
 //! closed form holding fewer values (slower) and the closed form on the lane types (5% slower
 //! than the compiler's vectorisation of its lane loops, which it keeps: its four sectors' fields
 //! spill either way). Half blocks cut the pixels tested past a span's end (1.12 tests per hit,
 //! from 1.21): 3-5% with AVX2, nothing with AVX-512, where the span's parity is a branch the
-//! predictor misses as often as the half block saves.
+//! predictor misses as often as the half block saves. A degree-5 minimax exponential gained 2-4%
+//! but changes every image and needs exp's accuracy bound relaxed from 2e-7 to 2.5e-7: left.
 
 use crate::camera::CameraRay;
 use crate::control::Control;

@@ -1,8 +1,10 @@
 //! Vectors of f32 lanes: the one type the per-hit arithmetic is written against, for every
 //! width (as Mitsuba 3's Dr.Jit arrays). [`Lanes`] is implemented by `f32` (one lane: the
-//! per-hit paths and the tests), by [`Avx512`] and [`Avx2`] (16 lanes in one AVX-512 register
-//! or two AVX2 ones, with the intrinsics written out) and by [`Portable`] (16 lanes as an array,
-//! whatever the compiler makes of the loops for the baseline target).
+//! per-hit paths and the tests), by `Avx512`, `Ymm` and `Avx2` (16 lanes in one AVX-512
+//! register, 8 in one AVX2 register, 16 in two: [`Pair`]; the intrinsics written out, and the
+//! types private to the crate, since their methods run instructions only the kernels compiled
+//! for them may) and by [`Portable`] (N lanes as an array, whatever the compiler makes of the
+//! loops for the baseline target).
 //!
 //! Every operation is exactly rounded IEEE arithmetic or a compare-and-select with the same
 //! NaN rule in every implementation (`min(a, b)` is `if a < b { a } else { b }`), and nothing
@@ -405,7 +407,7 @@ impl<V: Lanes<8>> Lanes<16> for Pair<V> {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub use x86::{Avx2, Avx512, Ymm};
+pub(crate) use x86::{Avx2, Avx512, Ymm};
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
@@ -415,27 +417,29 @@ mod x86 {
 
     /// 16 lanes in one AVX-512 register. Only for code compiled with AVX-512 F, VL, DQ and BW.
     #[derive(Clone, Copy, Debug)]
-    pub struct Avx512(__m512);
+    pub(crate) struct Avx512(__m512);
 
     /// The mask of [`Avx512`]: a mask register.
     #[derive(Clone, Copy, Debug)]
-    pub struct Mask16(__mmask16);
+    pub(crate) struct Mask16(__mmask16);
 
     /// 8 lanes in one AVX2 register. Only for code compiled with AVX2 and FMA (the AVX2 and
     /// AVX-512 kernels).
     #[derive(Clone, Copy, Debug)]
-    pub struct Ymm(__m256);
+    pub(crate) struct Ymm(__m256);
 
     /// The mask of [`Ymm`]: all ones or zero per lane, as compares give.
     #[derive(Clone, Copy, Debug)]
-    pub struct YmmMask(__m256);
+    pub(crate) struct YmmMask(__m256);
 
     /// 16 lanes in two AVX2 registers.
-    pub type Avx2 = super::Pair<Ymm>;
+    pub(crate) type Avx2 = super::Pair<Ymm>;
 
-    // SAFETY (every `unsafe` below): these types are made only inside the kernels compiled for
-    // their features (`crate::kernel`), after `Kernel::resolve` checked the CPU; the loads and
-    // stores take whole arrays of lanes.
+    // SAFETY (every `unsafe` below): these types are private to the crate, which makes them
+    // only inside the kernels compiled for their features (`crate::kernel`), after
+    // `Kernel::resolve` checked the CPU (and in tests, after checking it themselves): their
+    // safe methods would run instructions the CPU may lack if called anywhere else. The loads
+    // and stores take whole arrays of lanes.
 
     macro_rules! binary {
         ($trait:ident, $method:ident, $f512:ident, $f256:ident) => {

@@ -290,7 +290,7 @@ impl Denominator for StratifiedK {
 }
 
 /// `cmis-exact`: D = (1/pi) int_0^pi g(beta) d beta, the closed form of section 3 in f32
-/// ([`cmis_exact_mean_f32`], vectorised over the lanes). The f64 form
+/// ([`cmis_exact_mean_f32`](super::cmis_exact_mean_f32), vectorised over the lanes). The f64 form
 /// [`cmis_exact_mean`](super::cmis_exact_mean) is its reference in the tests.
 pub struct CmisExact;
 
