@@ -445,7 +445,7 @@ proptest! {
             Err(e) => check_error(&e)?,
         }
         if let [a, b] = &parts[..] {
-            match combine(a, b) {
+            match combine(a.clone(), b) {
                 Ok(p) => prop_assert!(p.check().is_ok()),
                 Err(e) => check_error(&e)?,
             }

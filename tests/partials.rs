@@ -71,7 +71,7 @@ fn chunks_merged_in_any_order_equal_the_whole_render_bit_for_bit() {
             let b = chunk(&s, &o, 4 * CHUNK_PLANES..planes);
             let merged = merge_in_canonical_order(vec![b.clone(), a.clone()]).unwrap();
             assert!(finish(&s, &o, &merged).unwrap().pixels == whole.pixels);
-            assert!(finish(&s, &o, &combine(&a, &b).unwrap()).unwrap().pixels == whole.pixels);
+            assert!(finish(&s, &o, &combine(a.clone(), &b).unwrap()).unwrap().pixels == whole.pixels);
             // Not a node (chunks 1..3 of the first four): added in another order, within one
             // f32 rounding of the whole (the f64 sums differ by ~1e-16 relative).
             let odd = vec![parts[0].clone(), chunk(&s, &o, CHUNK_PLANES..3 * CHUNK_PLANES), parts[3].clone()];
@@ -99,7 +99,7 @@ fn merges_refuse_parts_that_do_not_make_one_render() {
     );
     let m = message(vec![c[0].clone(), c[1].clone(), other.clone()]);
     assert!(m.contains("different renders"), "{m}");
-    assert!(combine(&c[1], &other).unwrap_err().to_string().contains("different renders"));
+    assert!(combine(c[1].clone(), &other).unwrap_err().to_string().contains("different renders"));
     // Another resolution: another render too.
     let small = chunk(&scene(8, 9), &o, 2 * CHUNK_PLANES..planes);
     assert!(message(vec![c[0].clone(), c[1].clone(), small]).contains("different renders"));
@@ -111,8 +111,8 @@ fn merges_refuse_parts_that_do_not_make_one_render() {
     assert!(message(vec![c[1].clone(), c[2].clone()]).contains("planes 0:16384 are missing"));
     assert!(message(vec![c[0].clone(), c[1].clone()]).contains("are missing"));
     assert!(message(vec![]).contains("no partial"));
-    assert!(combine(&c[0], &c[2]).unwrap_err().to_string().contains("not adjacent"));
-    assert!(combine(&c[1], &c[0]).is_err());
+    assert!(combine(c[0].clone(), &c[2]).unwrap_err().to_string().contains("not adjacent"));
+    assert!(combine(c[1].clone(), &c[0]).is_err());
     // Finishing: all planes, of this render.
     assert!(finish(&s, &o, &c[0]).unwrap_err().to_string().contains("do not cover"));
     let all = merge_in_canonical_order(c.clone()).unwrap();

@@ -149,11 +149,25 @@ impl ScreenRaster {
     /// over the edges serves the whole band, its rows as lanes (one vector register): the scalar
     /// walk, row by row, took a tenth of the gathering's instructions.
     fn spans(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
+        #[cfg(target_arch = "x86_64")]
+        if Kernel::Avx2.is_available() {
+            // SAFETY: the CPU has the features of `spans_avx2`, just checked.
+            return unsafe { self.spans_avx2(i, first_row, rows) };
+        }
+        self.spans_in_lanes(i, first_row, rows)
+    }
+
+    /// [`ScreenRaster::spans`] with the band's eight rows in one AVX register (the same
+    /// operations: the same bits); with SSE's four it took 7% of the benchmark's CPU time.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn spans_avx2(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
+        self.spans_in_lanes(i, first_row, rows)
+    }
+
+    #[inline(always)]
+    fn spans_in_lanes(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
         const R: usize = BAND_ROWS as usize;
-        // Compare-and-select: one instruction each (f32::min and max spend several on NaN,
-        // which only the unused slope of a horizontal edge is).
-        let min = |a: f32, b: f32| if a < b { a } else { b };
-        let max = |a: f32, b: f32| if a > b { a } else { b };
         let poly = &self.vertices[self.offsets[i] as usize..self.offsets[i + 1] as usize];
         let mut lo = [f32::INFINITY; R];
         let mut hi = [f32::NEG_INFINITY; R];
@@ -308,6 +322,19 @@ impl ScreenRaster {
         }
         stats
     }
+}
+
+/// Compare-and-select: one instruction each (f32::min and max spend several on NaN, which only
+/// the unused slope of a horizontal edge is). Functions, not closures: a closure is compiled
+/// without the caller's target features.
+#[inline(always)]
+fn min(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
 }
 
 /// The camera rays of one band as a structure of arrays, so that a span vectorises. Each row is

@@ -205,7 +205,7 @@ impl<'a> ChunkRenderer<'a> {
             while held.len() > alive {
                 let right = held.pop().expect("a right child");
                 let left = held.pop().expect("its left sibling");
-                held.push(combine(&left, &right)?);
+                held.push(combine(left, &right)?);
             }
             observer(&held, self.gatherer.spread.as_ref())?;
         }

@@ -100,7 +100,7 @@ impl PyPartial {
     fn __add__(&self, other: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
         let other =
             other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
-        partial::combine(&self.inner, &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+        partial::combine(self.inner.clone(), &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
     }
 
     /// Rebuilds a pickled partial from its state, the tuple `__reduce__` gives: (width, height,
@@ -229,7 +229,7 @@ pub(crate) type PlanTuple = (usize, usize, Option<usize>, Option<usize>);
 /// float64. ValueError for partials of different renders, overlapping or not adjacent.
 #[pyfunction]
 pub(crate) fn combine(a: &Bound<'_, PyPartial>, b: &Bound<'_, PyPartial>) -> PyResult<PyPartial> {
-    partial::combine(&a.get().inner, &b.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
+    partial::combine(a.get().inner.clone(), &b.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
 }
 
 /// Merges partials (any order) into one covering their union, added in the canonical order that

@@ -168,18 +168,21 @@ fn check_same_render(a: &Partial, b: &Partial) -> Result<()> {
     Ok(())
 }
 
-/// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in f64.
+/// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in f64,
+/// into `a`'s buffer (a partial of a large image is tens of megabytes: no copy of it is made).
 /// Each is checked first ([`Partial::check`]).
-pub fn combine(a: &Partial, b: &Partial) -> Result<Partial> {
+pub fn combine(mut a: Partial, b: &Partial) -> Result<Partial> {
     a.check()?;
     b.check()?;
-    check_same_render(a, b)?;
+    check_same_render(&a, b)?;
     if a.end != b.start {
         let how = if a.end > b.start { "overlap" } else { "leave a gap" };
         return Err(Error::Partial(format!("{} and {} are not adjacent: they {how}", a.describe(), b.describe())));
     }
-    let sums = a.sums.iter().zip(&b.sums).map(|(x, y)| *x + *y).collect();
-    Ok(Partial { sums, end: b.end, hits: a.hits.saturating_add(b.hits), seconds: a.seconds + b.seconds, ..a.clone() })
+    for (x, y) in a.sums.iter_mut().zip(&b.sums) {
+        *x += *y;
+    }
+    Ok(Partial { end: b.end, hits: a.hits.saturating_add(b.hits), seconds: a.seconds + b.seconds, ..a })
 }
 
 /// The largest power of two strictly below `n` (n >= 2): where the canonical tree splits.
@@ -242,11 +245,11 @@ fn merge_node(parts: &mut [Option<Partial>], range: Range<usize>) -> Result<Part
     if range.len() >= 2 && !straddles {
         let left = merge_node(parts, range.start..m)?;
         let right = merge_node(parts, m..range.end)?;
-        return combine(&left, &right);
+        return combine(left, &right);
     }
     let mut taken = inside.iter().filter_map(|&i| parts[i].take());
     let first = taken.next().ok_or_else(|| Error::Partial("no partial renders to merge".into()))?;
-    taken.try_fold(first, |a, b| combine(&a, &b))
+    taken.try_fold(first, |a, b| combine(a, &b))
 }
 
 /// The pieces a set of `planes` splits into for gathering: the canonical chunks cut further
@@ -593,7 +596,7 @@ mod tests {
         let mut bad = valid.clone();
         bad.sums[0].x = f64::NAN;
         assert!(merge_in_canonical_order(vec![first.clone(), bad.clone()]).unwrap_err().to_string().contains("NaN"));
-        assert!(combine(&first, &bad).is_err() && combine(&first, &valid).is_ok());
+        assert!(combine(first.clone(), &bad).is_err() && combine(first.clone(), &valid).is_ok());
         let wrapped = Partial { start: 0, end: usize::MAX, planes_total: usize::MAX, ..valid };
         assert!(merge_in_canonical_order(vec![wrapped]).unwrap_err().to_string().contains("plane count"));
     }
