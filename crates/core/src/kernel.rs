@@ -6,7 +6,9 @@
 //! [`Kernel`].
 //!
 //! No operation is fused or reordered between them (every lane type does exactly rounded IEEE
-//! operations, and Rust never contracts `a * b + c`), so every kernel gives bit-identical sums.
+//! operations, and Rust never contracts `a * b + c`; where a fused multiply-add is wanted, in
+//! cmis-exact's closed form, it is written out as [`Lanes::mul_add`], rounded once on every
+//! width), so every kernel gives bit-identical sums.
 //!
 //! Where a hit's time goes (issue 27; AMD EPYC Zen 4 under KVM, which exposes no hardware
 //! counters): with the lane loops vectorised by the compiler, a 16-pixel block of `smis-exact`
@@ -26,7 +28,7 @@
 //! cost as much as the rounding saved: 1.22 tests per hit), and for `cmis-exact` a two-pass
 //! closed form holding fewer values (slower) and the closed form on the lane types (5% slower
 //! than the compiler's vectorisation of its lane loops, which it keeps: its four sectors' fields
-//! spill either way). Half blocks cut the pixels tested past a span's end (1.12 tests per hit,
+//! spill either way; with fused multiply-adds, still 3-4% slower). Half blocks cut the pixels tested past a span's end (1.12 tests per hit,
 //! from 1.21): 3-5% with AVX2, nothing with AVX-512, where the span's parity is a branch the
 //! predictor misses as often as the half block saves. A degree-5 minimax exponential gained 2-4%
 //! but changes every image and needs exp's accuracy bound relaxed from 2e-7 to 2.5e-7: left.

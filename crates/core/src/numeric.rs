@@ -113,12 +113,12 @@ pub fn atan2_lanes<const L: usize, V: Lanes<L>>(y: V, x: V) -> V {
     let t = V::select(large.gt(zero), small / large, zero);
     let t2 = t * t;
     let (t4, t8) = (t2 * t2, (t2 * t2) * (t2 * t2));
-    // Estrin's scheme, for a short dependency chain.
-    let p01 = s(C[0]) + t2 * s(C[1]);
-    let p23 = s(C[2]) + t2 * s(C[3]);
-    let p45 = s(C[4]) + t2 * s(C[5]);
-    let p67 = s(C[6]) + t2 * s(C[7]);
-    let p = (p01 + t4 * p23) + t8 * ((p45 + t4 * p67) + t8 * s(C[8]));
+    // Estrin's scheme in fused multiply-adds, for a short dependency chain and few operations.
+    let p01 = t2.mul_add(s(C[1]), s(C[0]));
+    let p23 = t2.mul_add(s(C[3]), s(C[2]));
+    let p45 = t2.mul_add(s(C[5]), s(C[4]));
+    let p67 = t2.mul_add(s(C[7]), s(C[6]));
+    let p = t8.mul_add(t8.mul_add(s(C[8]), t4.mul_add(p67, p45)), t4.mul_add(p23, p01));
     let a = t * p;
     let a = V::select(steep, s(FRAC_PI_2) - a, a);
     let a = V::select(x.lt(zero), s(PI) - a, a);
@@ -147,8 +147,12 @@ pub fn ln_lanes<const L: usize, V: Lanes<L>>(x: V) -> V {
     let (m, e) = (V::select(big, m * s(0.5), m), V::select(big, e + s(1.0), e));
     let f = m - s(1.0);
     let (f2, f4) = (f * f, (f * f) * (f * f));
-    let p = ((s(C[0]) + f * s(C[1])) + f2 * (s(C[2]) + f * s(C[3]))) + f4 * ((s(C[4]) + f * s(C[5])) + f2 * s(C[6]));
-    ((f - s(0.5) * f2) + (f2 * f) * p + e * s(LN2_LO)) + e * s(LN2_HI)
+    // In fused multiply-adds: Estrin's scheme, then the terms in the same order.
+    let low = f2.mul_add(f.mul_add(s(C[3]), s(C[2])), f.mul_add(s(C[1]), s(C[0])));
+    let high = f2.mul_add(s(C[6]), f.mul_add(s(C[5]), s(C[4])));
+    let p = f4.mul_add(high, low);
+    let sum = (f2 * f).mul_add(p, f2.mul_add(s(-0.5), f));
+    e.mul_add(s(LN2_HI), e.mul_add(s(LN2_LO), sum))
 }
 
 /// ln(1 + x) in f32 for x > -1, accurate also for tiny x: ln(u) of u = 1 + x plus the rounding

@@ -68,6 +68,9 @@ pub trait Lanes<const L: usize>:
     fn split_exponent(self) -> (Self, Self);
     /// `-self` (the sign flipped: -0 for 0).
     fn neg(self) -> Self;
+    /// `self * b + c` rounded once (a fused multiply-add): exactly specified, so every width
+    /// gives the bits of one lane, `f32::mul_add` (a library call where the target lacks FMA).
+    fn mul_add(self, b: Self, c: Self) -> Self;
     /// Whether each lane is finite (not infinite, not NaN).
     #[inline(always)]
     fn is_finite(self) -> Self::Mask {
@@ -153,6 +156,10 @@ impl Lanes<1> for f32 {
     #[inline(always)]
     fn neg(self) -> f32 {
         -self
+    }
+    #[inline(always)]
+    fn mul_add(self, b: f32, c: f32) -> f32 {
+        f32::mul_add(self, b, c)
     }
 }
 
@@ -283,6 +290,10 @@ impl<const N: usize> Lanes<N> for Portable<N> {
     fn neg(self) -> Portable<N> {
         self.map(|x| -x)
     }
+    #[inline(always)]
+    fn mul_add(self, b: Portable<N>, c: Portable<N>) -> Portable<N> {
+        Portable(std::array::from_fn(|l| self.0[l].mul_add(b.0[l], c.0[l])))
+    }
 }
 
 /// 16 lanes as two halves of 8: every operation on both (AVX2's 16 lanes are two `Ymm`).
@@ -403,6 +414,10 @@ impl<V: Lanes<8>> Lanes<16> for Pair<V> {
     #[inline(always)]
     fn neg(self) -> Pair<V> {
         Pair([self.0[0].neg(), self.0[1].neg()])
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Pair<V>, c: Pair<V>) -> Pair<V> {
+        Pair([self.0[0].mul_add(b.0[0], c.0[0]), self.0[1].mul_add(b.0[1], c.0[1])])
     }
 }
 
@@ -606,6 +621,10 @@ mod x86 {
                 Avx512(_mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(self.0), _mm512_set1_epi32(NEG))))
             }
         }
+        #[inline(always)]
+        fn mul_add(self, b: Avx512, c: Avx512) -> Avx512 {
+            unsafe { Avx512(_mm512_fmadd_ps(self.0, b.0, c.0)) }
+        }
     }
 
     impl Ymm {
@@ -689,6 +708,10 @@ mod x86 {
         fn neg(self) -> Ymm {
             unsafe { Ymm(_mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(NEG)))) }
         }
+        #[inline(always)]
+        fn mul_add(self, b: Ymm, c: Ymm) -> Ymm {
+            unsafe { Ymm(_mm256_fmadd_ps(self.0, b.0, c.0)) }
+        }
     }
 }
 
@@ -728,6 +751,8 @@ mod tests {
                 x.split_exponent().0.to_array(),
                 x.split_exponent().1.to_array(),
                 x.neg().to_array(),
+                x.mul_add(y, x).to_array(),
+                y.mul_add(y, x.neg()).to_array(),
                 V::select(m, x, y).to_array(),
                 V::select(x.le(y) & y.ge(x), x, y).to_array(),
                 V::select(x.gt(y) | x.is_finite(), x, y).to_array(),

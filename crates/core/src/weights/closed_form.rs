@@ -115,15 +115,15 @@ pub fn cmis_exact_mean_lanes<const L: usize, V: Lanes<L>>(w: f32, h: f32, p: V, 
             at_neg[k] = V::select(t.has_neg, fields[k], at_neg[k]);
         }
     }
-    let z2 = zx * zx + zy * zy;
+    let z2 = zx.mul_add(zx, zy * zy);
     let (z_turn, z_ell) = to_zero::<L, V>(at_z, 1.0, zx, zy, z2);
     let (n_turn, n_ell) = to_zero::<L, V>(at_neg, -1.0, zx, zy, z2);
     let mut total = zero;
     for t in &sectors {
         let first_turn = V::select(t.has_z, z_turn, V::select(t.has_neg, n_turn, t.turn));
         let first_ell = V::select(t.has_z, z_ell, V::select(t.has_neg, n_ell, t.ell));
-        let first = t.a_n * first_turn - t.a_t * first_ell;
-        let second = t.a_n * (t.turn - first_turn) - t.a_t * (t.ell - first_ell);
+        let first = t.a_n.mul_add(first_turn, (t.a_t * first_ell).neg());
+        let second = t.a_n.mul_add(t.turn - first_turn, (t.a_t * (t.ell - first_ell)).neg());
         let value = t.dist * (first.abs() + second.abs());
         // A sector whose edge passes through the vertex contributes nothing.
         total = total + V::select(t.dist.gt(zero), value, zero);
@@ -138,8 +138,9 @@ pub fn cmis_exact_mean_lanes<const L: usize, V: Lanes<L>>(w: f32, h: f32, p: V, 
 #[inline(always)]
 fn to_zero<const L: usize, V: Lanes<L>>([x, y, nz2, d2]: [V; 4], sign: f32, zx: V, zy: V, z2: V) -> (V, V) {
     let s = V::splat;
-    let turn = atan2_lanes::<L, V>(s(sign) * (x * zy - y * zx), s(sign) * (x * zx + y * zy));
-    (turn, s(0.5) * ln_lanes::<L, V>(nz2 * (x * x + y * y) / (d2 * z2)))
+    let (cross, dot) = (x.mul_add(zy, (y * zx).neg()), x.mul_add(zx, y * zy));
+    let turn = atan2_lanes::<L, V>(s(sign) * cross, s(sign) * dot);
+    (turn, s(0.5) * ln_lanes::<L, V>(nz2 * x.mul_add(x, y * y) / (d2 * z2)))
 }
 
 /// One sector of [`cmis_exact_mean_lanes`]: the part of the circle of directions from the
@@ -178,22 +179,22 @@ fn sector<const E: usize, const L: usize, V: Lanes<L>>(w: f32, h: f32, p: V, q: 
     let delta =
         [s(-w) * (start.0 + end.0), s(-h) * (start.1 + end.1), s(w) * (start.0 + end.0), s(h) * (start.1 + end.1)][E];
     let nz = [zy.neg(), zx, zy, zx.neg()][E];
-    let r2_end = end.0 * end.0 + end.1 * end.1;
-    let turn = atan2_lanes::<L, V>(dist * s(len), start.0 * end.0 + start.1 * end.1);
+    let r2_end = end.0.mul_add(end.0, end.1 * end.1);
+    let turn = atan2_lanes::<L, V>(dist * s(len), start.0.mul_add(end.0, start.1 * end.1));
     // ln(|r_start|^2 / |r_end|^2) as ln(1 + x), x = delta / |r_end|^2, where that is accurate
     // (x small: the ratio would round away its difference from 1), else from the ratio (x near
     // -1: 1 + x would cancel).
     // One logarithm of the chosen argument, not both forms (branch-free, both were evaluated):
     // ln_1p_f32(x) is ln_f32(1 + x) plus the rounding of 1 + x, added here (the same bits).
     let inv = s(1.0) / r2_end;
-    let (x, ratio) = (delta * inv, (start.0 * start.0 + start.1 * start.1) * inv);
+    let (x, ratio) = (delta * inv, start.0.mul_add(start.0, start.1 * start.1) * inv);
     let near_one = x.abs().lt(s(0.5));
     let u = s(1.0) + x;
     let argument = V::select(near_one, u, ratio);
     let rounding = V::select(near_one, x - (u - s(1.0)), zero);
     let ell = s(0.5) * (ln_lanes::<L, V>(argument) + rounding);
-    let c_start = start.0 * zy - start.1 * zx;
-    let c_end = zx * end.1 - zy * end.0;
+    let c_start = start.0.mul_add(zy, (start.1 * zx).neg());
+    let c_end = zx.mul_add(end.1, (zy * end.0).neg());
     Sector {
         turn,
         ell,
