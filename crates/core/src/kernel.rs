@@ -6,9 +6,8 @@
 //! [`Kernel`].
 //!
 //! No operation is fused or reordered between them (every lane type does exactly rounded IEEE
-//! operations, and Rust never contracts `a * b + c`; where a fused multiply-add is wanted, in
-//! cmis-exact's closed form, it is written out as [`Lanes::mul_add`], rounded once on every
-//! width), so every kernel gives bit-identical sums.
+//! operations, and Rust never contracts `a * b + c`; a fused multiply-add is written out as
+//! [`Lanes::mul_add`], rounded once on every width), so every kernel gives bit-identical sums.
 //!
 //! Where a hit's time goes (issue 27; AMD EPYC Zen 4 under KVM, which exposes no hardware
 //! counters): with the lane loops vectorised by the compiler, a 16-pixel block of `smis-exact`

@@ -48,20 +48,15 @@ impl PlaneFrame {
     #[inline(always)]
     pub fn vertex_lanes<const L: usize, V: Lanes<L>>(&self, a: V) -> (V, V) {
         let s = V::splat;
-        let p = (s(self.p0) + a * s(self.cos_a)).max(s(0.0)).min(s(self.light_w));
-        let q = (s(self.q0) + a * s(self.sin_a)).max(s(0.0)).min(s(self.light_h));
+        let p = a.mul_add(s(self.cos_a), s(self.p0)).max(s(0.0)).min(s(self.light_w));
+        let q = a.mul_add(s(self.sin_a), s(self.q0)).max(s(0.0)).min(s(self.light_h));
         (p, q)
     }
 
     /// Light-local coordinates of the light vertex y' at chord parameter `a`, kept inside.
     #[inline(always)]
     pub fn vertex(&self, a: f32) -> (f32, f32) {
-        // Compare-and-select rather than clamp: no panic or NaN path, so loops vectorise.
-        let inside = |x: f32, hi: f32| {
-            let x = if x > 0.0 { x } else { 0.0 };
-            if x < hi { x } else { hi }
-        };
-        (inside(self.p0 + a * self.cos_a, self.light_w), inside(self.q0 + a * self.sin_a, self.light_h))
+        self.vertex_lanes::<1, f32>(a)
     }
 }
 
@@ -204,7 +199,7 @@ impl Denominator for SmisExactPair {
         let s = V::splat;
         let (p, q) = f.vertex_lanes::<L, V>(a);
         let width_perp = chord_width_lanes::<L, V>(f.light_w, f.light_h, p, q, &f.perp);
-        s(0.5) * (s(f.width) * det.abs() + width_perp * det_perp.abs())
+        s(0.5) * width_perp.mul_add(det_perp.abs(), s(f.width) * det.abs())
     }
 }
 
