@@ -84,7 +84,7 @@ pub struct HitLanes<const L: usize> {
 #[inline(always)]
 fn a_uv<const L: usize, V: Lanes<L>>(f: &PlaneFrame, det: V, det_perp: V) -> (V, V) {
     let s = V::splat;
-    (s(f.cos_a) * det - s(f.sin_a) * det_perp, s(f.sin_a) * det + s(f.cos_a) * det_perp)
+    (det.mul_add(s(f.cos_a), (s(f.sin_a) * det_perp).neg()), det.mul_add(s(f.sin_a), s(f.cos_a) * det_perp))
 }
 
 /// A denominator D, specialised per estimator so that the gathering loop is monomorphised.
@@ -165,7 +165,7 @@ impl Denominator for CmisCosine {
     #[inline(always)]
     fn denominators_of<const L: usize, V: Lanes<L>>(&self, f: &PlaneFrame, det: V, det_perp: V, _: V) -> V {
         let s = V::splat;
-        s(f.width) * s(std::f32::consts::FRAC_2_PI) * (det * det + det_perp * det_perp).sqrt()
+        s(f.width) * s(std::f32::consts::FRAC_2_PI) * det.mul_add(det, det_perp * det_perp).sqrt()
     }
 }
 
@@ -275,9 +275,12 @@ impl Denominator for StratifiedK {
         let (p, q) = f.vertex_lanes::<L, V>(a);
         let mut sum = if self.exact { s(f.width) * det.abs() } else { det.abs() };
         for o in &plane.others {
-            let det = (s(o.cos) * a_u + s(o.sin) * a_v).abs();
-            sum = sum
-                + if self.exact { chord_width_lanes::<L, V>(f.light_w, f.light_h, p, q, &o.chord) * det } else { det };
+            let det = a_u.mul_add(s(o.cos), s(o.sin) * a_v).abs();
+            sum = if self.exact {
+                chord_width_lanes::<L, V>(f.light_w, f.light_h, p, q, &o.chord).mul_add(det, sum)
+            } else {
+                sum + det
+            };
         }
         let mean = sum * s(1.0 / (plane.others.len() + 1) as f32);
         if self.exact { mean } else { s(f.width) * mean }
