@@ -24,16 +24,18 @@ use rayon::prelude::*;
 
 /// Rows per band: a band's rays and sums stay in cache while its planes stream by, its spans
 /// computed with its rows as lanes. At most this many: see [`band_rows`].
-pub const BAND_ROWS: u32 = 8;
+pub const BAND_ROWS: u32 = 16;
 
-/// The rows of a band for an image `height` rows high gathered by `threads` workers: 8, halved
-/// (to 4, 2, 1) while that leaves fewer than two bands per worker, so that many cores are all
-/// busy and the bands' unequal work evens out (45 bands of 8 rows make a 640x360 image: 23
-/// workers or more get bands of 4 rows, 46 or more of 2). The image is the same bits whatever
+/// The rows of a band for an image `height` rows high gathered by `threads` workers: 16, halved
+/// (to 8, 4, 2, 1) while that leaves fewer than two bands per worker, so that many cores are all
+/// busy and the bands' unequal work evens out (23 bands of 16 rows make a 640x360 image: 12
+/// workers or more get bands of 8 rows, 23 or more of 4). The image is the same bits whatever
 /// the band: a pixel adds its planes in index order within its band either way. A smaller band
-/// computes its planes' spans for fewer rows at a time, which costs CPU time: on the benchmark,
-/// 0.66 CPU s with bands of 8 rows, 0.73 with 4, 0.86 with 2 (12 and 24 workers on 2 cores, so
-/// an upper bound), paid only where there are the workers to spare.
+/// makes more plane-band pairs, each with its span walk and its plane's set-up, which costs CPU
+/// time: on the benchmark, bands of 16 rows took 0.97x the CPU time of bands of 8 (7 alternating
+/// runs; a band's 336 KB of rays and sums still sit in a 1 MB L2), an older build 0.66 CPU s
+/// with 8 rows, 0.73 with 4, 0.86 with 2 (12 and 24 workers on 2 cores, so an upper bound),
+/// paid only where there are the workers to spare.
 pub fn band_rows(height: u32, threads: usize) -> u32 {
     let mut rows = BAND_ROWS;
     while rows > 1 && (height.div_ceil(rows) as usize) < 2 * threads {
@@ -146,7 +148,7 @@ impl ScreenRaster {
     /// For each row of `first_row..first_row + rows` (at most [`BAND_ROWS`]), the columns
     /// `[first, last]` whose pixel squares may meet polygon `i`, if any: the polygon's x-range
     /// within the row's strip `[row - m, row + 1 + m]`, grown by m = [`SPAN_MARGIN`]. One walk
-    /// over the edges serves the whole band, its rows as lanes (one vector register): the scalar
+    /// over the edges serves the whole band, its rows as lanes (two AVX registers): the scalar
     /// walk, row by row, took a tenth of the gathering's instructions.
     fn spans(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
         #[cfg(target_arch = "x86_64")]
