@@ -122,8 +122,9 @@ impl<T: Copy + Default> Polygon<T> {
     pub fn clip(&self, inside: impl Fn(T) -> f64, lerp: impl Fn(T, T, f64) -> T) -> Self {
         let mut out = Polygon { vertices: [T::default(); Polygon::<DVec3>::CAPACITY], len: 0 };
         let pts = self.points();
-        for (k, &cur) in pts.iter().enumerate() {
-            let next = pts[(k + 1) % pts.len()];
+        // Each edge cur -> next, the last closing the polygon (no index modulo the length: an
+        // integer division per vertex).
+        for (&cur, &next) in pts.iter().zip(pts.iter().cycle().skip(1)) {
             let (dc, dn) = (inside(cur), inside(next));
             if dc >= 0.0 && out.len < Self::CAPACITY {
                 out.vertices[out.len] = cur;

@@ -177,8 +177,9 @@ impl ScreenRaster {
         let top: [f32; R] = std::array::from_fn(|j| (first_row as usize + j) as f32 - SPAN_MARGIN);
         let bottom: [f32; R] = std::array::from_fn(|j| (first_row as usize + j) as f32 + 1.0 + SPAN_MARGIN);
         let (band_top, band_bottom) = (top[0], (first_row + rows) as f32 + SPAN_MARGIN);
-        for (k, &p) in poly.iter().enumerate() {
-            let q = poly[(k + 1) % poly.len()];
+        // Each edge p -> q, the last closing the polygon (a rotated iterator: an index modulo
+        // the length was an integer division per edge).
+        for (&p, &q) in poly.iter().zip(poly.iter().cycle().skip(1)) {
             let (ymin, ymax) = (min(p.y, q.y), max(p.y, q.y));
             if ymax < band_top || ymin > band_bottom {
                 continue;
