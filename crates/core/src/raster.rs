@@ -244,8 +244,7 @@ impl ScreenRaster {
         // The bands with the most planes first: the last a worker takes are then small ones, and
         // the workers finish together (with 23 bands for 2 workers, in image order one of them
         // idled for 5% of the gathering's wall time).
-        let mut bands: Vec<(usize, (&mut [Vec3], &[CameraRay]))> =
-            out.chunks_mut(band_pixels).zip(rays.chunks(band_pixels)).enumerate().collect();
+        let mut bands: Vec<_> = out.chunks_mut(band_pixels).zip(rays.chunks(band_pixels)).enumerate().collect();
         bands.sort_by_key(|(band, _)| std::cmp::Reverse(self.bands[*band].len()));
         bands
             .into_par_iter()
