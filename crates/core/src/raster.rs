@@ -361,21 +361,23 @@ impl PaddedRays {
     fn new(rays: &[CameraRay], width: usize) -> Self {
         let stride = (width + LANES - 1).next_multiple_of(LANES);
         let n = rays.len() / width * stride;
-        let mut soa = PaddedRays {
-            stride,
-            x: vec![0.0; n],
-            y: vec![0.0; n],
-            z: vec![0.0; n],
-            t0: vec![1.0; n],
-            t1: vec![0.0; n],
-        };
-        for (row, rays) in rays.chunks(width).enumerate() {
-            for (k, r) in rays.iter().enumerate() {
-                let i = row * stride + k;
-                (soa.x[i], soa.y[i], soa.z[i], soa.t0[i], soa.t1[i]) = (r.dir.x, r.dir.y, r.dir.z, r.t0, r.t1);
+        let field = |get: fn(&CameraRay) -> f32, pad: f32| -> Vec<f32> {
+            // Each row and its padding written once (not the whole band filled first).
+            let mut v = Vec::with_capacity(n);
+            for row in rays.chunks(width) {
+                v.extend(row.iter().map(get));
+                v.resize(v.len() + stride - row.len(), pad);
             }
+            v
+        };
+        PaddedRays {
+            stride,
+            x: field(|r| r.dir.x, 0.0),
+            y: field(|r| r.dir.y, 0.0),
+            z: field(|r| r.dir.z, 0.0),
+            t0: field(|r| r.t0, 1.0),
+            t1: field(|r| r.t1, 0.0),
         }
-        soa
     }
 }
 
