@@ -33,9 +33,10 @@
 //! saves. A degree-5 minimax exponential gained 2-4% but errs by up to 2.4e-7 relative (2.5e-7
 //! without fused multiply-adds), over exp's tested 2e-7: left. Fused multiply-adds
 //! ([`Lanes::mul_add`]) took 5-7% off the gathering of every estimator and 10% off cmis-exact's.
-//! Also measured and left: blocks of 32 lanes as two AVX-512 registers, for the core to overlap two blocks' dependency chains (no change for
-//! smis-exact and unweighted, cmis-exact 10% slower: the block is bound by its operations, not
-//! its chains; replacing D's division by a multiply, for the count, saved 2.5%), and AVX2 blocks
+//! Also measured and left: blocks of 32 lanes as two AVX-512 registers, for the core to overlap
+//! two blocks' dependency chains (no change for smis-exact and unweighted, cmis-exact 10%
+//! slower: the block is bound by its operations, not its chains; replacing D's division by a
+//! multiply, for the count, saved 2.5%), and AVX2 blocks
 //! of 8 lanes in one register instead of 16 in two (fewer spills, more blocks: smis-exact 1.05x).
 //! One bounds check per span instead of eight per block (unsafe loads, behind one assert per
 //! span) took 1.3% off the benchmark's CPU time (perf stat task-clock, 7 runs, alternating). A
@@ -328,15 +329,19 @@ fn plane_body<V: Lanes<LANES>, H: Lanes<HALF_LANES>, D: Denominator, const GREY:
     let len = band.pixels();
     for span in spans {
         let (start, end) = (span.start as usize, (span.start + span.len) as usize);
-        // The one bounds check of the span's blocks (eight arrays each), which `block` relies on.
-        assert!(start <= end && end <= len, "span {start}..{end} outside the band's {len} pixels");
+        // The one bounds check of the span's blocks (eight arrays each), which `block` relies
+        // on: inside the band, and whole half blocks (so that the last one ends at `end`).
+        assert!(
+            start <= end && end <= len && (end - start) % HALF_LANES == 0,
+            "span {start}..{end} is not whole half blocks inside the band's {len} pixels"
+        );
         let whole = start + (end - start) / LANES * LANES;
         for i in (start..whole).step_by(LANES) {
             // SAFETY: i + LANES <= whole <= end <= len, checked above.
             hits += unsafe { block::<LANES, V, D, GREY, CONTRIBUTE>(job, band, i) } as u64;
         }
         if whole < end {
-            // SAFETY: whole + HALF_LANES <= end (span lengths are multiples of HALF_LANES).
+            // SAFETY: whole + HALF_LANES = end <= len (whole half blocks, checked above).
             hits += unsafe { block::<HALF_LANES, H, D, GREY, CONTRIBUTE>(job, band, whole) } as u64;
         }
     }

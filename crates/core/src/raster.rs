@@ -159,8 +159,8 @@ impl ScreenRaster {
         self.spans_in_lanes(i, first_row, rows)
     }
 
-    /// [`ScreenRaster::spans`] with the band's eight rows in one AVX register (the same
-    /// operations: the same bits); with SSE's four it took 7% of the benchmark's CPU time.
+    /// [`ScreenRaster::spans`] with the band's sixteen rows in two AVX registers (the same
+    /// operations: the same bits); with SSE's four lanes it took 7% of the benchmark's CPU time.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn spans_avx2(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
