@@ -67,15 +67,19 @@ impl RectLight {
 
     /// Where the ray `o + t d` crosses the panel with `t` in `(t_min, t_max)`, if it does.
     pub fn intersect(&self, o: DVec3, d: DVec3, t_min: f64, t_max: f64) -> Option<f64> {
-        let r = Rectangle {
+        self.rectangle().crossing(o.to_array(), d.to_array(), t_min, t_max)
+    }
+
+    /// The panel as a ray sees it, in f64.
+    pub fn rectangle(&self) -> Rectangle<f64> {
+        Rectangle {
             corner: self.corner.to_array(),
             u: self.u.to_array(),
             v: self.v.to_array(),
             n: self.n.to_array(),
             width: self.width,
             height: self.height,
-        };
-        r.crossing(o.to_array(), d.to_array(), t_min, t_max)
+        }
     }
 }
 

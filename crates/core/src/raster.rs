@@ -77,7 +77,7 @@ pub struct ScreenRaster {
 pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> Polygon<DVec2> {
     let margin = 1e-6 * medium.diagonal();
     let world = plane.polygon_in_box(medium, margin);
-    let mut cam = Polygon::<DVec3>::from_slice(&[]);
+    let mut cam = Polygon::<DVec3>::empty();
     for &v in world.points() {
         cam.vertices[cam.len] = camera.to_camera(v);
         cam.len += 1;
@@ -86,7 +86,7 @@ pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> 
     // projection finite (points closer than this lie within it of the camera).
     let near = 1e-9 * medium.diagonal().max(1e-30);
     let cam = cam.clip(|v| v.z - near, |p, q, s| p + (q - p) * s);
-    let mut screen = Polygon::<DVec2>::from_slice(&[]);
+    let (mut screen, mut other) = (Polygon::<DVec2>::empty(), Polygon::<DVec2>::empty());
     for &v in cam.points() {
         let (x, y) = camera.project(v);
         screen.vertices[screen.len] = DVec2::new(x, y);
@@ -94,10 +94,11 @@ pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> 
     }
     let (w, h) = (camera.width as f64, camera.height as f64);
     let lerp = |p: DVec2, q: DVec2, s: f64| p + (q - p) * s;
-    screen = screen.clip(|v| v.x + 1.0, lerp);
-    screen = screen.clip(|v| w + 1.0 - v.x, lerp);
-    screen = screen.clip(|v| v.y + 1.0, lerp);
-    screen.clip(|v| h + 1.0 - v.y, lerp)
+    screen.clip_into(&mut other, |v| v.x + 1.0, lerp);
+    other.clip_into(&mut screen, |v| w + 1.0 - v.x, lerp);
+    screen.clip_into(&mut other, |v| v.y + 1.0, lerp);
+    other.clip_into(&mut screen, |v| h + 1.0 - v.y, lerp);
+    screen
 }
 
 impl ScreenRaster {
