@@ -85,7 +85,7 @@ impl PlaneBvh {
                     stats.tests += 1;
                     if let Some(c) = ctx.gather_one(weights, view, ray) {
                         stats.hits += 1;
-                        sum += c;
+                        sum += view.scale * c;
                     }
                 }
             } else if top + 2 <= stack.len() {

@@ -52,6 +52,7 @@ use crate::simd::{Lanes, Portable};
 use crate::weights::Denominator;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// How the gathering loop runs over the pixels of a span.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -214,8 +215,17 @@ pub struct BandRays<'a> {
     pub t1: &'a [f32],
 }
 
-/// The RGB sums of a band, a structure of arrays laid out like its rays.
+/// The sums of a band, a structure of arrays laid out like its rays: the current light's
+/// contributions without its power ([`PlaneJob::gather_block`]; a grey medium's in `r` alone),
+/// until [`fold`] adds them to the band's [`BandTotals`].
 pub struct BandSums<'a> {
+    pub r: &'a mut [f32],
+    pub g: &'a mut [f32],
+    pub b: &'a mut [f32],
+}
+
+/// The RGB sums of a band of the lights already folded, laid out like its rays.
+pub struct BandTotals<'a> {
     pub r: &'a mut [f32],
     pub g: &'a mut [f32],
     pub b: &'a mut [f32],
@@ -274,6 +284,81 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
         #[cfg(target_arch = "x86_64")]
         Kernel::Avx2 => unsafe { run!(plane_avx2) },
         _ => run!(plane_portable),
+    }
+}
+
+/// Ends a light's planes in a band ([the sums light by light](crate::gather#sums-light-by-light)):
+/// over the pixels `range` (whole blocks of [`LANES`] inside the band), adds the light's `scale`
+/// times the band's sums (in a grey medium the one sum, to all three channels) to `totals`, a
+/// separate multiply and add, and zeroes the sums. `kernel` resolved, as for [`gather_plane`].
+pub fn fold(
+    kernel: Kernel,
+    scale: Vec3,
+    grey: bool,
+    sums: &mut BandSums,
+    totals: &mut BandTotals,
+    range: Range<usize>,
+) {
+    let len = [sums.r.len(), sums.g.len(), sums.b.len(), totals.r.len(), totals.g.len(), totals.b.len()];
+    assert!(
+        range.start <= range.end && range.end <= len.into_iter().min().unwrap_or(0),
+        "fold of pixels {range:?} outside the band"
+    );
+    assert!(
+        range.start.is_multiple_of(LANES) && range.end.is_multiple_of(LANES),
+        "fold of pixels {range:?}: not whole blocks"
+    );
+    match kernel {
+        // SAFETY: `resolve` returned these kernels only after checking the CPU's features.
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx512 => unsafe { fold_avx512(scale, grey, sums, totals, range) },
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx2 => unsafe { fold_avx2(scale, grey, sums, totals, range) },
+        _ => fold_body::<Portable<LANES>>(scale, grey, sums, totals, range),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512bw,avx2,fma")]
+fn fold_avx512(scale: Vec3, grey: bool, sums: &mut BandSums, totals: &mut BandTotals, range: Range<usize>) {
+    fold_body::<Avx512>(scale, grey, sums, totals, range)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn fold_avx2(scale: Vec3, grey: bool, sums: &mut BandSums, totals: &mut BandTotals, range: Range<usize>) {
+    fold_body::<Avx2>(scale, grey, sums, totals, range)
+}
+
+/// [`fold`] on the lane type `V`: the same operations on every width.
+#[inline(always)]
+fn fold_body<V: Lanes<LANES>>(
+    scale: Vec3,
+    grey: bool,
+    sums: &mut BandSums,
+    totals: &mut BandTotals,
+    range: Range<usize>,
+) {
+    /// The block of `s` from `i`, bounds checked.
+    #[inline(always)]
+    fn at(s: &mut [f32], i: usize) -> &mut [f32; LANES] {
+        (&mut s[i..i + LANES]).try_into().unwrap()
+    }
+    let zero = V::splat(0.0);
+    for i in range.step_by(LANES) {
+        let r = V::load(at(sums.r, i));
+        let (g, b) = if grey { (r, r) } else { (V::load(at(sums.g, i)), V::load(at(sums.b, i))) };
+        for (total, (sum, c)) in
+            [&mut *totals.r, &mut *totals.g, &mut *totals.b].into_iter().zip([(r, scale.x), (g, scale.y), (b, scale.z)])
+        {
+            let total = at(total, i);
+            (V::load(total) + V::splat(c) * sum).store(total);
+        }
+        zero.store(at(sums.r, i));
+        if !grey {
+            zero.store(at(sums.g, i));
+            zero.store(at(sums.b, i));
+        }
     }
 }
 

@@ -3,13 +3,13 @@
 //! Every camera ray starts at the camera, so the rays that can hit a plane are exactly those
 //! whose image point lies in the projection of the plane's polygon (clipped to the box). Each
 //! polygon is projected once, clipped to the image, and binned into horizontal bands of rows.
-//! A band walks its planes in index order; for every row it covers, the conservative span of
-//! pixels whose squares meet the polygon is tested exactly with
-//! [`crate::gather::PlaneJob::gather_block`]. The exact test decides; the span only has to
-//! contain every pixel that can hit, whatever the jitter.
+//! A band walks its planes light by light, each light's in index order; for every row it
+//! covers, the conservative span of pixels whose squares meet the polygon is tested exactly
+//! with [`crate::gather::PlaneJob::gather_block`]. The exact test decides; the span only has
+//! to contain every pixel that can hit, whatever the jitter.
 //!
-//! Each pixel's sum runs over planes in index order whatever the thread count, so images are
-//! bit-identical for a seed.
+//! Each pixel's sum runs over planes in that order whatever the thread count ([the sums light by
+//! light](crate::gather#sums-light-by-light)), so images are bit-identical for a seed.
 
 use crate::camera::Camera;
 use crate::camera::CameraRay;
@@ -21,6 +21,7 @@ use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Rows per band: a band's rays and sums stay in cache while its planes stream by, its spans
 /// computed with its rows as lanes. At most this many: see [`band_rows`].
@@ -68,8 +69,10 @@ pub struct ScreenRaster {
     /// Vertices of polygon `i` are `vertices[offsets[i]..offsets[i + 1]]`, in pixel units.
     vertices: Vec<Vec2>,
     offsets: Vec<u32>,
-    /// Plane indices per band, ascending.
+    /// Plane indices per band, by light, each light's ascending.
     bands: Vec<Vec<u32>>,
+    /// The light of each plane.
+    lights: Vec<u32>,
 }
 
 /// The plane's polygon as seen from the camera, clipped to the image grown by one pixel, in
@@ -120,6 +123,7 @@ impl ScreenRaster {
             vertices: Vec::new(),
             offsets: vec![0],
             bands: vec![Vec::new(); band_count],
+            lights: Vec::new(),
         }
     }
 
@@ -144,6 +148,10 @@ impl ScreenRaster {
             }
             self.offsets.push(self.vertices.len() as u32);
         }
+        self.lights.extend(planes.iter().map(|p| p.light as u32));
+        // Light by light (stable: each light's planes stay in index order).
+        let lights = &self.lights;
+        self.bands.par_iter_mut().for_each(|band| band.sort_by_key(|&i| lights[i as usize]));
     }
 
     /// For each row of `first_row..first_row + rows` (at most [`BAND_ROWS`]), the columns
@@ -282,12 +290,18 @@ impl ScreenRaster {
         let soa = PaddedRays::new(rays, w);
         let stride = soa.stride;
         let mut acc = PaddedSums::new(soa.x.len());
+        let mut totals = PaddedSums::new(soa.x.len());
+        let mut totals = kernel::BandTotals { r: &mut totals.r, g: &mut totals.g, b: &mut totals.b };
         let mut stats = GatherStats::default();
         let mut kernel_band = Band {
             rays: kernel::BandRays { x: &soa.x, y: &soa.y, z: &soa.z, t0: &soa.t0, t1: &soa.t1 },
             sums: kernel::BandSums { r: &mut acc.r, g: &mut acc.g, b: &mut acc.b },
         };
         let mut spans = Vec::with_capacity(BAND_ROWS as usize);
+        // The light whose planes are being summed: its scale and the pixels they touched.
+        let mut light: Option<(u32, Vec3, Range<usize>)> = None;
+        let fold_kernel = if kernel == Kernel::PerHit { Kernel::Portable } else { kernel };
+        let grey = ctx.extinction.grey;
         for &plane in &self.bands[band] {
             if control.is_cancelled() {
                 return stats;
@@ -307,6 +321,20 @@ impl ScreenRaster {
             if spans.is_empty() {
                 continue;
             }
+            let (first, end) = spans
+                .iter()
+                .fold((usize::MAX, 0), |(lo, hi), s| (lo.min(s.start as usize), hi.max((s.start + s.len) as usize)));
+            match &mut light {
+                Some((l, _, touched)) if *l == view.light => {
+                    *touched = touched.start.min(first)..touched.end.max(end);
+                }
+                _ => {
+                    if let Some((_, scale, touched)) = light.take() {
+                        kernel::fold(fold_kernel, scale, grey, &mut kernel_band.sums, &mut totals, blocks(touched));
+                    }
+                    light = Some((view.light, view.scale, first..end));
+                }
+            }
             let job = ctx.job(weights, view, &prepared[plane as usize]);
             if kernel == Kernel::PerHit {
                 let (rays, sums) = (&kernel_band.rays, &mut kernel_band.sums);
@@ -323,14 +351,22 @@ impl ScreenRaster {
                 stats.hits += kernel::gather_plane::<D, CONTRIBUTE>(kernel, &job, &spans, &mut kernel_band);
             }
         }
+        if let Some((_, scale, touched)) = light {
+            kernel::fold(fold_kernel, scale, grey, &mut kernel_band.sums, &mut totals, blocks(touched));
+        }
         for (row, sums) in sums.chunks_mut(w).enumerate() {
             let i = row * stride;
             for (k, s) in sums.iter_mut().enumerate() {
-                *s += Vec3::new(acc.r[i + k], acc.g[i + k], acc.b[i + k]);
+                *s += Vec3::new(totals.r[i + k], totals.g[i + k], totals.b[i + k]);
             }
         }
         stats
     }
+}
+
+/// `range` grown to whole blocks of [`LANES`] (a band's rows are padded to whole blocks).
+fn blocks(range: Range<usize>) -> Range<usize> {
+    range.start / LANES * LANES..range.end.next_multiple_of(LANES)
 }
 
 /// Compare-and-select: one instruction each (f32::min and max spend several on NaN, which only
@@ -382,7 +418,7 @@ impl PaddedRays {
     }
 }
 
-/// Per-pixel RGB sums of one band (rows padded like [`PaddedRays`]), a structure of arrays.
+/// Per-pixel sums of one band (rows padded like [`PaddedRays`]), a structure of arrays.
 struct PaddedSums {
     r: Vec<f32>,
     g: Vec<f32>,
