@@ -31,10 +31,11 @@ pub const BAND_ROWS: u32 = 16;
 /// (to 8, 4, 2, 1) while that leaves fewer than two bands per worker, so that many cores are all
 /// busy and the bands' unequal work evens out (23 bands of 16 rows make a 640x360 image: 12
 /// workers or more get bands of 8 rows, 23 or more of 4). The image is the same bits whatever
-/// the band: a pixel adds its planes in index order within its band either way. A smaller band
-/// makes more plane-band pairs, each with its span walk and its plane's set-up, which costs CPU
-/// time: on the benchmark, bands of 16 rows took 0.97x the CPU time of bands of 8 (7 alternating
-/// runs; a band's 336 KB of rays and sums still sit in a 1 MB L2), an older build 0.66 CPU s
+/// the band: a pixel adds its planes light by light, each light's in index order, within its
+/// band either way (and the lights' sums in light order). A smaller band makes more plane-band
+/// pairs, each with its span walk and its plane's set-up, which costs CPU time: on the
+/// benchmark, bands of 16 rows took 0.97x the CPU time of bands of 8 (7 alternating runs; a
+/// band's rays, sums and totals, 460 KB, still sit in a 1 MB L2), an older build 0.66 CPU s
 /// with 8 rows, 0.73 with 4, 0.86 with 2 (12 and 24 workers on 2 cores, so an upper bound),
 /// paid only where there are the workers to spare.
 pub fn band_rows(height: u32, threads: usize) -> u32 {
@@ -271,7 +272,8 @@ impl ScreenRaster {
             })
     }
 
-    /// One band of rows: its planes in index order, each against its spans. The cancel flag is
+    /// One band of rows: its planes light by light, each against its spans, each light's sums
+    /// folded into the band's totals when its planes end ([`kernel::fold`]). The cancel flag is
     /// read before each plane (a relaxed load, nothing beside a plane's work), so that even a
     /// band of millions of planes stops within milliseconds.
     fn gather_band<D: Denominator, const CONTRIBUTE: bool>(
