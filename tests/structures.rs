@@ -4,10 +4,12 @@
 //! on the thread count.
 
 use crate::common::options;
-use fogplanes::accel::Accelerator;
+use fogplanes::accel::{Accelerator, PreparedPlanes};
 use fogplanes::control::Control;
 use fogplanes::kernel::Kernel;
 use fogplanes::options::RenderOptions;
+use fogplanes::photon_plane::PlaneSet;
+use fogplanes::pixel::ray_set_rays;
 use fogplanes::render::{render, render_in_passes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
@@ -50,6 +52,29 @@ fn every_kernel_gives_bit_identical_images() {
                 assert!(image.pixels == reference.pixels, "{file} {w} {k}: the image differs from brute force");
             }
         }
+    }
+}
+
+/// Planes prepared in several pieces (`PreparedPlanes` samples 16,384 at a time; a render's
+/// chunks never hold more), so that the raster's bands and the brute-force loop's order are each
+/// merged from several, light by light: the same bits, in a grey medium and an RGB one.
+#[test]
+fn planes_prepared_in_pieces_give_the_brute_force_image() {
+    for file in ["media_scenes/six_lights.toml", "media_scenes/hard/camera_inside_box.toml"] {
+        let s = scene(file, 20, 12);
+        let set = PlaneSet { sampler: Sampler::default(), seed: 3 };
+        let rays = ray_set_rays(&s, 3, 0, false);
+        let gather = |accelerator| {
+            let planes = PreparedPlanes::new(&s, set, 0..40_000, accelerator, Control::none()).unwrap();
+            let mut sums = vec![glam::Vec3::ZERO; rays.len()];
+            let kernel = Kernel::Auto.resolve().unwrap();
+            let stats = planes.gather(Weighting::default(), kernel, &rays, &mut sums, Control::none()).unwrap();
+            (sums, stats.hits)
+        };
+        let ((fast, fast_hits), (slow, slow_hits)) = (gather(Accelerator::Raster), gather(Accelerator::BruteForce));
+        assert!(slow_hits > 10_000, "{file}: {slow_hits} hits");
+        assert_eq!(fast_hits, slow_hits, "{file}: hit counts differ");
+        assert!(fast == slow, "{file}: the raster's sums differ from brute force");
     }
 }
 

@@ -1,5 +1,6 @@
 //! One camera ray against one photon plane: the hit test and the weighted contribution
-//! `C = K / (N P_l D)` of docs/mathematics.md section 2. Everything here is f32 and relative to
+//! `C = K / (N P_l D)` of docs/mathematics.md section 2, summed without its factor `power / N`,
+//! which is the same for every plane of a light and is applied once per light. Everything here is f32 and relative to
 //! the ray origin, prepared once per plane so that a hit costs a few dot products and one
 //! exponential.
 //!
@@ -12,8 +13,9 @@
 //! AVX2 registers (or an array, for the portable kernel); the per-hit paths with one lane, `f32`:
 //! the BVH and the brute-force loop through [`GatherContext::gather_one`], the raster's
 //! `per-hit` kernel through [`PlaneJob::gather_block_in`]. Every lane does the same operations
-//! in the same order whatever the width, so images are bit-identical whichever path found a
-//! hit. Multiply-adds are fused where written ([`Lanes::mul_add`]: 5-7% of the gathering time of
+//! in the same order whatever the width, so a hit's contribution is the same bits whichever
+//! path found it, and the raster's kernels and the brute-force loop, which also sum in one
+//! order, give bit-identical images (the BVH sums in the order of its traversal). Multiply-adds are fused where written ([`Lanes::mul_add`]: 5-7% of the gathering time of
 //! the fast estimators, 10% of cmis-exact's); fused multiply-adds are exactly rounded, so the
 //! paths still agree, but where the code is compiled without FMA (the portable kernel and the
 //! per-hit paths on x86-64, whose baseline lacks it) each is a library call: the portable
@@ -21,13 +23,14 @@
 //!
 //! # Sums light by light
 //!
-//! Every gathering path sums a ray's hits in one order, so that they agree bit for bit: light
-//! by light in index order, and within a light its planes in index order, each hit's
-//! contribution without the light's power `power / N` ([`PlaneView::contribution`], in f32);
-//! then, light by light, that sum times the light's `scale` is added to the ray's RGB sum (a
-//! separate multiply and add, in f32; a light without hits adds exactly zero). The raster
-//! ([`crate::raster`]) keeps its bands' planes in that order, and
-//! [`GatherContext::gather_brute_force`] takes them so. Every plane of a light has the same
+//! The raster's kernels and the brute-force loop sum a ray's hits in one order, so that they
+//! agree bit for bit: light by light in index order, and within a light its planes in index
+//! order, each hit's contribution without the light's power `power / N`
+//! ([`PlaneView::contribution`], in f32); then, light by light, that sum times the light's
+//! `scale` is added to the ray's RGB sum ([`add_light`], in f32; a light without hits adds
+//! exactly zero). The raster ([`crate::raster`]) keeps its bands' planes in that order, and
+//! [`GatherContext::gather_brute_force`] takes them so; the BVH multiplies each hit by its
+//! scale. Every plane of a light has the same
 //! scale, so in a grey medium a block of hits loads, adds and stores one sum instead of three,
 //! and multiplies by no scale: 8-9% of the benchmark's CPU time.
 
@@ -55,7 +58,7 @@ pub struct PlaneView {
     pub t_det: f32,
     pub frame: PlaneFrame,
     /// power / N: the hit-independent factor of C, the same for every plane of a light (the
-    /// gathering paths apply it once per light, see [`PlaneJob::gather_block`]).
+    /// raster and the brute-force loop apply it once per light, see [`PlaneJob::gather_block`]).
     pub scale: Vec3,
     /// The largest component of `scale`.
     pub scale_max: f32,
@@ -306,6 +309,8 @@ pub struct GatherContext {
     /// The N of the set the planes belong to, once some are pushed: one N, so that every plane
     /// of a light has one scale (what the sums light by light rely on).
     planes_total: Option<usize>,
+    /// The planes' indices light by light, each light's ascending: the brute-force loop's order.
+    by_light: Vec<u32>,
 }
 
 impl GatherContext {
@@ -319,7 +324,14 @@ impl GatherContext {
     /// A context with no planes yet, for [`GatherContext::push_planes`].
     pub fn empty(scene: &Scene, origin: DVec3) -> Self {
         let extinction = Extinction::new(scene.medium.sigma_t());
-        GatherContext { origin, views: Vec::new(), occluders: Vec::new(), extinction, planes_total: None }
+        GatherContext {
+            origin,
+            views: Vec::new(),
+            occluders: Vec::new(),
+            extinction,
+            planes_total: None,
+            by_light: Vec::new(),
+        }
     }
 
     /// Prepares and appends the next planes of a set of `planes_total` planes (the same for every
@@ -360,6 +372,10 @@ impl GatherContext {
                 .zip(ranges.par_iter())
                 .map(|(p, &range)| PlaneView::new(p, scene, origin, planes_total, range)),
         );
+        // Stable: each light's planes stay in index order (the new ones follow, a merge).
+        self.by_light.extend(self.by_light.len() as u32..self.views.len() as u32);
+        let views = &self.views;
+        self.by_light.sort_by_key(|&i| views[i as usize].light);
     }
 
     /// The panels that may shadow a plane.
@@ -399,20 +415,38 @@ impl GatherContext {
     /// number of hits, summed as the raster sums them ([light by light](self#sums-light-by-light)).
     pub fn gather_brute_force<D: Denominator>(&self, weights: &D, ray: &CameraRay) -> (Vec3, u64) {
         let (mut sum, mut hits) = (Vec3::ZERO, 0);
-        let lights = self.views.iter().map(|v| v.light + 1).max().unwrap_or(0);
-        for light in 0..lights {
-            let (mut light_sum, mut scale) = (Vec3::ZERO, Vec3::ZERO);
-            for view in self.views.iter().filter(|v| v.light == light) {
-                scale = view.scale;
-                if let Some(c) = self.gather_one(weights, view, ray) {
-                    hits += 1;
-                    light_sum += c;
+        // The light being summed: its index, its scale and its hits' sum.
+        let mut light: Option<(u32, Vec3, Vec3)> = None;
+        for &i in &self.by_light {
+            let view = &self.views[i as usize];
+            let Some(c) = self.gather_one(weights, view, ray) else {
+                continue;
+            };
+            hits += 1;
+            match &mut light {
+                Some((l, _, light_sum)) if *l == view.light => *light_sum += c,
+                _ => {
+                    if let Some((_, scale, light_sum)) = light.take() {
+                        sum = add_light(sum, scale, light_sum);
+                    }
+                    light = Some((view.light, view.scale, c));
                 }
             }
-            sum += scale * light_sum;
+        }
+        if let Some((_, scale, light_sum)) = light {
+            sum = add_light(sum, scale, light_sum);
         }
         (sum, hits)
     }
+}
+
+/// `sum + scale * light_sum` channel by channel (a separate multiply and add), a channel whose
+/// scale is 0 left as it is: a light's sum of hits without its power can overflow to infinity
+/// where the scaled hits would not, and 0 times that is NaN. The raster's [`crate::kernel::fold`]
+/// does the same.
+pub fn add_light(sum: Vec3, scale: Vec3, light_sum: Vec3) -> Vec3 {
+    let add = |s: f32, k: f32, l: f32| if k == 0.0 { s } else { s + k * l };
+    Vec3::new(add(sum.x, scale.x, light_sum.x), add(sum.y, scale.y, light_sum.y), add(sum.z, scale.z, light_sum.z))
 }
 
 #[cfg(test)]

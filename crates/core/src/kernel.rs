@@ -265,8 +265,8 @@ pub struct Span {
 
 /// One plane against its spans in a band with a vector kernel (`kernel` resolved, not
 /// [`Kernel::PerHit`]): [`PlaneJob::gather_block`] on each block of [`LANES`] pixels. Adds each
-/// pixel's contribution to the band's sums unless `CONTRIBUTE` is off (then only hits are
-/// counted). Returns the hit count.
+/// pixel's contribution without the light's scale to the band's sums ([`fold`] applies it)
+/// unless `CONTRIBUTE` is off (then only hits are counted). Returns the hit count.
 #[inline(always)]
 pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     kernel: Kernel,
@@ -296,8 +296,9 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
 /// Ends a light's planes in a band ([the sums light by light](crate::gather#sums-light-by-light)):
 /// over the pixels `range` (whole blocks of [`LANES`] inside the band), adds the light's `scale`
 /// times the band's sums (in a grey medium the one sum, to all three channels) to `totals`, a
-/// separate multiply and add, and zeroes the sums. `kernel` resolved, as for [`gather_plane`].
-pub fn fold(
+/// separate multiply and add ([`crate::gather::add_light`]: a channel whose scale is 0 is left
+/// as it is), and zeroes the sums. `kernel` resolved, as for [`gather_plane`].
+pub(crate) fn fold(
     kernel: Kernel,
     scale: Vec3,
     grey: bool,
@@ -357,8 +358,10 @@ fn fold_body<V: Lanes<LANES>>(
         for (total, (sum, c)) in
             [&mut *totals.r, &mut *totals.g, &mut *totals.b].into_iter().zip([(r, scale.x), (g, scale.y), (b, scale.z)])
         {
-            let total = at(total, i);
-            (V::load(total) + V::splat(c) * sum).store(total);
+            if c != 0.0 {
+                let total = at(total, i);
+                (V::load(total) + V::splat(c) * sum).store(total);
+            }
         }
         zero.store(at(sums.r, i));
         if !grey {

@@ -237,6 +237,9 @@ impl ScreenRaster {
         out: &mut [Vec3],
         control: Control,
     ) -> GatherStats {
+        // The kernels' target features are the CPU's: checked once here, for every plane and
+        // fold of the gathering (a `Gathering` can be made with any kernel).
+        assert!(with.kernel.is_available(), "the {} kernel is not available on this CPU", with.kernel);
         let w = self.width as usize;
         let band_pixels = self.band_rows as usize * w;
         // What the weights need of each plane, once (a plane crosses many bands); stopped, like
@@ -292,18 +295,25 @@ impl ScreenRaster {
         let soa = PaddedRays::new(rays, w);
         let stride = soa.stride;
         let mut acc = PaddedSums::new(soa.x.len());
-        let mut totals = PaddedSums::new(soa.x.len());
-        let mut totals = kernel::BandTotals { r: &mut totals.r, g: &mut totals.g, b: &mut totals.b };
+        let mut folded = PaddedSums::new(soa.x.len());
+        let mut totals = kernel::BandTotals { r: &mut folded.r, g: &mut folded.g, b: &mut folded.b };
         let mut stats = GatherStats::default();
         let mut kernel_band = Band {
             rays: kernel::BandRays { x: &soa.x, y: &soa.y, z: &soa.z, t0: &soa.t0, t1: &soa.t1 },
             sums: kernel::BandSums { r: &mut acc.r, g: &mut acc.g, b: &mut acc.b },
         };
         let mut spans = Vec::with_capacity(BAND_ROWS as usize);
-        // The light whose planes are being summed: its scale and the pixels they touched.
-        let mut light: Option<(u32, Vec3, Range<usize>)> = None;
+        let mut light: Option<LightSum> = None;
+        // The per-hit kernel's sums are folded by the portable one (a fold has no per-hit form;
+        // its lanes do the same operations).
         let fold_kernel = if kernel == Kernel::PerHit { Kernel::Portable } else { kernel };
         let grey = ctx.extinction.grey;
+        let fold = |sums: &mut kernel::BandSums, totals: &mut kernel::BandTotals, done: LightSum| {
+            // Counting hits alone writes no sums.
+            if CONTRIBUTE {
+                kernel::fold(fold_kernel, done.scale, grey, sums, totals, blocks(done.touched));
+            }
+        };
         for &plane in &self.bands[band] {
             if control.is_cancelled() {
                 return stats;
@@ -327,14 +337,15 @@ impl ScreenRaster {
                 .iter()
                 .fold((usize::MAX, 0), |(lo, hi), s| (lo.min(s.start as usize), hi.max((s.start + s.len) as usize)));
             match &mut light {
-                Some((l, _, touched)) if *l == view.light => {
-                    *touched = touched.start.min(first)..touched.end.max(end);
+                Some(current) if current.light == view.light => {
+                    debug_assert_eq!(current.scale, view.scale, "one scale per light");
+                    current.touched = current.touched.start.min(first)..current.touched.end.max(end);
                 }
                 _ => {
-                    if let Some((_, scale, touched)) = light.take() {
-                        kernel::fold(fold_kernel, scale, grey, &mut kernel_band.sums, &mut totals, blocks(touched));
+                    if let Some(done) = light.take() {
+                        fold(&mut kernel_band.sums, &mut totals, done);
                     }
-                    light = Some((view.light, view.scale, first..end));
+                    light = Some(LightSum { light: view.light, scale: view.scale, touched: first..end });
                 }
             }
             let job = ctx.job(weights, view, &prepared[plane as usize]);
@@ -353,8 +364,8 @@ impl ScreenRaster {
                 stats.hits += kernel::gather_plane::<D, CONTRIBUTE>(kernel, &job, &spans, &mut kernel_band);
             }
         }
-        if let Some((_, scale, touched)) = light {
-            kernel::fold(fold_kernel, scale, grey, &mut kernel_band.sums, &mut totals, blocks(touched));
+        if let Some(done) = light {
+            fold(&mut kernel_band.sums, &mut totals, done);
         }
         for (row, sums) in sums.chunks_mut(w).enumerate() {
             let i = row * stride;
@@ -364,6 +375,14 @@ impl ScreenRaster {
         }
         stats
     }
+}
+
+/// The light whose planes a band is summing: its index, its scale and the pixels its planes
+/// touched.
+struct LightSum {
+    light: u32,
+    scale: Vec3,
+    touched: Range<usize>,
 }
 
 /// `range` grown to whole blocks of [`LANES`] (a band's rows are padded to whole blocks).
