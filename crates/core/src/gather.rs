@@ -538,6 +538,27 @@ mod tests {
         assert!(checked > 10_000 && blocked > 500 && near < checked / 50, "{checked} {blocked} {near}");
     }
 
+    /// A light's sum scaled and added channel by channel; an overflowed sum under a scale of 0
+    /// leaves its channel as it was (not NaN), and the kernels' fold does the same.
+    #[test]
+    fn a_light_is_added_without_nan_from_a_zero_scale() {
+        let sum = Vec3::new(1.0, 2.0, 3.0);
+        let got = add_light(sum, Vec3::new(0.5, 0.0, 2.0), Vec3::new(4.0, f32::INFINITY, 1.0));
+        assert_eq!(got, Vec3::new(3.0, 2.0, 5.0));
+        let (mut r, mut g, mut b) = (vec![4.0f32; 32], vec![f32::INFINITY; 32], vec![1.0f32; 32]);
+        let (mut tr, mut tg, mut tb) = (vec![1.0f32; 32], vec![2.0f32; 32], vec![3.0f32; 32]);
+        let mut sums = crate::kernel::BandSums { r: &mut r, g: &mut g, b: &mut b };
+        let mut totals = crate::kernel::BandTotals { r: &mut tr, g: &mut tg, b: &mut tb };
+        let scale = Vec3::new(0.5, 0.0, 2.0);
+        for kernel in crate::kernel::Kernel::available().into_iter().filter(|&k| k != crate::kernel::Kernel::PerHit) {
+            // The first kernel folds; the sums are then zero, and the next ones add nothing.
+            crate::kernel::fold(kernel, scale, false, &mut sums, &mut totals, 0..32);
+            assert!(totals.g.iter().all(|&t| t == 2.0), "{kernel}");
+            assert!(sums.r.iter().chain(sums.g.iter()).chain(sums.b.iter()).all(|&s| s == 0.0), "{kernel}");
+            assert!(totals.r.iter().all(|&t| t == 3.0) && totals.b.iter().all(|&t| t == 5.0), "{kernel}");
+        }
+    }
+
     #[test]
     fn hit_solves_the_plane_equation() {
         let text = include_str!("../../../media_scenes/six_lights.toml");
