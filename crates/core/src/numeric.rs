@@ -101,6 +101,20 @@ pub fn atan2_f32(y: f32, x: f32) -> f32 {
 #[inline(always)]
 pub fn atan2_lanes<const L: usize, V: Lanes<L>>(y: V, x: V) -> V {
     use std::f32::consts::{FRAC_PI_2, PI};
+    let (s, zero) = (V::splat, V::splat(0.0));
+    let (ax, ay) = (x.abs(), y.abs());
+    let steep = ay.gt(ax);
+    let (small, large) = (V::select(steep, ax, ay), V::select(steep, ay, ax));
+    let t = V::select(large.gt(zero), small / large, zero);
+    let a = atan_unit_lanes::<L, V>(t);
+    let a = V::select(steep, s(FRAC_PI_2) - a, a);
+    let a = V::select(x.lt(zero), s(PI) - a, a);
+    V::select(y.lt(zero), a.neg(), a)
+}
+
+/// atan(t) for t in [0, 1], lane by lane: the polynomial of [`atan2_lanes`] (the same bits).
+#[inline(always)]
+pub fn atan_unit_lanes<const L: usize, V: Lanes<L>>(t: V) -> V {
     const C: [f32; 9] = [
         1.0,
         -0.333_330_93,
@@ -112,11 +126,7 @@ pub fn atan2_lanes<const L: usize, V: Lanes<L>>(y: V, x: V) -> V {
         -0.016_283_017,
         0.002_903_554,
     ];
-    let (s, zero) = (V::splat, V::splat(0.0));
-    let (ax, ay) = (x.abs(), y.abs());
-    let steep = ay.gt(ax);
-    let (small, large) = (V::select(steep, ax, ay), V::select(steep, ay, ax));
-    let t = V::select(large.gt(zero), small / large, zero);
+    let s = V::splat;
     let t2 = t * t;
     let (t4, t8) = (t2 * t2, (t2 * t2) * (t2 * t2));
     // Estrin's scheme in fused multiply-adds, for a short dependency chain and few operations.
@@ -125,10 +135,7 @@ pub fn atan2_lanes<const L: usize, V: Lanes<L>>(y: V, x: V) -> V {
     let p45 = t2.mul_add(s(C[5]), s(C[4]));
     let p67 = t2.mul_add(s(C[7]), s(C[6]));
     let p = t8.mul_add(t8.mul_add(s(C[8]), t4.mul_add(p67, p45)), t4.mul_add(p23, p01));
-    let a = t * p;
-    let a = V::select(steep, s(FRAC_PI_2) - a, a);
-    let a = V::select(x.lt(zero), s(PI) - a, a);
-    V::select(y.lt(zero), a.neg(), a)
+    t * p
 }
 
 /// ln(x) in f32 for x >= 0, branch-free: x = m 2^e with m in [sqrt(1/2), sqrt(2)), f = m - 1
