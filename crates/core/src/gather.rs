@@ -1,8 +1,8 @@
 //! One camera ray against one photon plane: the hit test and the weighted contribution
 //! `C = K / (N P_l D)` of docs/mathematics.md section 2, summed without its factor `power / N`,
-//! which is the same for every plane of a light and is applied once per light. Everything here is f32 and relative to
-//! the ray origin, prepared once per plane so that a hit costs a few dot products and one
-//! exponential.
+//! which is the same for every plane of a light and is applied once per light. Everything here
+//! is f32 and relative to the ray origin, prepared once per plane so that a hit costs a few dot
+//! products and one exponential.
 //!
 //! The per-hit arithmetic is written once, here, branch-free, for a block of rays at a time as
 //! a vector of lanes ([`crate::simd::Lanes`]): [`PlaneJob::gather_block`] runs
@@ -15,11 +15,13 @@
 //! `per-hit` kernel through [`PlaneJob::gather_block_in`]. Every lane does the same operations
 //! in the same order whatever the width, so a hit's contribution is the same bits whichever
 //! path found it, and the raster's kernels and the brute-force loop, which also sum in one
-//! order, give bit-identical images (the BVH sums in the order of its traversal). Multiply-adds are fused where written ([`Lanes::mul_add`]: 5-7% of the gathering time of
-//! the fast estimators, 10% of cmis-exact's); fused multiply-adds are exactly rounded, so the
-//! paths still agree, but where the code is compiled without FMA (the portable kernel and the
-//! per-hit paths on x86-64, whose baseline lacks it) each is a library call: the portable
-//! kernel, chosen only on x86-64 CPUs without AVX2 (before 2013), became 10x slower.
+//! order, give bit-identical images (the BVH sums in the order of its traversal).
+//!
+//! Multiply-adds are fused where written ([`Lanes::mul_add`]: 5-7% of the gathering time of the
+//! fast estimators, 10% of cmis-exact's); fused multiply-adds are exactly rounded, so the paths
+//! still agree, but where the code is compiled without FMA (the portable kernel and the per-hit
+//! paths on x86-64, whose baseline lacks it) each is a library call: the portable kernel, chosen
+//! only on x86-64 CPUs without AVX2 (before 2013), became 10x slower.
 //!
 //! # Sums light by light
 //!
@@ -30,9 +32,9 @@
 //! `scale` is added to the ray's RGB sum ([`add_light`], in f32; a light without hits adds
 //! exactly zero). The raster ([`crate::raster`]) keeps its bands' planes in that order, and
 //! [`GatherContext::gather_brute_force`] takes them so; the BVH multiplies each hit by its
-//! scale. Every plane of a light has the same
-//! scale, so in a grey medium a block of hits loads, adds and stores one sum instead of three,
-//! and multiplies by no scale: 8-9% of the benchmark's CPU time.
+//! scale. Every plane of a light has the same scale, so in a grey medium a block of hits loads,
+//! adds and stores one sum instead of three, and multiplies by no scale: 8-9% of the
+//! benchmark's CPU time.
 
 use crate::camera::CameraRay;
 use crate::numeric::exp_lanes;
@@ -539,24 +541,11 @@ mod tests {
     }
 
     /// A light's sum scaled and added channel by channel; an overflowed sum under a scale of 0
-    /// leaves its channel as it was (not NaN), and the kernels' fold does the same.
+    /// leaves its channel as it was (not NaN).
     #[test]
     fn a_light_is_added_without_nan_from_a_zero_scale() {
-        let sum = Vec3::new(1.0, 2.0, 3.0);
-        let got = add_light(sum, Vec3::new(0.5, 0.0, 2.0), Vec3::new(4.0, f32::INFINITY, 1.0));
+        let got = add_light(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.5, 0.0, 2.0), Vec3::new(4.0, f32::INFINITY, 1.0));
         assert_eq!(got, Vec3::new(3.0, 2.0, 5.0));
-        let (mut r, mut g, mut b) = (vec![4.0f32; 32], vec![f32::INFINITY; 32], vec![1.0f32; 32]);
-        let (mut tr, mut tg, mut tb) = (vec![1.0f32; 32], vec![2.0f32; 32], vec![3.0f32; 32]);
-        let mut sums = crate::kernel::BandSums { r: &mut r, g: &mut g, b: &mut b };
-        let mut totals = crate::kernel::BandTotals { r: &mut tr, g: &mut tg, b: &mut tb };
-        let scale = Vec3::new(0.5, 0.0, 2.0);
-        for kernel in crate::kernel::Kernel::available().into_iter().filter(|&k| k != crate::kernel::Kernel::PerHit) {
-            // The first kernel folds; the sums are then zero, and the next ones add nothing.
-            crate::kernel::fold(kernel, scale, false, &mut sums, &mut totals, 0..32);
-            assert!(totals.g.iter().all(|&t| t == 2.0), "{kernel}");
-            assert!(sums.r.iter().chain(sums.g.iter()).chain(sums.b.iter()).all(|&s| s == 0.0), "{kernel}");
-            assert!(totals.r.iter().all(|&t| t == 3.0) && totals.b.iter().all(|&t| t == 5.0), "{kernel}");
-        }
     }
 
     #[test]

@@ -36,8 +36,8 @@
 //! Also measured and left: blocks of 32 lanes as two AVX-512 registers, for the core to overlap
 //! two blocks' dependency chains (no change for smis-exact and unweighted, cmis-exact 10%
 //! slower: the block is bound by its operations, not its chains; replacing D's division by a
-//! multiply, for the count, saved 2.5%), and AVX2 blocks
-//! of 8 lanes in one register instead of 16 in two (fewer spills, more blocks: smis-exact 1.05x).
+//! multiply, for the count, saved 2.5%), and AVX2 blocks of 8 lanes in one register instead of
+//! 16 in two (fewer spills, more blocks: smis-exact 1.05x).
 //! One bounds check per span instead of eight per block (unsafe loads, behind one assert per
 //! span) took 1.3% off the benchmark's CPU time (perf stat task-clock, 7 runs, alternating).
 //! Summing a light's hits without its power and multiplying once per light and band ([`fold`];
@@ -485,6 +485,45 @@ unsafe fn block<const L: usize, V: Lanes<L>, D: Denominator, const GREY: bool, c
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every kernel's fold adds `scale` times the sums as [`crate::gather::add_light`] does (a
+    /// channel under a scale of 0 untouched, even by an infinite sum), in a grey medium and an
+    /// RGB one, and zeroes the sums.
+    #[test]
+    fn every_fold_adds_a_light_as_add_light_does() {
+        use crate::gather::add_light;
+        let scale = Vec3::new(0.5, 0.0, 2.0);
+        for kernel in Kernel::available().into_iter().filter(|&k| k != Kernel::PerHit) {
+            for grey in [false, true] {
+                let sum = |k: usize| Vec3::new(4.0 + k as f32, if grey { 4.0 + k as f32 } else { f32::INFINITY }, 1.0);
+                let (mut r, mut g, mut b): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+                    (0..48).map(|k| sum(k).x).collect(),
+                    (0..48).map(|k| sum(k).y).collect(),
+                    (0..48).map(|k| sum(k).z).collect(),
+                );
+                let total = |k: usize| Vec3::new(1.0, 2.0, 3.0) * k as f32;
+                let (mut tr, mut tg, mut tb): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+                    (0..48).map(|k| total(k).x).collect(),
+                    (0..48).map(|k| total(k).y).collect(),
+                    (0..48).map(|k| total(k).z).collect(),
+                );
+                let mut sums = BandSums { r: &mut r, g: &mut g, b: &mut b };
+                let mut totals = BandTotals { r: &mut tr, g: &mut tg, b: &mut tb };
+                fold(kernel, scale, grey, &mut sums, &mut totals, 16..48);
+                for k in 0..48 {
+                    let got = Vec3::new(totals.r[k], totals.g[k], totals.b[k]);
+                    let want = if k < 16 {
+                        total(k)
+                    } else {
+                        add_light(total(k), scale, if grey { Vec3::splat(sum(k).x) } else { sum(k) })
+                    };
+                    assert_eq!(got, want, "{kernel} grey {grey} pixel {k}");
+                    let left = if k < 16 { sum(k).x } else { 0.0 };
+                    assert_eq!(sums.r[k], left, "{kernel} grey {grey} pixel {k}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn names_round_trip_and_auto_resolves_to_an_available_kernel() {
