@@ -230,12 +230,9 @@ pub struct BandSums<'a> {
     pub b: &'a mut [f32],
 }
 
-/// The RGB sums of a band of the lights already folded, laid out like its rays.
-pub struct BandTotals<'a> {
-    pub r: &'a mut [f32],
-    pub g: &'a mut [f32],
-    pub b: &'a mut [f32],
-}
+/// The RGB sums of a band of the lights already folded, laid out like its rays (the same three
+/// arrays as [`BandSums`], in another role).
+pub type BandTotals<'a> = BandSums<'a>;
 
 /// What a kernel reads and writes of a band of rows: its rays and their sums. A new per-band
 /// input is one field here.
