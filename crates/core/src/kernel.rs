@@ -48,8 +48,8 @@
 //! the zeros of det, so that fewer of its values are live at once, was 13-16% slower (the same
 //! bits): left. Its sectors summed as |dF| with one correction per zero of det, on the edge the
 //! zero's direction leaves through, instead of each sector split by selects, took 4% off its
-//! CPU time with AVX-512 and 14% with AVX2 (fewer values live: 47 spill slots read or written
-//! per block, from 65); on the lane types, rather than the compiler's vectorisation, it was
+//! CPU time with AVX-512 and 14% with AVX2 (fewer values live: 47 of the hot instructions touch
+//! the stack, from 65); on the lane types, rather than the compiler's vectorisation, it was
 //! still 6% slower. Its arc tangents and logarithms are 28% of its time (measured by replacing
 //! them with the identity), its twelve divisions 5%.
 
