@@ -392,7 +392,19 @@ mod tests {
         for &(p, q) in &[(0.0, 0.0), (w, 0.0), (w, h), (0.0, h), (0.0, 0.2), (w, 0.1), (0.3, 0.0), (0.2, h), (0.3, 0.2)]
         {
             for &(a_u, a_v) in
-                &[(1.0, 0.0), (0.0, 1.0), (-0.3, 0.0), (0.0, -2.0), (1.0, 1e-7), (1e-7, -1.0), (0.6, 0.8)]
+                // The last two put z and -z on corners' directions from (0.3, 0.2): a zero
+                // charged to either edge.
+                &[
+                    (1.0, 0.0),
+                    (0.0, 1.0),
+                    (-0.3, 0.0),
+                    (0.0, -2.0),
+                    (1.0, 1e-7),
+                    (1e-7, -1.0),
+                    (0.6, 0.8),
+                    (0.2, -0.3),
+                    (-0.2, 0.3),
+                ]
             {
                 let e = relative(w, h, p, q, a_u, a_v);
                 assert!(e < 1e-5, "p={p} q={q} a=({a_u},{a_v}): relative error {e:e}");
