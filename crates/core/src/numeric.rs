@@ -140,8 +140,9 @@ pub fn atan_unit_lanes<const L: usize, V: Lanes<L>>(t: V) -> V {
 
 /// ln(x) in f32 for x >= 0, branch-free: x = m 2^e with m in [sqrt(1/2), sqrt(2)), f = m - 1
 /// (exact), ln(1 + f) = f - f^2 / 2 + f^3 P(f) with P a degree-6 minimax fit, plus e ln 2.
-/// Within 1.5e-7 relative (tested) for normal x; ln(0) (and a subnormal) gives about -88, finite,
-/// so that a factor of zero in front of it still gives zero.
+/// Within 1.5e-7 relative (tested) for normal x; ln(0) (and a subnormal) gives about -88, and
+/// infinity, NaN or a negative x some other finite value (tested), so that a factor of zero in
+/// front of it still gives zero.
 #[inline(always)]
 pub fn ln_f32(x: f32) -> f32 {
     ln_lanes::<1, f32>(x)
@@ -229,6 +230,11 @@ mod tests {
         assert_eq!(atan2_f32(0.0, 0.0), 0.0);
         assert_eq!(atan2_f32(0.0, -1.0), std::f32::consts::PI);
         assert!(ln_f32(0.0).is_finite() && ln_f32(0.0) < -87.0);
+        // Finite for any input (cmis-exact's zero of det relies on it where z = 0: a factor of
+        // zero in front still gives zero).
+        for x in [f32::INFINITY, f32::NAN, -1.0, f32::MAX, f32::MIN_POSITIVE / 8.0] {
+            assert!(ln_f32(x).is_finite(), "ln_f32({x}) = {}", ln_f32(x));
+        }
         println!("atan2 {worst_atan:e}, ln {worst_ln:e}, ln_1p {worst_ln_1p:e}");
     }
 
