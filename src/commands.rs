@@ -8,7 +8,7 @@ use crate::watch::{ReferenceWatch, RenderWatch};
 use crate::{page, system};
 use anyhow::{Context, Result, anyhow};
 use fogplanes::control::Control;
-use fogplanes::film::{Film, ImageInfo, check_writable, read_image_info, write_file_atomically};
+use fogplanes::film::{Film, ImageInfo, read_image_info, write_file_atomically};
 use fogplanes::merge::{Merged, merge_parts};
 use fogplanes::metrics::{compare, compare_noisy};
 use fogplanes::options::RenderOptions;
@@ -70,12 +70,13 @@ fn refuse_unused(unused: Option<String>) -> Result<(), Failure> {
     unused.map_or(Ok(()), |m| Err(input(anyhow!(m))))
 }
 
-/// A partial file's name ends in .npz (numpy loads it by that name).
-fn check_partial_output(path: &std::path::Path) -> Result<(), Failure> {
+/// A partial file's name ends in .npz (numpy loads it by that name), and it is none of the
+/// command's `inputs`.
+fn check_partial_output(path: &std::path::Path, inputs: &[&Path]) -> Result<(), Failure> {
     if path.extension().and_then(|e| e.to_str()) != Some("npz") {
         return Err(input(anyhow!("{}: a partial file is a .npz", path.display())));
     }
-    check_outputs(&[Output::File(path)])?;
+    check_outputs(&[Output::File(path)], inputs)?;
     Ok(())
 }
 
@@ -141,7 +142,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
-    check_outputs(&outputs)?;
+    check_outputs(&outputs, &[&a.scene])?;
     if r.in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
         return Err(input(anyhow!(
@@ -191,8 +192,8 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     if let Some(stop) = stats.stopped_by {
         summary += &format!(", stopped by the {stop}");
     }
-    if let Some(e) = stats.relative_error {
-        summary += &format!(", estimated relative RMS error {e:.2e}");
+    if let Some(e) = stats.relative_error_text() {
+        summary += &format!(", estimated relative RMS error {e}");
     }
     if let Some(c) = cpu.filter(|_| stats.hits > 0) {
         summary += &format!(", {:.2} ns/hit CPU all included", 1e9 * c / stats.hits.max(1) as f64);
@@ -201,11 +202,34 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         summary += &format!(", peak memory {:.0} MB", b as f64 / 1e6);
     }
     say!("{summary}");
+    if let Some(why) = out_of_reach(&stats, r.target_error) {
+        let _ = writeln!(std::io::stderr(), "warning: {why}");
+    }
     say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", output.display(), film.width, film.height, film.mean(), film.max());
     if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
         say!("wrote {} (standard error: mean {:.3e}, max {:.3e})", path.display(), se.mean(), se.max());
     }
     Ok(())
+}
+
+/// Why a render to a target error stopped short of it, in one line: the target below the
+/// error's floor, or a black image.
+fn out_of_reach(stats: &fogplanes::options::RenderStats, target: Option<f64>) -> Option<String> {
+    let target = target?;
+    match stats.stopped_by? {
+        "error floor" => Some(format!(
+            "--target-error {target:.2e} is out of reach: the direct emission's error, {:.2e} of the image's mean, \
+             does not fall with more planes (docs/mathematics.md section 10.3); stopped after {} planes",
+            stats.error_floor.unwrap_or_default(),
+            stats.planes
+        )),
+        "black image" => Some(format!(
+            "--target-error {target:.2e} cannot be met: the image is black after {} planes, so its relative error \
+             is undefined (0/0); stopped",
+            stats.planes
+        )),
+        _ => None,
+    }
 }
 
 /// `render --partial`: planes `--plane-range` (all by default) into a partial file.
@@ -216,7 +240,7 @@ fn render_part(
     part: &std::path::Path,
     threads: Option<usize>,
 ) -> Result<(), Failure> {
-    check_partial_output(part)?;
+    check_partial_output(part, &[&a.scene])?;
     let (start, end) = a.plane_range.unwrap_or((0, opts.planes() as u64));
     let range = start as usize..end as usize;
     fogplanes::partial::chunk_indices(opts.planes(), &range)?;
@@ -236,6 +260,10 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
     // Before any part is read: an exposure needs a PNG among the outputs.
     let images: Vec<&std::path::Path> = std::iter::once(a.output.as_path()).chain(a.stderr_image.as_deref()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
+    // Before any part is read: no output is one of the parts (of whatever kind they turn out).
+    let parts: Vec<&Path> = a.parts.iter().map(PathBuf::as_path).collect();
+    let files: Vec<Output> = images.iter().map(|p| Output::File(p)).collect();
+    check_outputs(&files, &parts)?;
     let merged = merge_parts(&a.parts)?;
     let exposure = settings::exposure(a.exposure)?;
     match merged {
@@ -243,7 +271,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             if a.stderr_image.is_some() {
                 return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
             }
-            check_outputs(&[Output::Image(&a.output)])?;
+            check_outputs(&[Output::Image(&a.output)], &parts)?;
             settings::check_exposure_applies(a.exposure, &[&a.output])?;
             image.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, partial.planes_total)))?;
             if !a.quiet {
@@ -267,7 +295,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
         Merged::Reference { scene, options, mean, stderr, seconds } => {
             let mut outputs = vec![Output::Image(&a.output)];
             outputs.extend(a.stderr_image.as_deref().map(Output::Image));
-            check_outputs(&outputs)?;
+            check_outputs(&outputs, &parts)?;
             let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
             settings::check_exposure_applies(a.exposure, &images)?;
             mean.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, false)))?;
@@ -283,7 +311,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             if a.stderr_image.is_some() {
                 return Err(input(anyhow!("--stderr-image: pilot parts merge into one .npz")));
             }
-            check_partial_output(&a.output)?;
+            check_partial_output(&a.output, &parts)?;
             settings::check_exposure_applies(a.exposure, &[])?;
             let rows = 0..scene.camera.height;
             save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
@@ -298,7 +326,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
 /// `reference --partial`: rows `--rows` (all by default) into a partial file: the pilot's with
 /// `--pilot-pass`, else the reference's (counts from `--pilot` unless uniform).
 fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std::path::Path) -> Result<(), Failure> {
-    check_partial_output(part)?;
+    check_partial_output(part, &reference_inputs(a))?;
     let (scene, opts) = (&r.scene, &r.options);
     let (j0, j1) = a.rows.unwrap_or((0, scene.camera.height as u64));
     let rows = u32::try_from(j0).unwrap_or(u32::MAX)..u32::try_from(j1).unwrap_or(u32::MAX);
@@ -335,6 +363,11 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
     Ok(())
 }
 
+/// The files `reference` reads: its scene and, if given, its pilot.
+fn reference_inputs(a: &ReferenceArgs) -> Vec<&Path> {
+    std::iter::once(a.scene.as_path()).chain(a.pilot.as_deref()).collect()
+}
+
 pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     refuse_unused(a.unused())?;
     let scene = Scene::load(&a.scene).map_err(input)?;
@@ -347,7 +380,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
-    check_outputs(&outputs)?;
+    check_outputs(&outputs, &reference_inputs(&a))?;
     let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
@@ -393,6 +426,15 @@ fn check_reference(image: Option<&ImageInfo>, reference: Option<&ImageInfo>, pat
 }
 
 pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
+    // Before any file is read: the z-image is none of the images compared.
+    if let Some(z) = &a.z_image {
+        let inputs: Vec<&Path> =
+            [Some(a.image.as_path()), Some(a.reference.as_path()), a.ref_stderr.as_deref(), a.stderr.as_deref()]
+                .into_iter()
+                .flatten()
+                .collect();
+        check_outputs(&[Output::Image(z)], &inputs)?;
+    }
     let (image, image_info) = Film::load_exr_with_info(&a.image).map_err(input)?;
     let (reference, reference_info) = Film::load_exr_with_info(&a.reference).map_err(input)?;
     ImageInfo::check_is_image(image_info.as_ref(), "--stderr")
@@ -407,9 +449,6 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
         }
         return Ok(());
     };
-    if let Some(z) = &a.z_image {
-        check_outputs(&[Output::Image(z)])?;
-    }
     // Each standard error is checked against what its image records.
     let load_se = |path: &Path, of: Option<&ImageInfo>| -> Result<Film, Failure> {
         let bad = |e: fogplanes::Error| input(anyhow!("{}: {e}", path.display()));
@@ -421,7 +460,9 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     let image_se = a.stderr.as_deref().map(|p| load_se(p, image_info.as_ref())).transpose()?;
     let (noisy, z) = compare_noisy(&image, &reference, &ref_se, image_se.as_ref(), a.regions).map_err(input)?;
     if let Some(path) = &a.z_image {
-        z.save_with_info(path, 0.0, None)?;
+        let compared = format!("{} against {}", a.image.display(), a.reference.display());
+        let info = ImageInfo::z_image(image_info.as_ref(), (z.width, z.height), &compared);
+        z.save_with_info(path, 0.0, Some(&info))?;
     }
     if a.json {
         let both = serde_json::json!({ "metrics": m, "noise": noisy });
@@ -506,7 +547,7 @@ pub(crate) fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     let files: Vec<PathBuf> = TABLE_FILES.iter().chain(plots).map(|f| a.out.join(f)).collect();
     let outputs: Vec<Output> =
         std::iter::once(Output::Image(&panel)).chain(files.iter().map(|p| Output::File(p))).collect();
-    check_outputs(&outputs)?;
+    check_outputs(&outputs, &[&a.scene, &a.reference])?;
     start_threads(r.threads)?;
     let opts =
         TableOptions { settings: &r, out: a.out.clone(), quiet: a.common.quiet, reference_path: a.reference.clone() };
@@ -528,7 +569,7 @@ pub(crate) fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
     let (plot, files) = (a.out.join("seconds_vs_hits.png"), SCALING_FILES.map(|f| a.out.join(f)));
-    check_outputs(&[&[Output::Image(&plot)][..], &files.each_ref().map(|p| Output::File(p))].concat())?;
+    check_outputs(&[&[Output::Image(&plot)][..], &files.each_ref().map(|p| Output::File(p))].concat(), &[&a.scene])?;
     start_threads(r.threads)?;
     let md = experiments::run_scaling(&scene, &r, &a.out, a.common.quiet)?;
     say!("{md}");
@@ -550,7 +591,7 @@ pub(crate) fn cmd_export(a: ExportArgs) -> Result<(), Failure> {
         scene = scene.with_resolution(w, h)?;
     }
     let output = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.xml", scene.name)));
-    check_writable(&output)?;
+    check_outputs(&[Output::File(&output)], &[&a.scene])?;
     let text = match a.format {
         ExportFormat::Mitsuba => fogplanes::export::mitsuba_xml(&scene),
     };

@@ -102,8 +102,11 @@ pub struct ImageInfo {
 impl ImageInfo {
     /// The prefix of the header attributes that hold the fields.
     pub const PREFIX: &'static str = "fogplanes.";
-    /// What the image is: `render`, `reference` or `reference standard error`.
+    /// What the image is: `render`, `reference`, `render standard error`, `reference standard
+    /// error` or [`ImageInfo::Z_IMAGE`].
     pub const IMAGE: &'static str = "image";
+    /// What `compare --z-image` writes: the difference over its noise, per pixel and channel.
+    pub const Z_IMAGE: &'static str = "compare z-image";
     /// `box` (the mean over the pixel's square) or `center` (the pixel's centre).
     pub const PIXEL_FILTER: &'static str = "pixel_filter";
     /// `WIDTHxHEIGHT`.
@@ -111,7 +114,7 @@ impl ImageInfo {
     /// [`crate::scene::Scene::fingerprint`]: the scene's content.
     pub const SCENE: &'static str = "scene";
     /// The order fields are printed in; others follow, sorted.
-    const ORDER: [&'static str; 17] = [
+    const ORDER: [&'static str; 18] = [
         "image",
         "fogplanes",
         "scene_name",
@@ -129,6 +132,7 @@ impl ImageInfo {
         "samples",
         "seconds",
         "hits",
+        "compared",
     ];
 
     /// The fields every image of fogplanes records: what it is, the fogplanes version, the
@@ -141,6 +145,20 @@ impl ImageInfo {
             .with(Self::SCENE, scene)
             .with(Self::RESOLUTION, format!("{width}x{height}"))
             .with(Self::PIXEL_FILTER, pixel_filter_name(pixel_center))
+    }
+
+    /// The record of `compare --z-image`'s image: what it is, the fogplanes version, what the
+    /// image compared records of its scene, resolution and pixel filter (its `image` record,
+    /// if it has one; else the resolution alone), and the files compared.
+    pub fn z_image(image: Option<&ImageInfo>, (width, height): (u32, u32), compared: &str) -> Self {
+        let mut info =
+            ImageInfo::default().with(Self::IMAGE, Self::Z_IMAGE).with("fogplanes", env!("CARGO_PKG_VERSION"));
+        for key in ["scene_name", Self::SCENE, Self::PIXEL_FILTER] {
+            if let Some(v) = image.and_then(|i| i.get(key)) {
+                info = info.with(key, v);
+            }
+        }
+        info.with(Self::RESOLUTION, format!("{width}x{height}")).with("compared", compared)
     }
 
     /// The fields with `key` set to `value` (replaced if present).
@@ -229,11 +247,14 @@ impl ImageInfo {
     /// Refuses an error image where an image is measured (`flag`: where its standard error
     /// goes instead), as far as its record says.
     pub fn check_is_image(info: Option<&ImageInfo>, flag: &str) -> Result<()> {
-        match info.and_then(|i| i.get(Self::IMAGE)).filter(|k| k.ends_with("standard error")) {
-            Some(kind) => Err(Error::NotComparable(format!(
+        match info.and_then(|i| i.get(Self::IMAGE)) {
+            Some(kind) if kind.ends_with("standard error") => Err(Error::NotComparable(format!(
                 "it records a {kind}, not an image: measure an image (a standard error goes to compare's {flag})"
             ))),
-            None => Ok(()),
+            Some(kind) if kind == Self::Z_IMAGE => Err(Error::NotComparable(format!(
+                "it records a {kind} (the difference of two images over its noise), not an image to measure"
+            ))),
+            _ => Ok(()),
         }
     }
 

@@ -15,7 +15,7 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spread::{relative_rms_error, stderr_film};
 use crate::weights::Weighting;
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
 /// Settings of one render, resolved ([`crate::settings::resolve_render`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -119,9 +119,15 @@ pub struct RenderStats {
     /// (docs/mathematics.md section 10).
     #[serde(skip)]
     pub stderr: Option<Film>,
-    /// The estimated relative RMS error of the image, with the error image (section 10.2).
+    /// The estimated relative RMS error of the image, with the error image (section 10.2);
+    /// `None` without one, and for a black image (0/0: [`RenderStats::black`] says which).
     pub relative_error: Option<f64>,
-    /// Why a render in passes stopped: "time budget", "target error" or "plane limit".
+    /// The part of `relative_error` that planes do not lower: the direct emission's (section
+    /// 10.3). A target error below it is out of reach.
+    pub error_floor: Option<f64>,
+    /// Why a render in passes stopped: "time budget", "target error", "plane limit", "error
+    /// floor" (the target lies below [`RenderStats::error_floor`]) or "black image" (the
+    /// relative error is undefined).
     pub stopped_by: Option<&'static str>,
 }
 
@@ -138,12 +144,19 @@ impl RenderStats {
     }
 
     /// Records the error image of `image` from its pixels' `variance` (`None`: too few plane
-    /// groups to measure a spread).
-    pub fn add_error_image(&mut self, image: &Film, variance: Option<Vec<DVec3>>) -> Result<()> {
+    /// groups to measure a spread), of which `emission_variance` is the direct emission's.
+    pub fn add_error_image(
+        &mut self,
+        image: &Film,
+        variance: Option<Vec<DVec3>>,
+        emission_variance: &[Vec3],
+    ) -> Result<()> {
         let variance = variance.ok_or_else(|| {
             Error::option(Setting::Planes, "an error image needs planes in at least two groups: give more planes")
         })?;
-        self.relative_error = Some(relative_rms_error(image, &variance));
+        let error = relative_rms_error(image, &variance, emission_variance);
+        self.relative_error = error.map(|e| e.total);
+        self.error_floor = error.map(|e| e.floor);
         self.stderr = Some(stderr_film(image.width, image.height, &variance)?);
         Ok(())
     }
@@ -153,6 +166,25 @@ impl RenderStats {
         self.seconds_gather += seconds;
         self.hits += s.hits;
         self.tests += s.tests;
+    }
+
+    /// Whether the render made an error image of a black image, whose relative error is
+    /// undefined (0/0).
+    pub fn black(&self) -> bool {
+        self.stderr.is_some() && self.relative_error.is_none()
+    }
+
+    /// The estimated relative error as a report says it: the figure and its floor, or why
+    /// there is none; `None` without an error image. Never `inf` or `NaN`.
+    pub fn relative_error_text(&self) -> Option<String> {
+        self.stderr.as_ref()?;
+        Some(match (self.relative_error, self.error_floor) {
+            (Some(e), Some(floor)) => {
+                format!("{e:.2e} (its floor, the direct emission's error, which planes do not lower: {floor:.2e})")
+            }
+            (Some(e), None) => format!("{e:.2e}"),
+            (None, _) => "undefined (the image is black)".to_string(),
+        })
     }
 
     pub fn hits_per_ray(&self) -> f64 {

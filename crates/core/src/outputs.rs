@@ -1,6 +1,8 @@
 //! Every output of a command checked before any work: each can be written, none is a
-//! directory, and no file is named twice (the second write would replace the first, as
-//! `reference -o x.exr --stderr-image x.exr` once lost its reference).
+//! directory, no file is named twice (the second write would replace the first, as
+//! `reference -o x.exr --stderr-image x.exr` once lost its reference), and none is one of the
+//! command's inputs (`compare IMG REF --ref-stderr SE --z-image IMG` once wrote the z-image over
+//! the image it had just read, and `merge a.npz b.npz -o a.npz` over a part).
 
 use crate::error::{Error, Result};
 use crate::film::{check_image_output, check_writable};
@@ -24,10 +26,11 @@ impl Output<'_> {
 }
 
 /// Checks every output before any work: writable ([`check_writable`]), an image's format
-/// known, and each file named once (two names of one file count as one: `./x.exr` and
-/// `x.exr`, or a link and its target).
-pub fn check_outputs(outputs: &[Output<'_>]) -> Result<()> {
-    let mut seen: Vec<(PathBuf, &Path)> = Vec::with_capacity(outputs.len());
+/// known, each file named once, and none of them one of `inputs`, the files the command reads
+/// (two names of one file count as one: `./x.exr` and `x.exr`, or a link and its target).
+pub fn check_outputs(outputs: &[Output<'_>], inputs: &[&Path]) -> Result<()> {
+    let inputs: Vec<(Identity, &Path)> = inputs.iter().map(|&p| (identity(p), p)).collect();
+    let mut seen: Vec<(Identity, &Path)> = Vec::with_capacity(outputs.len());
     for output in outputs {
         match output {
             Output::Image(p) => check_image_output(p)?,
@@ -39,25 +42,45 @@ pub fn check_outputs(outputs: &[Output<'_>]) -> Result<()> {
             let also = if *first == path { String::new() } else { format!(" (also as {})", first.display()) };
             return Err(Error::bad_input(path, format!("is named twice as an output{also}")));
         }
+        if let Some((_, input)) = inputs.iter().find(|(other, _)| *other == id) {
+            let also = if *input == path { String::new() } else { format!(" (as {})", input.display()) };
+            return Err(Error::bad_input(
+                path,
+                format!("is an input of this command{also}: writing it would lose it; name another output"),
+            ));
+        }
         seen.push((id, path));
     }
     Ok(())
 }
 
-/// The one name of the file at `path`: the canonical path if the file exists, else the
-/// canonical directory (it exists: [`check_writable`] passed) joined with the file name.
-fn identity(path: &Path) -> PathBuf {
+/// What makes two paths one file: the device and inode of a file that exists (so that a link,
+/// hard or symbolic, and its target are one), else the canonical directory (it exists:
+/// [`check_writable`] passed) joined with the file name.
+#[derive(Debug, PartialEq, Eq)]
+enum Identity {
+    #[cfg(unix)]
+    Inode(u64, u64),
+    Path(PathBuf),
+}
+
+fn identity(path: &Path) -> Identity {
+    #[cfg(unix)]
+    if let Ok(m) = std::fs::metadata(path) {
+        use std::os::unix::fs::MetadataExt;
+        return Identity::Inode(m.dev(), m.ino());
+    }
     if let Ok(p) = std::fs::canonicalize(path) {
-        return p;
+        return Identity::Path(p);
     }
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    match (std::fs::canonicalize(dir), path.file_name()) {
+    Identity::Path(match (std::fs::canonicalize(dir), path.file_name()) {
         (Ok(d), Some(name)) => d.join(name),
         _ => path.to_path_buf(),
-    }
+    })
 }
 
 #[cfg(test)]
@@ -70,17 +93,38 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(dir.join("index.html")).unwrap();
         let (a, b) = (dir.join("a.exr"), dir.join("b.exr"));
-        assert!(check_outputs(&[Output::Image(&a), Output::Image(&b), Output::File(&dir.join("t.md"))]).is_ok());
+        assert!(check_outputs(&[Output::Image(&a), Output::Image(&b), Output::File(&dir.join("t.md"))], &[]).is_ok());
         // Named twice, also through another spelling of the same place.
         let again = dir.join(".").join("a.exr");
         for second in [&a, &again] {
-            let e = check_outputs(&[Output::Image(&a), Output::Image(second)]).unwrap_err();
+            let e = check_outputs(&[Output::Image(&a), Output::Image(second)], &[]).unwrap_err();
             assert!(e.is_input() && e.to_string().contains("is named twice as an output"), "{e}");
         }
         // A directory where a file goes; an image with an unknown extension.
-        let e = check_outputs(&[Output::Image(&a), Output::File(&dir.join("index.html"))]).unwrap_err();
+        let e = check_outputs(&[Output::Image(&a), Output::File(&dir.join("index.html"))], &[]).unwrap_err();
         assert!(e.to_string().contains("is a directory"), "{e}");
-        assert!(check_outputs(&[Output::Image(&dir.join("x.jpg"))]).is_err());
+        assert!(check_outputs(&[Output::Image(&dir.join("x.jpg"))], &[]).is_err());
+        // An output that is one of the inputs, under any of its names: the same spelling, a
+        // `./` spelling, a symbolic link to it, a hard link to it.
+        let input = dir.join("in.exr");
+        std::fs::write(&input, b"an input").unwrap();
+        let (soft, hard) = (dir.join("soft.exr"), dir.join("hard.exr"));
+        std::os::unix::fs::symlink(&input, &soft).unwrap();
+        std::fs::hard_link(&input, &hard).unwrap();
+        for (output, input) in [
+            (&input, &input),
+            (&dir.join(".").join("in.exr"), &input),
+            (&soft, &input),
+            (&input, &soft),
+            (&hard, &input),
+        ] {
+            let e = check_outputs(&[Output::Image(&a), Output::Image(output)], &[&b, input]).unwrap_err();
+            assert!(e.is_input() && e.to_string().contains("is an input of this command"), "{e}");
+        }
+        assert!(check_outputs(&[Output::Image(&a)], &[&input, &soft]).is_ok());
+        for f in [&input, &soft, &hard] {
+            std::fs::remove_file(f).unwrap();
+        }
         // Nothing was left behind by the checks.
         let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(left, ["index.html"]);

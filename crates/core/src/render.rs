@@ -293,7 +293,7 @@ pub fn render_from(
     let film = crate::partial::finish_with(scene, opts, &partial, &emission)?;
     if let Some(mut spread) = spread {
         spread.close();
-        stats.add_error_image(&film, spread.variance(&emission_variance))?;
+        stats.add_error_image(&film, spread.variance(&emission_variance), &emission_variance)?;
     }
     stats.seconds_rays += t.elapsed().as_secs_f64();
     stats.seconds_total = start.elapsed().as_secs_f64();
@@ -362,10 +362,12 @@ pub struct Until {
 /// Renders the scene in plane passes until `until`: each pass extends the plane set by the
 /// next points of the sampler (for Sobol, further points of the same sequence), until the time
 /// budget would not fit the next pass, or the image's estimated relative RMS error falls below
-/// the target, or the plane limit is reached; [`RenderStats::stopped_by`] says which. The
-/// passes double the planes; the last on a budget is sized from the measured time per plane
-/// to use what remains, and with a target error no pass is larger than the error's `1/sqrt(N)`
-/// decay says is needed. The image is the estimate of the N planes gathered, N = the total over
+/// the target, or the target is shown to be out of reach (below the error's floor, the direct
+/// emission's error, which planes do not lower; or undefined, the image being black), or the
+/// plane limit is reached; [`RenderStats::stopped_by`] says which. The passes double the
+/// planes; the last on a budget is sized from the measured time per plane to use what remains,
+/// and with a target error no pass is larger than the decay of the planes' part of the error
+/// (`1/sqrt(N)` above the floor) says is needed. The image is the estimate of the N planes gathered, N = the total over
 /// passes: the same planes as a render of N planes; each pass splits its planes among the
 /// `opts.spp` ray sets (fewer for small passes, taken in turn), so every plane is still
 /// gathered with a ray set uniform over the pixel, and the estimate is unbiased
@@ -387,14 +389,29 @@ pub fn render_until(
             return FIRST_PASS_PLANES;
         }
         let mut next = pass.planes.min(MAX_PASS_PLANES);
-        if let (Some(target), Some(error)) = (until.target_error, pass.relative_error) {
-            if error <= target {
-                stopped_by = "target error";
+        if let Some(target) = until.target_error {
+            if pass.black {
+                stopped_by = "black image";
                 return 0;
             }
-            // The error falls as 1/sqrt(N): the planes still needed, and a tenth more.
-            let needed = pass.planes as f64 * ((error / target).powi(2) - 1.0) * 1.1;
-            next = next.min(needed.ceil().max(FIRST_PASS_PLANES as f64) as usize);
+            if let Some(error) = pass.relative_error {
+                if error <= target {
+                    stopped_by = "target error";
+                    return 0;
+                }
+                // The direct emission's error does not fall with the planes: below it, the
+                // target is out of reach, whatever the planes (section 10.3).
+                let floor = pass.error_floor.unwrap_or(0.0);
+                if floor >= target {
+                    stopped_by = "error floor";
+                    return 0;
+                }
+                // The planes' part of the variance falls as 1/N, error^2 = floor^2 + c / N:
+                // the planes still needed, and a tenth more.
+                let ratio = (error * error - floor * floor) / (target * target - floor * floor);
+                let needed = pass.planes as f64 * (ratio - 1.0) * 1.1;
+                next = next.min(needed.ceil().max(FIRST_PASS_PLANES as f64) as usize);
+            }
         }
         if let Some(deadline) = deadline {
             // A pass's cost is close to proportional to its planes; keep a tenth in hand.
@@ -430,6 +447,11 @@ pub struct PassReport {
     /// The image's estimated relative RMS error now, with an error image
     /// (docs/mathematics.md section 10.2).
     pub relative_error: Option<f64>,
+    /// The part of it that planes do not lower, the direct emission's (section 10.3).
+    pub error_floor: Option<f64>,
+    /// Whether the image has an error image but is black, so that its relative error is
+    /// undefined (0/0).
+    pub black: bool,
 }
 
 /// Renders planes in passes, each extending the set by the next planes of the sampler:
@@ -460,7 +482,8 @@ pub fn render_in_passes(
     // Each pass sums its planes in f32 weighted 1 (N is known only at the end); the passes add
     // up in f64, so that the sums stay as far from f32 overflow as a single pass's.
     let mut total = vec![DVec3::ZERO; pixels];
-    let mut report = PassReport { planes: 0, seconds_per_plane: 0.0, relative_error: None };
+    let mut report =
+        PassReport { planes: 0, seconds_per_plane: 0.0, relative_error: None, error_floor: None, black: false };
     let mut next_set = 0u32;
     loop {
         control.check()?;
@@ -497,7 +520,12 @@ pub fn render_in_passes(
         if let Some(spread) = &mut gatherer.spread {
             spread.close();
             let image = Film::finish(width, height, &total, report.planes, &emission)?;
-            report.relative_error = spread.variance(&emission_variance).map(|v| relative_rms_error(&image, &v));
+            let error = spread.variance(&emission_variance).map(|v| relative_rms_error(&image, &v, &emission_variance));
+            report.black = matches!(error, Some(None));
+            (report.relative_error, report.error_floor) = match error.flatten() {
+                Some(e) => (Some(e.total), Some(e.floor)),
+                None => (None, None),
+            };
         }
     }
     if report.planes == 0 {
@@ -507,7 +535,7 @@ pub fn render_in_passes(
     stats.planes = report.planes;
     let film = Film::finish(width, height, &total, report.planes, &emission)?;
     if let Some(spread) = spread {
-        stats.add_error_image(&film, spread.variance(&emission_variance))?;
+        stats.add_error_image(&film, spread.variance(&emission_variance), &emission_variance)?;
     }
     stats.seconds_rays += seconds_emission;
     stats.seconds_total = start.elapsed().as_secs_f64();

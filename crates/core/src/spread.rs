@@ -208,13 +208,30 @@ pub fn stderr_film(width: u32, height: u32, variance: &[DVec3]) -> Result<Film> 
     Ok(film)
 }
 
-/// The estimated relative RMS error of an image (section 10.2): the root of the mean variance
-/// over pixels and channels, over the image's mean value. Infinite for a black image.
-pub fn relative_rms_error(image: &Film, variance: &[DVec3]) -> f64 {
+/// An image's estimated relative RMS error (docs/mathematics.md section 10.2) and the part of
+/// it that more planes do not lower.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RelativeError {
+    /// `sqrt(mean Var_hat) / mean(image)`, the means over pixels and channels.
+    pub total: f64,
+    /// The direct emission's part, `sqrt(mean Var_hat(E_hat)) / mean(image)` (section 10.3):
+    /// its samples are fixed by the ray sets and the grids, not by the planes, so no number of
+    /// planes brings `total` below it.
+    pub floor: f64,
+}
+
+/// The relative RMS error of `image` whose pixels have `variance`, of which `emission_variance`
+/// is the direct emission's; `None` for a black image (mean 0), whose relative error is 0/0.
+pub fn relative_rms_error(image: &Film, variance: &[DVec3], emission_variance: &[Vec3]) -> Option<RelativeError> {
     let count = 3.0 * variance.len().max(1) as f64;
     let mean_variance = variance.iter().map(|v| v.x + v.y + v.z).sum::<f64>() / count;
+    let mean_emission = emission_variance.iter().map(|v| v.as_dvec3().element_sum()).sum::<f64>() / count;
     let mean = image.mean();
-    if mean > 0.0 { mean_variance.sqrt() / mean } else { f64::INFINITY }
+    // `!(mean > 0)` also takes a NaN mean (a film is checked finite, but say so here too).
+    if !(mean > 0.0) {
+        return None;
+    }
+    Some(RelativeError { total: mean_variance.sqrt() / mean, floor: mean_emission.sqrt() / mean })
 }
 
 #[cfg(test)]

@@ -71,6 +71,8 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     d.set_item("hits_per_ray", s.hits_per_ray())?;
     d.set_item("gather_ns_per_hit", s.gather_ns_per_hit())?;
     d.set_item("relative_error", s.relative_error)?;
+    d.set_item("error_floor", s.error_floor)?;
+    d.set_item("relative_error_text", s.relative_error_text())?;
     d.set_item("stopped_by", s.stopped_by)?;
     d.set_item("summary", s.summary())?;
     Ok(d)

@@ -41,7 +41,9 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// that many seconds instead of a plane count: planes in passes, each extending the set (the
 /// stats give "planes" and "plane_passes"); `target_error` renders passes until the estimated
 /// relative RMS error of the image falls below it (with `time_budget`, whichever comes first;
-/// the stats' "stopped_by" says which). `threads` runs the render in a pool of that many
+/// the stats' "stopped_by" says which), or stops as soon as it is shown out of reach: below the
+/// stats' "error_floor" (the direct emission's error, which planes do not lower), or a black
+/// image. `threads` runs the render in a pool of that many
 /// threads (None: all cores); the image depends on the seed alone. The image is bit-identical
 /// to the EXR that `fogplanes render` writes for the same arguments. With
 /// `return_stderr=True`, also the estimated standard error of each pixel (as `render
@@ -175,7 +177,7 @@ pub(crate) fn save_image(
     let stops = given.float(Setting::Exposure, exposure)?.map(|e| e as f32);
     let exposure = settings::exposure(stops).map_err(|e| given.error(e))?;
     let film = image_arg(image, "image")?;
-    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)]).map_err(py_error)?;
+    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)], &[]).map_err(py_error)?;
     settings::check_exposure_applies(stops, &[&path]).map_err(|e| given.error(e))?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)
 }

@@ -155,9 +155,17 @@ class RenderStats(TypedDict):
     seconds_total: float
     hits_per_ray: float
     gather_ns_per_hit: float
-    #: The estimated relative RMS error of the image, with an error image (else None).
+    #: The estimated relative RMS error of the image, with an error image (else None; None too
+    #: for a black image, whose relative error is 0/0: "relative_error_text" says which).
     relative_error: float | None
-    #: Why a render in passes stopped: "time budget", "target error", "plane limit" (else None).
+    #: The part of "relative_error" that planes do not lower, the direct emission's error
+    #: (docs/mathematics.md section 10.3): a `target_error` below it is out of reach.
+    error_floor: float | None
+    #: The relative error as the summary words it, e.g. "undefined (the image is black)"; None
+    #: without an error image. Never "inf" or "nan".
+    relative_error_text: str | None
+    #: Why a render in passes stopped: "time budget", "target error", "plane limit", "error
+    #: floor" (the target lies below "error_floor") or "black image" (else None).
     stopped_by: str | None
     summary: str
 
@@ -204,7 +212,9 @@ def render(
     centres. `time_budget` renders for that many seconds instead of a plane count: planes in
     passes, each extending the set (the stats give "planes" and "plane_passes");
     `target_error` renders passes until the estimated relative RMS error of the image falls
-    below it (with `time_budget`, whichever comes first; the stats' "stopped_by" says which).
+    below it (with `time_budget`, whichever comes first; the stats' "stopped_by" says which),
+    or stops as soon as it is shown out of reach: below the stats' "error_floor", the direct
+    emission's error that planes do not lower, or for a black image.
     `threads` runs the render in a pool of that many threads (None: all cores); the image
     depends on the seed alone. The image is bit-identical to the EXR that `fogplanes render`
     writes for the same arguments. `sampler` is where the planes' random numbers come from:
