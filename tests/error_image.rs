@@ -188,7 +188,9 @@ fn calibration_figures() {
 }
 
 /// A render to a target error stops when its estimated relative RMS error is below it, and
-/// says so; an unreachable target within a budget stops at the budget, and says so.
+/// says so; a render on a budget stops at the budget, and says so; a target below the error's
+/// floor (the direct emission's error, which planes do not lower) stops as soon as the floor
+/// is measured, and says so (it ran to the plane limit).
 #[test]
 fn a_render_to_a_target_error_stops_there() {
     let scene = benchmark(80, 45);
@@ -199,11 +201,20 @@ fn a_render_to_a_target_error_stops_there() {
     let e = stats.relative_error.unwrap();
     assert!(e <= 0.02, "{e}");
     assert!(stats.plane_passes >= 2 && stats.stderr.is_some());
-    let o = options(&scene, Overrides { target_error: Some(1e-6), time_budget: Some(0.3), ..Overrides::default() });
-    let until = Until { budget: Some(std::time::Duration::from_secs_f64(0.3)), target_error: Some(1e-6) };
+    let floor = stats.error_floor.unwrap();
+    assert!(floor > 0.0 && floor < e, "floor {floor}, error {e}");
+    let o = options(&scene, Overrides { time_budget: Some(0.3), stderr: true, ..Overrides::default() });
+    let until = Until { budget: Some(std::time::Duration::from_secs_f64(0.3)), target_error: None };
     let (_, stats) = render_until(&scene, &o, until, Control::none()).unwrap();
     assert_eq!(stats.stopped_by, Some("time budget"));
-    assert!(stats.relative_error.unwrap() > 1e-6);
+    assert!(stats.relative_error.unwrap() > stats.error_floor.unwrap());
+    let o = options(&scene, Overrides { target_error: Some(1e-6), time_budget: Some(60.0), ..Overrides::default() });
+    let until = Until { budget: Some(std::time::Duration::from_secs(60)), target_error: Some(1e-6) };
+    let (_, stats) = render_until(&scene, &o, until, Control::none()).unwrap();
+    assert_eq!(stats.stopped_by, Some("error floor"));
+    assert!(stats.plane_passes == 2 && stats.planes < 1000, "{} planes in {} passes", stats.planes, stats.plane_passes);
+    let (e, floor) = (stats.relative_error.unwrap(), stats.error_floor.unwrap());
+    assert!(1e-6 < floor && floor <= e, "floor {floor}, error {e}");
 }
 
 /// The error image is a side output: the image with it is bit for bit the image without it,

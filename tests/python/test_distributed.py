@@ -101,6 +101,35 @@ def test_a_worker_killed_mid_render_changes_no_bit(client, scene):
     assert pids[victim] not in client.run(os.getpid).values()
 
 
+def test_a_client_that_lost_a_worker_renders_references_and_tables_with_the_same_bits(client, scene):
+    """An idle worker SIGKILLed, then at once render, reference and table on the same client,
+    5 rounds in a row: each the bits of the plain function. (The first call after the kill
+    once failed in 23 of 25 rounds: the cores were asked of every worker the scheduler still
+    listed, the dead one too, and the broadcast's CommClosedError ended the call.)"""
+    size = dict(resolution=(32, 18))
+    kwargs = dict(size, planes=3 * chunk_planes(scene) + 77)
+    plain = fogplanes.render(scene, **kwargs)
+    ref_kwargs = dict(size, spp=16, uniform=True)
+    plain_ref = fogplanes.reference(scene, **ref_kwargs)
+    ref = plain_ref[0]
+    plain_row = fogplanes.compare(fogplanes.render(scene, "smis-exact", planes=500, seed=1, **size), ref)
+    for round in range(5):
+        client.wait_for_workers(2, timeout=60)
+        pids = client.run(os.getpid)
+        victim = sorted(pids)[round % 2]
+        os.kill(pids[victim], signal.SIGKILL)
+        image = fd.render(scene, client=client, threads=1, progress=False, **kwargs)
+        assert_bit_identical(image, plain)
+        mean, stderr = fd.reference(scene, client=client, threads=1, band_rows=6, progress=False, **ref_kwargs)
+        assert_bit_identical(mean, plain_ref[0])
+        assert_bit_identical(stderr, plain_ref[1])
+        rows = fd.table(scene, ref, estimators=["smis-exact"], planes=[500], seeds=[1], client=client, threads=1,
+                        progress=False, **size)
+        assert {k: rows[0][k] for k in ("smape", "mse", "rel_mse", "max_abs")} == {
+            k: plain_row[k] for k in ("smape", "mse", "rel_mse", "max_abs")}, f"round {round}"
+    client.wait_for_workers(2, timeout=60)
+
+
 def test_a_pickled_scene_renders_identically(client, scene):
     small = scene.with_resolution(48, 27)
     copy = pickle.loads(pickle.dumps(small))

@@ -43,9 +43,29 @@ def test_an_error_image_needs_two_ray_sets():
 def test_a_render_to_a_target_error_says_why_it_stopped():
     _, stats = fogplanes.render(SIX_LIGHTS, resolution=(48, 27), target_error=0.05, return_stats=True)
     assert stats["stopped_by"] == "target error" and stats["relative_error"] <= 0.05
-    _, stats = fogplanes.render(SIX_LIGHTS, resolution=(48, 27), target_error=1e-6, time_budget=0.3,
+    assert 0 < stats["error_floor"] < stats["relative_error"]
+    _, stats = fogplanes.render(SIX_LIGHTS, resolution=(48, 27), time_budget=0.3, return_stderr=True,
+                                return_stats=True)[1:]
+    assert stats["stopped_by"] == "time budget" and stats["relative_error"] > stats["error_floor"]
+    # Below the floor, the direct emission's error, which planes do not lower: stopped at once
+    # (it ran to the plane limit).
+    _, stats = fogplanes.render(SIX_LIGHTS, resolution=(48, 27), target_error=1e-6, time_budget=60,
                                 return_stats=True)
-    assert stats["stopped_by"] == "time budget" and stats["relative_error"] > 1e-6
+    assert stats["stopped_by"] == "error floor" and stats["planes"] < 1000
+    assert 1e-6 < stats["error_floor"] <= stats["relative_error"]
+    assert "which planes do not lower" in stats["relative_error_text"]
+
+
+def test_a_black_image_has_no_relative_error_and_stops_a_target_error_at_once(tmp_path):
+    text = (ROOT / "media_scenes" / "six_lights.toml").read_text()
+    black = fogplanes.Scene.from_toml(text.replace("look_at = [0.0, 2.5, 0.0]", "look_at = [0.0, 3.0, 20.0]"))
+    image, _, stats = fogplanes.render(black, resolution=(32, 18), planes=4096, return_stderr=True,
+                                       return_stats=True)
+    assert image.max() == 0
+    assert stats["relative_error"] is None and stats["error_floor"] is None
+    assert stats["relative_error_text"] == "undefined (the image is black)"
+    _, stats = fogplanes.render(black, resolution=(32, 18), target_error=0.01, return_stats=True)
+    assert stats["stopped_by"] == "black image" and stats["planes"] < 10_000
 
 
 def test_progress_writes_lines_where_stderr_is_not_a_terminal(capfd):

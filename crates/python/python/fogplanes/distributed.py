@@ -203,16 +203,25 @@ def _cores() -> int:
 
 def _threads_per_task(client: Client) -> tuple[int, int]:
     """(threads per render, Dask threads in the cluster): each node's cores over its Dask
-    threads, the smallest over the nodes, so that no node runs more render threads than cores."""
+    threads, the smallest over the nodes, so that no node runs more render threads than cores.
+
+    The cores are asked of the workers that answer: the scheduler may still list a worker that
+    died (SIGKILLed, its machine gone) until it notices, and asking it once failed the whole
+    call with the broadcast's CommClosedError. A worker that does not answer is left out here;
+    the job's tasks go to the others, and to it again if it comes back."""
     workers = client.scheduler_info(n_workers=-1).get("workers")
     if workers is None:  # the client lost its scheduler (it then closes itself)
         raise ValueError(_gone(client))
     if not workers:
         raise ValueError("the Dask cluster has no workers")
-    cores = client.run(_cores)
+    cores = {address: n for address, n in client.run(_cores, on_error="return").items() if isinstance(n, int)}
+    if not cores:
+        raise ValueError(f"none of the Dask cluster's {len(workers)} workers answers")
     slots_by_host: dict[str, int] = {}
     cores_by_host: dict[str, int] = {}
     for address, info in workers.items():
+        if address not in cores:
+            continue
         host = info.get("host", address)
         slots_by_host[host] = slots_by_host.get(host, 0) + int(info["nthreads"])
         cores_by_host[host] = max(cores_by_host.get(host, 1), int(cores.get(address, 1)))
