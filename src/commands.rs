@@ -141,6 +141,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    outputs.extend(a.schedule_record.as_deref().map(Output::File));
     check_outputs(&outputs)?;
     if r.in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
@@ -163,9 +164,27 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let cpu = system::cpu_seconds();
     let (film, stats) = if !r.in_passes() {
         let held = watch.take_resumed();
-        render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h, spread| {
-            watch.chunk_done(h, spread)
-        })?
+        let strand = a.schedule_record.is_some().then(fogplanes::schedule::start);
+        fogplanes::schedule::cut_for(a.schedule_workers.filter(|&n| n > 0));
+        let progress = || bar.inc(1);
+        let mut control = Control::with_progress(&progress);
+        if let Some(strand) = &strand {
+            control = control.with_strand(strand);
+        }
+        let done = render_from(scene, opts, control, held, &mut |h, spread| watch.chunk_done(h, spread))?;
+        if let Some(path) = &a.schedule_record {
+            let record = serde_json::json!({
+                "threads": rayon::current_num_threads(),
+                "cut_for": fogplanes::schedule::workers(),
+                "planes": opts.planes(),
+                "width": scene.camera.width,
+                "height": scene.camera.height,
+                "estimator": opts.weighting().label(),
+                "sections": fogplanes::schedule::finish(),
+            });
+            fogplanes::film::write_file_atomically(path, record.to_string().as_bytes())?;
+        }
+        done
     } else {
         // What the command spent before rendering, and what writing the file will take.
         let reserve = 0.02 + 5e-8 * film_pixels(scene);
