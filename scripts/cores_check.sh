@@ -2,7 +2,7 @@
 # Issue 38's measurement on a many-core machine (the device machine's CPU): wall and CPU seconds
 # of the benchmark render (six_lights, 640x360, smis-exact) at 1, 2, 4, 8 and 16 threads, for
 # 655,360 and 2,621,440 planes, and the speedup and CPU growth against 1 thread. Not run yet:
-# no session has had such a machine (docs/scaling/scaling.md, "Threads").
+# no session has had such a machine (docs/scaling/threads.md).
 #
 #   scripts/cores_check.sh [BINARY] [THREADS...]     (default: target/release/fogplanes, 1 2 4 8 16)
 #
