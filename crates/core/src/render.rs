@@ -272,6 +272,8 @@ impl<'a> ChunkRenderer<'a> {
             Some(first) => Some(self.prepare(first.clone(), control)?),
             None => None,
         };
+        // The buffers of a chunk's f32 and f64 sums, reused from chunk to chunk.
+        let mut spare: (Vec<Vec3>, Vec<DVec3>) = (Vec::new(), Vec::new());
         for c in done..root.end {
             let start = Instant::now();
             let (work, (sampling, build)) = next.take().expect("the chunk's pieces, prepared before");
@@ -279,14 +281,16 @@ impl<'a> ChunkRenderer<'a> {
             let mut side = self.gatherer.gather_side(weighting);
             let following = specs.get(c + 1 - done).cloned();
             let width = scene.camera.width as usize;
+            let (mut sums, mut wide) = (std::mem::take(&mut spare.0), std::mem::take(&mut spare.1));
             let (gathered, upcoming) = control.join(
                 |control| {
-                    let mut sums = vec![Vec3::ZERO; pixels];
+                    sums.clear();
+                    sums.resize(pixels, Vec3::ZERO);
                     let found = side.gather(&work, &mut sums, control)?;
                     // The chunk's planes freed and its sums widened to f64 here, beside the next
                     // chunk's preparation, not between the chunks.
                     drop(work);
-                    let mut wide = vec![DVec3::ZERO; pixels];
+                    wide.resize(pixels, DVec3::ZERO);
                     control.fill_units("partial", &mut wide, width * 16, |p| sums[p].as_dvec3());
                     Ok::<_, Error>((wide, found))
                 },
@@ -296,6 +300,7 @@ impl<'a> ChunkRenderer<'a> {
                 },
             );
             let (wide, (stats, seconds)) = gathered?;
+            spare.0 = sums;
             let (ready, seconds_prepared) = upcoming;
             self.gatherer.stats.seconds_sampling += sampling;
             self.gatherer.stats.seconds_build += build;
@@ -319,6 +324,8 @@ impl<'a> ChunkRenderer<'a> {
                 let right = held.pop().expect("a right child");
                 let left = held.pop().expect("its left sibling");
                 held.push(combine_in(left, &right, control)?);
+                // Its buffer is the next chunk's (fresh pages cost their faults again).
+                spare.1 = right.sums;
             }
             observer(&held, self.gatherer.spread.as_ref())?;
             // The next chunk's preparation failed (cancelled) only now that this chunk is told.
