@@ -78,6 +78,14 @@ def cpu_seconds(sections):
 
 
 def record(binary, scene, args, threads, path):
+    if args.reference:
+        # The reference's units do not depend on the workers: each record on at most
+        # --record-threads threads (default: N).
+        cmd = [binary, "reference", scene, "--quiet", "--spp", str(args.reference), "--resolution", args.resolution,
+               "--schedule-record", path, "--threads", str(min(threads, args.record_threads or threads))]
+        with tempfile.TemporaryDirectory() as tmp:
+            subprocess.run(cmd + ["-o", os.path.join(tmp, "x.exr")] + args.extra, check=True)
+        return
     cmd = [binary, "render", scene, "--quiet", "--planes", str(args.planes),
            "-e", args.estimator, "--resolution", args.resolution, "--schedule-record", path]
     if args.record_threads:
@@ -101,6 +109,8 @@ def main():
     ap.add_argument("--record-threads", type=int, help="record with at most this many threads (the cores here), "
                     "the work cut for N workers (--schedule-workers N): no unit measured beside more threads than "
                     "cores; without it, each record runs N threads")
+    ap.add_argument("--reference", type=int, metavar="SPP",
+                    help="model the reference renderer (`fogplanes reference --spp SPP`) instead of a render")
     ap.add_argument("--extra", nargs="*", default=[], help="further arguments for the renders")
     args = ap.parse_args()
     threads = [int(t) for t in args.threads.split(",")]

@@ -296,6 +296,10 @@ pub(crate) struct ReferenceArgs {
     /// sample counts come from it instead of a pilot pass of this run's own.
     #[arg(long, value_name = "PILOT.npz", conflicts_with = "uniform")]
     pub(crate) pilot: Option<PathBuf>,
+    /// Record the reference's units of work into this JSON file, as `render --schedule-record`
+    /// does (`scripts/scaling_model.py --reference`).
+    #[arg(long, value_name = "FILE.json", conflicts_with = "partial")]
+    pub(crate) schedule_record: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) watch: WatchArgs,
     #[command(flatten)]

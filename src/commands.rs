@@ -366,6 +366,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    outputs.extend(a.schedule_record.as_deref().map(Output::File));
     check_outputs(&outputs)?;
     let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
@@ -379,8 +380,24 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     }
     let done = watch.take_done();
     let tick = || bar.inc(1);
-    let control = Control::with_progress(&tick);
+    let strand = a.schedule_record.is_some().then(fogplanes::schedule::start);
+    let mut control = Control::with_progress(&tick);
+    if let Some(strand) = &strand {
+        control = control.with_strand(strand);
+    }
     let reference = render_reference_from(scene, &r.options, control, done, &mut |step| watch.step(step))?;
+    if let Some(path) = &a.schedule_record {
+        let record = serde_json::json!({
+            "threads": rayon::current_num_threads(),
+            "cut_for": rayon::current_num_threads(),
+            "planes": 0,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "estimator": "reference",
+            "sections": fogplanes::schedule::finish(),
+        });
+        fogplanes::film::write_file_atomically(path, record.to_string().as_bytes())?;
+    }
     bar.finish_and_clear();
     reference.mean.save_with_info(&output, r.exposure, Some(&r.options.image_info(scene, false)))?;
     if let Some(p) = &a.stderr_image {
