@@ -238,6 +238,16 @@ pub(crate) struct RenderArgs {
     /// file instead of an image (numpy loads it: `sums` and a JSON `meta`).
     #[arg(long, value_name = "PART.npz", conflicts_with_all = ["time_budget", "target_error"])]
     pub(crate) partial: Option<PathBuf>,
+    /// Record the render's units of work (each one's CPU seconds, and what it waits for) into
+    /// this JSON file, for the schedule model that predicts the speed on more cores
+    /// (`scripts/scaling_model.py`; `fogplanes::schedule`).
+    #[arg(long, value_name = "FILE.json", conflicts_with_all = ["partial", "time_budget", "target_error"])]
+    pub(crate) schedule_record: Option<PathBuf>,
+    /// With --schedule-record: cut the work (the raster's tiles) as for this many workers,
+    /// whatever --threads, so that a record made on few cores holds a larger machine's units,
+    /// each measured without more threads than cores. The image is the same bits.
+    #[arg(long, value_name = "N", requires = "schedule_record")]
+    pub(crate) schedule_workers: Option<usize>,
     #[command(flatten)]
     pub(crate) watch: WatchArgs,
     #[command(flatten)]
@@ -286,6 +296,10 @@ pub(crate) struct ReferenceArgs {
     /// sample counts come from it instead of a pilot pass of this run's own.
     #[arg(long, value_name = "PILOT.npz", conflicts_with = "uniform")]
     pub(crate) pilot: Option<PathBuf>,
+    /// Record the reference's units of work into this JSON file, as `render --schedule-record`
+    /// does (`scripts/scaling_model.py --reference`).
+    #[arg(long, value_name = "FILE.json", conflicts_with = "partial")]
+    pub(crate) schedule_record: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) watch: WatchArgs,
     #[command(flatten)]

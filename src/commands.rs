@@ -142,6 +142,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    outputs.extend(a.schedule_record.as_deref().map(Output::File));
     check_outputs(&outputs, &[&a.scene])?;
     if r.in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
@@ -164,9 +165,27 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let cpu = system::cpu_seconds();
     let (film, stats) = if !r.in_passes() {
         let held = watch.take_resumed();
-        render_from(scene, opts, Control::with_progress(&|| bar.inc(1)), held, &mut |h, spread| {
-            watch.chunk_done(h, spread)
-        })?
+        let strand = a.schedule_record.is_some().then(fogplanes::schedule::start);
+        fogplanes::schedule::cut_for(a.schedule_workers.filter(|&n| n > 0));
+        let progress = || bar.inc(1);
+        let mut control = Control::with_progress(&progress);
+        if let Some(strand) = &strand {
+            control = control.with_strand(strand);
+        }
+        let done = render_from(scene, opts, control, held, &mut |h, spread| watch.chunk_done(h, spread))?;
+        if let Some(path) = &a.schedule_record {
+            let record = serde_json::json!({
+                "threads": rayon::current_num_threads(),
+                "cut_for": fogplanes::schedule::workers(),
+                "planes": opts.planes(),
+                "width": scene.camera.width,
+                "height": scene.camera.height,
+                "estimator": opts.weighting().label(),
+                "sections": fogplanes::schedule::finish(),
+            });
+            fogplanes::film::write_file_atomically(path, record.to_string().as_bytes())?;
+        }
+        done
     } else {
         // What the command spent before rendering, and what writing the file will take.
         let reserve = 0.02 + 5e-8 * film_pixels(scene);
@@ -380,6 +399,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let output = a.output.clone().unwrap_or_else(|| default_output(scene, "_reference"));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
+    outputs.extend(a.schedule_record.as_deref().map(Output::File));
     check_outputs(&outputs, &reference_inputs(&a))?;
     let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
@@ -393,8 +413,24 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     }
     let done = watch.take_done();
     let tick = || bar.inc(1);
-    let control = Control::with_progress(&tick);
+    let strand = a.schedule_record.is_some().then(fogplanes::schedule::start);
+    let mut control = Control::with_progress(&tick);
+    if let Some(strand) = &strand {
+        control = control.with_strand(strand);
+    }
     let reference = render_reference_from(scene, &r.options, control, done, &mut |step| watch.step(step))?;
+    if let Some(path) = &a.schedule_record {
+        let record = serde_json::json!({
+            "threads": rayon::current_num_threads(),
+            "cut_for": rayon::current_num_threads(),
+            "planes": 0,
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "estimator": "reference",
+            "sections": fogplanes::schedule::finish(),
+        });
+        fogplanes::film::write_file_atomically(path, record.to_string().as_bytes())?;
+    }
     bar.finish_and_clear();
     reference.mean.save_with_info(&output, r.exposure, Some(&r.options.image_info(scene, false)))?;
     if let Some(p) = &a.stderr_image {

@@ -169,24 +169,52 @@ fn bvh_finds_the_same_hits() {
     }
 }
 
-/// Nor on the raster's bands, which are smaller for more workers (`raster::band_rows`): 54
-/// rows make 4 bands of 16 rows for 1 or 2 workers, 7 of 8 rows for 3, of 4 rows (14) for 4 to
-/// 7, of 2 (27) for 8 to 13, of 1 (54) for 14 or more. Every estimator, the same bits.
+/// Nor on the thread count: the images of every estimator, with whole pixels (16 ray sets, so
+/// that a chunk has several pieces) and at pixel centres, are main's before issue 38 bit for
+/// bit (the hashes below, made at 868acbd), with pools of 1, 2, 3, 7, 16 and 64 workers, which
+/// cut the image into different tiles (`raster::Tiling`). Three chunks of planes, so that a
+/// chunk's planes are prepared while the one before is gathered; the error image too.
 #[test]
-fn images_do_not_depend_on_the_thread_count() {
+fn images_are_main_s_at_every_thread_count_and_pixel_filter() {
     let s = scene("media_scenes/six_lights.toml", 96, 54);
-    assert_eq!([1, 3, 5, 10, 16].map(|t| fogplanes::raster::band_rows(54, t)), [16, 8, 4, 2, 1]);
-    for estimator in Estimator::ALL {
-        let opts = with(&s, Weighting { estimator, orientations: 2 }, Accelerator::Raster, Kernel::Auto, 4000);
-        let render_with = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            pool.install(|| render(&s, &opts, Control::none()).unwrap().0)
-        };
-        let one = render_with(1);
-        for threads in [5, 10, 16] {
-            assert!(render_with(threads).pixels == one.pixels, "{estimator}, {threads} workers");
+    let planes = 2 * fogplanes::limits::CHUNK_PLANES + 3000;
+    // (estimator, whole pixels, pixel centres)
+    let want: [(Estimator, u64, u64); 5] = [
+        (Estimator::Unweighted, 0xbfe3_ad5e_3c88_6b36, 0x291d_bfc2_dc03_6c28),
+        (Estimator::CmisCosine, 0x3fd5_da52_7f3c_62c1, 0x8fd5_5186_4850_0352),
+        (Estimator::SmisCosine, 0x09f0_488c_023d_da23, 0xf2f9_2efa_4d37_df52),
+        (Estimator::SmisExact, 0x67d0_4033_0f67_7063, 0x8c2d_3ea4_c8f3_f0b5),
+        (Estimator::CmisExact, 0x1b8f_a62d_86dc_aeea, 0x8492_624f_686b_ba27),
+    ];
+    let pools: Vec<_> =
+        [1, 2, 3, 7, 16, 64].map(|t| rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap()).into();
+    let mut got = Vec::new();
+    for (estimator, whole, centre) in want {
+        for (pixel_center, hash) in [(false, whole), (true, centre)] {
+            let mut opts = Overrides {
+                planes: Some(planes as u64),
+                estimator: Some(estimator),
+                seed: Some(5),
+                pixel_center,
+                ..Overrides::default()
+            };
+            opts.stderr = !pixel_center && estimator == Estimator::SmisExact;
+            let opts = options(&s, opts);
+            for pool in &pools {
+                let (image, stats) = pool.install(|| render(&s, &opts, Control::none()).unwrap());
+                let mut h = image_hash(&image.pixels);
+                if let Some(se) = &stats.stderr {
+                    h ^= image_hash(&se.pixels).rotate_left(1);
+                }
+                let mark = if h == hash { "" } else { "  <- not main's" };
+                got.push(format!(
+                    "{estimator}, centres {pixel_center}, {} workers: {h:#018x}{mark}",
+                    pool.current_num_threads()
+                ));
+            }
         }
     }
+    assert!(!got.iter().any(|g| g.ends_with("main's")), "{}", got.join("\n"));
 }
 
 /// The raster's near-plane and image clipping, with the camera inside the box, on its boundary,

@@ -10,8 +10,9 @@ use crate::control::Control;
 use crate::error::Result;
 use crate::gather::{GatherContext, GatherStats};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
-use crate::photon_plane::{PlaneSet, sample_plane_range};
-use crate::raster::{ScreenRaster, band_rows};
+use crate::limits::PLANE_UNIT;
+use crate::photon_plane::{PlaneSet, sample_plane};
+use crate::raster::{RasterPiece, ScreenRaster, Tiling};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -41,12 +42,12 @@ impl Accelerator {
         }
     }
 
-    /// Progress units of one gathering over the image (for sizing a progress bar): a band of
-    /// rows on the raster (sized for the current thread pool: call it in the pool that
-    /// renders), a chunk of rays on the per-ray structures.
+    /// Progress units of one gathering over the image (for sizing a progress bar): a tile on
+    /// the raster (sized for the current thread pool: call it in the pool that renders), a
+    /// chunk of rays on the per-ray structures.
     pub fn units_per_gathering(self, width: u32, height: u32) -> u64 {
         match self {
-            Accelerator::Raster => height.div_ceil(band_rows(height, rayon::current_num_threads())) as u64,
+            Accelerator::Raster => Tiling::new(width, height, crate::schedule::workers()).count() as u64,
             _ => (width as u64 * height as u64).div_ceil(RAY_CHUNK as u64),
         }
     }
@@ -127,16 +128,19 @@ impl PreparedPlanes {
         let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
+        let lights = scene.light_distribution();
         for start in range.clone().step_by(SAMPLING_PIECE) {
             control.check()?;
             let t = Instant::now();
-            let piece =
-                sample_plane_range(scene, set.sampler, set.seed, start..(start + SAMPLING_PIECE).min(range.end));
+            let piece = start..(start + SAMPLING_PIECE).min(range.end);
+            let piece = control.map_units("sample", piece.len(), PLANE_UNIT, |j| {
+                sample_plane(scene, &lights, set.sampler.plane_numbers(set.seed, (piece.start + j) as u64))
+            });
             seconds_sampling += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            context.push_planes(scene, &piece, 1);
+            context.push_planes_in(scene, &piece, 1, control);
             if let Some(r) = &mut raster {
-                r.push_planes(&scene.camera, &piece, &scene.medium);
+                r.push_planes_in(&scene.camera, &piece, &scene.medium, control);
             }
             seconds_build += t.elapsed().as_secs_f64();
             if accelerator == Accelerator::Bvh {
@@ -179,24 +183,59 @@ impl PreparedPlanes {
         sums: &mut [Vec3],
         control: Control,
     ) -> Result<GatherStats> {
-        struct Run<'a> {
-            planes: &'a PreparedPlanes,
-            kernel: Kernel,
-            rays: &'a [CameraRay],
-            sums: &'a mut [Vec3],
-            control: Control<'a>,
-        }
-        impl WithDenominator for Run<'_> {
-            type Output = GatherStats;
-            fn run<D: Denominator>(self, weights: &D) -> GatherStats {
-                let with = Gathering { ctx: &self.planes.context, weights, kernel: self.kernel };
-                self.planes.structure.gather(with, self.rays, self.sums, self.control)
-            }
-        }
-        let stats = weighting.dispatch(Run { planes: self, kernel, rays, sums, control });
-        control.check()?;
-        Ok(stats)
+        gather_pieces(&[(self, rays)], weighting, kernel, sums, control)
     }
+}
+
+/// Gathers several pieces of planes in their order, each along its own ray set, adding each
+/// ray's estimate of each to `sums`: [`PreparedPlanes::gather`] of each piece in turn, the same
+/// bits. On the raster, one parallel loop over the image's tiles, each tile taking every piece
+/// in turn ([`crate::raster::gather_pieces`]: no barrier between pieces); on the other
+/// structures, piece after piece. Progress and cancelling as for [`PreparedPlanes::gather`].
+pub fn gather_pieces(
+    pieces: &[(&PreparedPlanes, &[CameraRay])],
+    weighting: Weighting,
+    kernel: Kernel,
+    sums: &mut [Vec3],
+    control: Control,
+) -> Result<GatherStats> {
+    struct Run<'a, 'p> {
+        pieces: &'p [(&'a PreparedPlanes, &'a [CameraRay])],
+        kernel: Kernel,
+        sums: &'p mut [Vec3],
+        control: Control<'p>,
+    }
+    impl WithDenominator for Run<'_, '_> {
+        type Output = GatherStats;
+        fn run<D: Denominator>(self, weights: &D) -> GatherStats {
+            let rasters: Option<Vec<RasterPiece>> = self
+                .pieces
+                .iter()
+                .map(|(p, rays)| p.raster().map(|raster| RasterPiece { raster, ctx: &p.context, rays }))
+                .collect();
+            if let Some(rasters) = rasters {
+                return crate::raster::gather_pieces::<D, true>(
+                    &rasters,
+                    weights,
+                    self.kernel,
+                    self.sums,
+                    self.control,
+                );
+            }
+            let mut stats = GatherStats::default();
+            for (planes, rays) in self.pieces {
+                if self.control.is_cancelled() {
+                    break;
+                }
+                let with = Gathering { ctx: &planes.context, weights, kernel: self.kernel };
+                stats += planes.structure.gather(with, rays, self.sums, self.control);
+            }
+            stats
+        }
+    }
+    let stats = weighting.dispatch(Run { pieces, kernel, sums, control });
+    control.check()?;
+    Ok(stats)
 }
 
 #[cfg(test)]
@@ -234,7 +273,7 @@ mod tests {
     }
 
     /// Cancelled in the middle of a plane, the raster stops before the next plane: each thread
-    /// weighs at most the rest of the plane under way in its band, with every kernel. The
+    /// weighs at most the rest of the plane under way in its tile, with every kernel. The
     /// per-ray paths stop before the next ray: each thread finishes at most the hits of its ray
     /// under way. Counted in blocks weighed, out of the thousands a whole pass weighs.
     #[test]
@@ -242,7 +281,7 @@ mod tests {
         let scene = small_scene();
         let rays = crate::pixel::ray_set_rays(&scene, 1, 0, false);
         let (planes, after, threads) = (3000, 20, 2);
-        // The most blocks one plane has in one band: every half block of every row.
+        // The most blocks one plane has in one tile: every half block of every row.
         let band_blocks = (BAND_ROWS * scene.camera.width.div_ceil(crate::kernel::HALF_LANES as u32)) as usize;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         for accelerator in Accelerator::ALL {

@@ -2,15 +2,16 @@
 //! flag) goes to every render, reference and gathering call.
 //!
 //! The flag is read with a relaxed load (a plain memory read) between small units of work: per
-//! plane in a band of rows, per ray on the per-ray paths, per chunk of planes while sampling,
+//! plane in a tile of the image, per ray on the per-ray paths, per chunk of planes while sampling,
 //! per pixel in the reference. So a job stops within a few milliseconds of the flag being set,
 //! at any plane count (the promise is under a second), and a read costs nothing beside a
 //! plane's or a pixel's work.
 
 use crate::error::{Error, Result};
+use crate::schedule::{self, Strand};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// A progress callback: called once per finished unit of work (a band of rows, a chunk of rays,
+/// A progress callback: called once per finished unit of work (a tile and piece of planes, a chunk of rays,
 /// a row of the reference); see [`crate::accel::Accelerator::units_per_gathering`].
 pub type Progress<'a> = &'a (dyn Fn() + Sync);
 
@@ -19,6 +20,8 @@ pub type Progress<'a> = &'a (dyn Fn() + Sync);
 pub struct Control<'a> {
     progress: Progress<'a>,
     cancel: &'a AtomicBool,
+    /// Where the job's units of work are recorded, if they are ([`crate::schedule`]).
+    strand: Option<&'a Strand>,
 }
 
 /// The flag of a job nobody can cancel: private, so never set.
@@ -29,22 +32,106 @@ fn no_progress() {}
 impl<'a> Control<'a> {
     /// Progress reported to `progress`; the job stops once another thread sets `cancel`.
     pub fn new(progress: Progress<'a>, cancel: &'a AtomicBool) -> Self {
-        Control { progress, cancel }
+        Control { progress, cancel, strand: None }
     }
 
     /// No progress reported, never cancelled.
     pub fn none() -> Control<'static> {
-        Control { progress: &no_progress, cancel: &NEVER }
+        Control { progress: &no_progress, cancel: &NEVER, strand: None }
     }
 
     /// Progress reported to `progress`, never cancelled.
     pub fn with_progress(progress: Progress<'a>) -> Self {
-        Control { progress, cancel: &NEVER }
+        Control { progress, cancel: &NEVER, strand: None }
     }
 
     /// No progress reported; the job stops once another thread sets `cancel`.
     pub fn with_cancel(cancel: &'a AtomicBool) -> Self {
-        Control { progress: &no_progress, cancel }
+        Control { progress: &no_progress, cancel, strand: None }
+    }
+
+    /// The same control, recording the job's units of work on `strand` ([`crate::schedule`]).
+    pub fn with_strand(self, strand: &'a Strand) -> Self {
+        Control { strand: Some(strand), ..self }
+    }
+
+    /// Opens a parallel section of the record, if the job is recorded: each of its units runs
+    /// in [`Section::unit`]; [`Section::close`] ends it.
+    pub fn section(&self, label: &'static str) -> Section<'a> {
+        Section { strand: self.strand, id: self.strand.map_or(0, |s| s.open(label)) }
+    }
+
+    /// `f(i)` for every `i` in `0..n`, in parallel, in order: units of `unit` consecutive
+    /// indices, each one unit of the record's section `label` when the job is recorded.
+    pub fn map_units<T: Send>(
+        &self,
+        label: &'static str,
+        n: usize,
+        unit: usize,
+        f: impl Fn(usize) -> T + Sync + Send,
+    ) -> Vec<T> {
+        use rayon::prelude::*;
+        let unit = unit.max(1);
+        let section = self.section(label);
+        let parts: Vec<Vec<T>> = (0..n.div_ceil(unit))
+            .into_par_iter()
+            .map(|u| section.unit(|| (u * unit..((u + 1) * unit).min(n)).map(&f).collect()))
+            .collect();
+        section.close();
+        let mut out = Vec::with_capacity(n);
+        for part in parts {
+            out.extend(part);
+        }
+        out
+    }
+
+    /// `out[i] = f(i)` for every `i`, in parallel: units of `unit` consecutive indices, as
+    /// [`Control::map_units`], written in place.
+    pub fn fill_units<T: Send>(&self, label: &'static str, out: &mut [T], unit: usize, f: impl Fn(usize) -> T + Sync) {
+        use rayon::prelude::*;
+        let unit = unit.max(1);
+        let section = self.section(label);
+        out.par_chunks_mut(unit).enumerate().for_each(|(u, part)| {
+            section.unit(|| {
+                for (i, o) in part.iter_mut().enumerate() {
+                    *o = f(u * unit + i);
+                }
+            })
+        });
+        section.close();
+    }
+
+    /// `rayon::join(a, b)`, each side given this control; recorded as two strands that start
+    /// here and end before the next section.
+    pub fn join<A, B, RA, RB>(&self, a: A, b: B) -> (RA, RB)
+    where
+        A: FnOnce(Control) -> RA + Send,
+        B: FnOnce(Control) -> RB + Send,
+        RA: Send,
+        RB: Send,
+    {
+        let Some(strand) = self.strand else {
+            return rayon::join(|| a(*self), || b(*self));
+        };
+        let (sa, sb) = strand.fork();
+        fn side<'s>(control: &Control<'s>, s: &'s Strand) -> Control<'s> {
+            s.begin();
+            Control { strand: Some(s), ..*control }
+        }
+        let out = rayon::join(
+            || {
+                let r = a(side(self, &sa));
+                sa.end();
+                r
+            },
+            || {
+                let r = b(side(self, &sb));
+                sb.end();
+                r
+            },
+        );
+        strand.join(sa, sb);
+        out
     }
 
     /// Reports one finished unit of work.
@@ -63,6 +150,31 @@ impl<'a> Control<'a> {
     #[inline]
     pub fn check(&self) -> Result<()> {
         if self.is_cancelled() { Err(Error::Cancelled) } else { Ok(()) }
+    }
+}
+
+/// A parallel section of a recorded job (nothing when it is not recorded).
+#[derive(Clone, Copy)]
+pub struct Section<'a> {
+    strand: Option<&'a Strand>,
+    id: usize,
+}
+
+impl Section<'_> {
+    /// Runs `f` as one unit of the section.
+    #[inline]
+    pub fn unit<R>(&self, f: impl FnOnce() -> R) -> R {
+        match self.strand {
+            Some(_) => schedule::unit(self.id, f),
+            None => f(),
+        }
+    }
+
+    /// Ends the section: what the job does next comes after it.
+    pub fn close(self) {
+        if let Some(s) = self.strand {
+            s.close(self.id);
+        }
     }
 }
 

@@ -9,6 +9,7 @@
 //! estimates of the mean of `E` over the pixel, and pixels that no panel can cover pay nothing.
 
 use crate::camera::Camera;
+use crate::control::Control;
 use crate::light::RectLight;
 use crate::photon_plane::{Polygon, clip_segment};
 use crate::pixel::{PanelFootprints, ray_set_position};
@@ -16,7 +17,6 @@ use crate::sampling::{rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::{DVec2, DVec3, Vec3};
 use rand::RngCore;
-use rayon::prelude::*;
 
 /// The side `n` of the jittered grid of an outline pixel (`n^2` samples): chosen by measurement
 /// (docs/mathematics.md section 8.2).
@@ -41,12 +41,12 @@ const TINY_AREA: f64 = 1e-9;
 /// the pixel centre when `pixel_center`. `ray_sets` and `seed` fix the positions that pixels
 /// without an outline average over (those of the render's ray sets).
 pub fn direct_emission(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool) -> Vec<Vec3> {
-    emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID).0
+    emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID, Control::none()).0
 }
 
 /// [`direct_emission`] with a `grid x grid` jittered grid in the pixels that need one.
 pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_center: bool, grid: u32) -> Vec<Vec3> {
-    emission_with_variance(scene, seed, ray_sets, pixel_center, grid).0
+    emission_with_variance(scene, seed, ray_sets, pixel_center, grid, Control::none()).0
 }
 
 /// [`direct_emission`] and, per pixel, an estimate of its variance (docs/mathematics.md section
@@ -59,7 +59,19 @@ pub fn direct_emission_and_variance(
     ray_sets: u32,
     pixel_center: bool,
 ) -> (Vec<Vec3>, Vec<Vec3>) {
-    emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID)
+    direct_emission_and_variance_in(scene, seed, ray_sets, pixel_center, Control::none())
+}
+
+/// [`direct_emission_and_variance`] with its rows, units of work, recorded on `control`'s
+/// strand ([`crate::schedule`]).
+pub fn direct_emission_and_variance_in(
+    scene: &Scene,
+    seed: u64,
+    ray_sets: u32,
+    pixel_center: bool,
+    control: Control,
+) -> (Vec<Vec3>, Vec<Vec3>) {
+    emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID, control)
 }
 
 fn emission_with_variance(
@@ -68,6 +80,7 @@ fn emission_with_variance(
     ray_sets: u32,
     pixel_center: bool,
     grid: u32,
+    control: Control,
 ) -> (Vec<Vec3>, Vec<Vec3>) {
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
@@ -75,9 +88,9 @@ fn emission_with_variance(
     let outline = if pixel_center { vec![false; (w * h) as usize] } else { outline_pixels(scene) };
     let projected = projected_panels(scene);
     let ray_sets = ray_sets.max(1);
-    (0..w * h)
-        .into_par_iter()
-        .map(|p| {
+    control
+        .map_units("emission", (w * h) as usize, w as usize, |p| {
+            let p = p as u32;
             let (i, j) = (p % w, p / w);
             if !footprints.any_over(i, j) {
                 return (Vec3::ZERO, Vec3::ZERO);
@@ -109,6 +122,7 @@ fn emission_with_variance(
             };
             (mean.value().as_vec3(), mean.variance().as_vec3())
         })
+        .into_iter()
         .unzip()
 }
 

@@ -57,7 +57,8 @@ impl Film {
     /// no image holds NaN or infinity.
     pub fn finish(width: u32, height: u32, sums: &[DVec3], planes: usize, emission: &[Vec3]) -> Result<Film> {
         let n = planes as f64;
-        let pixels = sums.iter().zip(emission).map(|(s, e)| (*s / n).as_vec3() + *e).collect();
+        use rayon::prelude::*;
+        let pixels = sums.par_iter().zip(emission).map(|(s, e)| (*s / n).as_vec3() + *e).collect();
         let film = Film { width, height, pixels };
         film.check_finite("image")?;
         Ok(film)

@@ -37,6 +37,8 @@
 //! benchmark's CPU time.
 
 use crate::camera::CameraRay;
+use crate::control::Control;
+use crate::limits::PLANE_UNIT;
 use crate::numeric::exp_lanes;
 use crate::occlusion::{Occluder, possible_occluders};
 use crate::photon_plane::PhotonPlane;
@@ -339,9 +341,14 @@ impl GatherContext {
     /// Prepares and appends the next planes of a set of `planes_total` planes (the same for every
     /// push: a context holds planes of one set).
     pub fn push_planes(&mut self, scene: &Scene, planes: &[PhotonPlane], planes_total: usize) {
-        use rayon::prelude::*;
-        let masks: Vec<u64> = planes.par_iter().map(|p| possible_occluders(scene, p)).collect();
-        self.push_planes_with_occluders(scene, planes, &masks, planes_total);
+        self.push_planes_in(scene, planes, planes_total, Control::none());
+    }
+
+    /// [`GatherContext::push_planes`] with its parallel loops recorded on `control`'s strand
+    /// ([`crate::schedule`]), in units of [`PLANE_UNIT`] planes.
+    pub fn push_planes_in(&mut self, scene: &Scene, planes: &[PhotonPlane], planes_total: usize, control: Control) {
+        let masks = control.map_units("occluders", planes.len(), PLANE_UNIT, |i| possible_occluders(scene, &planes[i]));
+        self.push_views(scene, planes, &masks, planes_total, control);
     }
 
     /// [`GatherContext::push_planes`] with the lights that may shadow each plane given (a bit
@@ -353,7 +360,17 @@ impl GatherContext {
         masks: &[u64],
         planes_total: usize,
     ) {
-        use rayon::prelude::*;
+        self.push_views(scene, planes, masks, planes_total, Control::none());
+    }
+
+    fn push_views(
+        &mut self,
+        scene: &Scene,
+        planes: &[PhotonPlane],
+        masks: &[u64],
+        planes_total: usize,
+        control: Control,
+    ) {
         let total = *self.planes_total.get_or_insert(planes_total);
         assert_eq!(total, planes_total, "the planes of a context belong to one set (one N)");
         let mut ranges = Vec::with_capacity(planes.len());
@@ -368,12 +385,9 @@ impl GatherContext {
             ranges.push((start, self.occluders.len() as u32));
         }
         let origin = self.origin;
-        self.views.par_extend(
-            planes
-                .par_iter()
-                .zip(ranges.par_iter())
-                .map(|(p, &range)| PlaneView::new(p, scene, origin, planes_total, range)),
-        );
+        self.views.extend(control.map_units("views", planes.len(), PLANE_UNIT, |i| {
+            PlaneView::new(&planes[i], scene, origin, planes_total, ranges[i])
+        }));
         // Stable: each light's planes stay in index order (the new ones follow, a merge).
         self.by_light.extend(self.by_light.len() as u32..self.views.len() as u32);
         let views = &self.views;

@@ -14,6 +14,7 @@
 //! |---|---|---|
 //! | foundations | [`numeric`] | generic scalar arithmetic and the branch-free exponential |
 //! | | [`error`] | the library's typed errors, and the closed list of settings they name |
+//! | | [`schedule`] | a record of a job's units of work and their order, for the schedule model (`scripts/scaling_model.py`) |
 //! | | [`control`] | following and stopping a long job: progress callback and cancel flag |
 //! | | [`limits`] | every default of a render, every range a setting must lie in, the memory rule |
 //! | | [`sampling`] | the plane samplers (Owen-scrambled Sobol, independent), the one hash and its random streams, warps, the Kronecker sequence of the reference (section 4), the chi-square test |
@@ -94,6 +95,7 @@ pub mod reference;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod schedule;
 pub mod settings;
 pub mod simd;
 pub mod spread;

@@ -15,8 +15,12 @@ pub const DEFAULT_RAY_SETS: u32 = 16;
 /// Planes per canonical chunk ([`crate::partial`]): a power of two, fixed (it never depends on
 /// the number of workers or of planes), small enough that one chunk is a task of a fraction of
 /// a second at 640x360 and holds little memory, large enough that the per-chunk costs (one
-/// pass over the image's bands, the f64 conversion) stay near 1% of a render.
+/// pass over the image's tiles, the f64 conversion) stay near 1% of a render.
 pub const CHUNK_PLANES: usize = 16_384;
+
+/// Planes per unit of work of the parallel loops over planes (sampling, preparing, projecting):
+/// a few hundred microseconds each, a unit of the schedule's record ([`crate::schedule`]).
+pub const PLANE_UNIT: usize = 256;
 
 // ---------------------------------------------------------------------------------------------
 // Ranges
@@ -117,10 +121,11 @@ pub fn check_sweep_seeds(seeds: u32) -> Result<(), String> {
 }
 
 /// The memory rule of a render of `planes` planes at `width x height` (the scene loader and
-/// every front end apply it, through [`crate::settings`]): it holds one canonical chunk's
-/// planes at a time ([`CHUNK_PLANES`]) and, per pixel, besides [`BYTES_PER_PIXEL`], one f64 sum
-/// per level of the canonical tree over its chunks ([`crate::partial`]); so only the image can
-/// exceed the memory.
+/// every front end apply it, through [`crate::settings`]): it holds two canonical chunks'
+/// planes at a time ([`CHUNK_PLANES`]: the chunk being gathered and the next, prepared
+/// meanwhile) and, per pixel, besides [`BYTES_PER_PIXEL`], the second chunk's ray set and one
+/// f64 sum per level of the canonical tree over its chunks ([`crate::partial`]); so only the
+/// image can exceed the memory.
 pub fn check_render_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
     check_render_memory_with(width, height, planes, 0)
 }
@@ -129,8 +134,8 @@ pub fn check_render_memory(width: u32, height: u32, planes: u64) -> Result<(), S
 pub fn check_render_memory_with(width: u32, height: u32, planes: u64, extra: u64) -> Result<(), String> {
     let chunks = planes.div_ceil(CHUNK_PLANES as u64).max(1);
     let levels = (u64::BITS - chunks.leading_zeros()) as u64 + 1;
-    let held = planes.min(CHUNK_PLANES as u64);
-    let per_pixel = BYTES_PER_PIXEL + 24 * levels + extra;
+    let held = planes.min(2 * CHUNK_PLANES as u64);
+    let per_pixel = BYTES_PER_PIXEL + 20 + 24 * levels + extra;
     let bytes =
         held.saturating_mul(BYTES_PER_PLANE).saturating_add((width as u64 * height as u64).saturating_mul(per_pixel));
     budget(width, height, planes, bytes)

@@ -10,6 +10,7 @@
 //! integrated over the pixel separately ([`crate::emission`]).
 
 use crate::camera::CameraRay;
+use crate::control::Control;
 use crate::light::Rectangle;
 use crate::numeric::dot;
 use crate::sampling::sobol::{nested_uniform_scramble, sobol_u32};
@@ -18,6 +19,7 @@ use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The random stream of the ray sets' positions in their pixels.
@@ -165,6 +167,12 @@ pub fn ray_set_rays(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> Vec
 /// is written, and a fresh buffer of a few megabytes costs its page faults again (3% of the
 /// benchmark's CPU time when each set had its own).
 pub fn ray_set_rays_into(scene: &Scene, seed: u64, k: u32, pixel_center: bool, rays: &mut Vec<CameraRay>) {
+    ray_set_rays_in(scene, seed, k, pixel_center, rays, Control::none())
+}
+
+/// [`ray_set_rays_into`] with its rows, units of work, recorded on `control`'s strand
+/// ([`crate::schedule`]).
+fn ray_set_rays_in(scene: &Scene, seed: u64, k: u32, pixel_center: bool, rays: &mut Vec<CameraRay>, control: Control) {
     let cam = &scene.camera;
     let w = cam.width as usize;
     let footprints = PanelFootprints::new(scene);
@@ -172,15 +180,19 @@ pub fn ray_set_rays_into(scene: &Scene, seed: u64, k: u32, pixel_center: bool, r
     if rays.len() != w * cam.height as usize {
         *rays = vec![CameraRay::default(); w * cam.height as usize];
     }
+    let section = control.section("rays");
     rays.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
-        let blocks = w / RAY_LANES * RAY_LANES;
-        for i in (0..blocks).step_by(RAY_LANES) {
-            maker.run_block(j, i, (&mut row[i..i + RAY_LANES]).try_into().unwrap());
-        }
-        for (i, ray) in row.iter_mut().enumerate().skip(blocks) {
-            *ray = ray_set_ray(scene, &footprints, seed, k, pixel_center, j * w + i);
-        }
+        section.unit(|| {
+            let blocks = w / RAY_LANES * RAY_LANES;
+            for i in (0..blocks).step_by(RAY_LANES) {
+                maker.run_block(j, i, (&mut row[i..i + RAY_LANES]).try_into().unwrap());
+            }
+            for (i, ray) in row.iter_mut().enumerate().skip(blocks) {
+                *ray = ray_set_ray(scene, &footprints, seed, k, pixel_center, j * w + i);
+            }
+        })
     });
+    section.close();
 }
 
 /// Pixels per block of [`ray_set_rays`]: one AVX-512 vector of f64, two AVX2 ones.
@@ -367,9 +379,10 @@ impl RayRow {
 /// Which ray sets a [`RaySets`] keeps once made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Keep {
-    /// The last set made: a chunked render takes its pieces in plane order and a ray set
+    /// The last two sets made: a chunked render takes its pieces in plane order and a ray set
     /// serves one group of consecutive planes, so a set is needed again only by the next piece,
-    /// and each set is made once in the memory of one.
+    /// and each set is made once in the memory of two (the chunk being gathered's and the next
+    /// chunk's, prepared meanwhile).
     Last,
     /// Every set made: passes that come back to the same sets (a render on a time budget), or
     /// several weightings gathered along the same rays (the table).
@@ -383,8 +396,10 @@ pub struct RaySets {
     pixel_center: bool,
     count: u32,
     keep: Keep,
-    /// The sets kept, by index.
-    sets: Vec<(u32, Vec<CameraRay>)>,
+    /// The sets kept, by index, oldest first.
+    sets: Vec<(u32, Arc<Vec<CameraRay>>)>,
+    /// Sets no longer kept, whose buffers serve the next sets once nothing holds them.
+    retired: Vec<Arc<Vec<CameraRay>>>,
     /// Rays made so far (a set made twice counts twice) and the seconds spent making them.
     pub made: u64,
     pub seconds: f64,
@@ -394,29 +409,34 @@ impl RaySets {
     /// `ray_sets` sets of rays under `seed` (one at pixel centres), none made yet.
     pub fn new(seed: u64, ray_sets: u32, pixel_center: bool, keep: Keep) -> Self {
         let count = if pixel_center { 1 } else { ray_sets.max(1) };
-        RaySets { seed, pixel_center, count, keep, sets: Vec::new(), made: 0, seconds: 0.0 }
+        RaySets { seed, pixel_center, count, keep, sets: Vec::new(), retired: Vec::new(), made: 0, seconds: 0.0 }
     }
 
-    /// The rays of ray set `k` (taken modulo the set count), made if need be.
-    pub fn rays(&mut self, scene: &Scene, k: u32) -> &[CameraRay] {
+    /// The rays of ray set `k` (taken modulo the set count), made if need be (their rows
+    /// recorded on `control`'s strand, [`crate::schedule`]).
+    pub fn rays(&mut self, scene: &Scene, k: u32, control: Control) -> Arc<Vec<CameraRay>> {
         let k = k % self.count;
-        let index = match self.sets.iter().position(|(set, _)| *set == k) {
-            Some(i) => i,
-            None => {
-                let t = Instant::now();
-                // Keeping only the last set, its buffer is the next one's.
-                let mut rays = Vec::new();
-                if self.keep == Keep::Last {
-                    rays = self.sets.pop().map(|(_, r)| r).unwrap_or_default();
-                }
-                ray_set_rays_into(scene, self.seed, k, self.pixel_center, &mut rays);
-                self.seconds += t.elapsed().as_secs_f64();
-                self.made += rays.len() as u64;
-                self.sets.push((k, rays));
-                self.sets.len() - 1
+        if let Some((_, rays)) = self.sets.iter().find(|(set, _)| *set == k) {
+            return rays.clone();
+        }
+        let t = Instant::now();
+        // Keeping the last two sets, the older one retires, and the buffer of a retired set
+        // that no gathering holds any more is the next one's.
+        let mut rays = Vec::new();
+        if self.keep == Keep::Last {
+            if self.sets.len() >= 2 {
+                self.retired.push(self.sets.remove(0).1);
             }
-        };
-        &self.sets[index].1
+            if let Some(i) = self.retired.iter().position(|r| Arc::strong_count(r) == 1) {
+                rays = Arc::try_unwrap(self.retired.swap_remove(i)).unwrap_or_default();
+            }
+        }
+        ray_set_rays_in(scene, self.seed, k, self.pixel_center, &mut rays, control);
+        self.seconds += t.elapsed().as_secs_f64();
+        self.made += rays.len() as u64;
+        let rays = Arc::new(rays);
+        self.sets.push((k, rays.clone()));
+        rays
     }
 
     /// Bytes the rays of `ray_sets` sets take at a resolution (for the memory check).

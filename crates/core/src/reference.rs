@@ -16,7 +16,6 @@ use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rand::RngCore;
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 const REFERENCE_STREAM: u64 = 0x2EF_E2E;
@@ -337,6 +336,9 @@ const PILOT_SEED: u64 = 0x9_11_07;
 /// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
 /// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
 /// their mean and its standard error comes from their spread, an honest measure of the noise.
+/// Pixels per unit of parallel work of the reference: a pixel is tens of microseconds.
+const REFERENCE_UNIT: usize = 8;
+
 /// The cancel flag is read before each pixel (at most 64 times the average samples, a few
 /// milliseconds).
 fn render_pixels(
@@ -357,19 +359,19 @@ fn render_pixels(
     // pixel to finish reports the row.
     let unfinished: Vec<AtomicUsize> = (0..band).map(|_| AtomicUsize::new(w)).collect();
     let top = rows.start as usize;
-    let values: Vec<(Vec3, Vec3)> = (top * w..rows.end as usize * w)
-        .into_par_iter()
-        .map(|p| {
-            if control.is_cancelled() {
-                return (Vec3::ZERO, Vec3::ZERO); // the image is discarded
-            }
-            let v = pixel_estimate(scene, &lights, &sequence, (seed, pixel_center), (p % w, p / w), spp(p));
-            if unfinished[p / w - top].fetch_sub(1, Ordering::Relaxed) == 1 {
-                control.progress();
-            }
-            v
-        })
-        .collect();
+    // Units of a few pixels, each a unit of the schedule's record when there is one
+    // ([`crate::schedule`]).
+    let values: Vec<(Vec3, Vec3)> = control.map_units("reference", band as usize * w, REFERENCE_UNIT, |i| {
+        let p = top * w + i;
+        if control.is_cancelled() {
+            return (Vec3::ZERO, Vec3::ZERO); // the image is discarded
+        }
+        let v = pixel_estimate(scene, &lights, &sequence, (seed, pixel_center), (p % w, p / w), spp(p));
+        if unfinished[p / w - top].fetch_sub(1, Ordering::Relaxed) == 1 {
+            control.progress();
+        }
+        v
+    });
     control.check()?;
     let mean = Film { width: cam.width, height: band, pixels: values.iter().map(|v| v.0).collect() };
     let stderr = Film { width: cam.width, height: band, pixels: values.iter().map(|v| v.1).collect() };

@@ -9,20 +9,23 @@
 //! direct emission, [`crate::emission`]). The options come resolved and checked from
 //! [`crate::settings`]: nothing here checks them again.
 
-use crate::accel::PreparedPlanes;
+use crate::accel::{PreparedPlanes, gather_pieces};
+use crate::camera::CameraRay;
 use crate::control::Control;
-use crate::emission::direct_emission_and_variance;
+use crate::emission::direct_emission_and_variance_in;
 use crate::error::{Error, Result, Setting};
 use crate::film::Film;
+use crate::gather::GatherStats;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
 use crate::options::{RenderOptions, RenderStats};
-use crate::partial::{Partial, Resume, chunk_indices, chunk_planes, chunks, combine, fingerprint, frontier, pieces};
+use crate::partial::{Partial, Resume, chunk_indices, chunk_planes, chunks, combine_in, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::scene::Scene;
 use crate::spread::{GroupSpread, relative_rms_error};
 use crate::weights::Weighting;
 use glam::{DVec3, Vec3};
 use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The one loop over plane groups and ray sets, with the cache of ray sets and what it measured.
@@ -34,8 +37,97 @@ struct Gatherer<'a> {
     stats: RenderStats,
     /// The plane groups' spread, for the error image ([`crate::spread`]), when it is asked.
     spread: Option<GroupSpread>,
-    /// The sums before the piece being gathered (the spread's pieces are differences).
-    before: Vec<Vec3>,
+}
+
+/// A piece of planes `(k, planes, quarter, whole)`: gathered along ray set `k`, in `quarter` of
+/// the render for the error image (`whole`: the piece is its whole group).
+type PieceSpec = (u32, Range<usize>, usize, bool);
+
+/// A piece ready to gather: its planes prepared.
+struct Piece {
+    spec: PieceSpec,
+    planes: Arc<PreparedPlanes>,
+}
+
+/// The most pieces one gathering takes (each tile taking them in turn): their ray sets are held
+/// together, so that a chunk of many small pieces (small renders, many ray sets) holds two at
+/// a time, not all of its own.
+const PIECES_PER_GATHERING: usize = 2;
+
+/// Where the preparation of pieces finds what it needs (the other side of a chunk's gathering).
+struct Preparer<'g> {
+    scene: &'g Scene,
+    opts: &'g RenderOptions,
+    prepared: &'g [(Range<usize>, Arc<PreparedPlanes>)],
+    /// Seconds spent sampling planes and building their structures.
+    seconds_sampling: f64,
+    seconds_build: f64,
+}
+
+impl<'g> Preparer<'g> {
+    fn new(scene: &'g Scene, opts: &'g RenderOptions, prepared: &'g [(Range<usize>, Arc<PreparedPlanes>)]) -> Self {
+        Preparer { scene, opts, prepared, seconds_sampling: 0.0, seconds_build: 0.0 }
+    }
+
+    /// Each piece's planes taken from `prepared` if they are there, else sampled and prepared
+    /// now.
+    fn pieces(&mut self, specs: impl IntoIterator<Item = PieceSpec>, control: Control) -> Result<Vec<Piece>> {
+        let mut out = Vec::new();
+        for spec in specs {
+            let planes = match self.prepared.iter().find(|(r, _)| *r == spec.1) {
+                Some((_, p)) => p.clone(),
+                None => {
+                    let set = self.opts.plane_set();
+                    let p = PreparedPlanes::new(self.scene, set, spec.1.clone(), self.opts.accelerator, control)?;
+                    self.seconds_sampling += p.seconds_sampling;
+                    self.seconds_build += p.seconds_build;
+                    Arc::new(p)
+                }
+            };
+            out.push(Piece { spec, planes });
+        }
+        Ok(out)
+    }
+}
+
+/// What gathers prepared pieces: the options, the cache of ray sets and the error image's
+/// spread (borrowed apart from the preparation of the next chunk).
+struct GatherSide<'g> {
+    scene: &'g Scene,
+    opts: &'g RenderOptions,
+    weighting: Weighting,
+    rays: &'g mut RaySets,
+    spread: &'g mut Option<GroupSpread>,
+}
+
+impl GatherSide<'_> {
+    /// Gathers `pieces` in order, adding into `sums` (f32, each plane weighted 1): up to
+    /// [`PIECES_PER_GATHERING`] in one gathering ([`gather_pieces`]: on the raster, each tile
+    /// takes every piece in turn), their ray sets made first; with an error image, piece by
+    /// piece, each piece's sums going to the group spread. Returns what it found and its wall
+    /// seconds.
+    fn gather(&mut self, pieces: &[Piece], sums: &mut [Vec3], control: Control) -> Result<(GatherStats, f64)> {
+        let t = Instant::now();
+        let mut stats = GatherStats::default();
+        let (weighting, kernel) = (self.weighting, self.opts.kernel);
+        let at_once = if self.spread.is_some() { 1 } else { PIECES_PER_GATHERING };
+        let mut before = Vec::new();
+        for group in pieces.chunks(at_once) {
+            let rays: Vec<Arc<Vec<CameraRay>>> =
+                group.iter().map(|p| self.rays.rays(self.scene, p.spec.0, control)).collect();
+            let all: Vec<_> = group.iter().zip(&rays).map(|(p, r)| (&*p.planes, r.as_slice())).collect();
+            if let Some(spread) = self.spread.as_mut() {
+                before.clear();
+                before.extend_from_slice(sums);
+                stats += gather_pieces(&all, weighting, kernel, sums, control)?;
+                let (k, ref planes, quarter, whole) = group[0].spec;
+                spread.add(k, quarter, planes.len(), whole, &before, sums);
+            } else {
+                stats += gather_pieces(&all, weighting, kernel, sums, control)?;
+            }
+        }
+        Ok((stats, t.elapsed().as_secs_f64()))
+    }
 }
 
 impl<'a> Gatherer<'a> {
@@ -43,55 +135,37 @@ impl<'a> Gatherer<'a> {
         let rays = RaySets::new(opts.seed, opts.ray_sets(), opts.pixel_center, keep);
         let pixels = scene.camera.width as usize * scene.camera.height as usize;
         let spread = opts.stderr.then(|| GroupSpread::new(pixels));
-        Gatherer { scene, opts, control, rays, stats: RenderStats::new(opts), spread, before: Vec::new() }
+        Gatherer { scene, opts, control, rays, stats: RenderStats::new(opts), spread }
     }
 
-    /// Gathers each piece `(k, planes, quarter, whole)` along ray set `k` with `weighting`,
-    /// adding into `sums` (f32, each plane weighted 1): its planes taken from `prepared` if they
-    /// are there, else sampled and prepared now (one piece's planes exist at a time). With an
-    /// error image, each piece's sums also go to the group spread, in `quarter` of the render
-    /// (`whole`: the piece is its whole group).
-    fn gather(
-        &mut self,
-        pieces: impl IntoIterator<Item = (u32, Range<usize>, usize, bool)>,
-        weighting: Weighting,
-        prepared: &[(Range<usize>, PreparedPlanes)],
-        sums: &mut [Vec3],
-    ) -> Result<()> {
-        let (scene, kernel, control) = (self.scene, self.opts.kernel, self.control);
-        for (k, piece, quarter, whole) in pieces {
-            let count = piece.len();
-            let made;
-            let planes = match prepared.iter().find(|(r, _)| *r == piece) {
-                Some((_, p)) => p,
-                None => {
-                    made = self.prepare(piece)?;
-                    &made
-                }
-            };
-            if self.spread.is_some() {
-                self.before.clear();
-                self.before.extend_from_slice(sums);
-            }
-            let rays = self.rays.rays(scene, k);
-            let t = Instant::now();
-            let s = planes.gather(weighting, kernel, rays, sums, control)?;
-            self.stats.add_gather(s, t.elapsed().as_secs_f64());
-            if let Some(spread) = &mut self.spread {
-                spread.add(k, quarter, count, whole, &self.before, sums);
-            }
+    /// The preparer of pieces, with `prepared` pieces to take.
+    fn preparer<'g>(&self, prepared: &'g [(Range<usize>, Arc<PreparedPlanes>)]) -> Preparer<'g>
+    where
+        'a: 'g,
+    {
+        Preparer::new(self.scene, self.opts, prepared)
+    }
+
+    /// The gathering side, with `weighting`.
+    fn gather_side(&mut self, weighting: Weighting) -> GatherSide<'_> {
+        GatherSide { scene: self.scene, opts: self.opts, weighting, rays: &mut self.rays, spread: &mut self.spread }
+    }
+
+    /// Gathers each piece along its ray set with the options' weighting, adding into `sums`
+    /// (f32, each plane weighted 1), one piece prepared at a time (its planes sampled now).
+    fn gather(&mut self, specs: impl IntoIterator<Item = PieceSpec>, sums: &mut [Vec3]) -> Result<()> {
+        let control = self.control;
+        for spec in specs {
+            let mut preparer = self.preparer(&[]);
+            let pieces = preparer.pieces([spec], control)?;
+            let (sampling, build) = (preparer.seconds_sampling, preparer.seconds_build);
+            self.stats.seconds_sampling += sampling;
+            self.stats.seconds_build += build;
+            let (s, seconds) = self.gather_side(self.opts.weighting).gather(&pieces, sums, control)?;
+            self.stats.add_gather(s, seconds);
         }
         self.count_rays();
         Ok(())
-    }
-
-    /// Samples and prepares the planes `piece`, counting the time it took.
-    fn prepare(&mut self, piece: Range<usize>) -> Result<PreparedPlanes> {
-        let (scene, opts) = (self.scene, self.opts);
-        let planes = PreparedPlanes::new(scene, opts.plane_set(), piece, opts.accelerator, self.control)?;
-        self.stats.seconds_sampling += planes.seconds_sampling;
-        self.stats.seconds_build += planes.seconds_build;
-        Ok(planes)
     }
 
     /// The rays made so far, and their time, into the statistics.
@@ -106,12 +180,12 @@ pub struct ChunkRenderer<'a> {
     gatherer: Gatherer<'a>,
     fingerprint: String,
     /// Pieces prepared ahead (the table's, gathered with several weightings), in plane order.
-    prepared: Vec<(Range<usize>, PreparedPlanes)>,
+    prepared: Vec<(Range<usize>, Arc<PreparedPlanes>)>,
 }
 
 impl<'a> ChunkRenderer<'a> {
-    /// A renderer that samples each piece's planes when it gathers them, and keeps the last
-    /// ray set (chunks go in plane order, so each set is made once).
+    /// A renderer that samples each chunk's planes while it gathers the chunk before, and keeps
+    /// the last two ray sets (chunks go in plane order, so each set is made once).
     pub fn new(scene: &'a Scene, opts: &'a RenderOptions, control: Control<'a>) -> Self {
         ChunkRenderer {
             gatherer: Gatherer::new(scene, opts, control, Keep::Last),
@@ -129,13 +203,13 @@ impl<'a> ChunkRenderer<'a> {
             fingerprint: fingerprint(scene, opts),
             prepared: Vec::new(),
         };
-        for c in chunks(opts.planes) {
-            for (k, piece) in pieces(opts.planes, opts.ray_sets(), c) {
-                let planes = r.gatherer.prepare(piece.clone())?;
-                r.gatherer.rays.rays(scene, k);
-                r.prepared.push((piece, planes));
-            }
-        }
+        let specs: Vec<_> = chunks(opts.planes).into_iter().flat_map(|c| r.chunk_pieces(c)).collect();
+        let mut preparer = r.gatherer.preparer(&[]);
+        let ready = preparer.pieces(specs, control)?;
+        let (sampling, build) = (preparer.seconds_sampling, preparer.seconds_build);
+        r.gatherer.stats.seconds_sampling += sampling;
+        r.gatherer.stats.seconds_build += build;
+        r.prepared = ready.into_iter().map(|p| (p.spec.1, p.planes)).collect();
         r.gatherer.count_rays();
         Ok(r)
     }
@@ -145,29 +219,18 @@ impl<'a> ChunkRenderer<'a> {
         &self.gatherer.stats
     }
 
-    /// The partial of canonical chunk `c`, gathered with `weighting`.
-    fn chunk(&mut self, c: usize, weighting: Weighting) -> Result<Partial> {
-        let start = Instant::now();
-        let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
-        let hits = self.gatherer.stats.hits;
-        let range = c * CHUNK_PLANES..((c + 1) * CHUNK_PLANES).min(opts.planes);
-        let cam = &scene.camera;
-        let mut sums = vec![Vec3::ZERO; cam.width as usize * cam.height as usize];
+    /// The pieces of the planes `range` (a chunk): each its share of a plane group.
+    fn chunk_pieces(&self, range: Range<usize>) -> Vec<PieceSpec> {
+        let opts = self.gatherer.opts;
         let sets = opts.ray_sets();
-        let pieces = pieces(opts.planes, sets, range.clone())
-            .map(|(k, p)| (k, p.clone(), quarter_of(k, sets), p == plane_group(k, opts.planes, sets)));
-        self.gatherer.gather(pieces, weighting, &self.prepared, &mut sums)?;
-        Ok(Partial {
-            width: cam.width,
-            height: cam.height,
-            sums: sums.iter().map(|s| s.as_dvec3()).collect(),
-            start: range.start,
-            end: range.end,
-            planes_total: opts.planes,
-            fingerprint: self.fingerprint.clone(),
-            hits: self.gatherer.stats.hits - hits,
-            seconds: start.elapsed().as_secs_f64(),
-        })
+        pieces(opts.planes, sets, range)
+            .map(|(k, p)| (k, p.clone(), quarter_of(k, sets), p == plane_group(k, opts.planes, sets)))
+            .collect()
+    }
+
+    /// The planes of canonical chunk `c`.
+    fn chunk_range(&self, c: usize) -> Range<usize> {
+        c * CHUNK_PLANES..((c + 1) * CHUNK_PLANES).min(self.gatherer.opts.planes)
     }
 
     /// The partial of planes `range`, a union of consecutive canonical chunks, added along the
@@ -196,20 +259,87 @@ impl<'a> ChunkRenderer<'a> {
         observer: ChunkObserver,
     ) -> Result<Partial> {
         let root = chunk_indices(self.gatherer.opts.planes, &range)?;
-        self.gatherer.control.check()?;
+        let control = self.gatherer.control;
+        control.check()?;
         let done = self.resumed_chunks(&root, &held)?;
+        let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
+        let pixels = scene.camera.width as usize * scene.camera.height as usize;
+        // Chunk c is gathered while chunk c + 1 is prepared (its planes sampled, projected and
+        // binned, its ray set made): the two sides of a join, so that the workers a chunk's last
+        // tiles leave idle prepare the next.
+        let specs: Vec<_> = (done..root.end).map(|c| self.chunk_pieces(self.chunk_range(c))).collect();
+        let mut next = match specs.first() {
+            Some(first) => Some(self.prepare(first.clone(), control)?),
+            None => None,
+        };
+        // The buffers of a chunk's f32 and f64 sums, reused from chunk to chunk.
+        let mut spare: (Vec<Vec3>, Vec<DVec3>) = (Vec::new(), Vec::new());
         for c in done..root.end {
-            held.push(self.chunk(c, weighting)?);
+            let start = Instant::now();
+            let (work, (sampling, build)) = next.take().expect("the chunk's pieces, prepared before");
+            let mut preparer = Preparer::new(scene, opts, &self.prepared);
+            let mut side = self.gatherer.gather_side(weighting);
+            let following = specs.get(c + 1 - done).cloned();
+            let width = scene.camera.width as usize;
+            let (mut sums, mut wide) = (std::mem::take(&mut spare.0), std::mem::take(&mut spare.1));
+            let (gathered, upcoming) = control.join(
+                |control| {
+                    sums.clear();
+                    sums.resize(pixels, Vec3::ZERO);
+                    let found = side.gather(&work, &mut sums, control)?;
+                    // The chunk's planes freed and its sums widened to f64 here, beside the next
+                    // chunk's preparation, not between the chunks.
+                    drop(work);
+                    wide.resize(pixels, DVec3::ZERO);
+                    control.fill_units("partial", &mut wide, width * 16, |p| sums[p].as_dvec3());
+                    Ok::<_, Error>((wide, found))
+                },
+                |control| {
+                    let ready = following.map(|specs| preparer.pieces(specs, control)).transpose();
+                    (ready, (preparer.seconds_sampling, preparer.seconds_build))
+                },
+            );
+            let (wide, (stats, seconds)) = gathered?;
+            spare.0 = sums;
+            let (ready, seconds_prepared) = upcoming;
+            self.gatherer.stats.seconds_sampling += sampling;
+            self.gatherer.stats.seconds_build += build;
+            self.gatherer.stats.add_gather(stats, seconds);
+            self.gatherer.count_rays();
+            let range = self.chunk_range(c);
+            held.push(Partial {
+                width: scene.camera.width,
+                height: scene.camera.height,
+                sums: wide,
+                start: range.start,
+                end: range.end,
+                planes_total: opts.planes,
+                fingerprint: self.fingerprint.clone(),
+                hits: stats.hits,
+                seconds: start.elapsed().as_secs_f64(),
+            });
             // The nodes this chunk completes, the innermost first.
             let alive = frontier(root.clone(), c + 1).len();
             while held.len() > alive {
                 let right = held.pop().expect("a right child");
                 let left = held.pop().expect("its left sibling");
-                held.push(combine(left, &right)?);
+                held.push(combine_in(left, &right, control)?);
+                // Its buffer is the next chunk's (fresh pages cost their faults again).
+                spare.1 = right.sums;
             }
             observer(&held, self.gatherer.spread.as_ref())?;
+            // The next chunk's preparation failed (cancelled) only now that this chunk is told.
+            next = ready?.map(|pieces| (pieces, seconds_prepared));
         }
         Ok(held.pop().expect("the root node, checked or made above"))
+    }
+
+    /// Prepares pieces now (not beside a gathering), with the seconds it spent sampling and
+    /// building.
+    fn prepare(&mut self, specs: Vec<PieceSpec>, control: Control) -> Result<(Vec<Piece>, (f64, f64))> {
+        let mut preparer = self.gatherer.preparer(&self.prepared);
+        let pieces = preparer.pieces(specs, control)?;
+        Ok((pieces, (preparer.seconds_sampling, preparer.seconds_build)))
     }
 
     /// The end of the chunks that `held` covers, if it is what this render of chunks `root`
@@ -246,13 +376,13 @@ pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial], Option<&GroupSpread>)
 
 /// Renders the scene: the mean over each pixel of the direct emission (integrated over the
 /// pixel, [`crate::emission`]) plus the photon-plane estimate of single scattering, each plane
-/// gathered with one of the `spp` ray sets (docs/mathematics.md section 8). Reports each band of
-/// rows (or chunk of rays) to `control`; once another thread cancels it, the work stops within
+/// gathered with one of the `spp` ray sets (docs/mathematics.md section 8). Reports each tile
+/// and piece of planes (or chunk of rays) to `control`; once another thread cancels it, the work stops within
 /// a plane (or a ray) and the result is [`Error::Cancelled`].
 ///
 /// The planes are rendered in the canonical chunks of [`crate::partial`] and added along its
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
-/// bit; only one chunk's planes exist at a time.
+/// bit; two chunks' planes exist at a time (one gathered while the next is prepared).
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
     render_from(scene, opts, control, Resume::default(), &mut |_, _| Ok(()))
 }
@@ -289,7 +419,8 @@ pub fn render_from(
     let (mut stats, spread) = (chunks.gatherer.stats, chunks.gatherer.spread);
     stats.planes = opts.planes - resumed;
     let t = Instant::now();
-    let (emission, emission_variance) = direct_emission_and_variance(scene, opts.seed, opts.spp, opts.pixel_center);
+    let (emission, emission_variance) =
+        direct_emission_and_variance_in(scene, opts.seed, opts.spp, opts.pixel_center, control);
     let film = crate::partial::finish_with(scene, opts, &partial, &emission)?;
     if let Some(mut spread) = spread {
         spread.close();
@@ -477,7 +608,8 @@ pub fn render_in_passes(
     gatherer.stats.plane_passes = 0;
     let pixels = width as usize * height as usize;
     let t = Instant::now();
-    let (emission, emission_variance) = direct_emission_and_variance(scene, opts.seed, opts.spp, opts.pixel_center);
+    let (emission, emission_variance) =
+        direct_emission_and_variance_in(scene, opts.seed, opts.spp, opts.pixel_center, control);
     let seconds_emission = t.elapsed().as_secs_f64();
     // Each pass sums its planes in f32 weighted 1 (N is known only at the end); the passes add
     // up in f64, so that the sums stay as far from f32 overflow as a single pass's.
@@ -509,7 +641,7 @@ pub fn render_in_passes(
             ((next_set + g) % ray_sets, done + group.start..done + group.end, quarter, true)
         });
         let mut sums = vec![Vec3::ZERO; pixels];
-        gatherer.gather(pass, opts.weighting, &[], &mut sums)?;
+        gatherer.gather(pass, &mut sums)?;
         next_set = (next_set + used) % ray_sets;
         for (t, s) in total.iter_mut().zip(&sums) {
             *t += s.as_dvec3();
@@ -565,7 +697,7 @@ mod tests {
         // Set before: nothing runs.
         let e = render(&scene, &opts, Control::with_cancel(&AtomicBool::new(true))).unwrap_err();
         assert!(matches!(e, Error::Cancelled) && !e.is_input(), "{e}");
-        // Set when the first band (or chunk of rays) ends: the other thread's stops within a
+        // Set when the first tile (or chunk of rays) ends: the other thread's stops within a
         // plane (or a ray), and no further unit starts.
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
         for accelerator in Accelerator::ALL {
@@ -650,7 +782,7 @@ mod tests {
             cancel.store(true, Ordering::Relaxed);
         };
         let control = Control::new(&progress, &cancel);
-        // Passes of 4096 planes, each of 12 bands: set after the first band of the first pass.
+        // Passes of 4096 planes, each of 12 tiles: set after the first tile of the first pass.
         let mut passes = 0;
         let mut next = |_: PassReport| {
             passes += 1;
@@ -676,7 +808,7 @@ mod tests {
             units.into_inner() as u64,
             Accelerator::Raster.units_per_gathering(scene.camera.width, scene.camera.height)
         );
-        // On a budget of an hour: the first band ends it.
+        // On a budget of an hour: the first tile ends it.
         let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
         let progress = || {
             units.fetch_add(1, Ordering::Relaxed);

@@ -29,6 +29,7 @@ pub mod checkpoint;
 pub mod file;
 pub mod parts;
 
+use crate::control::Control;
 use crate::emission::{direct_emission, direct_emission_and_variance};
 use crate::error::{Error, Result};
 use crate::film::{Film, first_outside};
@@ -39,6 +40,7 @@ pub use crate::sampling::stable_hash;
 use crate::scene::Scene;
 use crate::spread::{GroupSpread, stderr_film};
 use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 use std::ops::Range;
 
 /// The canonical chunks of a set of `planes` planes, in order.
@@ -125,6 +127,12 @@ impl Partial {
     /// non-negative), naming the first that is not. Every count checked here is one that later
     /// arithmetic (the canonical tree, the division by N) trusts.
     pub fn check(&self) -> Result<()> {
+        self.check_in(Control::none())
+    }
+
+    /// [`Partial::check`], its pass over the sums in parallel units of rows recorded on
+    /// `control`'s strand ([`crate::schedule`]).
+    pub fn check_in(&self, control: Control) -> Result<()> {
         let bad = |m: String| Err(Error::Partial(format!("{}: {m}", self.describe())));
         crate::limits::check_resolution(self.width, self.height).or_else(|m| bad(format!("its size: {m}")))?;
         let pixels = self.width as usize * self.height as usize;
@@ -140,6 +148,17 @@ impl Partial {
         crate::limits::check_recorded_seconds(self.seconds)
             .or_else(|m| bad(format!("its seconds of rendering: {m}")))?;
         let most = self.most_per_channel();
+        let rows = self.width as usize * 16;
+        let fine = |s: &DVec3| s.to_array().iter().all(|&c| c >= 0.0 && c <= most);
+        let all_fine = control
+            .map_units("check", self.sums.len().div_ceil(rows), 1, |u| {
+                self.sums[u * rows..((u + 1) * rows).min(self.sums.len())].iter().all(fine)
+            })
+            .into_iter()
+            .all(|f| f);
+        if all_fine {
+            return Ok(());
+        }
         if let Some(p) = first_outside(self.sums.iter().map(|s| s.to_array()), self.width, most) {
             let why = if p.value.is_nan() || p.value < 0.0 {
                 "a sum of contributions is a non-negative number".to_string()
@@ -171,17 +190,30 @@ fn check_same_render(a: &Partial, b: &Partial) -> Result<()> {
 /// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in f64,
 /// into `a`'s buffer (a partial of a large image is tens of megabytes: no copy of it is made).
 /// Each is checked first ([`Partial::check`]).
-pub fn combine(mut a: Partial, b: &Partial) -> Result<Partial> {
-    a.check()?;
-    b.check()?;
+pub fn combine(a: Partial, b: &Partial) -> Result<Partial> {
+    combine_in(a, b, Control::none())
+}
+
+/// [`combine`], its passes over the sums in parallel units of rows recorded on `control`'s
+/// strand ([`crate::schedule`]).
+pub fn combine_in(mut a: Partial, b: &Partial, control: Control) -> Result<Partial> {
+    a.check_in(control)?;
+    b.check_in(control)?;
     check_same_render(&a, b)?;
     if a.end != b.start {
         let how = if a.end > b.start { "overlap" } else { "leave a gap" };
         return Err(Error::Partial(format!("{} and {} are not adjacent: they {how}", a.describe(), b.describe())));
     }
-    for (x, y) in a.sums.iter_mut().zip(&b.sums) {
-        *x += *y;
-    }
+    let rows = a.width as usize * 16;
+    let section = control.section("combine");
+    a.sums.par_chunks_mut(rows).zip(b.sums.par_chunks(rows)).for_each(|(x, y)| {
+        section.unit(|| {
+            for (x, y) in x.iter_mut().zip(y) {
+                *x += *y;
+            }
+        })
+    });
+    section.close();
     Ok(Partial { end: b.end, hits: a.hits.saturating_add(b.hits), seconds: a.seconds + b.seconds, ..a })
 }
 
