@@ -7,11 +7,12 @@
 use crate::bvh::PlaneBvh;
 use crate::camera::CameraRay;
 use crate::control::Control;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats};
+use crate::gpu::{self, GpuPlanes};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::photon_plane::{PlaneSet, sample_plane_range};
-use crate::raster::{ScreenRaster, band_rows};
+use crate::raster::{ScreenRaster, band_rows, screen_polygon};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -28,9 +29,13 @@ pub enum Accelerator {
     Bvh,
     /// Every ray tests every plane (for checking the others).
     BruteForce,
+    /// The GPU ([`crate::gpu`]): chosen by the device (`--device gpu`), never by name, so it is
+    /// not among [`Accelerator::ALL`], the CPU's structures.
+    Gpu,
 }
 
 impl Accelerator {
+    /// The CPU's structures (`--accelerator`).
     pub const ALL: [Accelerator; 3] = [Accelerator::Raster, Accelerator::Bvh, Accelerator::BruteForce];
 
     pub fn name(self) -> &'static str {
@@ -38,15 +43,17 @@ impl Accelerator {
             Accelerator::Raster => "raster",
             Accelerator::Bvh => "bvh",
             Accelerator::BruteForce => "brute-force",
+            Accelerator::Gpu => "gpu",
         }
     }
 
     /// Progress units of one gathering over the image (for sizing a progress bar): a band of
     /// rows on the raster (sized for the current thread pool: call it in the pool that
-    /// renders), a chunk of rays on the per-ray structures.
+    /// renders), a chunk of rays on the per-ray structures, the whole image on the GPU.
     pub fn units_per_gathering(self, width: u32, height: u32) -> u64 {
         match self {
             Accelerator::Raster => height.div_ceil(band_rows(height, rayon::current_num_threads())) as u64,
+            Accelerator::Gpu => 1,
             _ => (width as u64 * height as u64).div_ceil(RAY_CHUNK as u64),
         }
     }
@@ -68,19 +75,27 @@ impl Aggregate for BruteForce {
         let tests = with.ctx.views.len() as u64;
         gather_per_ray(rays, sums, control, |ray| {
             let (value, hits) = with.ctx.gather_brute_force(with.weights, ray);
-            (value, GatherStats { tests, hits })
+            (value, GatherStats { tests, hits, ..Default::default() })
         })
     }
 }
 
-/// The structure built over a set's planes.
+/// The structure built over a set's planes: one of the CPU's, gathered through [`Aggregate`]
+/// with the weighting's denominator as a type, or the GPU's, which takes the weighting as a
+/// value (its shaders are specialised per estimator instead).
 enum Structure {
+    Cpu(CpuStructure),
+    Gpu(GpuPlanes),
+}
+
+/// The CPU's structures.
+enum CpuStructure {
     Raster(ScreenRaster),
     Bvh(PlaneBvh),
     BruteForce(BruteForce),
 }
 
-impl Aggregate for Structure {
+impl Aggregate for CpuStructure {
     fn gather<D: Denominator>(
         &self,
         with: Gathering<D>,
@@ -89,9 +104,9 @@ impl Aggregate for Structure {
         control: Control,
     ) -> GatherStats {
         match self {
-            Structure::Raster(s) => s.gather(with, rays, sums, control),
-            Structure::Bvh(s) => s.gather(with, rays, sums, control),
-            Structure::BruteForce(s) => s.gather(with, rays, sums, control),
+            CpuStructure::Raster(s) => s.gather(with, rays, sums, control),
+            CpuStructure::Bvh(s) => s.gather(with, rays, sums, control),
+            CpuStructure::BruteForce(s) => s.gather(with, rays, sums, control),
         }
     }
 }
@@ -111,9 +126,10 @@ pub struct PreparedPlanes {
 }
 
 impl PreparedPlanes {
-    /// Planes `range` of `set`, with the structure `accelerator` over them.
+    /// Planes `range` of `set`, with the structure `accelerator` over them
+    /// ([`Accelerator::Gpu`]: on the GPU, which the settings have found).
     /// [`crate::Error::Cancelled`] once `control` is cancelled (checked after each piece of
-    /// planes sampled).
+    /// planes sampled); [`crate::Error::Device`] if the GPU fails.
     pub fn new(
         scene: &Scene,
         set: PlaneSet,
@@ -125,6 +141,8 @@ impl PreparedPlanes {
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
         let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
+        // The GPU's boxes of pixels, plane by plane (`gpu::screen_bounds`).
+        let mut bounds = Vec::new();
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
         for start in range.clone().step_by(SAMPLING_PIECE) {
@@ -138,6 +156,15 @@ impl PreparedPlanes {
             if let Some(r) = &mut raster {
                 r.push_planes(&scene.camera, &piece, &scene.medium);
             }
+            if accelerator == Accelerator::Gpu {
+                use rayon::prelude::*;
+                let (cam, medium) = (&scene.camera, &scene.medium);
+                bounds.par_extend(
+                    piece
+                        .par_iter()
+                        .map(|p| gpu::screen_bounds(&screen_polygon(cam, p, medium), cam.width, cam.height)),
+                );
+            }
             seconds_build += t.elapsed().as_secs_f64();
             if accelerator == Accelerator::Bvh {
                 all.extend(piece);
@@ -146,9 +173,16 @@ impl PreparedPlanes {
         control.check()?;
         let t = Instant::now();
         let structure = match (accelerator, raster) {
-            (Accelerator::Raster, Some(r)) => Structure::Raster(r),
-            (Accelerator::Bvh, _) => Structure::Bvh(PlaneBvh::build(&all, &scene.medium, origin, control)?),
-            _ => Structure::BruteForce(BruteForce),
+            (Accelerator::Raster, Some(r)) => Structure::Cpu(CpuStructure::Raster(r)),
+            (Accelerator::Bvh, _) => {
+                Structure::Cpu(CpuStructure::Bvh(PlaneBvh::build(&all, &scene.medium, origin, control)?))
+            }
+            (Accelerator::Gpu, _) => {
+                let gpu = gpu::adapter().map_err(Error::Device)?;
+                let (w, h) = (scene.camera.width, scene.camera.height);
+                Structure::Gpu(GpuPlanes::new(gpu, &context, &bounds, w, h)?)
+            }
+            _ => Structure::Cpu(CpuStructure::BruteForce(BruteForce)),
         };
         seconds_build += t.elapsed().as_secs_f64();
         Ok(PreparedPlanes { context, structure, seconds_sampling, seconds_build })
@@ -162,13 +196,13 @@ impl PreparedPlanes {
     /// The raster, if that is the structure (for measuring the traversal alone).
     pub fn raster(&self) -> Option<&ScreenRaster> {
         match &self.structure {
-            Structure::Raster(r) => Some(r),
+            Structure::Cpu(CpuStructure::Raster(r)) => Some(r),
             _ => None,
         }
     }
 
     /// Gathers the rays of one ray set with `weighting`, adding each ray's estimate to `sums`;
-    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]). Reports each unit of work to
+    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]), the GPU its own shaders. Reports each unit of work to
     /// `control`; once it is cancelled, the work stops before the next plane (or ray) and the
     /// result is [`crate::Error::Cancelled`], with `sums` incomplete.
     pub fn gather(
@@ -179,7 +213,12 @@ impl PreparedPlanes {
         sums: &mut [Vec3],
         control: Control,
     ) -> Result<GatherStats> {
+        let cpu = match &self.structure {
+            Structure::Cpu(s) => s,
+            Structure::Gpu(g) => return g.gather(weighting, rays, sums, control),
+        };
         struct Run<'a> {
+            structure: &'a CpuStructure,
             planes: &'a PreparedPlanes,
             kernel: Kernel,
             rays: &'a [CameraRay],
@@ -190,10 +229,10 @@ impl PreparedPlanes {
             type Output = GatherStats;
             fn run<D: Denominator>(self, weights: &D) -> GatherStats {
                 let with = Gathering { ctx: &self.planes.context, weights, kernel: self.kernel };
-                self.planes.structure.gather(with, self.rays, self.sums, self.control)
+                self.structure.gather(with, self.rays, self.sums, self.control)
             }
         }
-        let stats = weighting.dispatch(Run { planes: self, kernel, rays, sums, control });
+        let stats = weighting.dispatch(Run { structure: cpu, planes: self, kernel, rays, sums, control });
         control.check()?;
         Ok(stats)
     }
@@ -255,8 +294,9 @@ mod tests {
                     let weights = CancelAfter { weighed: AtomicUsize::new(0), after, cancel: &cancel };
                     let mut sums = vec![Vec3::ZERO; rays.len()];
                     let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
-                    let stats = pool
-                        .install(|| prepared.structure.gather(with, &rays, &mut sums, Control::with_cancel(&cancel)));
+                    let Structure::Cpu(structure) = &prepared.structure else { panic!("a CPU structure") };
+                    let stats =
+                        pool.install(|| structure.gather(with, &rays, &mut sums, Control::with_cancel(&cancel)));
                     (weights.weighed.into_inner(), stats, cancel.into_inner())
                 };
                 let (whole, whole_stats, set) = run(usize::MAX);

@@ -88,7 +88,7 @@ impl<'a> Gatherer<'a> {
     /// Samples and prepares the planes `piece`, counting the time it took.
     fn prepare(&mut self, piece: Range<usize>) -> Result<PreparedPlanes> {
         let (scene, opts) = (self.scene, self.opts);
-        let planes = PreparedPlanes::new(scene, opts.plane_set(), piece, opts.accelerator, self.control)?;
+        let planes = PreparedPlanes::new(scene, opts.plane_set(), piece, opts.structure(), self.control)?;
         self.stats.seconds_sampling += planes.seconds_sampling;
         self.stats.seconds_build += planes.seconds_build;
         Ok(planes)
@@ -329,7 +329,7 @@ pub fn render_chunk(
 /// whole [`render`]): one per unit of work of every gathering over the image, one gathering per
 /// piece of every chunk ([`crate::partial::gatherings`]).
 pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: Range<usize>) -> u64 {
-    let per_gathering = opts.accelerator.units_per_gathering(scene.camera.width, scene.camera.height);
+    let per_gathering = opts.structure().units_per_gathering(scene.camera.width, scene.camera.height);
     per_gathering * crate::partial::gatherings(opts.planes, opts.ray_sets(), range)
 }
 
