@@ -233,3 +233,59 @@ fn gpu_chunks_merges_and_a_resumed_render_give_the_render() {
     assert!(resumed.pixels == whole.pixels, "the resumed render differs");
     assert!(resumed_stats.stderr.unwrap().pixels == stats.stderr.unwrap().pixels, "its error image differs");
 }
+
+/// On the command line: a part gathered on the CPU and one on the GPU merge, and the merge says
+/// that the devices differ (each part records its device); the merged image agrees with the
+/// CPU's render within f32 rounding.
+#[test]
+fn gpu_parts_record_their_device_and_a_mixed_merge_says_so() {
+    if !have_gpu("gpu_parts_record_their_device_and_a_mixed_merge_says_so") {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("fogplanes-gpu-parts-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let common = ["render", "media_scenes/six_lights.toml", "--resolution", "32x18", "--planes", "20000", "-q"];
+    let run = |extra: &[&str]| {
+        let args: Vec<&str> = common.iter().chain(extra).copied().collect();
+        let o = crate::common::fogplanes(&args);
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    run(&["-o", &p("cpu.exr")]);
+    run(&["--plane-range", "0:16384", "--partial", &p("a.npz")]);
+    run(&["--plane-range", "16384:20000", "--partial", &p("b.npz"), "--device", "gpu"]);
+    let part = fogplanes::partial::parts::read_part(std::path::Path::new(&p("b.npz"))).unwrap();
+    assert!(part.meta.render.unwrap().device.starts_with("gpu: "));
+    let o = crate::common::fogplanes(&["merge", &p("a.npz"), &p("b.npz"), "-o", &p("merged.exr")]);
+    let out = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && out.contains("different devices (cpu, gpu: "), "{out}");
+    let (a, b) = (Film::load_exr(&dir.join("merged.exr")).unwrap(), Film::load_exr(&dir.join("cpu.exr")).unwrap());
+    let to64 = |f: &Film| f.pixels.iter().map(|v| v.as_dvec3()).collect::<Vec<_>>();
+    let (rel, _) = relative_mse(&to64(&a), &to64(&b));
+    assert!(rel <= 1e-8, "{rel}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--device gpu` where no Vulkan driver can be found: one line naming the flag, exit 2; `auto`
+/// falls back to the CPU. (The loader is pointed at a driver file that does not exist.)
+#[test]
+fn gpu_without_an_adapter_is_one_line_and_exit_2() {
+    let run = |device: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+            .args(["render", "media_scenes/six_lights.toml", "--resolution", "16x9", "--planes", "64", "-q"])
+            .args(["--device", device, "-o"])
+            .arg(std::env::temp_dir().join(format!("fogplanes-no-gpu-{}.exr", std::process::id())))
+            .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+            .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap()
+    };
+    let o = run("gpu");
+    let err = String::from_utf8_lossy(&o.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error: --device")).collect();
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(lines.len() == 1 && lines[0].contains("no GPU adapter"), "{err}");
+    assert!(run("auto").status.success());
+}
