@@ -204,7 +204,7 @@ impl RenderStats {
     pub fn summary(&self) -> String {
         let gathered_by = if self.seconds_device > 0.0 {
             format!(
-                "{}; GPU time {:.3} s, {:.2} G hits/s",
+                "{}; GPU time {:.4} s, {:.4} G hits/s",
                 self.device,
                 self.seconds_device,
                 self.device_hits_per_second() * 1e-9
