@@ -618,6 +618,29 @@ mod tests {
         assert_eq!(got, Vec3::new(3.0, 2.0, 5.0));
     }
 
+    /// The record that crosses to the GPU is 128 bytes, the layout `gpu/gather.wgsl`'s `Plane`
+    /// declares, and carries the view's values, an infinite reciprocal as 0.
+    #[test]
+    fn a_plane_record_carries_the_view_and_no_infinity() {
+        assert_eq!(std::mem::size_of::<PlaneRecord>(), 128);
+        assert_eq!(std::mem::size_of::<Occluder>(), 32);
+        let text = include_str!("../../../media_scenes/six_lights.toml");
+        let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let planes = sample_planes(&scene, Sampler::default(), 200, 2);
+        let ctx = GatherContext::new(&scene, &planes, scene.camera.position);
+        for v in &ctx.views {
+            let r = PlaneRecord::from(v);
+            assert_eq!((r.normal, r.t_det, r.width, r.light), (v.normal.to_array(), v.t_det, v.frame.width, v.light));
+            let bytes: &[u8] = bytemuck::bytes_of(&r);
+            let words: &[f32] = bytemuck::cast_slice(bytes);
+            assert!(words.iter().all(|w| !w.is_infinite()), "{r:?}");
+        }
+        let mut v = ctx.views[0];
+        v.frame.perp = crate::light::ChordDirection::<f32>::from_cos_sin(0.0, 1.0);
+        let r = PlaneRecord::from(&v);
+        assert_eq!((r.perp_inv_abs_cos, r.perp_inv_sin, r.perp_cos_positive), (0.0, 1.0, 0));
+    }
+
     #[test]
     fn hit_solves_the_plane_equation() {
         let text = include_str!("../../../media_scenes/six_lights.toml");
