@@ -369,8 +369,9 @@ impl GpuPlanes {
     }
 
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
-    /// `sums`: the planes in batches, each binned and gathered on the GPU, then the image read
-    /// back once. Checks `control` before the work is submitted; reports one unit of progress.
+    /// `sums`: the planes in batches, each binned and gathered on the GPU in a submission of its
+    /// own, then the image read back once. Checks `control` before each batch (a cancel stops
+    /// the work within one); reports one unit of progress.
     pub fn gather(
         &self,
         weighting: Weighting,
@@ -424,11 +425,6 @@ impl GpuPlanes {
         let image_bytes = pixels as u64 * 16;
         let image = gpu.scratch("image", image_bytes, storage | copy_src | wgpu::BufferUsages::COPY_DST);
         let hits = gpu.scratch("hits", pixels as u64 * 4, storage | copy_src | wgpu::BufferUsages::COPY_DST);
-        let readback = gpu.scratch(
-            "readback",
-            image_bytes + pixels as u64 * 4 + 16,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
         let pipelines = gpu.gather_pipelines(estimator_id(weighting));
         let gather_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("gather"),
@@ -447,23 +443,34 @@ impl GpuPlanes {
                 entry(10, &hits),
             ],
         });
-        let queries = gpu.timestamps.then(|| {
+        // A timestamp pair per batch (its first pass's start, its last pass's end), where the
+        // adapter has them; else the wall time of the submissions.
+        let batches = self.batches.len();
+        let queries = (gpu.timestamps && batches <= 2048).then(|| {
             let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("gather time"),
                 ty: wgpu::QueryType::Timestamp,
-                count: 2,
+                count: 2 * batches as u32,
             });
-            let resolve = gpu.scratch("timestamps", 16, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
+            let resolve = gpu.scratch("timestamps", 16 * batches as u64, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
             (set, resolve)
         });
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        encoder.clear_buffer(&image, 0, None);
-        encoder.clear_buffer(&hits, 0, None);
+        let stamps_at = image_bytes + pixels as u64 * 4;
+        let readback = gpu.scratch(
+            "readback",
+            stamps_at + 16 * batches as u64,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
         let tile_grid = grid(tiles as u64);
-        let passes = self.batches.len() * 5;
-        let mut pass_index = 0;
-        let mut keep = Vec::new();
-        for batch in &self.batches {
+        let mut wall_ns = 0u64;
+        // Batch by batch, each its own submission, so that a cancel stops the work within one.
+        for (b, batch) in self.batches.iter().enumerate() {
+            control.check()?;
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            if b == 0 {
+                encoder.clear_buffer(&image, 0, None);
+                encoder.clear_buffer(&hits, 0, None);
+            }
             let bin_params = BinParams {
                 width: w,
                 height: h,
@@ -495,43 +502,42 @@ impl GpuPlanes {
                 (&pipelines[0], &gather_group, grid(batch.items.max(1))),
                 (&pipelines[1], &gather_group, (tiles_x, tiles_y)),
             ];
-            for (pipeline, group, (x, y)) in steps {
+            for (k, (pipeline, group, (x, y))) in steps.into_iter().enumerate() {
                 let timestamp_writes =
-                    queries.as_ref().filter(|_| pass_index == 0 || pass_index + 1 == passes).map(|(set, _)| {
-                        wgpu::ComputePassTimestampWrites {
-                            query_set: set,
-                            beginning_of_pass_write_index: (pass_index == 0).then_some(0),
-                            end_of_pass_write_index: (pass_index + 1 == passes).then_some(1),
-                        }
+                    queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: (k == 0).then_some(2 * b as u32),
+                        end_of_pass_write_index: (k == 4).then_some(2 * b as u32 + 1),
                     });
                 let mut pass =
                     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, group, &[]);
                 pass.dispatch_workgroups(x, y, 1);
-                pass_index += 1;
             }
-            keep.push(bin_params);
+            if b + 1 == batches {
+                encoder.copy_buffer_to_buffer(&image, 0, &readback, 0, image_bytes);
+                encoder.copy_buffer_to_buffer(&hits, 0, &readback, image_bytes, pixels as u64 * 4);
+                if let Some((set, resolve)) = &queries {
+                    encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
+                    encoder.copy_buffer_to_buffer(resolve, 0, &readback, stamps_at, 16 * batches as u64);
+                }
+            }
+            let t = Instant::now();
+            gpu.queue.submit([encoder.finish()]);
+            if b + 1 == batches {
+                readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            }
+            let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+            wall_ns += t.elapsed().as_nanos() as u64;
+            gpu.take_errors().map_err(Error::Device)?;
+            polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
-        encoder.copy_buffer_to_buffer(&image, 0, &readback, 0, image_bytes);
-        encoder.copy_buffer_to_buffer(&hits, 0, &readback, image_bytes, pixels as u64 * 4);
-        if let Some((set, resolve)) = &queries {
-            encoder.resolve_query_set(set, 0..2, resolve, 0);
-            encoder.copy_buffer_to_buffer(resolve, 0, &readback, image_bytes + pixels as u64 * 4, 16);
-        }
-        control.check()?;
-        let t = Instant::now();
-        gpu.queue.submit([encoder.finish()]);
         let slice = readback.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| ());
-        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
-        let wall_ns = t.elapsed().as_nanos() as u64;
-        gpu.take_errors().map_err(Error::Device)?;
-        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         let view = slice.get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's image back: {e}")))?;
         let bytes: &[u8] = &view;
         let sums_back: &[[f32; 4]] = bytemuck::cast_slice(&bytes[..image_bytes as usize]);
-        let hits_back: &[u32] = bytemuck::cast_slice(&bytes[image_bytes as usize..image_bytes as usize + pixels * 4]);
+        let hits_back: &[u32] = bytemuck::cast_slice(&bytes[image_bytes as usize..stamps_at as usize]);
         let mut stats = GatherStats::default();
         for ((sum, back), &n) in sums.iter_mut().zip(sums_back).zip(hits_back) {
             *sum += Vec3::new(back[0], back[1], back[2]);
@@ -539,9 +545,9 @@ impl GpuPlanes {
         }
         stats.tests = self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64;
         stats.device_ns = if queries.is_some() {
-            let ts: &[u64] = bytemuck::cast_slice(&bytes[image_bytes as usize + pixels * 4..]);
+            let ts: &[u64] = bytemuck::cast_slice(&bytes[stamps_at as usize..]);
             let period = gpu.queue.get_timestamp_period() as f64;
-            (ts[1].wrapping_sub(ts[0]) as f64 * period) as u64
+            ts.chunks(2).map(|p| (p[1].wrapping_sub(p[0]) as f64 * period) as u64).sum()
         } else {
             wall_ns
         };
