@@ -5,6 +5,7 @@
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fogplanes::accel::Accelerator;
+use fogplanes::gpu::Device;
 use fogplanes::kernel::Kernel;
 use fogplanes::sampling::Sampler;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
@@ -141,6 +142,19 @@ pub(crate) struct ScalingArgs {
     pub(crate) sampler: Sampler,
     #[command(flatten)]
     pub(crate) common: CommonArgs,
+    #[command(flatten)]
+    pub(crate) device: DeviceArgs,
+}
+
+/// Which processor gathers: `render`, `table` and `scaling` (the reference stays on the CPU, so
+/// that it shares nothing with the gather).
+#[derive(Args)]
+pub(crate) struct DeviceArgs {
+    /// The processor that gathers: cpu, gpu (through Vulkan, Metal or DX12; refused where no
+    /// adapter is found) or auto (the GPU when one is found, which the summary names)
+    /// [default: cpu].
+    #[arg(long, value_parser = device_parser())]
+    pub(crate) device: Option<Device>,
 }
 
 #[derive(Args)]
@@ -252,6 +266,8 @@ pub(crate) struct RenderArgs {
     pub(crate) watch: WatchArgs,
     #[command(flatten)]
     pub(crate) common: CommonArgs,
+    #[command(flatten)]
+    pub(crate) device: DeviceArgs,
 }
 
 #[derive(Args)]
@@ -377,6 +393,8 @@ pub(crate) struct TableArgs {
     pub(crate) exposure: Option<f32>,
     #[command(flatten)]
     pub(crate) common: CommonArgs,
+    #[command(flatten)]
+    pub(crate) device: DeviceArgs,
 }
 
 /// Parses a value from the closed list of names `names` (shown in `--help` and in errors).
@@ -392,6 +410,10 @@ pub(crate) fn estimator_parser() -> impl TypedValueParser<Value = Estimator> {
 
 pub(crate) fn accelerator_parser() -> impl TypedValueParser<Value = Accelerator> {
     named(Accelerator::ALL.iter().map(|a| a.name()).collect())
+}
+
+pub(crate) fn device_parser() -> impl TypedValueParser<Value = Device> {
+    named(Device::ALL.iter().map(|d| d.name()).collect())
 }
 
 pub(crate) fn sampler_parser() -> impl TypedValueParser<Value = Sampler> {
@@ -477,6 +499,7 @@ impl From<&RenderArgs> for Overrides {
             pixel_center: a.pixel_center,
             accelerator: a.accelerator,
             kernel: a.kernel,
+            device: a.device.device,
             time_budget: a.time_budget,
             target_error: a.target_error,
             stderr: a.stderr_image.is_some(),
@@ -515,6 +538,7 @@ impl From<&TableArgs> for TableOverrides {
             resolution: a.common.resolution,
             threads: a.common.threads,
             exposure: a.exposure,
+            device: a.device.device,
         }
     }
 }
@@ -527,6 +551,7 @@ impl From<&ScalingArgs> for ScalingOverrides {
             planes: Some(a.planes.clone()),
             resolutions: a.resolutions.clone(),
             threads: a.common.threads,
+            device: a.device.device,
         }
     }
 }

@@ -286,7 +286,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
     let merged = merge_parts(&a.parts)?;
     let exposure = settings::exposure(a.exposure)?;
     match merged {
-        Merged::Render { scene, options, partial, image } => {
+        Merged::Render { scene, options, partial, image, devices } => {
             if a.stderr_image.is_some() {
                 return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
             }
@@ -301,6 +301,12 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                     partial.hits,
                     partial.seconds
                 );
+                if devices.len() > 1 {
+                    say!(
+                        "note: the parts were gathered on different devices ({}): the image agrees with each one's render within f32 rounding, and is the bits of neither",
+                        devices.join(", ")
+                    );
+                }
                 say!(
                     "wrote {} ({}x{}, mean {:.6}, max {:.4})",
                     a.output.display(),

@@ -98,7 +98,11 @@ fn measure(settings: &ResolvedTable, planes: usize, seed: u64) -> Result<Vec<Mea
             let film = Film::finish(scene.camera.width, scene.camera.height, &partial.sums, planes, &emission)?;
             let gather_seconds = t.elapsed().as_secs_f64();
             let after = prepared.stats();
-            let stats = GatherStats { tests: after.tests - before.tests, hits: after.hits - before.hits };
+            let stats = GatherStats {
+                tests: after.tests - before.tests,
+                hits: after.hits - before.hits,
+                device_ns: ((after.seconds_device - before.seconds_device) * 1e9) as u64,
+            };
             out.push(Measured { entry: Entry { weighting, sampler }, film, stats, gather_seconds, shared_seconds });
         }
     }

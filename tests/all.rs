@@ -14,6 +14,7 @@ mod error_image;
 mod fuzz_exr;
 mod fuzz_parts;
 mod fuzz_scene;
+mod gpu;
 mod hard_scenes;
 mod hostile;
 mod hostile_parts;

@@ -214,7 +214,7 @@ sigma_a = 0.0
 /// The image mean and the means of blocks of pixels over `seeds` plane sets, against the
 /// reference's (its standard errors from its replicates): every |z| within 4.5. Returns the
 /// lines printed.
-fn against_reference(
+pub(crate) fn against_reference(
     name: &str,
     scene: &Scene,
     pixel_center: bool,

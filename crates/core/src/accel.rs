@@ -7,12 +7,13 @@
 use crate::bvh::PlaneBvh;
 use crate::camera::CameraRay;
 use crate::control::Control;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats};
+use crate::gpu::{self, GpuPlanes};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::limits::PLANE_UNIT;
 use crate::photon_plane::{PlaneSet, sample_plane};
-use crate::raster::{RasterPiece, ScreenRaster, Tiling};
+use crate::raster::{RasterPiece, ScreenRaster, Tiling, screen_polygon};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -29,9 +30,13 @@ pub enum Accelerator {
     Bvh,
     /// Every ray tests every plane (for checking the others).
     BruteForce,
+    /// The GPU ([`crate::gpu`]): chosen by the device (`--device gpu`), never by name, so it is
+    /// not among [`Accelerator::ALL`], the CPU's structures.
+    Gpu,
 }
 
 impl Accelerator {
+    /// The CPU's structures (`--accelerator`).
     pub const ALL: [Accelerator; 3] = [Accelerator::Raster, Accelerator::Bvh, Accelerator::BruteForce];
 
     pub fn name(self) -> &'static str {
@@ -39,15 +44,17 @@ impl Accelerator {
             Accelerator::Raster => "raster",
             Accelerator::Bvh => "bvh",
             Accelerator::BruteForce => "brute-force",
+            Accelerator::Gpu => "gpu",
         }
     }
 
     /// Progress units of one gathering over the image (for sizing a progress bar): a tile on
     /// the raster (sized for the current thread pool: call it in the pool that renders), a
-    /// chunk of rays on the per-ray structures.
+    /// chunk of rays on the per-ray structures, the whole image on the GPU.
     pub fn units_per_gathering(self, width: u32, height: u32) -> u64 {
         match self {
             Accelerator::Raster => Tiling::new(width, height, crate::schedule::workers()).count() as u64,
+            Accelerator::Gpu => 1,
             _ => (width as u64 * height as u64).div_ceil(RAY_CHUNK as u64),
         }
     }
@@ -69,19 +76,27 @@ impl Aggregate for BruteForce {
         let tests = with.ctx.views.len() as u64;
         gather_per_ray(rays, sums, control, |ray| {
             let (value, hits) = with.ctx.gather_brute_force(with.weights, ray);
-            (value, GatherStats { tests, hits })
+            (value, GatherStats { tests, hits, ..Default::default() })
         })
     }
 }
 
-/// The structure built over a set's planes.
+/// The structure built over a set's planes: one of the CPU's, gathered through [`Aggregate`]
+/// with the weighting's denominator as a type, or the GPU's, which takes the weighting as a
+/// value (its shaders are specialised per estimator instead).
 enum Structure {
+    Cpu(CpuStructure),
+    Gpu(GpuPlanes),
+}
+
+/// The CPU's structures.
+enum CpuStructure {
     Raster(ScreenRaster),
     Bvh(PlaneBvh),
     BruteForce(BruteForce),
 }
 
-impl Aggregate for Structure {
+impl Aggregate for CpuStructure {
     fn gather<D: Denominator>(
         &self,
         with: Gathering<D>,
@@ -90,9 +105,9 @@ impl Aggregate for Structure {
         control: Control,
     ) -> GatherStats {
         match self {
-            Structure::Raster(s) => s.gather(with, rays, sums, control),
-            Structure::Bvh(s) => s.gather(with, rays, sums, control),
-            Structure::BruteForce(s) => s.gather(with, rays, sums, control),
+            CpuStructure::Raster(s) => s.gather(with, rays, sums, control),
+            CpuStructure::Bvh(s) => s.gather(with, rays, sums, control),
+            CpuStructure::BruteForce(s) => s.gather(with, rays, sums, control),
         }
     }
 }
@@ -112,9 +127,10 @@ pub struct PreparedPlanes {
 }
 
 impl PreparedPlanes {
-    /// Planes `range` of `set`, with the structure `accelerator` over them.
+    /// Planes `range` of `set`, with the structure `accelerator` over them
+    /// ([`Accelerator::Gpu`]: on the GPU, which the settings have found).
     /// [`crate::Error::Cancelled`] once `control` is cancelled (checked after each piece of
-    /// planes sampled).
+    /// planes sampled); [`crate::Error::Device`] if the GPU fails.
     pub fn new(
         scene: &Scene,
         set: PlaneSet,
@@ -126,6 +142,8 @@ impl PreparedPlanes {
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
         let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
+        // The GPU's boxes of pixels, plane by plane (`gpu::screen_bounds`).
+        let mut bounds = Vec::new();
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
         let lights = scene.light_distribution();
@@ -142,6 +160,15 @@ impl PreparedPlanes {
             if let Some(r) = &mut raster {
                 r.push_planes_in(&scene.camera, &piece, &scene.medium, control);
             }
+            if accelerator == Accelerator::Gpu {
+                use rayon::prelude::*;
+                let (cam, medium) = (&scene.camera, &scene.medium);
+                bounds.par_extend(
+                    piece
+                        .par_iter()
+                        .map(|p| gpu::screen_bounds(&screen_polygon(cam, p, medium), cam.width, cam.height)),
+                );
+            }
             seconds_build += t.elapsed().as_secs_f64();
             if accelerator == Accelerator::Bvh {
                 all.extend(piece);
@@ -150,9 +177,16 @@ impl PreparedPlanes {
         control.check()?;
         let t = Instant::now();
         let structure = match (accelerator, raster) {
-            (Accelerator::Raster, Some(r)) => Structure::Raster(r),
-            (Accelerator::Bvh, _) => Structure::Bvh(PlaneBvh::build(&all, &scene.medium, origin, control)?),
-            _ => Structure::BruteForce(BruteForce),
+            (Accelerator::Raster, Some(r)) => Structure::Cpu(CpuStructure::Raster(r)),
+            (Accelerator::Bvh, _) => {
+                Structure::Cpu(CpuStructure::Bvh(PlaneBvh::build(&all, &scene.medium, origin, control)?))
+            }
+            (Accelerator::Gpu, _) => {
+                let gpu = gpu::adapter().map_err(Error::Device)?;
+                let (w, h) = (scene.camera.width, scene.camera.height);
+                Structure::Gpu(GpuPlanes::new(gpu, &context, &bounds, w, h)?)
+            }
+            _ => Structure::Cpu(CpuStructure::BruteForce(BruteForce)),
         };
         seconds_build += t.elapsed().as_secs_f64();
         Ok(PreparedPlanes { context, structure, seconds_sampling, seconds_build })
@@ -166,13 +200,13 @@ impl PreparedPlanes {
     /// The raster, if that is the structure (for measuring the traversal alone).
     pub fn raster(&self) -> Option<&ScreenRaster> {
         match &self.structure {
-            Structure::Raster(r) => Some(r),
+            Structure::Cpu(CpuStructure::Raster(r)) => Some(r),
             _ => None,
         }
     }
 
     /// Gathers the rays of one ray set with `weighting`, adding each ray's estimate to `sums`;
-    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]). Reports each unit of work to
+    /// the raster runs `kernel` (resolved, see [`Kernel::resolve`]), the GPU its own shaders. Reports each unit of work to
     /// `control`; once it is cancelled, the work stops before the next plane (or ray) and the
     /// result is [`crate::Error::Cancelled`], with `sums` incomplete.
     pub fn gather(
@@ -183,6 +217,9 @@ impl PreparedPlanes {
         sums: &mut [Vec3],
         control: Control,
     ) -> Result<GatherStats> {
+        if let Structure::Gpu(g) = &self.structure {
+            return g.gather(weighting, rays, sums, control);
+        }
         gather_pieces(&[(self, rays)], weighting, kernel, sums, control)
     }
 }
@@ -199,6 +236,14 @@ pub fn gather_pieces(
     sums: &mut [Vec3],
     control: Control,
 ) -> Result<GatherStats> {
+    // The GPU's pieces go one after another, each in its own submissions.
+    if pieces.iter().any(|(p, _)| matches!(p.structure, Structure::Gpu(_))) {
+        let mut stats = GatherStats::default();
+        for (planes, rays) in pieces {
+            stats += planes.gather(weighting, kernel, rays, sums, control)?;
+        }
+        return Ok(stats);
+    }
     struct Run<'a, 'p> {
         pieces: &'p [(&'a PreparedPlanes, &'a [CameraRay])],
         kernel: Kernel,
@@ -227,8 +272,11 @@ pub fn gather_pieces(
                 if self.control.is_cancelled() {
                     break;
                 }
-                let with = Gathering { ctx: &planes.context, weights, kernel: self.kernel };
-                stats += planes.structure.gather(with, rays, self.sums, self.control);
+                // Every piece is the CPU's here: the GPU's were gathered above.
+                if let Structure::Cpu(cpu) = &planes.structure {
+                    let with = Gathering { ctx: &planes.context, weights, kernel: self.kernel };
+                    stats += cpu.gather(with, rays, self.sums, self.control);
+                }
             }
             stats
         }
@@ -294,8 +342,9 @@ mod tests {
                     let weights = CancelAfter { weighed: AtomicUsize::new(0), after, cancel: &cancel };
                     let mut sums = vec![Vec3::ZERO; rays.len()];
                     let with = Gathering { ctx: &prepared.context, weights: &weights, kernel };
-                    let stats = pool
-                        .install(|| prepared.structure.gather(with, &rays, &mut sums, Control::with_cancel(&cancel)));
+                    let Structure::Cpu(structure) = &prepared.structure else { panic!("a CPU structure") };
+                    let stats =
+                        pool.install(|| structure.gather(with, &rays, &mut sums, Control::with_cancel(&cancel)));
                     (weights.weighed.into_inner(), stats, cancel.into_inner())
                 };
                 let (whole, whole_stats, set) = run(usize::MAX);

@@ -44,13 +44,16 @@ pub enum Error {
     /// The caller stopped the work (through the flag of its [`crate::control::Control`]).
     #[error("cancelled")]
     Cancelled,
+    /// The GPU failed while working (a validation error, out of memory, a lost device).
+    #[error("the GPU: {0}")]
+    Device(String),
 }
 
 impl Error {
     /// Whether the error is the caller's input (exit code 2 on the command line) rather than a
     /// failure while working.
     pub fn is_input(&self) -> bool {
-        !matches!(self, Error::Write { .. } | Error::Cancelled)
+        !matches!(self, Error::Write { .. } | Error::Cancelled | Error::Device(_))
     }
 
     /// The error in one line, a setting the caller gave named by `name` (the command line
@@ -130,6 +133,8 @@ pub enum Setting {
     Spp,
     Accelerator,
     Kernel,
+    /// The processor that gathers: cpu, gpu or auto.
+    Device,
     TimeBudget,
     /// The relative RMS error a render in passes stops at.
     TargetError,
@@ -147,7 +152,7 @@ pub enum Setting {
 }
 
 impl Setting {
-    pub const ALL: [Setting; 18] = [
+    pub const ALL: [Setting; 19] = [
         Setting::Estimator,
         Setting::Orientations,
         Setting::Planes,
@@ -156,6 +161,7 @@ impl Setting {
         Setting::Spp,
         Setting::Accelerator,
         Setting::Kernel,
+        Setting::Device,
         Setting::TimeBudget,
         Setting::TargetError,
         Setting::Resolution,
@@ -179,6 +185,7 @@ impl Setting {
             Setting::Spp => "spp",
             Setting::Accelerator => "accelerator",
             Setting::Kernel => "kernel",
+            Setting::Device => "device",
             Setting::TimeBudget => "time_budget",
             Setting::TargetError => "target_error",
             Setting::Resolution => "resolution",

@@ -74,6 +74,72 @@ pub struct PlaneView {
     pub occluders_end: u32,
 }
 
+/// A [`PlaneView`] as the GPU reads it: the one definition of what crosses for a plane
+/// (`gpu/gather.wgsl`'s `Plane`, eight rows of 16 bytes; the occluders cross as [`Occluder`]s).
+/// The same f32 values as the view, except that a reciprocal the CPU lets be infinite (a chord
+/// direction along an axis) is 0 here, and the shader reads 0 as infinite: Vulkan does not
+/// promise IEEE infinities.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PlaneRecord {
+    pub normal: [f32; 3],
+    pub t_det: f32,
+    pub a_axis: [f32; 3],
+    pub width: f32,
+    pub r_axis: [f32; 3],
+    pub occluders_start: u32,
+    pub normal_perp: [f32; 3],
+    pub occluders_end: u32,
+    pub scale: [f32; 3],
+    pub scale_max: f32,
+    pub cos_a: f32,
+    pub sin_a: f32,
+    pub p0: f32,
+    pub q0: f32,
+    pub light_w: f32,
+    pub light_h: f32,
+    /// 1 / |cos(alpha_perp)| and 1 / sin(alpha_perp), 0 for infinite (or above 1e30).
+    pub perp_inv_abs_cos: f32,
+    pub perp_inv_sin: f32,
+    pub perp_cos_positive: u32,
+    /// cmis-exact's unit of length, W + H, and its reciprocal (weights `CmisPlane`).
+    pub unit: f32,
+    pub inv_unit: f32,
+    pub light: u32,
+}
+
+impl From<&PlaneView> for PlaneRecord {
+    fn from(v: &PlaneView) -> Self {
+        let f = &v.frame;
+        let finite = |x: f32| if x.is_finite() && x <= 1e30 { x } else { 0.0 };
+        let unit = f.light_w + f.light_h;
+        PlaneRecord {
+            normal: v.normal.to_array(),
+            t_det: v.t_det,
+            a_axis: v.a_axis.to_array(),
+            width: f.width,
+            r_axis: v.r_axis.to_array(),
+            occluders_start: v.occluders_start,
+            normal_perp: v.normal_perp.to_array(),
+            occluders_end: v.occluders_end,
+            scale: v.scale.to_array(),
+            scale_max: v.scale_max,
+            cos_a: f.cos_a,
+            sin_a: f.sin_a,
+            p0: f.p0,
+            q0: f.q0,
+            light_w: f.light_w,
+            light_h: f.light_h,
+            perp_inv_abs_cos: finite(f.perp.inv_abs_cos),
+            perp_inv_sin: finite(f.perp.inv_sin),
+            perp_cos_positive: f.perp.cos_positive as u32,
+            unit,
+            inv_unit: 1.0 / unit,
+            light: v.light,
+        }
+    }
+}
+
 /// A block of camera rays, one per lane: unit directions and segments `[t0, t1]`.
 #[derive(Clone, Copy, Debug)]
 pub struct RayBlock<V> {
@@ -293,12 +359,16 @@ pub struct GatherStats {
     /// Ray-plane tests made and hits found.
     pub tests: u64,
     pub hits: u64,
+    /// Nanoseconds the device spent gathering, where one did (the GPU: its timestamps, or the
+    /// wall time of its submissions where it has none); 0 on the CPU.
+    pub device_ns: u64,
 }
 
 impl std::ops::AddAssign for GatherStats {
     fn add_assign(&mut self, o: Self) {
         self.tests += o.tests;
         self.hits += o.hits;
+        self.device_ns += o.device_ns;
     }
 }
 
@@ -560,6 +630,29 @@ mod tests {
     fn a_light_is_added_without_nan_from_a_zero_scale() {
         let got = add_light(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.5, 0.0, 2.0), Vec3::new(4.0, f32::INFINITY, 1.0));
         assert_eq!(got, Vec3::new(3.0, 2.0, 5.0));
+    }
+
+    /// The record that crosses to the GPU is 128 bytes, the layout `gpu/gather.wgsl`'s `Plane`
+    /// declares, and carries the view's values, an infinite reciprocal as 0.
+    #[test]
+    fn a_plane_record_carries_the_view_and_no_infinity() {
+        assert_eq!(std::mem::size_of::<PlaneRecord>(), 128);
+        assert_eq!(std::mem::size_of::<Occluder>(), 32);
+        let text = include_str!("../../../media_scenes/six_lights.toml");
+        let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let planes = sample_planes(&scene, Sampler::default(), 200, 2);
+        let ctx = GatherContext::new(&scene, &planes, scene.camera.position);
+        for v in &ctx.views {
+            let r = PlaneRecord::from(v);
+            assert_eq!((r.normal, r.t_det, r.width, r.light), (v.normal.to_array(), v.t_det, v.frame.width, v.light));
+            let bytes: &[u8] = bytemuck::bytes_of(&r);
+            let words: &[f32] = bytemuck::cast_slice(bytes);
+            assert!(words.iter().all(|w| !w.is_infinite()), "{r:?}");
+        }
+        let mut v = ctx.views[0];
+        v.frame.perp = crate::light::ChordDirection::<f32>::from_cos_sin(0.0, 1.0);
+        let r = PlaneRecord::from(&v);
+        assert_eq!((r.perp_inv_abs_cos, r.perp_inv_sin, r.perp_cos_positive), (0.0, 1.0, 0));
     }
 
     #[test]

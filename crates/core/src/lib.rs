@@ -29,6 +29,7 @@
 //! | traversal | [`kernel`] | the span kernels (AVX-512, AVX2, portable, per-hit) and the choice between them; the [`kernel::Aggregate`] interface every structure answers |
 //! | | [`raster`] | planes rasterised in screen space: the fast structure for camera rays |
 //! | | [`bvh`] | a bounding volume hierarchy over planes, for arbitrary rays |
+//! | | [`gpu`] | the GPU through wgpu: the planes binned to tiles and gathered in WGSL compute shaders (`gather.wgsl`, `bin.wgsl`), the adapter found once (docs/gpu.md) |
 //! | | [`accel`] | the prepared planes of a render behind one gather, whatever the structure |
 //! | pixels and film | [`pixel`] | the pixel: the ray sets that sample it, their plane groups, the one cache of ray sets (section 8.1) |
 //! | | [`emission`] | direct emission integrated over the pixel (section 8.2) |
@@ -76,6 +77,7 @@ pub mod error;
 pub mod export;
 pub mod film;
 pub mod gather;
+pub mod gpu;
 pub mod kernel;
 pub mod light;
 pub mod limits;

@@ -33,8 +33,10 @@ fn recorded_options(scene: &Scene, r: &RenderRecord) -> std::result::Result<Rend
 
 /// What parts merge into.
 pub enum Merged {
-    /// A whole render: its image, the scene, the settings and the merged sums.
-    Render { scene: Scene, options: RenderOptions, partial: Partial, image: Film },
+    /// A whole render: its image, the scene, the settings and the merged sums; the devices its
+    /// parts were gathered on, each once (more than one: the image agrees with each device's
+    /// render within f32 rounding, docs/gpu.md, but is the bits of neither).
+    Render { scene: Scene, options: RenderOptions, partial: Partial, image: Film, devices: Vec<String> },
     /// A whole reference: mean and standard error.
     Reference { scene: Scene, options: ReferenceOptions, mean: Film, stderr: Film, seconds: f64 },
     /// A whole pilot pass.
@@ -50,13 +52,15 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     // Each part's recorded scene and settings, not only its fingerprint, are the first's: a
     // band whose recorded width had been changed was stacked as it was, shifting every later
     // row (or indexing past the image).
+    // The device is not a setting of the image: parts of different devices merge.
+    let settings = |r: &Option<RenderRecord>| r.clone().map(|r| RenderRecord { device: String::new(), ..r });
     for p in &parts[1..] {
         let (a, b) = (&first.meta, &p.meta);
         if b.kind != a.kind
             || b.fingerprint != a.fingerprint
             || b.total != a.total
             || b.scene != a.scene
-            || b.render != a.render
+            || settings(&b.render) != settings(&a.render)
             || b.reference != a.reference
         {
             return Err(Error::Partial(format!(
@@ -88,7 +92,13 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
             let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
             let partial = merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
             let image = finish(&scene, &options, &partial)?;
-            Ok(Merged::Render { scene, options, partial, image })
+            let mut devices: Vec<String> = Vec::new();
+            for r in parts.iter().filter_map(|p| p.meta.render.as_ref()) {
+                if !devices.contains(&r.device) {
+                    devices.push(r.device.clone());
+                }
+            }
+            Ok(Merged::Render { scene, options, partial, image, devices })
         }
         kind => {
             let record = first.meta.reference.as_ref().ok_or_else(|| first.bad("no reference settings"))?;

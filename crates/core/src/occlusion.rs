@@ -15,7 +15,10 @@ use glam::{DVec2, DVec3};
 /// A hit at plane distance r is in shadow when 0 < t < r (with a relative margin of 1e-6 at
 /// both ends, so that neither the light itself nor the hit's own panel counts) and the point
 /// lies on the panel, edges included (docs/mathematics.md section 2.3).
-#[derive(Clone, Copy, Debug)]
+///
+/// Plain data (`repr(C)`): it crosses to the GPU as it is (`gpu/gather.wgsl`'s `Occluder`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Occluder {
     pub t0: f32,
     pub t_a: f32,

@@ -9,6 +9,7 @@ use crate::accel::Accelerator;
 use crate::error::{Error, Result, Setting};
 use crate::film::{Film, ImageInfo};
 use crate::gather::GatherStats;
+use crate::gpu::Device;
 use crate::kernel::Kernel;
 use crate::photon_plane::PlaneSet;
 use crate::sampling::Sampler;
@@ -32,6 +33,10 @@ pub struct RenderOptions {
     pub(crate) accelerator: Accelerator,
     /// The kernel that runs (`auto` resolved on this CPU).
     pub(crate) kernel: Kernel,
+    /// The processor that gathers: [`Device::Cpu`] or [`Device::Gpu`] (`auto` resolved, the GPU
+    /// found). Not in the render's fingerprint: the devices agree within f32 rounding
+    /// (docs/gpu.md), and their parts may be merged (the merge says so).
+    pub(crate) device: Device,
     /// Whether the render estimates its error image ([`crate::spread`]); never with fewer than
     /// two ray sets.
     pub(crate) stderr: bool,
@@ -65,6 +70,25 @@ impl RenderOptions {
     pub fn kernel(&self) -> Kernel {
         self.kernel
     }
+    /// The processor that gathers: resolved, never [`Device::Auto`].
+    pub fn device(&self) -> Device {
+        self.device
+    }
+    /// The structure the planes are gathered through: the GPU's on [`Device::Gpu`], else the
+    /// accelerator's.
+    pub fn structure(&self) -> Accelerator {
+        if self.device == Device::Gpu { Accelerator::Gpu } else { self.accelerator }
+    }
+    /// The device as parts and images record it: `cpu`, or `gpu` with the adapter's name.
+    pub fn device_label(&self) -> String {
+        match self.device {
+            Device::Gpu => match crate::gpu::adapter() {
+                Ok(g) => format!("gpu: {}", g.name()),
+                Err(_) => "gpu".into(),
+            },
+            d => d.name().into(),
+        }
+    }
     /// Whether the render estimates its error image (in [`RenderStats::stderr`]).
     pub fn stderr(&self) -> bool {
         self.stderr
@@ -95,6 +119,7 @@ impl RenderOptions {
             .with("spp", self.spp)
             .with("ray_sets", self.ray_sets())
             .with("accelerator", self.accelerator.name())
+            .with("device", self.device_label())
     }
 }
 
@@ -114,6 +139,11 @@ pub struct RenderStats {
     pub seconds_build: f64,
     pub seconds_rays: f64,
     pub seconds_gather: f64,
+    /// The device that gathered (`cpu`, or `gpu: ` and the adapter).
+    pub device: String,
+    /// Seconds the GPU spent in its gather (binning included), by its timestamps where it has
+    /// them, else the wall time of its submissions; 0 on the CPU.
+    pub seconds_device: f64,
     pub seconds_total: f64,
     /// The estimated standard error of each pixel, when the options asked for it
     /// (docs/mathematics.md section 10).
@@ -137,6 +167,7 @@ impl RenderStats {
         RenderStats {
             estimator: opts.weighting.label(),
             kernel: opts.kernel.to_string(),
+            device: opts.device_label(),
             planes: opts.planes,
             plane_passes: 1,
             ..Default::default()
@@ -164,6 +195,7 @@ impl RenderStats {
     /// Counts one gathering that found `s` in `seconds`.
     pub fn add_gather(&mut self, s: GatherStats, seconds: f64) {
         self.seconds_gather += seconds;
+        self.seconds_device += s.device_ns as f64 * 1e-9;
         self.hits += s.hits;
         self.tests += s.tests;
     }
@@ -197,9 +229,23 @@ impl RenderStats {
     pub fn gather_ns_per_hit(&self) -> f64 {
         1e9 * self.seconds_gather / self.hits.max(1) as f64
     }
+    /// Hits per second of the GPU's own gather time (0 on the CPU).
+    pub fn device_hits_per_second(&self) -> f64 {
+        if self.seconds_device > 0.0 { self.hits as f64 / self.seconds_device } else { 0.0 }
+    }
     pub fn summary(&self) -> String {
+        let gathered_by = if self.seconds_device > 0.0 {
+            format!(
+                "{}; GPU time {:.4} s, {:.4} G hits/s",
+                self.device,
+                self.seconds_device,
+                self.device_hits_per_second() * 1e-9
+            )
+        } else {
+            format!("{} kernel", self.kernel)
+        };
         format!(
-            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit of gathering, wall, {} kernel), total {:.3} s",
+            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit of gathering, wall, {}), total {:.3} s",
             self.estimator,
             self.planes,
             self.rays,
@@ -208,7 +254,7 @@ impl RenderStats {
             self.tests_per_hit(),
             self.seconds_gather,
             self.gather_ns_per_hit(),
-            self.kernel,
+            gathered_by,
             self.seconds_total
         )
     }

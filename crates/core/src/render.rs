@@ -78,7 +78,7 @@ impl<'g> Preparer<'g> {
                 Some((_, p)) => p.clone(),
                 None => {
                     let set = self.opts.plane_set();
-                    let p = PreparedPlanes::new(self.scene, set, spec.1.clone(), self.opts.accelerator, control)?;
+                    let p = PreparedPlanes::new(self.scene, set, spec.1.clone(), self.opts.structure(), control)?;
                     self.seconds_sampling += p.seconds_sampling;
                     self.seconds_build += p.seconds_build;
                     Arc::new(p)
@@ -460,7 +460,7 @@ pub fn render_chunk(
 /// whole [`render`]): one per unit of work of every gathering over the image, one gathering per
 /// piece of every chunk ([`crate::partial::gatherings`]).
 pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: Range<usize>) -> u64 {
-    let per_gathering = opts.accelerator.units_per_gathering(scene.camera.width, scene.camera.height);
+    let per_gathering = opts.structure().units_per_gathering(scene.camera.width, scene.camera.height);
     per_gathering * crate::partial::gatherings(opts.planes, opts.ray_sets(), range)
 }
 

@@ -14,6 +14,7 @@ use crate::accel::Accelerator;
 use crate::error::{Error, Result};
 pub use crate::error::{Origin, Setting};
 use crate::film::ImageFormat;
+use crate::gpu::Device;
 use crate::kernel::Kernel;
 use crate::limits::{
     MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes,
@@ -112,6 +113,25 @@ fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
     Weighting::new(estimator, Some(k)).map(|_| ()).map_err(from_caller(Setting::Orientations))
 }
 
+/// The device that gathers, resolved once: `auto` takes the GPU when an adapter is found and
+/// the CPU otherwise; `gpu` without an adapter is refused in one line saying why. The CPU's
+/// accelerator and kernel (`cpu_options`: the caller gave one) do not apply to the GPU.
+pub fn device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
+    let wanted = given.unwrap_or_default();
+    if wanted == Device::Cpu {
+        return Ok(Device::Cpu);
+    }
+    match (wanted, crate::gpu::adapter()) {
+        (Device::Auto, Err(_)) => Ok(Device::Cpu),
+        (_, Err(why)) => Err(Error::option(Setting::Device, format!("gpu: {why}"))),
+        (_, Ok(_)) if cpu_options => Err(Error::option(
+            Setting::Device,
+            format!("{wanted}: the accelerator and the kernel choose how the CPU gathers; give them with --device cpu"),
+        )),
+        (_, Ok(_)) => Ok(Device::Gpu),
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // render
 
@@ -130,6 +150,8 @@ pub struct Overrides {
     pub pixel_center: bool,
     pub accelerator: Option<Accelerator>,
     pub kernel: Option<Kernel>,
+    /// The processor that gathers (`None`: the CPU).
+    pub device: Option<Device>,
     /// Render in plane passes for this many seconds instead of a plane count.
     pub time_budget: Option<f64>,
     /// Render in plane passes until the estimated relative RMS error of the image falls below
@@ -228,6 +250,7 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
         pixel_center: given.pixel_center,
         accelerator: given.accelerator.unwrap_or_default(),
         kernel: given.kernel.unwrap_or_default().resolve()?,
+        device: device(given.device, given.accelerator.is_some() || given.kernel.is_some())?,
         stderr,
     };
     Ok(ResolvedRender {
@@ -327,6 +350,8 @@ pub struct TableOverrides {
     pub resolution: Option<(u32, u32)>,
     pub threads: Option<usize>,
     pub exposure: Option<f32>,
+    /// The processor that gathers (`None`: the CPU).
+    pub device: Option<Device>,
 }
 
 /// The table resolved.
@@ -347,6 +372,8 @@ pub struct ResolvedTable {
     pub equal_time: Option<f64>,
     pub exposure: f32,
     pub threads: Option<usize>,
+    /// The processor that gathers, resolved.
+    pub device: Device,
 }
 
 pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTable> {
@@ -387,6 +414,7 @@ pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTa
         equal_time: given.equal_time,
         exposure: exposure(given.exposure)?,
         threads: threads(given.threads)?,
+        device: device(given.device, false)?,
         scene,
     })
 }
@@ -405,6 +433,7 @@ impl ResolvedTable {
             pixel_center: self.pixel_center,
             accelerator: Accelerator::default(),
             kernel: Kernel::widest(),
+            device: self.device,
             stderr: false,
         }
     }
@@ -427,6 +456,8 @@ pub struct ScalingOverrides {
     pub planes: Option<Vec<u64>>,
     pub resolutions: Option<Vec<(u32, u32)>>,
     pub threads: Option<usize>,
+    /// The processor that gathers (`None`: the CPU).
+    pub device: Option<Device>,
 }
 
 /// A scaling run resolved.
@@ -437,6 +468,8 @@ pub struct ResolvedScaling {
     pub planes: Vec<usize>,
     pub resolutions: Vec<(u32, u32)>,
     pub threads: Option<usize>,
+    /// The processor that gathers, resolved.
+    pub device: Device,
 }
 
 impl ResolvedScaling {
@@ -452,6 +485,7 @@ impl ResolvedScaling {
             pixel_center: false,
             accelerator: Accelerator::default(),
             kernel: Kernel::widest(),
+            device: self.device,
             stderr: false,
         }
     }
@@ -476,6 +510,7 @@ pub fn resolve_scaling(given: &ScalingOverrides) -> Result<ResolvedScaling> {
         planes: planes.iter().map(|&n| n as usize).collect(),
         resolutions,
         threads: threads(given.threads)?,
+        device: device(given.device, false)?,
     })
 }
 
@@ -512,6 +547,7 @@ mod tests {
             pixel_center: false,
             accelerator: Accelerator::Raster,
             kernel: Kernel::Auto.resolve().unwrap(),
+            device: Device::Cpu,
             stderr: false,
         };
         assert_eq!(r.options, expected);
@@ -528,6 +564,7 @@ mod tests {
             pixel_center: true,
             accelerator: Some(Accelerator::Bvh),
             kernel: Some(Kernel::PerHit),
+            device: None,
             time_budget: None,
             target_error: None,
             stderr: false,
@@ -545,6 +582,7 @@ mod tests {
             pixel_center: true,
             accelerator: Accelerator::Bvh,
             kernel: Kernel::PerHit,
+            device: Device::Cpu,
             stderr: false,
         };
         assert_eq!(r.options, expected);

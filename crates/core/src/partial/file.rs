@@ -57,6 +57,15 @@ pub struct RenderRecord {
     pub pixel_center: bool,
     pub accelerator: String,
     pub kernel: String,
+    /// The device that gathered (`cpu`, or `gpu: ` and the adapter); `cpu` in parts written
+    /// before there was a GPU path. Not in the fingerprint: parts of different devices merge,
+    /// and the merge says so ([`crate::merge::Merged::Render`]'s `devices`).
+    #[serde(default = "cpu_device")]
+    pub device: String,
+}
+
+fn cpu_device() -> String {
+    "cpu".into()
 }
 
 /// The resolved settings of a reference.

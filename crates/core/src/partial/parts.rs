@@ -42,6 +42,7 @@ pub fn render_record(o: &RenderOptions) -> RenderRecord {
         pixel_center: o.pixel_center,
         accelerator: o.accelerator.name().into(),
         kernel: o.kernel.name().into(),
+        device: o.device_label(),
     }
 }
 

@@ -1,0 +1,41 @@
+//! Built without the `gpu` feature: no adapter, and so no planes on one.
+
+use crate::camera::CameraRay;
+use crate::control::Control;
+use crate::error::Result;
+use crate::gather::{GatherContext, GatherStats};
+use crate::weights::Weighting;
+use glam::Vec3;
+use std::sync::Arc;
+
+/// No adapter can exist in this build.
+pub enum Gpu {}
+
+impl Gpu {
+    pub fn name(&self) -> &str {
+        match *self {}
+    }
+    pub fn is_cpu_adapter(&self) -> bool {
+        match *self {}
+    }
+    pub fn has_timestamps(&self) -> bool {
+        match *self {}
+    }
+}
+
+/// Why there is no adapter.
+pub fn adapter() -> std::result::Result<Arc<Gpu>, String> {
+    Err("this fogplanes was built without the `gpu` cargo feature: rebuild with it (on by default)".into())
+}
+
+/// Never made: there is no [`Gpu`] to make it on.
+pub enum GpuPlanes {}
+
+impl GpuPlanes {
+    pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[[i32; 4]], _: u32, _: u32) -> Result<Self> {
+        match *gpu {}
+    }
+    pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
+        match *self {}
+    }
+}

@@ -1,0 +1,147 @@
+// Binning a batch of planes to 16 x 16 pixel tiles on the GPU (docs/gpu.md): count, prefix sum,
+// scatter, as tiled splatting rasterizers do, without atomics and without a sort.
+//
+// Each plane comes with the box of pixels its screen polygon can touch (gpu/mod.rs
+// `screen_bounds`, from raster.rs `screen_polygon`, made on the CPU with the plane's other
+// constants). `count`: a workgroup per tile counts the planes whose box meets the tile. `scan`:
+// one workgroup turns the counts into each tile's first list entry and first work item (a tile
+// of n planes is cut into ceil(n / item_planes) work items). `scatter`: a workgroup per tile
+// writes its list in plane order (a prefix sum of the flags of 256 planes at a time) and its
+// work items. Plane order within a tile is what makes the gather's sums the same bits from run
+// to run; a scatter by atomic cursors would not keep it.
+//
+// Every loop of an invocation runs at most count / 256 (<= 64) or tiles / 256 times, well
+// within llvmpipe's silent limit of about 65,000 loop iterations per invocation.
+
+struct Params {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles: u32,
+    // Planes in this batch, and the index of its first plane in `bounds` (and the planes buffer).
+    count: u32,
+    first: u32,
+    item_planes: u32,
+    pad: u32,
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+// Per plane: first and last column, first and last row (inclusive); empty when first > last.
+@group(0) @binding(1) var<storage, read> bounds: array<vec4<i32>>;
+@group(0) @binding(2) var<storage, read_write> tile_counts: array<u32>;
+@group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
+@group(0) @binding(4) var<storage, read_write> item_offsets: array<u32>;
+@group(0) @binding(5) var<storage, read_write> list: array<u32>;
+@group(0) @binding(6) var<storage, read_write> items: array<vec4<u32>>;
+
+const TILE: i32 = 16;
+const THREADS: u32 = 256u;
+
+var<workgroup> scratch: array<u32, 256>;
+var<workgroup> scratch_items: array<u32, 256>;
+
+fn covers(b: vec4<i32>, tile: u32) -> bool {
+    let tx = i32(tile % params.tiles_x) * TILE;
+    let ty = i32(tile / params.tiles_x) * TILE;
+    return b.x <= b.y && b.z <= b.w && b.x <= tx + TILE - 1 && b.y >= tx && b.z <= ty + TILE - 1 && b.w >= ty;
+}
+
+// Inclusive prefix sum of scratch over the workgroup (Hillis and Steele), in uniform control flow.
+fn scan_scratch(li: u32) {
+    for (var off = 1u; off < THREADS; off <<= 1u) {
+        workgroupBarrier();
+        let v = select(0u, scratch[li - select(0u, off, li >= off)], li >= off);
+        workgroupBarrier();
+        scratch[li] += v;
+    }
+    workgroupBarrier();
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+         @builtin(local_invocation_index) li: u32) {
+    let tile = wid.y * nwg.x + wid.x;
+    if (tile >= params.tiles) {
+        return;
+    }
+    var c = 0u;
+    for (var i = li; i < params.count; i += THREADS) {
+        c += select(0u, 1u, covers(bounds[params.first + i], tile));
+    }
+    scratch[li] = c;
+    for (var s = THREADS / 2u; s > 0u; s >>= 1u) {
+        workgroupBarrier();
+        if (li < s) {
+            scratch[li] += scratch[li + s];
+        }
+    }
+    if (li == 0u) {
+        tile_counts[tile] = scratch[0];
+    }
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn scan(@builtin(local_invocation_index) li: u32) {
+    let tiles = params.tiles;
+    let per = (tiles + THREADS - 1u) / THREADS;
+    let lo = min(li * per, tiles);
+    let hi = min(lo + per, tiles);
+    var c = 0u;
+    var n_items = 0u;
+    for (var t = lo; t < hi; t++) {
+        let k = tile_counts[t];
+        c += k;
+        n_items += (k + params.item_planes - 1u) / params.item_planes;
+    }
+    // Both prefix sums through `scratch`, one after the other.
+    scratch[li] = c;
+    scan_scratch(li);
+    var run = scratch[li] - c;
+    let total = scratch[THREADS - 1u];
+    workgroupBarrier();
+    scratch[li] = n_items;
+    scan_scratch(li);
+    var run_items = scratch[li] - n_items;
+    let total_items = scratch[THREADS - 1u];
+    for (var t = lo; t < hi; t++) {
+        let k = tile_counts[t];
+        offsets[t] = run;
+        item_offsets[t] = run_items;
+        run += k;
+        run_items += (k + params.item_planes - 1u) / params.item_planes;
+    }
+    if (li == 0u) {
+        offsets[tiles] = total;
+        item_offsets[tiles] = total_items;
+    }
+}
+
+@compute @workgroup_size(256, 1, 1)
+fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+           @builtin(local_invocation_index) li: u32) {
+    let tile = wid.y * nwg.x + wid.x;
+    if (tile >= params.tiles) {
+        return;
+    }
+    let base = offsets[tile];
+    let end = offsets[tile + 1u];
+    let first_item = item_offsets[tile];
+    let n_items = item_offsets[tile + 1u] - first_item;
+    for (var k = li; k < n_items; k += THREADS) {
+        let s = base + k * params.item_planes;
+        items[first_item + k] = vec4<u32>(tile, s, min(s + params.item_planes, end), 0u);
+    }
+    var written = 0u;
+    for (var b = 0u; b < params.count; b += THREADS) {
+        let i = b + li;
+        let hit = i < params.count && covers(bounds[params.first + min(i, params.count - 1u)], tile);
+        let flag = select(0u, 1u, hit);
+        workgroupBarrier();
+        scratch[li] = flag;
+        scan_scratch(li);
+        if (hit) {
+            list[base + written + scratch[li] - 1u] = params.first + i;
+        }
+        written += scratch[THREADS - 1u];
+    }
+}

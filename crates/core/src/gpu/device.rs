@@ -1,0 +1,570 @@
+//! The GPU through wgpu: the adapter, found once per process, its pipelines, and the planes of
+//! a structure on it ([`GpuPlanes`]).
+
+use super::{BATCH_PLANES, TILE, estimator_id, item_planes, tiles_of};
+use crate::camera::CameraRay;
+use crate::control::Control;
+use crate::error::{Error, Result};
+use crate::gather::{GatherContext, GatherStats, PlaneRecord};
+use crate::weights::Weighting;
+use glam::Vec3;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+
+const GATHER_WGSL: &str = include_str!("gather.wgsl");
+const BIN_WGSL: &str = include_str!("bin.wgsl");
+
+/// Bytes of one work item's partial sums: 256 pixels of (r, g, b, hits) in f32.
+const ITEM_BYTES: u64 = (TILE * TILE) as u64 * 16;
+
+/// `gather.wgsl`'s `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct GatherParams {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles: u32,
+    sigma_t: [f32; 3],
+    grey: u32,
+    orientations: u32,
+    inv_orientations: f32,
+    pad: [u32; 2],
+}
+
+/// `bin.wgsl`'s `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct BinParams {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles: u32,
+    count: u32,
+    first: u32,
+    item_planes: u32,
+    pad: u32,
+}
+
+/// `gather.wgsl`'s `Ray`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct RayRecord {
+    dir: [f32; 3],
+    t0: f32,
+    t1: f32,
+    pad: [f32; 3],
+}
+
+/// The adapter and device, with the pipelines made so far.
+pub struct Gpu {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    /// The adapter's name, back end and kind, as `--device auto` reports it.
+    name: String,
+    /// A CPU adapter (lavapipe): smaller work items ([`item_planes`]).
+    cpu_adapter: bool,
+    timestamps: bool,
+    max_binding: u64,
+    bin_layout: wgpu::BindGroupLayout,
+    gather_layout: wgpu::BindGroupLayout,
+    bin: [wgpu::ComputePipeline; 3],
+    gather_module: wgpu::ShaderModule,
+    gather_pipeline_layout: wgpu::PipelineLayout,
+    /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
+    gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 2]>>>,
+    /// Errors the device reported (validation, out of memory), taken after each submission.
+    errors: Arc<Mutex<Vec<String>>>,
+}
+
+/// The adapter of this process, found on first use: the high-performance one (a discrete GPU
+/// before an integrated one or a CPU adapter such as lavapipe) among Vulkan, Metal and DX12.
+/// `Err` says in one line why there is none.
+pub fn adapter() -> std::result::Result<Arc<Gpu>, String> {
+    static GPU: OnceLock<std::result::Result<Arc<Gpu>, String>> = OnceLock::new();
+    GPU.get_or_init(|| Gpu::new().map(Arc::new)).clone()
+}
+
+fn block_on<F: std::future::Future>(f: F) -> F::Output {
+    let mut f = std::pin::pin!(f);
+    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+    loop {
+        if let std::task::Poll::Ready(v) = f.as_mut().poll(&mut cx) {
+            return v;
+        }
+        std::thread::yield_now();
+    }
+}
+
+fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding: 0,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+impl Gpu {
+    fn new() -> std::result::Result<Self, String> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: wgpu::Backends::PRIMARY,
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| {
+            format!(
+                "no GPU adapter through Vulkan, Metal or DX12 ({e}): install a Vulkan driver (the GPU vendor's, or Mesa's lavapipe on the CPU: Debian's mesa-vulkan-drivers)"
+            )
+        })?;
+        let info = adapter.get_info();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let limits = adapter.limits();
+        let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("fogplanes"),
+            required_features: if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() },
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| format!("the GPU adapter {} gave no device: {e}", info.name))?;
+        let errors = Arc::new(Mutex::new(Vec::new()));
+        let sink = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            sink.lock().unwrap_or_else(|p| p.into_inner()).push(crate::error::one_line(&e.to_string()))
+        }));
+        let bin_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("bin"),
+            entries: &[
+                uniform_entry(),
+                storage_entry(1, true),
+                storage_entry(2, false),
+                storage_entry(3, false),
+                storage_entry(4, false),
+                storage_entry(5, false),
+                storage_entry(6, false),
+            ],
+        });
+        let mut gather_entries = vec![uniform_entry()];
+        gather_entries.extend((1..=7).map(|b| storage_entry(b, true)));
+        gather_entries.extend((8..=10).map(|b| storage_entry(b, false)));
+        let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gather"),
+            entries: &gather_entries,
+        });
+        let pipeline_layout = |layout: &wgpu::BindGroupLayout| {
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: None,
+                bind_group_layouts: &[Some(layout)],
+                immediate_size: 0,
+            })
+        };
+        let bin_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("bin.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(BIN_WGSL.into()),
+        });
+        let bin_pipeline_layout = pipeline_layout(&bin_layout);
+        let bin = ["count", "scan", "scatter"].map(|entry| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&bin_pipeline_layout),
+                module: &bin_module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        });
+        let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("gather.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
+        });
+        let kind = match info.device_type {
+            wgpu::DeviceType::Cpu => "CPU adapter",
+            wgpu::DeviceType::DiscreteGpu => "discrete GPU",
+            wgpu::DeviceType::IntegratedGpu => "integrated GPU",
+            wgpu::DeviceType::VirtualGpu => "virtual GPU",
+            wgpu::DeviceType::Other => "adapter",
+        };
+        let gpu = Gpu {
+            name: format!("{} ({:?}, {kind})", info.name, info.backend),
+            cpu_adapter: info.device_type == wgpu::DeviceType::Cpu,
+            timestamps,
+            max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
+            gather_pipeline_layout: pipeline_layout(&gather_layout),
+            device,
+            queue,
+            bin_layout,
+            gather_layout,
+            bin,
+            gather_module,
+            gather: Mutex::new(HashMap::new()),
+            errors,
+        };
+        gpu.take_errors().map_err(|e| format!("the GPU's shaders: {e}"))?;
+        Ok(gpu)
+    }
+
+    /// The adapter: its name, back end and kind.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Whether the adapter runs on the CPU (lavapipe).
+    pub fn is_cpu_adapter(&self) -> bool {
+        self.cpu_adapter
+    }
+
+    /// Whether the gather is timed by the GPU's timestamps (else by the wall time of its
+    /// submissions).
+    pub fn has_timestamps(&self) -> bool {
+        self.timestamps
+    }
+
+    fn take_errors(&self) -> std::result::Result<(), String> {
+        let mut errors = self.errors.lock().unwrap_or_else(|p| p.into_inner());
+        if errors.is_empty() {
+            return Ok(());
+        }
+        let all = errors.join("; ");
+        errors.clear();
+        Err(all)
+    }
+
+    /// The gather and reduce pipelines of estimator `id`, made on first use.
+    fn gather_pipelines(&self, id: u32) -> Arc<[wgpu::ComputePipeline; 2]> {
+        let mut cache = self.gather.lock().unwrap_or_else(|p| p.into_inner());
+        cache
+            .entry(id)
+            .or_insert_with(|| {
+                let constants = [("ESTIMATOR", id as f64)];
+                Arc::new(["gather", "reduce"].map(|entry| {
+                    self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(&self.gather_pipeline_layout),
+                        module: &self.gather_module,
+                        entry_point: Some(entry),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: &constants,
+                            zero_initialize_workgroup_memory: false,
+                        },
+                        cache: None,
+                    })
+                }))
+            })
+            .clone()
+    }
+
+    fn upload(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        // A binding may not be empty.
+        let pad = [0u8; 32];
+        let contents = if bytes.is_empty() { &pad[..] } else { bytes };
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+    }
+
+    fn scratch(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(32).next_multiple_of(4),
+            usage,
+            mapped_at_creation: false,
+        })
+    }
+}
+
+/// One batch of planes: binned and gathered together.
+struct Batch {
+    first: u32,
+    count: u32,
+    /// (tile, plane) pairs: the tiles' lists' total length.
+    pairs: u64,
+    /// A bound on its work items.
+    items: u64,
+}
+
+/// A structure's planes on the GPU, for gathering camera rays of one image size.
+pub struct GpuPlanes {
+    gpu: Arc<Gpu>,
+    width: u32,
+    height: u32,
+    planes: wgpu::Buffer,
+    occluders: wgpu::Buffer,
+    bounds: wgpu::Buffer,
+    batches: Vec<Batch>,
+    sigma_t: Vec3,
+    grey: bool,
+}
+
+impl GpuPlanes {
+    /// The planes of `ctx` on `gpu`, with each plane's box of pixels (`bounds`, from
+    /// [`super::screen_bounds`]) in a `width x height` image.
+    pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, bounds: &[[i32; 4]], width: u32, height: u32) -> Result<Self> {
+        assert_eq!(ctx.views.len(), bounds.len(), "a box per plane");
+        let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
+        let item = item_planes(gpu.cpu_adapter) as u64;
+        // Batches of consecutive planes whose work items' partial sums fit one binding.
+        let max_items = gpu.max_binding / ITEM_BYTES;
+        let mut batches: Vec<Batch> = Vec::new();
+        for (i, &b) in bounds.iter().enumerate() {
+            let pairs = tiles_of(b);
+            let fits = |batch: &Batch| {
+                let p = batch.pairs + pairs;
+                (batch.count as usize) < BATCH_PLANES
+                    && p.min(tiles) + p / item <= max_items
+                    && p * 4 <= gpu.max_binding
+            };
+            match batches.last_mut() {
+                Some(batch) if fits(batch) => {
+                    batch.count += 1;
+                    batch.pairs += pairs;
+                }
+                _ => batches.push(Batch { first: i as u32, count: 1, pairs, items: 0 }),
+            }
+        }
+        for b in &mut batches {
+            b.items = b.pairs.min(tiles) + b.pairs / item;
+            if b.items > max_items || b.pairs * 4 > gpu.max_binding {
+                return Err(Error::Device(format!(
+                    "a plane covers more of this {width}x{height} image than the GPU's buffers hold ({} bytes a binding): render smaller images on it",
+                    gpu.max_binding
+                )));
+            }
+        }
+        let records: Vec<PlaneRecord> = ctx.views.iter().map(PlaneRecord::from).collect();
+        let usage = wgpu::BufferUsages::STORAGE;
+        let sigma_t = ctx.extinction.sigma_t;
+        let planes = GpuPlanes {
+            planes: gpu.upload("planes", bytemuck::cast_slice(&records), usage),
+            occluders: gpu.upload("occluders", bytemuck::cast_slice(&ctx.occluders), usage),
+            bounds: gpu.upload("bounds", bytemuck::cast_slice(bounds), usage),
+            gpu,
+            width,
+            height,
+            batches,
+            sigma_t,
+            grey: ctx.extinction.grey,
+        };
+        planes.gpu.take_errors().map_err(Error::Device)?;
+        Ok(planes)
+    }
+
+    /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
+    /// `sums`: the planes in batches, each binned and gathered on the GPU in a submission of its
+    /// own, then the image read back once. Checks `control` before each batch (a cancel stops
+    /// the work within one); reports one unit of progress.
+    pub fn gather(
+        &self,
+        weighting: Weighting,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> Result<GatherStats> {
+        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
+        let pixels = w as usize * h as usize;
+        assert!(rays.len() == pixels && sums.len() == pixels, "one ray and one sum per pixel");
+        control.check()?;
+        if self.batches.is_empty() {
+            control.progress();
+            return Ok(GatherStats::default());
+        }
+        let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        let tiles = tiles_x * tiles_y;
+        let item = item_planes(gpu.cpu_adapter);
+        let k = weighting.orientations.max(1);
+        let rotations: Vec<[f32; 2]> = (1..k)
+            .map(|i| i as f64 * std::f64::consts::PI / k as f64)
+            .map(|b| [b.cos() as f32, b.sin() as f32])
+            .collect();
+        let ray_records: Vec<RayRecord> =
+            rays.iter().map(|r| RayRecord { dir: r.dir.to_array(), t0: r.t0, t1: r.t1, pad: [0.0; 3] }).collect();
+        let gather_params = GatherParams {
+            width: w,
+            height: h,
+            tiles_x,
+            tiles,
+            sigma_t: self.sigma_t.to_array(),
+            grey: self.grey as u32,
+            orientations: k,
+            inv_orientations: 1.0 / k as f32,
+            pad: [0; 2],
+        };
+        let (storage, copy_src) = (wgpu::BufferUsages::STORAGE, wgpu::BufferUsages::COPY_SRC);
+        let uniform = wgpu::BufferUsages::UNIFORM;
+        let params = gpu.upload("gather params", bytemuck::bytes_of(&gather_params), uniform);
+        let rays_buf = gpu.upload("rays", bytemuck::cast_slice(&ray_records), storage);
+        let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
+        let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
+        let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
+        let tile_words = (tiles as u64 + 1) * 4;
+        let tile_counts = gpu.scratch("tile counts", tile_words, storage);
+        let offsets = gpu.scratch("offsets", tile_words, storage);
+        let item_offsets = gpu.scratch("item offsets", tile_words, storage);
+        let list = gpu.scratch("list", max_pairs * 4, storage);
+        let items = gpu.scratch("items", max_items * 16, storage);
+        let partial = gpu.scratch("partial", max_items * ITEM_BYTES, storage);
+        let image_bytes = pixels as u64 * 16;
+        let image = gpu.scratch("image", image_bytes, storage | copy_src | wgpu::BufferUsages::COPY_DST);
+        let hits = gpu.scratch("hits", pixels as u64 * 4, storage | copy_src | wgpu::BufferUsages::COPY_DST);
+        let pipelines = gpu.gather_pipelines(estimator_id(weighting));
+        let gather_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gather"),
+            layout: &gpu.gather_layout,
+            entries: &[
+                entry(0, &params),
+                entry(1, &self.planes),
+                entry(2, &self.occluders),
+                entry(3, &rays_buf),
+                entry(4, &rotations_buf),
+                entry(5, &list),
+                entry(6, &item_offsets),
+                entry(7, &items),
+                entry(8, &partial),
+                entry(9, &image),
+                entry(10, &hits),
+            ],
+        });
+        // A timestamp pair per batch (its first pass's start, its last pass's end), where the
+        // adapter has them; else the wall time of the submissions.
+        let batches = self.batches.len();
+        let queries = (gpu.timestamps && batches <= 2048).then(|| {
+            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("gather time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * batches as u32,
+            });
+            let resolve = gpu.scratch("timestamps", 16 * batches as u64, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
+            (set, resolve)
+        });
+        let stamps_at = image_bytes + pixels as u64 * 4;
+        let readback = gpu.scratch(
+            "readback",
+            stamps_at + 16 * batches as u64,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let tile_grid = grid(tiles as u64);
+        let mut wall_ns = 0u64;
+        // Batch by batch, each its own submission, so that a cancel stops the work within one.
+        for (b, batch) in self.batches.iter().enumerate() {
+            control.check()?;
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            if b == 0 {
+                encoder.clear_buffer(&image, 0, None);
+                encoder.clear_buffer(&hits, 0, None);
+            }
+            let bin_params = BinParams {
+                width: w,
+                height: h,
+                tiles_x,
+                tiles,
+                count: batch.count,
+                first: batch.first,
+                item_planes: item,
+                pad: 0,
+            };
+            let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
+            let bin_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("bin"),
+                layout: &gpu.bin_layout,
+                entries: &[
+                    entry(0, &bin_params),
+                    entry(1, &self.bounds),
+                    entry(2, &tile_counts),
+                    entry(3, &offsets),
+                    entry(4, &item_offsets),
+                    entry(5, &list),
+                    entry(6, &items),
+                ],
+            });
+            let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
+                (&gpu.bin[0], &bin_group, tile_grid),
+                (&gpu.bin[1], &bin_group, (1, 1)),
+                (&gpu.bin[2], &bin_group, tile_grid),
+                (&pipelines[0], &gather_group, grid(batch.items.max(1))),
+                (&pipelines[1], &gather_group, (tiles_x, tiles_y)),
+            ];
+            for (k, (pipeline, group, (x, y))) in steps.into_iter().enumerate() {
+                let timestamp_writes =
+                    queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: (k == 0).then_some(2 * b as u32),
+                        end_of_pass_write_index: (k == 4).then_some(2 * b as u32 + 1),
+                    });
+                let mut pass =
+                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            if b + 1 == batches {
+                encoder.copy_buffer_to_buffer(&image, 0, &readback, 0, image_bytes);
+                encoder.copy_buffer_to_buffer(&hits, 0, &readback, image_bytes, pixels as u64 * 4);
+                if let Some((set, resolve)) = &queries {
+                    encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
+                    encoder.copy_buffer_to_buffer(resolve, 0, &readback, stamps_at, 16 * batches as u64);
+                }
+            }
+            let t = Instant::now();
+            gpu.queue.submit([encoder.finish()]);
+            if b + 1 == batches {
+                readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            }
+            let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+            wall_ns += t.elapsed().as_nanos() as u64;
+            gpu.take_errors().map_err(Error::Device)?;
+            polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        }
+        let slice = readback.slice(..);
+        let view = slice.get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's image back: {e}")))?;
+        let bytes: &[u8] = &view;
+        let sums_back: &[[f32; 4]] = bytemuck::cast_slice(&bytes[..image_bytes as usize]);
+        let hits_back: &[u32] = bytemuck::cast_slice(&bytes[image_bytes as usize..stamps_at as usize]);
+        let mut stats = GatherStats::default();
+        for ((sum, back), &n) in sums.iter_mut().zip(sums_back).zip(hits_back) {
+            *sum += Vec3::new(back[0], back[1], back[2]);
+            stats.hits += n as u64;
+        }
+        stats.tests = self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64;
+        stats.device_ns = if queries.is_some() {
+            let ts: &[u64] = bytemuck::cast_slice(&bytes[stamps_at as usize..]);
+            let period = gpu.queue.get_timestamp_period() as f64;
+            ts.chunks(2).map(|p| (p[1].wrapping_sub(p[0]) as f64 * period) as u64).sum()
+        } else {
+            wall_ns
+        };
+        drop(view);
+        readback.unmap();
+        control.progress();
+        Ok(stats)
+    }
+}
+
+fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding, resource: buffer.as_entire_binding() }
+}
+
+/// `n` workgroups as a grid within the 65,535 a dimension allows (the shaders number them
+/// `y * x_count + x` and skip those past `n`).
+fn grid(n: u64) -> (u32, u32) {
+    let x = n.clamp(1, 65_535);
+    (x as u32, n.div_ceil(x).max(1) as u32)
+}

@@ -1,0 +1,505 @@
+// The GPU gather: the per-hit arithmetic of docs/mathematics.md sections 2.3, 2.4 and 3, a second
+// implementation of crates/core/src/gather.rs, weights/denominators.rs and weights/closed_form.rs
+// (the same operations in the same order, fused multiply-adds where the CPU fuses them). One
+// workgroup per work item: a 16 x 16 tile's pixels against at most `item_planes` planes of the
+// tile's list (bin.wgsl made the lists); each thread keeps its pixel's sum in registers and writes
+// it to `partial`, and `reduce` adds a tile's items in order. No atomics, no float atomics: one
+// writer per value, so an image is the same bits from run to run.
+//
+// Nothing here relies on IEEE infinities or NaN, which Vulkan does not promise: every division
+// whose divisor can be 0 is guarded by a select, a chord direction along an axis carries 0 for
+// its infinite reciprocal (gather.rs's `PlaneRecord`), and a contribution too large for f32 is
+// dropped by a comparison made before the division could overflow.
+
+// 0 unweighted, 1 cmis-cosine, 2 smis-cosine (pair), 3 smis-exact (pair), 4 cmis-exact,
+// 5 smis-cosine with K orientations, 6 smis-exact with K orientations (gpu/mod.rs `estimator_id`).
+override ESTIMATOR: u32 = 0u;
+
+// gather.rs `PlaneRecord`, 128 bytes (eight rows of 16).
+struct Plane {
+    normal: vec3<f32>,
+    t_det: f32,
+    a_axis: vec3<f32>,
+    width: f32,
+    r_axis: vec3<f32>,
+    occluders_start: u32,
+    normal_perp: vec3<f32>,
+    occluders_end: u32,
+    scale: vec3<f32>,
+    scale_max: f32,
+    cos_a: f32,
+    sin_a: f32,
+    p0: f32,
+    q0: f32,
+    light_w: f32,
+    light_h: f32,
+    perp_inv_abs_cos: f32,
+    perp_inv_sin: f32,
+    perp_cos_positive: u32,
+    unit: f32,
+    inv_unit: f32,
+    light: u32,
+};
+
+// occlusion.rs `Occluder`.
+struct Occluder {
+    t0: f32,
+    t_a: f32,
+    p0: f32,
+    p_a: f32,
+    q0: f32,
+    q_a: f32,
+    width: f32,
+    height: f32,
+};
+
+// A camera ray (camera.rs `CameraRay`): unit direction and segment [t0, t1], empty when t0 > t1.
+struct Ray {
+    dir: vec3<f32>,
+    t0: f32,
+    t1: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
+};
+
+// gpu/mod.rs `GatherParams`.
+struct Params {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles: u32,
+    sigma_t: vec3<f32>,
+    grey: u32,
+    orientations: u32,
+    inv_orientations: f32,
+    pad0: u32,
+    pad1: u32,
+};
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> planes: array<Plane>;
+@group(0) @binding(2) var<storage, read> occluders: array<Occluder>;
+@group(0) @binding(3) var<storage, read> rays: array<Ray>;
+// (cos, sin) of k pi / K for k = 1 .. K - 1 (weights/denominators.rs `StratifiedK`).
+@group(0) @binding(4) var<storage, read> rotations: array<vec2<f32>>;
+// The tiles' plane lists, each tile's first list entry and first work item (bin.wgsl).
+@group(0) @binding(5) var<storage, read> list: array<u32>;
+@group(0) @binding(6) var<storage, read> item_offsets: array<u32>;
+// Work items: (tile, first list entry, end, 0).
+@group(0) @binding(7) var<storage, read> items: array<vec4<u32>>;
+// Each work item's 256 pixel sums: (rgb, hits).
+@group(0) @binding(8) var<storage, read_write> partial: array<vec4<f32>>;
+// The image: each pixel's sum of the gathering (rgb) and its hits, added batch after batch.
+@group(0) @binding(9) var<storage, read_write> image: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> hits_image: array<u32>;
+
+const TILE: u32 = 16u;
+const THREADS: u32 = 256u;
+// Planes loaded into workgroup memory at a time: 64 x 128 bytes = 8 KiB.
+const BATCH: u32 = 64u;
+const F32_MAX: f32 = 3.4028234e38;
+// Stands in for an infinite chord length (a line along an axis is not bounded by that axis).
+const BIG: f32 = 3.0e38;
+const PI: f32 = 3.14159265358979;
+const HALF_PI: f32 = 1.57079632679490;
+const FRAC_1_PI: f32 = 0.318309886183791;
+const FRAC_2_PI: f32 = 0.636619772367581;
+
+// ---------------------------------------------------------------------------------------------
+// numeric.rs, in the same operations.
+
+// `dir . v`, summed x, y, z in that order (gather.rs `RayBlock::dot`).
+fn dot3(d: vec3<f32>, v: vec3<f32>) -> f32 {
+    return fma(d.z, v.z, fma(d.y, v.y, d.x * v.x));
+}
+
+// The CPU's compare-and-select minimum and maximum (simd.rs `Lanes::min`, `max`).
+fn min_sel(a: f32, b: f32) -> f32 {
+    return select(b, a, a < b);
+}
+fn max_sel(a: f32, b: f32) -> f32 {
+    return select(b, a, a > b);
+}
+
+// numeric.rs `exp_lanes`: Cody-Waite reduction, Taylor to r^7 by Estrin's scheme, 2^k written
+// into the exponent bits; 0 below -87. k is rounded by `round` (to nearest, ties to even, as the
+// CPU's 1.5 * 2^23 trick): llvmpipe folds (x c + R) - R into x c, which loses the rounding.
+fn exp_f(x: f32) -> f32 {
+    let LN2_HI = 0.69314575;
+    let LN2_LO = 1.4286068e-6;
+    let k = round(x * 1.44269504088896);
+    let r = fma(k, -LN2_LO, fma(k, -LN2_HI, x));
+    let r2 = r * r;
+    let r4 = (r * r) * (r * r);
+    let low = fma(r2, fma(r, 1.0 / 6.0, 0.5), 1.0 + r);
+    let high = fma(r2, fma(r, 1.0 / 5040.0, 1.0 / 720.0), fma(r, 1.0 / 120.0, 1.0 / 24.0));
+    let p = fma(r4, high, low);
+    // 2^k, k kept where the exponent field holds it (x < -87 gives 0 below).
+    let scale = bitcast<f32>(u32(clamp(i32(k), -126, 127) + 127) << 23u);
+    return select(p * scale, 0.0, x < -87.0);
+}
+
+// numeric.rs `atan_unit_lanes`: atan(t) for t in [0, 1].
+fn atan_unit(t: f32) -> f32 {
+    let t2 = t * t;
+    let t4 = t2 * t2;
+    let t8 = (t2 * t2) * (t2 * t2);
+    let p01 = fma(t2, -0.33333093, 1.0);
+    let p23 = fma(t2, -0.14207134, 0.19993055);
+    let p45 = fma(t2, -0.07533678, 0.10654679);
+    let p67 = fma(t2, -0.016283017, 0.043039385);
+    let p = fma(t8, fma(t8, 0.002903554, fma(t4, p67, p45)), fma(t4, p23, p01));
+    return t * p;
+}
+
+// `small / large`, 0 where `large` is not positive (no division by zero).
+fn ratio_or_zero(small: f32, large: f32) -> f32 {
+    return select(0.0, small / select(1.0, large, large > 0.0), large > 0.0);
+}
+
+// numeric.rs `atan2_lanes`.
+fn atan2_f(y: f32, x: f32) -> f32 {
+    let ax = abs(x);
+    let ay = abs(y);
+    let steep = ay > ax;
+    let small = select(ay, ax, steep);
+    let large = select(ax, ay, steep);
+    var a = atan_unit(ratio_or_zero(small, large));
+    a = select(a, HALF_PI - a, steep);
+    a = select(a, PI - a, x < 0.0);
+    return select(a, -a, y < 0.0);
+}
+
+// numeric.rs `ln_lanes`: x = m 2^e from the bits, m in [sqrt(1/2), sqrt(2)), a degree-6 fit.
+fn ln_f(x: f32) -> f32 {
+    let LN2_HI = 0.69314575;
+    let LN2_LO = 1.4286068e-6;
+    let bits = bitcast<u32>(x);
+    var m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    var e = f32(i32((bits >> 23u) & 0xffu) - 127);
+    let big = m > 1.41421356237310;
+    m = select(m, m * 0.5, big);
+    e = select(e, e + 1.0, big);
+    let f = m - 1.0;
+    let f2 = f * f;
+    let f4 = (f * f) * (f * f);
+    let low = fma(f2, fma(f, -0.1657758, 0.19963062), fma(f, -0.25001338, 0.3333391));
+    let high = fma(f2, 0.08700456, fma(f, -0.14267519, 0.14914776));
+    let p = fma(f4, high, low);
+    let sum = fma(f2 * f, p, fma(f2, -0.5, f));
+    return fma(e, LN2_HI, fma(e, LN2_LO, sum));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The chord (section 2.2) and the denominators (section 2.4): weights/denominators.rs.
+
+// 1 / x for x >= 0, with 0 standing for infinity (x = 0 or too small for a finite reciprocal).
+fn reciprocal_or_zero(x: f32) -> f32 {
+    return select(0.0, 1.0 / select(1.0, x, x > 1e-30), x > 1e-30);
+}
+
+// x / (1 / inv): x times a reciprocal, BIG where the reciprocal is infinite (0).
+fn over(x: f32, inv: f32) -> f32 {
+    return select(x * inv, BIG, inv == 0.0);
+}
+
+// light.rs `chord_width` for a point (p, q) of a w x h light along the direction given by
+// cos > 0 and the reciprocals of |cos| and sin.
+fn chord_width(w: f32, h: f32, p: f32, q: f32, cos_positive: bool, inv_abs_cos: f32, inv_sin: f32) -> f32 {
+    let fx = select(p, w - p, cos_positive);
+    let bx = select(w - p, p, cos_positive);
+    let forward = min_sel(over(fx, inv_abs_cos), over(h - q, inv_sin));
+    let backward = min_sel(over(bx, inv_abs_cos), over(q, inv_sin));
+    return max_sel(backward, 0.0) + max_sel(forward, 0.0);
+}
+
+// The light vertex y' of chord parameter a in light-local coordinates, kept inside
+// (denominators.rs `PlaneFrame::vertex_lanes`).
+fn vertex(pl: Plane, a: f32) -> vec2<f32> {
+    let p = min_sel(max_sel(fma(a, pl.cos_a, pl.p0), 0.0), pl.light_w);
+    let q = min_sel(max_sel(fma(a, pl.sin_a, pl.q0), 0.0), pl.light_h);
+    return vec2<f32>(p, q);
+}
+
+// (a_u, a_v) from det(alpha) and det(alpha_perp) (denominators.rs `a_uv`, section 2.4).
+fn a_uv(pl: Plane, det: f32, det_perp: f32) -> vec2<f32> {
+    return vec2<f32>(fma(det, pl.cos_a, -(pl.sin_a * det_perp)), fma(det, pl.sin_a, pl.cos_a * det_perp));
+}
+
+// smis-cosine and smis-exact with K orientations (denominators.rs `StratifiedK`), the
+// orientations summed in the order k = 0, 1, .., K - 1.
+fn stratified(pl: Plane, det: f32, det_perp: f32, a: f32, exact: bool) -> f32 {
+    let uv = a_uv(pl, det, det_perp);
+    let pq = vertex(pl, a);
+    var sum = select(abs(det), pl.width * abs(det), exact);
+    for (var k = 0u; k + 1u < params.orientations; k++) {
+        let rot = rotations[k];
+        // beta = alpha + k pi / K, reduced to [0, pi) so that sin(beta) >= 0.
+        var c = pl.cos_a * rot.x - pl.sin_a * rot.y;
+        var s = pl.sin_a * rot.x + pl.cos_a * rot.y;
+        let flip = s < 0.0;
+        c = select(c, -c, flip);
+        s = select(s, -s, flip);
+        let d = abs(fma(uv.x, c, s * uv.y));
+        if (exact) {
+            let w = chord_width(pl.light_w, pl.light_h, pq.x, pq.y, c > 0.0, reciprocal_or_zero(abs(c)), reciprocal_or_zero(s));
+            sum = fma(w, d, sum);
+        } else {
+            sum = sum + d;
+        }
+    }
+    let mean = sum * params.inv_orientations;
+    return select(pl.width * mean, mean, exact);
+}
+
+// ---------------------------------------------------------------------------------------------
+// cmis-exact: the closed form of section 3 in f32 (weights/closed_form.rs
+// `cmis_exact_mean_lanes`, `zero_correction`, `ln_ratio`, `corner_angles`).
+
+// ln(1 + x) for ratio = 1 + x: from x where |x| < 1/2 (its rounding added back), else the ratio.
+fn ln_ratio(x: f32, ratio: f32) -> f32 {
+    let near_one = abs(x) < 0.5;
+    let u = 1.0 + x;
+    let argument = select(ratio, u, near_one);
+    let rounding = select(0.0, x - (u - 1.0), near_one);
+    return ln_f(argument) + rounding;
+}
+
+// A corner's angles from the normals of the edges at distances y and x.
+fn corner_angles(x: f32, y: f32) -> vec2<f32> {
+    let steep = x > y;
+    let small = select(x, y, steep);
+    let large = select(y, x, steep);
+    let a = atan_unit(ratio_or_zero(small, large));
+    let b = HALF_PI - a;
+    return vec2<f32>(select(a, b, steep), select(b, a, steep));
+}
+
+// What the zero of det in direction (zx, zy) adds: 2 min(|arc_1|, |dF_e - arc_1|) on the edge the
+// direction leaves through. dists: left, right, bottom, top; values: the sectors' dF_e.
+fn zero_correction(zx: f32, zy: f32, z2: f32, dists: vec4<f32>, values: vec4<f32>) -> f32 {
+    let x0 = dists.x;
+    let x1 = dists.y;
+    let y0 = dists.z;
+    let y1 = dists.w;
+    let east = zx > 0.0;
+    let north = zy > 0.0;
+    let dx = select(x0, x1, east);
+    let dy = select(y0, y1, north);
+    let vertical = (dx * abs(zy)) < (dy * abs(zx));
+    let d = select(dy, dx, vertical);
+    let z_n = select(abs(zy), abs(zx), vertical);
+    let z_t = select(select(zx, -zx, north), select(-zy, zy, east), vertical);
+    let t_s = -select(select(x0, x1, north), select(y1, y0, east), vertical);
+    let value = select(select(values.x, values.z, north), select(values.w, values.y, east), vertical);
+    let cross = fma(d, z_t, -(t_s * z_n));
+    let dot = fma(d, z_n, t_s * z_t);
+    let turn = atan2_f(cross, dot);
+    let gap = -cross * fma(z_n, t_s, d * z_t);
+    let d2 = d * d;
+    let den = d2 * z2;
+    // d = 0 (no arc) or z = 0 (a = 0, D = 0): the CPU's infinite reciprocal comes out as a
+    // correction of 0 either way; here the reciprocal is 0 instead.
+    let inv = select(0.0, 1.0 / select(1.0, den, den > 0.0), den > 0.0);
+    let small = gap * inv;
+    let ratio = (z_n * z_n) * fma(t_s, t_s, d2) * inv;
+    let ell = 0.5 * ln_ratio(small, ratio);
+    let arc = d * fma(z_t, turn, z_n * ell);
+    let correction = 2.0 * min_sel(abs(arc), abs(value - arc));
+    return select(0.0, correction, d > 0.0);
+}
+
+// (1/pi) integral_0^pi g(beta) d beta for the vertex (p, q) of a w x h light (section 3).
+fn cmis_exact_mean(w: f32, h: f32, p: f32, q: f32, a_u: f32, a_v: f32) -> f32 {
+    let zx = -a_v;
+    let zy = a_u;
+    let x0 = p;
+    let x1 = w - p;
+    let y0 = q;
+    let y1 = h - q;
+    let c0 = corner_angles(x0, y0);
+    let c1 = corner_angles(x1, y0);
+    let c2 = corner_angles(x1, y1);
+    let c3 = corner_angles(x0, y1);
+    let turns = array<f32, 4>(c0.x + c1.x, c1.y + c2.y, c2.x + c3.x, c3.y + c0.y);
+    let cx = array<f32, 4>(-p, x1, x1, -p);
+    let cy = array<f32, 4>(-q, -q, y1, y1);
+    var r2: array<f32, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        r2[k] = fma(cx[k], cx[k], cy[k] * cy[k]);
+    }
+    let deltas = array<f32, 4>(-w * (cx[0] + cx[1]), -h * (cy[1] + cy[2]), w * (cx[2] + cx[3]), h * (cy[3] + cy[0]));
+    let dist = array<f32, 4>(y0, x1, y1, x0);
+    let z_ns = array<f32, 4>(-zy, zx, zy, -zx);
+    let z_ts = array<f32, 4>(zx, zy, -zx, -zy);
+    var values = vec4<f32>(0.0);
+    var total = 0.0;
+    for (var e = 0u; e < 4u; e++) {
+        let end = r2[(e + 1u) % 4u];
+        // The end corner is the vertex only on an edge through it (d_e = 0, masked below).
+        let inv = select(0.0, 1.0 / select(1.0, end, end > 0.0), end > 0.0);
+        let ell = 0.5 * ln_ratio(deltas[e] * inv, r2[e] * inv);
+        let value = dist[e] * fma(z_ts[e], turns[e], z_ns[e] * ell);
+        values[e] = select(0.0, value, dist[e] > 0.0);
+        total = total + abs(values[e]);
+    }
+    let z2 = fma(zx, zx, zy * zy);
+    let dists = vec4<f32>(x0, x1, y0, y1);
+    let plus = zero_correction(zx, zy, z2, dists, values);
+    let minus = zero_correction(-zx, -zy, z2, dists, -values);
+    let mean = (total + plus + minus) * FRAC_1_PI;
+    return select(0.0, mean, mean > 0.0);
+}
+
+// D of a hit (section 2.4, the table's rows).
+fn denominator(pl: Plane, det: f32, det_perp: f32, a: f32) -> f32 {
+    switch ESTIMATOR {
+        case 0u: {
+            return pl.width * abs(det);
+        }
+        case 1u: {
+            return pl.width * FRAC_2_PI * sqrt(fma(det, det, det_perp * det_perp));
+        }
+        case 2u: {
+            return pl.width * 0.5 * (abs(det) + abs(det_perp));
+        }
+        case 3u: {
+            let pq = vertex(pl, a);
+            let wp = chord_width(pl.light_w, pl.light_h, pq.x, pq.y, pl.perp_cos_positive != 0u, pl.perp_inv_abs_cos, pl.perp_inv_sin);
+            return 0.5 * fma(wp, abs(det_perp), pl.width * abs(det));
+        }
+        case 4u: {
+            let uv = a_uv(pl, det, det_perp);
+            let pq = vertex(pl, a);
+            let u = pl.inv_unit;
+            return cmis_exact_mean(pl.light_w * u, pl.light_h * u, pq.x * u, pq.y * u, uv.x, uv.y) * pl.unit;
+        }
+        case 5u: {
+            return stratified(pl, det, det_perp, a, false);
+        }
+        default: {
+            return stratified(pl, det, det_perp, a, true);
+        }
+    }
+}
+
+// Whether a panel blocks the light path from chord parameter a to plane distance r
+// (occlusion.rs `Occluder::blocks_lanes`, section 2.3).
+fn blocked(pl: Plane, a: f32, r: f32) -> bool {
+    for (var o = pl.occluders_start; o < pl.occluders_end; o++) {
+        let oc = occluders[o];
+        let t = oc.t0 + a * oc.t_a;
+        let p = oc.p0 + a * oc.p_a;
+        let q = oc.q0 + a * oc.q_a;
+        if (t > 1e-6 * r && t < r * (1.0 - 1e-6) && p >= 0.0 && p <= oc.width && q >= 0.0 && q <= oc.height) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// C of a hit with its scale, `power Tr / (N D)` per channel (gather.rs `PlaneView::contribution`):
+// zero where D is not positive, where a channel's value would not be a finite f32 (checked as
+// exp(-sigma_t length) scale <= F32_MAX D, before any division), or where a panel blocks.
+fn contribution(pl: Plane, length: f32, d: f32) -> vec3<f32> {
+    if (!(d > 0.0)) {
+        return vec3<f32>(0.0);
+    }
+    var e: vec3<f32>;
+    if (params.grey != 0u) {
+        e = vec3<f32>(exp_f(-params.sigma_t.x * length));
+    } else {
+        e = vec3<f32>(exp_f(-params.sigma_t.x * length), exp_f(-params.sigma_t.y * length), exp_f(-params.sigma_t.z * length));
+    }
+    // e <= 1 and scale is finite: the products are finite; the bound falls below 1 only where d
+    // is small, and then d * F32_MAX is finite.
+    let bound = max(e.x * pl.scale.x, max(e.y * pl.scale.y, e.z * pl.scale.z));
+    if (!(d >= 1.0 || bound <= d * F32_MAX)) {
+        return vec3<f32>(0.0);
+    }
+    return pl.scale * (e / d);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The gather over work items, and the reduction of a tile's items.
+
+var<workgroup> batch: array<Plane, BATCH>;
+var<workgroup> wg_item: vec4<u32>;
+var<workgroup> wg_total: u32;
+
+@compute @workgroup_size(16, 16, 1)
+fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let index = wid.y * nwg.x + wid.x;
+    if (li == 0u) {
+        wg_total = item_offsets[params.tiles];
+        wg_item = items[min(index, max(item_offsets[params.tiles], 1u) - 1u)];
+    }
+    // The dispatch is sized by a bound on the items; those past the count do nothing.
+    if (index >= workgroupUniformLoad(&wg_total)) {
+        return;
+    }
+    let item = workgroupUniformLoad(&wg_item);
+    let tile = item.x;
+    let px = (tile % params.tiles_x) * TILE + lid.x;
+    let py = (tile / params.tiles_x) * TILE + lid.y;
+    let valid = px < params.width && py < params.height;
+    let ray = rays[min(py, params.height - 1u) * params.width + min(px, params.width - 1u)];
+    let dir = ray.dir;
+    let t0 = ray.t0;
+    // A pixel outside the image has an empty segment.
+    let t1 = select(-1.0, ray.t1, valid);
+    var sum = vec3<f32>(0.0);
+    var hits = 0u;
+    for (var b = item.y; b < item.z; b += BATCH) {
+        let n = min(BATCH, item.z - b);
+        workgroupBarrier();
+        if (li < n) {
+            batch[li] = planes[list[b + li]];
+        }
+        workgroupBarrier();
+        for (var j = 0u; j < n; j++) {
+            let pl = batch[j];
+            // Section 2.3: Cramer's rule with det = we . n_P; a hit needs det != 0 (tested as
+            // |det| > 1e-30, so that 1/det is finite), t in [t0, t1], a on the chord, r > 0.
+            let det = dot3(dir, pl.normal);
+            let crosses = abs(det) > 1e-30;
+            let inv = 1.0 / select(1.0, det, crosses);
+            let t = pl.t_det * inv;
+            let a = dot3(dir, pl.a_axis) * inv;
+            let r = dot3(dir, pl.r_axis) * inv;
+            if (crosses && t >= t0 && t <= t1 && a >= 0.0 && a <= pl.width && r > 0.0) {
+                hits += 1u;
+                if (!blocked(pl, a, r)) {
+                    let det_perp = dot3(dir, pl.normal_perp);
+                    let d = denominator(pl, det, det_perp, a);
+                    sum += contribution(pl, (t - t0) + r, d);
+                }
+            }
+        }
+    }
+    partial[index * THREADS + li] = vec4<f32>(sum, f32(hits));
+}
+
+// Adds each pixel's work items in order (deterministic) to the image.
+@compute @workgroup_size(16, 16, 1)
+fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
+          @builtin(local_invocation_index) li: u32) {
+    let px = wid.x * TILE + lid.x;
+    let py = wid.y * TILE + lid.y;
+    if (px >= params.width || py >= params.height) {
+        return;
+    }
+    let tile = wid.y * params.tiles_x + wid.x;
+    var sum = vec3<f32>(0.0);
+    var hits = 0u;
+    for (var k = item_offsets[tile]; k < item_offsets[tile + 1u]; k++) {
+        let v = partial[k * THREADS + li];
+        sum += v.xyz;
+        hits += u32(v.w);
+    }
+    let pix = py * params.width + px;
+    image[pix] = vec4<f32>(image[pix].xyz + sum, 0.0);
+    hits_image[pix] += hits;
+}

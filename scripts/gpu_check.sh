@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# The GPU check of issue 37, in one command on a machine with a GPU (a few minutes on an H100):
+# per estimator, the GPU gather's G hits/s (its timestamps) and the render's end-to-end time at
+# 640x360 with 40,960 and 655,360 planes (the benchmark scene, whole pixels), the agreement with
+# the CPU's image (relative MSE, `fogplanes compare`), then the CPU renderer's wall time on 1, 2,
+# 4, 8 and all threads, and the machine's threads per core.
+#
+#   scripts/gpu_check.sh --fetch   # here, once, with a network: the Vulkan loader and libglvnd
+#                                  # as Debian packages into .gl/ (the device machine has none)
+#   scripts/gpu_check.sh           # there, with target/release/fogplanes and .gl/ carried
+#
+# Vulkan there: if the system has no loader, the packages of .gl/ are unpacked over / and
+# ldconfig run (without libglvnd0 the NVIDIA ICD does not load: "no Vulkan adapter"), and the
+# NVIDIA ICD file is named when the loader would not find it. Output goes to stdout and, where
+# $OUT is set, to $OUT/gpu_check.log.
+set -u
+cd "$(dirname "$0")/.."
+if [ "${1:-}" = "--fetch" ]; then
+    grep -qx '/.gl/' .git/info/exclude 2>/dev/null || echo /.gl/ >>.git/info/exclude
+    mkdir -p .gl /tmp/amd64/partial
+    o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+    # shellcheck disable=SC2086
+    apt-get $o update -qq && (cd .gl && apt-get $o download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+    ls .gl
+    exit
+fi
+B=${FOGPLANES:-target/release/fogplanes}
+S=media_scenes/six_lights.toml
+# A dry run elsewhere (lavapipe) takes smaller ones: GPU_CHECK_RESOLUTION=64x36 GPU_CHECK_PLANES=2048.
+R=${GPU_CHECK_RESOLUTION:-640x360}
+P=${GPU_CHECK_PLANES:-40960 655360}
+work=$(mktemp -d)
+log=${OUT:+$OUT/gpu_check.log}
+log=${log:-/dev/null}
+{
+date -u
+nvidia-smi -L 2>/dev/null
+if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan.so.1 '; then
+    if ls .gl/*.deb >/dev/null 2>&1; then
+        for f in .gl/*.deb; do dpkg -x "$f" /; done
+        ldconfig
+        echo "Vulkan loader and libglvnd unpacked from .gl/"
+    else
+        echo "no Vulkan loader, and no .gl/ to unpack (scripts/gpu_check.sh --fetch first)"
+    fi
+fi
+nv=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+if [ -z "${VK_DRIVER_FILES:-}" ] && [ -f "$nv" ]; then
+    export VK_DRIVER_FILES=$nv __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+    echo "VK_DRIVER_FILES=$nv"
+fi
+echo "threads per core: $(lscpu 2>/dev/null | awk -F: '/Thread\(s\) per core/ {gsub(/ /, "", $2); print $2}'), logical CPUs: $(nproc)"
+# One render: its summary line (gather, GPU time and G hits/s, total: from the scene loaded to
+# the image finished in memory, without process start and file writing).
+render() { timeout 150 "$B" render "$S" --resolution "$R" -q "$@" 2>&1 | grep -v XDG_RUNTIME_DIR | grep -v '^wrote'; }
+for planes in $P; do
+    for e in unweighted cmis-cosine smis-cosine smis-exact "smis-exact --orientations 8" cmis-exact; do
+        name=${e// /_}
+        # shellcheck disable=SC2086
+        render --planes $planes -e $e --device gpu -o "$work/gpu_$name.exr" | sed "s/^/gpu $planes: /"
+        # shellcheck disable=SC2086
+        render --planes $planes -e $e -o "$work/cpu_$name.exr" | sed "s/^/cpu $planes: /"
+        printf 'agreement %s %s: ' "$planes" "$e"
+        timeout 60 "$B" compare "$work/gpu_$name.exr" "$work/cpu_$name.exr" | tr '\n' ' ' | tr -s ' '
+        echo
+    done
+done
+# The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).
+for t in 1 2 4 8 all; do
+    threads=()
+    [ "$t" = all ] || threads=(--threads "$t")
+    /usr/bin/time -f "cpu threads $t: wall %e s, user %U s, sys %S s" "$B" render "$S" --resolution "$R" --planes 40960 -q "${threads[@]}" -o "$work/t.exr" 2>&1 | grep -v '^wrote' | sed "s/^/  /"
+done
+date -u
+} 2>&1 | tee "$log"
+rm -rf "$work"
