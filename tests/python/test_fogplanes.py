@@ -499,3 +499,31 @@ def test_hostile_files_and_non_finite_images_raise_value_error():
     # The size limit holds for a file whose size says nothing.
     with pytest.raises(ValueError, match="/dev/zero: the file holds more than 1048576 bytes"):
         fogplanes.load_scene("/dev/zero")
+
+
+def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
+    """`device=` as `--device`: the GPU's image is the command line's with `--device gpu` bit
+    for bit, and agrees with the CPU's within f32 rounding; a bad name is named. Without a
+    Vulkan adapter (lavapipe: Debian's mesa-vulkan-drivers) the GPU part is SKIPPED, loudly."""
+    assert fogplanes.DEVICES == ("cpu", "gpu", "auto")
+    with pytest.raises(ValueError, match="device"):
+        fogplanes.render(SIX_LIGHTS, resolution=(32, 18), planes=512, device="tpu")
+    with pytest.raises(TypeError, match="device"):
+        fogplanes.render(SIX_LIGHTS, resolution=(32, 18), planes=512, device=1)
+    kwargs = dict(resolution=(48, 27), planes=2048, pixel_center=True)
+    try:
+        gpu, stats = fogplanes.render(SIX_LIGHTS, device="gpu", return_stats=True, **kwargs)
+    except ValueError as e:
+        pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
+    assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0
+    cpu = fogplanes.render(SIX_LIGHTS, **kwargs)
+    fog = cpu.max(axis=2) < 1  # the pixels that see no light directly
+    rel_mse = float(np.mean((gpu[fog] - cpu[fog]) ** 2) / np.mean(cpu[fog] ** 2))
+    assert rel_mse <= 1e-8, rel_mse
+    exe = ROOT / "target" / "release" / "fogplanes"
+    if not exe.exists():
+        pytest.skip(f"SKIPPED: {exe} is not built (cargo build --release)")
+    out = tmp_path / "gpu.exr"
+    subprocess.run([exe, "render", SIX_LIGHTS, "--resolution", "48x27", "--planes", "2048", "--pixel-center",
+                    "--device", "gpu", "-o", out, "--quiet"], check=True, capture_output=True)
+    assert_bit_identical(fogplanes.load_image(out), gpu)

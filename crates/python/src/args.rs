@@ -91,6 +91,7 @@ pub(crate) fn render_overrides(
             "pixel_center" => o.pixel_center = flag("pixel_center", &value)?,
             "accelerator" => o.accelerator = given.named(Setting::Accelerator, value.as_ref())?,
             "kernel" => o.kernel = given.named(Setting::Kernel, value.as_ref())?,
+            "device" => o.device = given.named(Setting::Device, value.as_ref())?,
             "resolution" => o.resolution = given.resolution(value.as_ref())?,
             "threads" => o.threads = given.threads(value.as_ref())?,
             "time_budget" if front == Front::Render => {

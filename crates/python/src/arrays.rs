@@ -58,6 +58,8 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     let d = PyDict::new(py);
     d.set_item("estimator", &s.estimator)?;
     d.set_item("kernel", &s.kernel)?;
+    d.set_item("device", &s.device)?;
+    d.set_item("seconds_device", s.seconds_device)?;
     d.set_item("planes", s.planes)?;
     d.set_item("plane_passes", s.plane_passes)?;
     d.set_item("rays", s.rays)?;

@@ -72,6 +72,7 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("KERNELS", PyTuple::new(m.py(), Kernel::ALL.iter().map(|k| k.name()))?)?;
     m.add("SAMPLERS", PyTuple::new(m.py(), Sampler::ALL.iter().map(|s| s.name()))?)?;
     m.add("ACCELERATORS", PyTuple::new(m.py(), Accelerator::ALL.iter().map(|a| a.name()))?)?;
+    m.add("DEVICES", PyTuple::new(m.py(), fogplanes::gpu::Device::ALL.iter().map(|d| d.name()))?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

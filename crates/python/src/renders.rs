@@ -48,6 +48,8 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// to the EXR that `fogplanes render` writes for the same arguments. With
 /// `return_stderr=True`, also the estimated standard error of each pixel (as `render
 /// --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
+/// `device="gpu"` gathers on the GPU through wgpu (ValueError without an adapter), `"auto"` on
+/// the GPU when one is found; the image agrees with the CPU's within f32 rounding (docs/gpu.md).
 /// `progress=True` shows a progress bar on standard error (a line per tenth when it is not a
 /// terminal, as in a notebook or a log).
 ///
@@ -57,8 +59,8 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 #[pyfunction]
 #[pyo3(signature = (scene, estimator = None, **kwargs))]
 #[pyo3(text_signature = "(scene, estimator=None, planes=None, seed=None, spp=None, pixel_center=False, \
-    resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', return_stats=False, \
-    sampler=None, time_budget=None, target_error=None, return_stderr=False, progress=False)")]
+    resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', device='cpu', \
+    return_stats=False, sampler=None, time_budget=None, target_error=None, return_stderr=False, progress=False)")]
 pub(crate) fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,

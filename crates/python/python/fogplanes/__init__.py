@@ -17,6 +17,7 @@ raises OSError (FileNotFoundError, ...). Ctrl-C stops a render with KeyboardInte
 
 from ._fogplanes import (
     ACCELERATORS,
+    DEVICES,
     ESTIMATORS,
     KERNELS,
     SAMPLERS,
@@ -46,6 +47,7 @@ from ._fogplanes import (
 
 __all__ = [
     "ACCELERATORS",
+    "DEVICES",
     "ESTIMATORS",
     "KERNELS",
     "SAMPLERS",

@@ -14,6 +14,9 @@ KERNELS: Final[tuple[str, ...]]
 SAMPLERS: Final[tuple[str, ...]]
 #: How rays find planes: raster, bvh, brute-force.
 ACCELERATORS: Final[tuple[str, ...]]
+#: The processors that gather: cpu, gpu (through wgpu: Vulkan, Metal, DX12), auto (the GPU when
+#: an adapter is found, else the CPU). docs/gpu.md says what is identical where.
+DEVICES: Final[tuple[str, ...]]
 
 Vec3: TypeAlias = tuple[float, float, float]
 Image: TypeAlias = npt.NDArray[np.float32]
@@ -142,6 +145,10 @@ class RenderStats(TypedDict):
 
     estimator: str
     kernel: str
+    #: The device that gathered: "cpu", or "gpu: " and the adapter's name.
+    device: str
+    #: Seconds of the GPU's own gather (its timestamps, else the wall time of its work); 0 on the CPU.
+    seconds_device: float
     planes: int
     #: 1, or the passes of a render on a time budget.
     plane_passes: int
@@ -194,6 +201,7 @@ def render(
     threads: int | None = None,
     accelerator: str = "raster",
     kernel: str = "auto",
+    device: str = "cpu",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
     time_budget: float | None = None,
@@ -221,6 +229,9 @@ def render(
     "sobol" (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol).
     With `return_stderr=True`, also the estimated standard error of each pixel (as `render
     --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
+    `device="gpu"` gathers on the GPU through wgpu (a Vulkan, Metal or DX12 adapter; ValueError
+    without one), `"auto"` on the GPU when one is found; the image agrees with the CPU's within
+    f32 rounding (docs/gpu.md), and the stats' "device" says which gathered.
     `progress=True` shows progress on standard error (one line redrawn on a terminal, else a
     line per tenth of the work).
 
@@ -242,6 +253,7 @@ def render(
     threads: int | None = None,
     accelerator: str = "raster",
     kernel: str = "auto",
+    device: str = "cpu",
     *,
     return_stats: Literal[True],
     sampler: str | None = None,
@@ -264,6 +276,7 @@ def render(
     threads: int | None = None,
     accelerator: str = "raster",
     kernel: str = "auto",
+    device: str = "cpu",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
     time_budget: float | None = None,
@@ -286,6 +299,7 @@ def render(
     threads: int | None = None,
     accelerator: str = "raster",
     kernel: str = "auto",
+    device: str = "cpu",
     *,
     return_stats: Literal[True],
     sampler: str | None = None,
@@ -346,6 +360,8 @@ class RenderPlan(TypedDict):
     pixel_center: bool
     accelerator: str
     kernel: str
+    #: "cpu" or "gpu" (`device="auto"` resolved where the plan is made).
+    device: str
     resolution: tuple[int, int]
     threads: int | None
 

@@ -168,7 +168,7 @@ def _common(client: Any, workers: Any, threads: Any, progress: Any, retries: Any
 
 
 #: Render settings given by name (their values are checked by the core).
-_NAMED_SETTINGS = ("estimator", "sampler", "accelerator", "kernel")
+_NAMED_SETTINGS = ("estimator", "sampler", "accelerator", "kernel", "device")
 
 
 def _render_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
