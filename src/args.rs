@@ -260,7 +260,7 @@ pub(crate) struct RenderArgs {
     /// With --schedule-record: cut the work (the raster's tiles) as for this many workers,
     /// whatever --threads, so that a record made on few cores holds a larger machine's units,
     /// each measured without more threads than cores. The image is the same bits.
-    #[arg(long, value_name = "N", requires = "schedule_record")]
+    #[arg(long, value_name = "N", requires = "schedule_record", value_parser = parse_schedule_workers)]
     pub(crate) schedule_workers: Option<usize>,
     #[command(flatten)]
     pub(crate) watch: WatchArgs,
@@ -438,6 +438,15 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 /// A display server's `HOST:PORT` (checked by the library, not resolved).
 pub(crate) fn parse_display_server(s: &str) -> Result<String, String> {
     fogplanes::display::check_address(s).map(|()| s.to_string())
+}
+
+/// `--schedule-workers`: 1 to 4096 simulated workers (a larger count would overflow the tiling's
+/// arithmetic, and no machine has it).
+pub(crate) fn parse_schedule_workers(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n @ 1..=4096) => Ok(n),
+        _ => Err(format!("expected a number of workers from 1 to 4096, got {s:?}")),
+    }
 }
 
 /// `A:B` with A < B.

@@ -331,14 +331,14 @@ pub fn reference_counts(opts: &ReferenceOptions, pilot: &[Vec3], width: u32) -> 
 /// Seed offset of the pilot pass, so that it shares no samples with the final one.
 const PILOT_SEED: u64 = 0x9_11_07;
 
+/// Pixels per unit of parallel work of the reference: a pixel is tens of microseconds.
+const REFERENCE_UNIT: usize = 8;
+
 /// Renders rows `rows` (a band of the image), pixel `p` (row-major in the whole image) with
 /// `spp(p)` samples, in [`REPLICATES`] independent replicates of
 /// randomised quasi-Monte Carlo: a randomly shifted low-discrepancy sequence over (jitter x,
 /// jitter y, light, point p, point q, distance). Each replicate is unbiased; the pixel value is
 /// their mean and its standard error comes from their spread, an honest measure of the noise.
-/// Pixels per unit of parallel work of the reference: a pixel is tens of microseconds.
-const REFERENCE_UNIT: usize = 8;
-
 /// The cancel flag is read before each pixel (at most 64 times the average samples, a few
 /// milliseconds).
 fn render_pixels(

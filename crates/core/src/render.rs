@@ -209,6 +209,11 @@ impl<'a> ChunkRenderer<'a> {
         let (sampling, build) = (preparer.seconds_sampling, preparer.seconds_build);
         r.gatherer.stats.seconds_sampling += sampling;
         r.gatherer.stats.seconds_build += build;
+        // Every ray set now, as the planes: the table counts them as shared work, not as the
+        // first weighting's gathering.
+        for piece in &ready {
+            r.gatherer.rays.rays(scene, piece.spec.0, control);
+        }
         r.prepared = ready.into_iter().map(|p| (p.spec.1, p.planes)).collect();
         r.gatherer.count_rays();
         Ok(r)

@@ -113,8 +113,8 @@ fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
     Weighting::new(estimator, Some(k)).map(|_| ()).map_err(from_caller(Setting::Orientations))
 }
 
-/// The device that gathers, resolved once: `auto` takes the GPU when an adapter is found and
-/// the CPU otherwise; `gpu` without an adapter is refused in one line saying why. The CPU's
+/// The device that gathers, resolved once: `auto` takes the GPU when a GPU adapter is found
+/// (not a CPU adapter such as lavapipe) and the CPU otherwise; `gpu` without an adapter is refused in one line saying why. The CPU's
 /// accelerator and kernel (`cpu_options`: the caller gave one) do not apply to the GPU.
 pub fn device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
     let wanted = given.unwrap_or_default();
@@ -122,7 +122,10 @@ pub fn device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
         return Ok(Device::Cpu);
     }
     match (wanted, crate::gpu::adapter()) {
+        // `auto` wants speed: not an adapter that runs on the CPU (lavapipe is slower than the
+        // CPU's own kernels), nor the GPU where the caller chose how the CPU gathers.
         (Device::Auto, Err(_)) => Ok(Device::Cpu),
+        (Device::Auto, Ok(g)) if g.is_cpu_adapter() || cpu_options => Ok(Device::Cpu),
         (_, Err(why)) => Err(Error::option(Setting::Device, format!("gpu: {why}"))),
         (_, Ok(_)) if cpu_options => Err(Error::option(
             Setting::Device,

@@ -77,6 +77,10 @@ pub struct Gpu {
     gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 2]>>>,
     /// Errors the device reported (validation, out of memory), taken after each submission.
     errors: Arc<Mutex<Vec<String>>>,
+    /// Held by each upload ([`GpuPlanes::new`]) and gathering ([`GpuPlanes::gather`]) for its
+    /// whole work: the render prepares the next chunk while it gathers one, and the device's
+    /// errors, one list for the process, must be taken by the work that caused them.
+    work: Mutex<()>,
 }
 
 /// The adapter of this process, found on first use: the high-performance one (a discrete GPU
@@ -220,6 +224,7 @@ impl Gpu {
             gather_module,
             gather: Mutex::new(HashMap::new()),
             errors,
+            work: Mutex::new(()),
         };
         gpu.take_errors().map_err(|e| format!("the GPU's shaders: {e}"))?;
         Ok(gpu)
@@ -320,6 +325,8 @@ impl GpuPlanes {
     /// [`super::screen_bounds`]) in a `width x height` image.
     pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, bounds: &[[i32; 4]], width: u32, height: u32) -> Result<Self> {
         assert_eq!(ctx.views.len(), bounds.len(), "a box per plane");
+        let held = Arc::clone(&gpu);
+        let _work = held.work.lock().unwrap_or_else(|p| p.into_inner());
         let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
         let item = item_planes(gpu.cpu_adapter) as u64;
         // Batches of consecutive planes whose work items' partial sums fit one binding.
@@ -383,6 +390,7 @@ impl GpuPlanes {
         let pixels = w as usize * h as usize;
         assert!(rays.len() == pixels && sums.len() == pixels, "one ray and one sum per pixel");
         control.check()?;
+        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         if self.batches.is_empty() {
             control.progress();
             return Ok(GatherStats::default());
@@ -547,7 +555,8 @@ impl GpuPlanes {
         stats.device_ns = if queries.is_some() {
             let ts: &[u64] = bytemuck::cast_slice(&bytes[stamps_at as usize..]);
             let period = gpu.queue.get_timestamp_period() as f64;
-            ts.chunks(2).map(|p| (p[1].wrapping_sub(p[0]) as f64 * period) as u64).sum()
+            // A driver's timestamps out of order count 0, not 2^64 ticks.
+            ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum()
         } else {
             wall_ns
         };
