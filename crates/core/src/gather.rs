@@ -134,7 +134,7 @@ impl From<&PlaneView> for PlaneRecord {
             perp_inv_sin: finite(f.perp.inv_sin),
             perp_cos_positive: f.perp.cos_positive as u32,
             unit,
-            inv_unit: 1.0 / unit,
+            inv_unit: finite(1.0 / unit),
             light: v.light,
         }
     }
