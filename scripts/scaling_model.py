@@ -25,6 +25,7 @@ import argparse
 import heapq
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -111,6 +112,9 @@ def main():
                     "cores; without it, each record runs N threads")
     ap.add_argument("--reference", type=int, metavar="SPP",
                     help="model the reference renderer (`fogplanes reference --spp SPP`) instead of a render")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="records per thread count; the medians of their CPU seconds and predicted walls are "
+                    "reported (one record's units vary by a few percent on a shared machine)")
     ap.add_argument("--extra", nargs="*", default=[], help="further arguments for the renders")
     args = ap.parse_args()
     threads = [int(t) for t in args.threads.split(",")]
@@ -125,27 +129,33 @@ def main():
         where = tmp.name
     records = {}
     for n in threads:
-        path = os.path.join(where, f"record_{n}.json")
-        if not args.from_records:
-            record(args.binary, args.scene, args, n, path)
-        with open(path) as f:
-            records[n] = json.load(f)
-    one = cpu_seconds(records[1]["sections"])
-    r = records[1]
+        records[n] = []
+        for r in range(max(1, args.repeat)):
+            path = os.path.join(where, f"record_{n}.json" if r == 0 else f"record_{n}_{r}.json")
+            if not args.from_records:
+                record(args.binary, args.scene, args, n, path)
+            elif not os.path.exists(path):
+                break
+            with open(path) as f:
+                records[n].append(json.load(f))
+    one = statistics.median(cpu_seconds(r["sections"]) for r in records[1])
+    r = records[1][0]
     print(f"{args.scene}: {r['estimator']}, {r['planes']} planes, {r['width']}x{r['height']}; "
-          f"1 worker: {one:.2f} CPU s in {sum(len(s['units']) for s in r['sections'])} units")
+          f"1 worker: {one:.2f} CPU s in {sum(len(s['units']) for s in r['sections'])} units"
+          f" (medians of {len(records[1])} records)")
     print("| workers | units | sections | CPU s of the units | predicted wall s | predicted speedup | efficiency |")
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for n in threads:
-        sections = records[n]["sections"]
-        wall = simulate(sections, n)
+        wall = statistics.median(simulate(r["sections"], n) for r in records[n])
+        cpu = statistics.median(cpu_seconds(r["sections"]) for r in records[n])
+        sections = records[n][0]["sections"]
         units = sum(len(s["units"]) for s in sections)
-        print(f"| {n} | {units} | {len(sections)} | {cpu_seconds(sections):.2f} | {wall:.3f} | "
+        print(f"| {n} | {units} | {len(sections)} | {cpu:.2f} | {wall:.3f} | "
               f"{one / wall:.2f}x | {one / wall / n:.0%} |")
     # Where the time of the largest record goes, section by section.
     last = max(threads)
     by = Counter()
-    for s in records[last]["sections"]:
+    for s in records[last][0]["sections"]:
         by[s["label"]] += sum(ns for _, ns in s["units"]) * 1e-9
     print(f"CPU s by section at {last} workers: " + ", ".join(f"{k} {v:.3f}" for k, v in by.most_common()))
     if tmp:

@@ -28,12 +28,16 @@ use fogplanes::settings::Overrides;
 use fogplanes::weights::{Estimator, Weighting};
 use glam::DVec3;
 
-/// Whether a GPU adapter exists; if not, says so on stderr for `test`, which then skips.
+/// Whether a GPU adapter exists; if not, says so on stderr for `test`, which then skips, unless
+/// `FOGPLANES_REQUIRE_GPU=1` (CI sets it where it installed lavapipe): then the test fails.
 pub fn have_gpu(test: &str) -> bool {
     match fogplanes::gpu::adapter() {
         Ok(g) => {
             eprintln!("{test}: on {}", g.name());
             true
+        }
+        Err(why) if std::env::var("FOGPLANES_REQUIRE_GPU").is_ok_and(|v| v == "1") => {
+            panic!("{test}: FOGPLANES_REQUIRE_GPU=1 but there is no Vulkan adapter: {why}")
         }
         Err(why) => {
             eprintln!("SKIPPED: no Vulkan adapter for {test}: {why}");
@@ -288,4 +292,27 @@ fn gpu_without_an_adapter_is_one_line_and_exit_2() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(lines.len() == 1 && lines[0].contains("no GPU adapter"), "{err}");
     assert!(run("auto").status.success());
+}
+
+/// An image whose rays do not fit one of the GPU's buffer bindings is refused in one line that
+/// names the limit, before any work (not by the driver's validation, nor a panic).
+#[test]
+fn an_image_larger_than_the_gpu_binds_is_a_clear_error() {
+    if !have_gpu("an_image_larger_than_the_gpu_binds_is_a_clear_error") {
+        return;
+    }
+    let most = fogplanes::gpu::adapter().unwrap().max_binding();
+    // 32 bytes of rays a pixel: the image just over the limit, if that is a size to test here.
+    let pixels = most / 32 + 1;
+    if pixels > 20_000_000 {
+        eprintln!("SKIPPED: this adapter binds {most} bytes: an image over it is too large to test here");
+        return;
+    }
+    let width = 2048u32;
+    let height = pixels.div_ceil(width as u64) as u32;
+    let s = scene("media_scenes/six_lights.toml", width, height);
+    let given = Overrides { planes: Some(64), device: Some(Device::Gpu), ..Overrides::default() };
+    let err = render(&s, &options(&s, given), Control::none()).err().expect("refused");
+    let text = err.to_string();
+    assert!(text.contains("more than the GPU binds at once") && !text.contains('\n'), "{text}");
 }

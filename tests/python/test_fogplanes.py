@@ -514,6 +514,8 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
     try:
         gpu, stats = fogplanes.render(SIX_LIGHTS, device="gpu", return_stats=True, **kwargs)
     except ValueError as e:
+        if os.environ.get("FOGPLANES_REQUIRE_GPU") == "1":
+            raise AssertionError(f"FOGPLANES_REQUIRE_GPU=1 but there is no GPU adapter: {e}") from e
         pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
     assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0
     cpu = fogplanes.render(SIX_LIGHTS, **kwargs)

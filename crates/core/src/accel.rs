@@ -220,43 +220,62 @@ impl PreparedPlanes {
         if let Structure::Gpu(g) = &self.structure {
             return g.gather(weighting, rays, sums, control);
         }
-        gather_pieces(&[(self, rays)], weighting, kernel, sums, control)
+        let piece = GatherPiece { planes: self, rays, target: 0 };
+        Ok(gather_pieces(&[piece], weighting, kernel, &mut [sums], control)?[0])
     }
 }
 
-/// Gathers several pieces of planes in their order, each along its own ray set, adding each
-/// ray's estimate of each to `sums`: [`PreparedPlanes::gather`] of each piece in turn, the same
-/// bits. On the raster, one parallel loop over the image's tiles, each tile taking every piece
-/// in turn ([`crate::raster::gather_pieces`]: no barrier between pieces); on the other
-/// structures, piece after piece. Progress and cancelling as for [`PreparedPlanes::gather`].
+/// A piece of planes for [`gather_pieces`]: its planes, the ray set it is gathered along and
+/// the sums (of several) it adds to.
+#[derive(Clone, Copy)]
+pub struct GatherPiece<'a> {
+    pub planes: &'a PreparedPlanes,
+    pub rays: &'a [CameraRay],
+    pub target: usize,
+}
+
+/// Gathers several pieces of planes, each along its own ray set, adding each ray's estimate of
+/// each to `sums[target]`, the pieces of a target in their order: [`PreparedPlanes::gather`] of
+/// each piece in turn, the same bits; returns what each target's pieces found. On the raster,
+/// one parallel loop over the tiles of every target, each tile taking its target's pieces in
+/// turn ([`crate::raster::gather_pieces`]: no barrier between pieces, nor between targets); on
+/// the other structures, piece after piece. Progress and cancelling as for
+/// [`PreparedPlanes::gather`].
 pub fn gather_pieces(
-    pieces: &[(&PreparedPlanes, &[CameraRay])],
+    pieces: &[GatherPiece],
     weighting: Weighting,
     kernel: Kernel,
-    sums: &mut [Vec3],
+    sums: &mut [&mut [Vec3]],
     control: Control,
-) -> Result<GatherStats> {
+) -> Result<Vec<GatherStats>> {
     // The GPU's pieces go one after another, each in its own submissions.
-    if pieces.iter().any(|(p, _)| matches!(p.structure, Structure::Gpu(_))) {
-        let mut stats = GatherStats::default();
-        for (planes, rays) in pieces {
-            stats += planes.gather(weighting, kernel, rays, sums, control)?;
+    if pieces.iter().any(|p| matches!(p.planes.structure, Structure::Gpu(_))) {
+        let mut found = vec![GatherStats::default(); sums.len()];
+        for p in pieces {
+            found[p.target] += p.planes.gather(weighting, kernel, p.rays, sums[p.target], control)?;
         }
-        return Ok(stats);
+        return Ok(found);
     }
-    struct Run<'a, 'p> {
-        pieces: &'p [(&'a PreparedPlanes, &'a [CameraRay])],
+    struct Run<'a, 'p, 's> {
+        pieces: &'p [GatherPiece<'a>],
         kernel: Kernel,
-        sums: &'p mut [Vec3],
+        sums: &'p mut [&'s mut [Vec3]],
         control: Control<'p>,
     }
-    impl WithDenominator for Run<'_, '_> {
-        type Output = GatherStats;
-        fn run<D: Denominator>(self, weights: &D) -> GatherStats {
+    impl WithDenominator for Run<'_, '_, '_> {
+        type Output = Vec<GatherStats>;
+        fn run<D: Denominator>(self, weights: &D) -> Vec<GatherStats> {
             let rasters: Option<Vec<RasterPiece>> = self
                 .pieces
                 .iter()
-                .map(|(p, rays)| p.raster().map(|raster| RasterPiece { raster, ctx: &p.context, rays }))
+                .map(|p| {
+                    p.planes.raster().map(|raster| RasterPiece {
+                        raster,
+                        ctx: &p.planes.context,
+                        rays: p.rays,
+                        target: p.target,
+                    })
+                })
                 .collect();
             if let Some(rasters) = rasters {
                 return crate::raster::gather_pieces::<D, true>(
@@ -267,23 +286,23 @@ pub fn gather_pieces(
                     self.control,
                 );
             }
-            let mut stats = GatherStats::default();
-            for (planes, rays) in self.pieces {
+            let mut found = vec![GatherStats::default(); self.sums.len()];
+            for p in self.pieces {
                 if self.control.is_cancelled() {
                     break;
                 }
                 // Every piece is the CPU's here: the GPU's were gathered above.
-                if let Structure::Cpu(cpu) = &planes.structure {
-                    let with = Gathering { ctx: &planes.context, weights, kernel: self.kernel };
-                    stats += cpu.gather(with, rays, self.sums, self.control);
+                if let Structure::Cpu(cpu) = &p.planes.structure {
+                    let with = Gathering { ctx: &p.planes.context, weights, kernel: self.kernel };
+                    found[p.target] += cpu.gather(with, p.rays, self.sums[p.target], self.control);
                 }
             }
-            stats
+            found
         }
     }
-    let stats = weighting.dispatch(Run { pieces, kernel, sums, control });
+    let found = weighting.dispatch(Run { pieces, kernel, sums, control });
     control.check()?;
-    Ok(stats)
+    Ok(found)
 }
 
 #[cfg(test)]

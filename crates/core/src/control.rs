@@ -73,15 +73,20 @@ impl<'a> Control<'a> {
         use rayon::prelude::*;
         let unit = unit.max(1);
         let section = self.section(label);
-        let parts: Vec<Vec<T>> = (0..n.div_ceil(unit))
-            .into_par_iter()
-            .map(|u| section.unit(|| (u * unit..((u + 1) * unit).min(n)).map(&f).collect()))
-            .collect();
+        // Written in place (no serial copy of the parts after the loop: 5 MB of a chunk's plane
+        // views took 2 ms, on the path of every chunk's preparation).
+        let mut out: Vec<T> = Vec::with_capacity(n);
+        out.spare_capacity_mut()[..n].par_chunks_mut(unit).enumerate().for_each(|(u, part)| {
+            section.unit(|| {
+                for (i, o) in part.iter_mut().enumerate() {
+                    o.write(f(u * unit + i));
+                }
+            })
+        });
         section.close();
-        let mut out = Vec::with_capacity(n);
-        for part in parts {
-            out.extend(part);
-        }
+        // SAFETY: the loop wrote each of the first n elements (every chunk all of its own), or
+        // it panicked and this line is not reached (what was written then leaks, never read).
+        unsafe { out.set_len(n) };
         out
     }
 

@@ -443,25 +443,53 @@ impl GatherContext {
     ) {
         let total = *self.planes_total.get_or_insert(planes_total);
         assert_eq!(total, planes_total, "the planes of a context belong to one set (one N)");
-        let mut ranges = Vec::with_capacity(planes.len());
-        for (p, &mask) in planes.iter().zip(masks) {
-            let start = self.occluders.len() as u32;
-            let mut mask = mask;
-            while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                self.occluders.extend(Occluder::new(p, &scene.lights[k]));
+        // Each block of planes' panels made in parallel, then added in plane order.
+        let blocks = control.map_units("occluders", planes.len().div_ceil(PLANE_UNIT), 1, |b| {
+            let (mut panels, mut ends) = (Vec::new(), Vec::with_capacity(PLANE_UNIT));
+            for i in b * PLANE_UNIT..((b + 1) * PLANE_UNIT).min(planes.len()) {
+                let mut mask = masks[i];
+                while mask != 0 {
+                    let k = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    panels.extend(Occluder::new(&planes[i], &scene.lights[k]));
+                }
+                ends.push(panels.len() as u32);
             }
-            ranges.push((start, self.occluders.len() as u32));
+            (panels, ends)
+        });
+        let mut ranges = Vec::with_capacity(planes.len());
+        for (panels, ends) in blocks {
+            let base = self.occluders.len() as u32;
+            let mut start = base;
+            for end in ends {
+                ranges.push((start, base + end));
+                start = base + end;
+            }
+            self.occluders.extend(panels);
         }
         let origin = self.origin;
-        self.views.extend(control.map_units("views", planes.len(), PLANE_UNIT, |i| {
+        let views = control.map_units("views", planes.len(), PLANE_UNIT, |i| {
             PlaneView::new(&planes[i], scene, origin, planes_total, ranges[i])
-        }));
-        // Stable: each light's planes stay in index order (the new ones follow, a merge).
-        self.by_light.extend(self.by_light.len() as u32..self.views.len() as u32);
-        let views = &self.views;
-        self.by_light.sort_by_key(|&i| views[i as usize].light);
+        });
+        if self.views.is_empty() {
+            self.views = views;
+        } else {
+            self.views.extend(views);
+        }
+        // Every plane by light, each light's in index order: a counting sort (a stable one).
+        let lights = self.views.iter().map(|v| v.light as usize + 1).max().unwrap_or(0);
+        let mut next = vec![0u32; lights + 1];
+        for v in &self.views {
+            next[v.light as usize + 1] += 1;
+        }
+        for l in 1..next.len() {
+            next[l] += next[l - 1];
+        }
+        self.by_light.resize(self.views.len(), 0);
+        for (i, v) in self.views.iter().enumerate() {
+            self.by_light[next[v.light as usize] as usize] = i as u32;
+            next[v.light as usize] += 1;
+        }
     }
 
     /// The panels that may shadow a plane.

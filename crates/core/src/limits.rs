@@ -18,6 +18,17 @@ pub const DEFAULT_RAY_SETS: u32 = 16;
 /// pass over the image's tiles, the f64 conversion) stay near 1% of a render.
 pub const CHUNK_PLANES: usize = 16_384;
 
+/// The most chunks a render gathers at once ([`crate::raster::chunks_at_once`]; it prepares as
+/// many more meanwhile).
+pub const MAX_CHUNKS_AT_ONCE: usize = 8;
+
+/// The most pixels of a window's chunks' sums together (a chunk's f32 sums and f64 partial,
+/// [`WINDOW_BYTES_PER_PIXEL`]): a large image gathers one chunk at a time.
+pub const MAX_WINDOW_PIXELS: usize = 1 << 22;
+
+/// Bytes of a chunk's sums per pixel while its window is gathered: f32 and f64 RGB.
+pub const WINDOW_BYTES_PER_PIXEL: u64 = 36;
+
 /// Planes per unit of work of the parallel loops over planes (sampling, preparing, projecting):
 /// a few hundred microseconds each, a unit of the schedule's record ([`crate::schedule`]).
 pub const PLANE_UNIT: usize = 256;
@@ -121,11 +132,12 @@ pub fn check_sweep_seeds(seeds: u32) -> Result<(), String> {
 }
 
 /// The memory rule of a render of `planes` planes at `width x height` (the scene loader and
-/// every front end apply it, through [`crate::settings`]): it holds two canonical chunks'
-/// planes at a time ([`CHUNK_PLANES`]: the chunk being gathered and the next, prepared
-/// meanwhile) and, per pixel, besides [`BYTES_PER_PIXEL`], the second chunk's ray set and one
-/// f64 sum per level of the canonical tree over its chunks ([`crate::partial`]); so only the
-/// image can exceed the memory.
+/// every front end apply it, through [`crate::settings`]): it holds two windows of canonical
+/// chunks' planes at a time (at most [`MAX_CHUNKS_AT_ONCE`] chunks of [`CHUNK_PLANES`] each: the
+/// window being gathered and the next, prepared meanwhile), the window's sums (at most
+/// [`MAX_WINDOW_PIXELS`] pixels' worth, or one chunk's) and, per pixel, besides
+/// [`BYTES_PER_PIXEL`], the second ray set and one f64 sum per level of the canonical tree over
+/// its chunks ([`crate::partial`]); so only the image can exceed the memory.
 pub fn check_render_memory(width: u32, height: u32, planes: u64) -> Result<(), String> {
     check_render_memory_with(width, height, planes, 0)
 }
@@ -134,10 +146,12 @@ pub fn check_render_memory(width: u32, height: u32, planes: u64) -> Result<(), S
 pub fn check_render_memory_with(width: u32, height: u32, planes: u64, extra: u64) -> Result<(), String> {
     let chunks = planes.div_ceil(CHUNK_PLANES as u64).max(1);
     let levels = (u64::BITS - chunks.leading_zeros()) as u64 + 1;
-    let held = planes.min(2 * CHUNK_PLANES as u64);
+    let held = planes.min(2 * (MAX_CHUNKS_AT_ONCE * CHUNK_PLANES) as u64);
     let per_pixel = BYTES_PER_PIXEL + 20 + 24 * levels + extra;
+    let pixels = width as u64 * height as u64;
+    let window = WINDOW_BYTES_PER_PIXEL * pixels.max(MAX_WINDOW_PIXELS as u64);
     let bytes =
-        held.saturating_mul(BYTES_PER_PLANE).saturating_add((width as u64 * height as u64).saturating_mul(per_pixel));
+        held.saturating_mul(BYTES_PER_PLANE).saturating_add(pixels.saturating_mul(per_pixel)).saturating_add(window);
     budget(width, height, planes, bytes)
 }
 

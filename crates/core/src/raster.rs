@@ -18,7 +18,7 @@ use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::gather::{GatherContext, GatherStats, RayBlock};
 use crate::kernel::{self, Aggregate, Band, Gathering, HALF_LANES, Kernel, LANES, Span};
-use crate::limits::PLANE_UNIT;
+use crate::limits::{MAX_CHUNKS_AT_ONCE, MAX_WINDOW_PIXELS, PLANE_UNIT};
 use crate::medium::Medium;
 use crate::photon_plane::{PhotonPlane, Polygon};
 use crate::weights::{Denominator, Unweighted};
@@ -39,6 +39,20 @@ pub const TILES_PER_WORKER: usize = 4;
 /// ([`gather_pieces`]).
 const SPLIT_PER_WORKER: usize = 8;
 
+/// Chunks of planes a render gathers at once on `workers` workers at `width x height`, each
+/// into its own sums ([`gather_pieces`]'s targets): as many as give the workers
+/// [`TILES_PER_WORKER`] tiles each with the image's bands of [`BAND_ROWS`] rows whole, at most
+/// [`MAX_CHUNKS_AT_ONCE`] and [`MAX_WINDOW_PIXELS`]. A plane's set-up and span walk are made
+/// once per tile it crosses: one chunk of the benchmark (640x360) cut into tiles for 64 workers
+/// took 47% more CPU than in bands, eight at once in tiles for eight workers 19% (the schedule
+/// model's records); a small image on many cores gathers several chunks, a large one one.
+pub fn chunks_at_once(workers: usize, width: u32, height: u32) -> usize {
+    let bands = height.div_ceil(BAND_ROWS).max(1) as usize;
+    let pixels = (width as usize * height as usize).max(1);
+    let most = (MAX_WINDOW_PIXELS / pixels).clamp(1, MAX_CHUNKS_AT_ONCE);
+    (TILES_PER_WORKER * workers.max(1)).div_ceil(bands).clamp(1, most)
+}
+
 /// The narrowest tile, in pixels.
 const MIN_TILE_COLS: u32 = 32;
 
@@ -58,14 +72,15 @@ pub struct Tiling {
 }
 
 impl Tiling {
-    /// The tiles of an image for `threads` workers: bands of 16 rows across the whole image
-    /// while they are [`TILES_PER_WORKER`] per worker (23 bands make a 640x360 image: up to 5
-    /// workers), else each band cut into as few runs of columns as make that many (at least 32
-    /// wide, a multiple of 8), and then bands of 8 or 4 rows (640x360 for 16 workers: 23 x 3
-    /// tiles of 16 x 216; for 64: 23 x 12 of 16 x 56). The heavy tiles are cut further into
-    /// parts of rows when gathered ([`gather_pieces`]).
+    /// The tiles of an image for `threads` workers, each gathering a window of
+    /// [`chunks_at_once`] chunks: bands of 16 rows across the whole image while they are
+    /// [`TILES_PER_WORKER`] per worker for a window (23 bands make a 640x360 image: up to 5
+    /// workers for one chunk, 40 for eight), else each band cut into as few runs of columns as
+    /// make that many (at least 32 wide, a multiple of 8), and then bands of 8 or 4 rows
+    /// (640x360 for 64 workers, eight chunks at once: 23 x 2 tiles of 16 x 320). The heavy
+    /// tiles are cut further into parts of rows when gathered ([`gather_pieces`]).
     pub fn new(width: u32, height: u32, threads: usize) -> Self {
-        let want = TILES_PER_WORKER * threads.max(1);
+        let want = (TILES_PER_WORKER * threads.max(1)).div_ceil(chunks_at_once(threads, width, height));
         let widest = width.max(1);
         let mut rows = BAND_ROWS;
         loop {
@@ -117,8 +132,8 @@ impl Aggregate for ScreenRaster {
         sums: &mut [Vec3],
         control: Control,
     ) -> GatherStats {
-        let piece = RasterPiece { raster: self, ctx: with.ctx, rays };
-        gather_pieces::<D, true>(&[piece], with.weights, with.kernel, sums, control)
+        let piece = RasterPiece { raster: self, ctx: with.ctx, rays, target: 0 };
+        gather_pieces::<D, true>(&[piece], with.weights, with.kernel, &mut [sums], control)[0]
     }
 }
 
@@ -138,7 +153,16 @@ pub struct ScreenRaster {
     tiles: Vec<Vec<u32>>,
     /// The light of each plane.
     lights: Vec<u32>,
+    /// Each plane's bounding box on the screen, `[x0, x1, y0, y1]` in pixels.
+    bounds: Vec<[f32; 4]>,
+    /// Per tile, an estimate of its work: pixels tested (its planes' boxes or spans in it) plus
+    /// [`PLANE_WORK`] per plane, for cutting the heavy tiles ([`gather_pieces`]).
+    work: Vec<u64>,
 }
+
+/// A plane's set-up in a tile, in pixels tested (its job, its spans), for estimating the tiles'
+/// work.
+const PLANE_WORK: u64 = 32;
 
 /// The plane's polygon as seen from the camera, clipped to the image grown by one pixel, in
 /// pixel coordinates; empty if the camera cannot see it.
@@ -189,6 +213,8 @@ impl ScreenRaster {
             bands: (0..tiling.down()).map(|_| BandBins::default()).collect(),
             tiles: vec![Vec::new(); tiling.count()],
             lights: Vec::new(),
+            bounds: Vec::new(),
+            work: vec![0; tiling.count()],
         }
     }
 
@@ -205,28 +231,33 @@ impl ScreenRaster {
     /// [`ScreenRaster::push_planes`] with its parallel loops recorded on `control`'s strand
     /// ([`crate::schedule`]).
     pub fn push_planes_in(&mut self, camera: &Camera, planes: &[PhotonPlane], medium: &Medium, control: Control) {
-        let polygons: Vec<Polygon<DVec2>> =
-            control.map_units("polygons", planes.len(), PLANE_UNIT, |i| screen_polygon(camera, &planes[i], medium));
         let tiling = self.tiling;
         let (down, across) = (tiling.down(), tiling.across());
-        // Each new plane's vertices and the bands of rows it may cover (none: invisible).
+        // Each new plane's polygon, the bands of rows it may cover (none: invisible) and its
+        // bounding box (for estimating the tiles' work).
+        let polygons: Vec<(Polygon<DVec2>, Range<u32>, [f32; 4])> =
+            control.map_units("polygons", planes.len(), PLANE_UNIT, |i| {
+                let poly = screen_polygon(camera, &planes[i], medium);
+                if poly.len < 3 {
+                    return (poly, 0..0, [0.0; 4]);
+                }
+                let (lo, hi) = poly.points().iter().fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(*v), hi.max(*v))
+                });
+                let rows = tiling.rows;
+                let first = (lo.y - SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows;
+                let last = ((hi.y + SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows).min(down - 1);
+                (poly, first..last + 1, [lo.x as f32, hi.x as f32, lo.y as f32, hi.y as f32])
+            });
         let first_new = (self.offsets.len() - 1) as u32;
         let mut reach = Vec::with_capacity(polygons.len());
-        for poly in &polygons {
+        for (poly, rows, bounds) in &polygons {
             if poly.len >= 3 {
-                let (lo, hi) = poly
-                    .points()
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v.y), hi.max(v.y)));
-                let rows = tiling.rows;
-                let first = (lo - SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows;
-                let last = ((hi + SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows).min(down - 1);
-                reach.push(first..last + 1);
                 self.vertices.extend(poly.points().iter().map(|v| v.as_vec2()));
-            } else {
-                reach.push(0..0);
             }
             self.offsets.push(self.vertices.len() as u32);
+            self.bounds.push(*bounds);
+            reach.push(rows.clone());
         }
         self.lights.extend(planes.iter().map(|p| p.light as u32));
         // Binned band by band in parallel: each plane's spans in the band's rows, walked once
@@ -237,7 +268,7 @@ impl ScreenRaster {
         let lights = &self.lights;
         let section = control.section("bin");
         let me = &*self;
-        let bins: Vec<(BandBins, Vec<Vec<u32>>)> = (0..down)
+        let bins: Vec<(BandBins, Vec<Vec<u32>>, Vec<u64>)> = (0..down)
             .into_par_iter()
             .zip(old)
             .map(|(band, mut bins)| {
@@ -283,21 +314,35 @@ impl ScreenRaster {
                     }
                     bins.records.sort_by_key(|r| r.light);
                     let mut tiles = vec![Vec::new(); across as usize];
+                    let mut work = vec![0u64; across as usize];
+                    let band_rows = (first_row as f32, (first_row + rows) as f32);
                     for (k, r) in bins.records.iter().enumerate() {
+                        if across == 1 {
+                            tiles[0].push(k as u32);
+                            // The box's part in the band.
+                            let [x0, x1, y0, y1] = me.bounds[r.plane as usize];
+                            let h = (y1.min(band_rows.1) - y0.max(band_rows.0)).max(0.0) + 1.0;
+                            work[0] += PLANE_WORK + (h * (x1 - x0 + 1.0)) as u64;
+                            continue;
+                        }
                         let col = |x: u16| (x as u32 / tiling.cols).min(across - 1) as usize;
-                        for tile in &mut tiles[col(r.cols.0)..=col(r.cols.1)] {
-                            tile.push(k as u32);
+                        for c in col(r.cols.0)..=col(r.cols.1) {
+                            tiles[c].push(k as u32);
+                            let (c0, c1) = (c as u32 * tiling.cols, (c as u32 + 1) * tiling.cols - 1);
+                            let wide = (r.cols.1 as u32).min(c1) + 1 - (r.cols.0 as u32).max(c0).min(c1 + 1);
+                            work[c] += PLANE_WORK + wide as u64 * r.rows as u64;
                         }
                     }
-                    (bins, tiles)
+                    (bins, tiles, work)
                 })
             })
             .collect();
         section.close();
-        for (band, (bins, tiles)) in bins.into_iter().enumerate() {
+        for (band, (bins, tiles, work)) in bins.into_iter().enumerate() {
             self.bands.push(bins);
-            for (c, tile) in tiles.into_iter().enumerate() {
+            for (c, (tile, work)) in tiles.into_iter().zip(work).enumerate() {
                 self.tiles[band * across as usize + c] = tile;
+                self.work[band * across as usize + c] = work;
             }
         }
     }
@@ -371,8 +416,8 @@ impl ScreenRaster {
 
     pub fn count_hits(&self, ctx: &GatherContext, kernel: Kernel, rays: &[CameraRay]) -> GatherStats {
         let mut out = vec![Vec3::ZERO; rays.len()];
-        let piece = RasterPiece { raster: self, ctx, rays };
-        gather_pieces::<Unweighted, false>(&[piece], &Unweighted, kernel, &mut out, Control::none())
+        let piece = RasterPiece { raster: self, ctx, rays, target: 0 };
+        gather_pieces::<Unweighted, false>(&[piece], &Unweighted, kernel, &mut [&mut out], Control::none())[0]
     }
 
     /// One piece's planes in one tile (its rows from `skip` on, as many as `sums` holds: a part
@@ -503,39 +548,43 @@ impl ScreenRaster {
     }
 }
 
-/// One piece of planes for [`gather_pieces`]: its raster, its planes' constants and the ray
-/// set it is gathered along (one ray per pixel, row-major).
+/// One piece of planes for [`gather_pieces`]: its raster, its planes' constants, the ray set it
+/// is gathered along (one ray per pixel, row-major) and the sums it adds to.
 #[derive(Clone, Copy)]
 pub struct RasterPiece<'a> {
     pub raster: &'a ScreenRaster,
     pub ctx: &'a GatherContext,
     pub rays: &'a [CameraRay],
+    pub target: usize,
 }
 
-/// Gathers `pieces` in their order with `weights`, adding each ray's estimate of each piece to
-/// `sums` (the image's, row-major), with `kernel` (resolved). The pieces' rasters share one
-/// [`Tiling`]: the tiles are the units of work, one parallel loop over them, the heaviest first,
-/// and each tile takes every piece in turn (no barrier between pieces). A pixel lies in one
-/// tile, which adds each piece to it as a whole-image gathering of that piece alone would: the
-/// same bits. One progress report per tile and piece; cancelled, each tile stops before its
-/// next plane.
+/// Gathers `pieces` with `weights`, adding each ray's estimate of each piece to `sums[target]`
+/// (an image's, row-major; the piece's target), with `kernel` (resolved); returns what each
+/// target's pieces found. The pieces' rasters share one [`Tiling`]: a tile of a target is a unit
+/// of work (one parallel loop over them all, the heaviest first), which takes the target's
+/// pieces in their order (no barrier between pieces, nor between targets: a render gathers
+/// several chunks at once, each into its own sums). A pixel of a target lies in one tile, which
+/// adds each piece to it as a whole-image gathering of that piece alone would: the same bits.
+/// One progress report per tile and piece; cancelled, each tile stops before its next plane.
 pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
     pieces: &[RasterPiece],
     weights: &D,
     kernel: Kernel,
-    sums: &mut [Vec3],
+    sums: &mut [&mut [Vec3]],
     control: Control,
-) -> GatherStats {
+) -> Vec<GatherStats> {
     // The kernels' target features are the CPU's: checked once here, for every plane and fold
     // of the gathering (a `Gathering` can be made with any kernel).
     assert!(kernel.is_available(), "the {kernel} kernel is not available on this CPU");
+    let mut found = vec![GatherStats::default(); sums.len()];
     let Some(first) = pieces.first() else {
-        return GatherStats::default();
+        return found;
     };
     let tiling = first.raster.tiling;
     let pixels = tiling.width as usize * tiling.height as usize;
     assert!(
-        pieces.iter().all(|p| p.raster.tiling == tiling && p.rays.len() == pixels) && sums.len() == pixels,
+        pieces.iter().all(|p| p.raster.tiling == tiling && p.rays.len() == pixels && p.target < sums.len())
+            && sums.iter().all(|s| s.len() == pixels),
         "the pieces of a gathering share one image and its tiles"
     );
     // What the weights need of each plane, once per piece (a plane crosses many tiles); stopped,
@@ -547,39 +596,49 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
             (!control.is_cancelled()).then(|| weights.prepare(&views[i].frame))
         });
         if control.is_cancelled() {
-            return GatherStats::default();
+            return found;
         }
         prepared.push(planes.into_iter().map(|p| p.expect("not cancelled")).collect());
     }
-    // Each tile's rows of the image's sums (the tiles cut every row into disjoint runs).
+    // Each target's tiles' rows of its sums (the tiles cut every row into disjoint runs).
     let w = tiling.width as usize;
-    let mut tiles: Vec<(usize, Vec<&mut [Vec3]>)> = (0..tiling.count()).map(|t| (t, Vec::new())).collect();
-    for (j, mut row) in sums.chunks_mut(w).enumerate() {
-        let down = j / tiling.rows as usize;
-        for across in 0..tiling.across() as usize {
-            let take = (tiling.cols as usize).min(row.len());
-            let (run, rest) = row.split_at_mut(take);
-            tiles[down * tiling.across() as usize + across].1.push(run);
-            row = rest;
+    let across = tiling.across() as usize;
+    let mut tiles: Vec<(usize, usize, Vec<&mut [Vec3]>)> = Vec::with_capacity(sums.len() * tiling.count());
+    for (target, sums) in sums.iter_mut().enumerate() {
+        let first = tiles.len();
+        tiles.extend((0..tiling.count()).map(|t| (target, t, Vec::new())));
+        for (j, mut row) in sums.chunks_mut(w).enumerate() {
+            let down = j / tiling.rows as usize;
+            for a in 0..across {
+                let take = (tiling.cols as usize).min(row.len());
+                let (run, rest) = row.split_at_mut(take);
+                tiles[first + down * across + a].2.push(run);
+                row = rest;
+            }
         }
     }
-    // Where bands are cut into tiles (many workers), a tile with more planes than its share is
-    // cut into parts of whole rows, each taking the tile's planes over its own rows (their spans
-    // kept by the binning): so that no part outweighs a worker's share of the gathering (the
-    // tiles' work is uneven: 7 times the mean for the heaviest of 640x360's 540 tiles for 64
-    // workers), at the cost of a plane's set-up per part.
-    let load = |t: usize| pieces.iter().map(|p| p.raster.tiles[t].len()).sum::<usize>();
-    let share =
-        (tiles.iter().map(|(t, _)| load(*t)).sum::<usize>() / (SPLIT_PER_WORKER * crate::schedule::workers())).max(1);
+    // A tile with more work than its share is cut into parts of whole rows, each taking the
+    // tile's planes over its own rows (their spans kept by the binning, or walked for the
+    // part's rows where a band is one tile), so that no part outweighs a worker's share of the
+    // gathering (the tiles' work is uneven: 7 times the mean for the heaviest of 640x360's 540
+    // tiles for 64 workers), at the cost of a plane's set-up per part. Bands are cut only where
+    // one would be half a worker's share: on few workers, never.
+    let load = |target: usize, t: usize| {
+        pieces.iter().filter(|p| p.target == target).map(|p| p.raster.work[t] as usize).sum::<usize>()
+    };
+    let per_worker = if tiling.across() > 1 { SPLIT_PER_WORKER } else { 4 };
+    let share = (tiles.iter().map(|(target, t, _)| load(*target, *t)).sum::<usize>()
+        / (per_worker * crate::schedule::workers()))
+    .max(1);
     let mut parts = Vec::with_capacity(tiles.len());
-    let split = tiling.across() > 1;
-    for (tile, mut rows) in tiles {
-        let n = if split { load(tile).div_ceil(share).clamp(1, rows.len().max(1)) } else { 1 };
+    for (target, tile, mut rows) in tiles {
+        let load = load(target, tile);
+        let n = load.div_ceil(share).clamp(1, rows.len().max(1));
         let per = rows.len().div_ceil(n).max(1);
         let mut skip = 0;
         while !rows.is_empty() {
             let rest = rows.split_off(per.min(rows.len()));
-            parts.push((tile, skip as u32, load(tile) / n, rows));
+            parts.push((target, tile, skip as u32, load / n, rows));
             skip += per;
             rows = rest;
         }
@@ -587,15 +646,15 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
     // The heaviest first: the last a worker takes are then small ones, and the workers finish
     // together (with 23 bands of rows for 2 workers, in image order one of them idled for 5% of
     // the gathering's wall time).
-    parts.sort_by_key(|&(tile, skip, load, _)| (std::cmp::Reverse(load), tile, skip));
+    parts.sort_by_key(|&(target, tile, skip, load, _)| (std::cmp::Reverse(load), target, tile, skip));
     let section = control.section("tiles");
-    let stats = parts
+    let each = parts
         .into_par_iter()
         .with_max_len(1)
-        .map(|(tile, skip, _, mut rows)| {
-            section.unit(|| {
+        .map(|(target, tile, skip, _, mut rows)| {
+            let stats = section.unit(|| {
                 let mut stats = GatherStats::default();
-                for (piece, prepared) in pieces.iter().zip(&prepared) {
+                for (piece, prepared) in pieces.iter().zip(&prepared).filter(|(p, _)| p.target == target) {
                     if control.is_cancelled() {
                         break;
                     }
@@ -614,14 +673,15 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
                     }
                 }
                 stats
-            })
+            });
+            (target, stats)
         })
-        .reduce(GatherStats::default, |mut a, b| {
-            a += b;
-            a
-        });
+        .collect::<Vec<_>>();
     section.close();
-    stats
+    for (target, stats) in each {
+        found[target] += stats;
+    }
+    found
 }
 
 /// The planes that may cover a band of rows, each with its spans there: what the band's tiles
@@ -730,7 +790,7 @@ mod tests {
     use super::*;
 
     /// Every pixel lies in exactly one tile, whatever the image and the workers; the benchmark's
-    /// image is bands of 16 rows for 2 workers, and as the docs say for 16 and 64.
+    /// image is bands of 16 rows for 2 and 16 workers, and as the docs say for 64.
     #[test]
     fn tiles_cover_the_image_once() {
         for (w, h) in [(640, 360), (96, 54), (7, 3), (1, 1), (1000, 17), (33, 700)] {
@@ -755,7 +815,11 @@ mod tests {
             (t.down(), t.across(), t.rows, t.cols)
         };
         assert_eq!(shape(2), (23, 1, 16, 640));
-        assert_eq!(shape(16), (23, 3, 16, 216));
-        assert_eq!(shape(64), (23, 12, 16, 56));
+        assert_eq!(shape(16), (23, 1, 16, 640));
+        assert_eq!(shape(64), (23, 2, 16, 320));
+        // A large image gathers one chunk at a time, in tiles for every worker.
+        assert_eq!(chunks_at_once(64, 3840, 2160), 1);
+        assert_eq!(Tiling::new(3840, 2160, 64).count(), 270);
+        assert_eq!([2, 16, 32, 64].map(|w| chunks_at_once(w, 640, 360)), [1, 3, 6, 8]);
     }
 }

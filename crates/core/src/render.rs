@@ -9,7 +9,7 @@
 //! direct emission, [`crate::emission`]). The options come resolved and checked from
 //! [`crate::settings`]: nothing here checks them again.
 
-use crate::accel::{PreparedPlanes, gather_pieces};
+use crate::accel::{Accelerator, GatherPiece, PreparedPlanes, gather_pieces};
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::emission::direct_emission_and_variance_in;
@@ -49,10 +49,10 @@ struct Piece {
     planes: Arc<PreparedPlanes>,
 }
 
-/// The most pieces one gathering takes (each tile taking them in turn): their ray sets are held
-/// together, so that a chunk of many small pieces (small renders, many ray sets) holds two at
+/// The most ray sets one gathering holds (its pieces' sets, each tile taking the pieces in
+/// turn): so that a chunk of many small pieces (small renders, many ray sets) holds two sets at
 /// a time, not all of its own.
-const PIECES_PER_GATHERING: usize = 2;
+const RAY_SETS_PER_GATHERING: usize = 2;
 
 /// Where the preparation of pieces finds what it needs (the other side of a chunk's gathering).
 struct Preparer<'g> {
@@ -101,33 +101,129 @@ struct GatherSide<'g> {
 }
 
 impl GatherSide<'_> {
-    /// Gathers `pieces` in order, adding into `sums` (f32, each plane weighted 1): up to
-    /// [`PIECES_PER_GATHERING`] in one gathering ([`gather_pieces`]: on the raster, each tile
-    /// takes every piece in turn), their ray sets made first; with an error image, piece by
-    /// piece, each piece's sums going to the group spread. Returns what it found and its wall
-    /// seconds.
-    fn gather(&mut self, pieces: &[Piece], sums: &mut [Vec3], control: Control) -> Result<(GatherStats, f64)> {
+    /// Gathers the pieces of each chunk of `chunks` in order, adding into the chunk's `sums`
+    /// (f32, each plane weighted 1), in gatherings of consecutive pieces ([`gatherings`]:
+    /// [`gather_pieces`], on the raster each tile of each chunk taking the chunk's pieces in
+    /// turn), their ray sets made first; with an error image, each piece's sums going to the
+    /// group spread. Returns what each chunk's pieces found and the wall seconds.
+    fn gather(
+        &mut self,
+        chunks: &[Vec<Piece>],
+        sums: &mut [&mut [Vec3]],
+        control: Control,
+    ) -> Result<(Vec<GatherStats>, f64)> {
         let t = Instant::now();
-        let mut stats = GatherStats::default();
+        let mut found = vec![GatherStats::default(); chunks.len()];
         let (weighting, kernel) = (self.weighting, self.opts.kernel);
-        let at_once = if self.spread.is_some() { 1 } else { PIECES_PER_GATHERING };
+        let all: Vec<(usize, &Piece)> =
+            chunks.iter().enumerate().flat_map(|(c, pieces)| pieces.iter().map(move |p| (c, p))).collect();
         let mut before = Vec::new();
-        for group in pieces.chunks(at_once) {
+        for group in gatherings(&all, self.spread.is_some()) {
             let rays: Vec<Arc<Vec<CameraRay>>> =
-                group.iter().map(|p| self.rays.rays(self.scene, p.spec.0, control)).collect();
-            let all: Vec<_> = group.iter().zip(&rays).map(|(p, r)| (&*p.planes, r.as_slice())).collect();
-            if let Some(spread) = self.spread.as_mut() {
-                before.clear();
-                before.extend_from_slice(sums);
-                stats += gather_pieces(&all, weighting, kernel, sums, control)?;
-                let (k, ref planes, quarter, whole) = group[0].spec;
-                spread.add(k, quarter, planes.len(), whole, &before, sums);
+                group.iter().map(|(_, p)| self.rays.rays(self.scene, p.spec.0, control)).collect();
+            let pieces: Vec<GatherPiece> = group
+                .iter()
+                .zip(&rays)
+                .map(|(&(target, p), r)| GatherPiece { planes: &p.planes, rays: r.as_slice(), target })
+                .collect();
+            let each = if let Some(spread) = self.spread.as_mut() {
+                // Each piece is its chunk's only one in the gathering: its sums are its chunk's
+                // after less before, told to the spread in piece order.
+                before.resize_with(group.len(), Vec::new);
+                for (b, &(c, _)) in before.iter_mut().zip(group) {
+                    b.clear();
+                    b.extend_from_slice(sums[c]);
+                }
+                let each = gather_pieces(&pieces, weighting, kernel, sums, control)?;
+                for (b, &(c, piece)) in before.iter().zip(group) {
+                    let (k, ref planes, quarter, whole) = piece.spec;
+                    spread.add(k, quarter, planes.len(), whole, b, sums[c]);
+                }
+                each
             } else {
-                stats += gather_pieces(&all, weighting, kernel, sums, control)?;
+                gather_pieces(&pieces, weighting, kernel, sums, control)?
+            };
+            for (f, e) in found.iter_mut().zip(each) {
+                *f += e;
             }
         }
-        Ok((stats, t.elapsed().as_secs_f64()))
+        Ok((found, t.elapsed().as_secs_f64()))
     }
+}
+
+/// The gatherings of `pieces` (chunk, piece), in order: runs of consecutive pieces that hold at
+/// most [`RAY_SETS_PER_GATHERING`] ray sets; with an error image (`apart`), at most one piece of
+/// each chunk, so that each piece's sums are told apart (its chunk's sums before and after).
+fn gatherings<'p, 'q>(pieces: &'q [(usize, &'p Piece)], apart: bool) -> Vec<&'q [(usize, &'p Piece)]> {
+    let mut out = Vec::new();
+    let mut start = 0;
+    let (mut sets, mut chunks) = (Vec::new(), Vec::new());
+    for (i, &(c, p)) in pieces.iter().enumerate() {
+        let new_set = !sets.contains(&p.spec.0);
+        if (new_set && sets.len() == RAY_SETS_PER_GATHERING) || (apart && chunks.contains(&c)) {
+            out.push(&pieces[start..i]);
+            start = i;
+            sets.clear();
+            chunks.clear();
+        }
+        if !sets.contains(&p.spec.0) {
+            sets.push(p.spec.0);
+        }
+        chunks.push(c);
+    }
+    if start < pieces.len() {
+        out.push(&pieces[start..]);
+    }
+    out
+}
+
+/// Chunks a render gathers at once, in one parallel loop, each into its own sums
+/// ([`crate::raster::chunks_at_once`]: several on many workers and a small image); one where
+/// the structure is not the raster.
+fn chunks_at_once(scene: &Scene, opts: &RenderOptions) -> usize {
+    if opts.structure() != Accelerator::Raster {
+        return 1;
+    }
+    let cam = &scene.camera;
+    crate::raster::chunks_at_once(crate::schedule::workers(), cam.width, cam.height)
+}
+
+/// `buf` as `pixels` zeros: a buffer of that size (an earlier chunk's) zeroed in parallel, else
+/// a fresh one (its pages zeroed by the system where they are first written, in parallel).
+fn zeroed(buf: &mut Vec<Vec3>, pixels: usize, control: Control) {
+    if buf.len() == pixels {
+        control.fill_units("partial", buf, 16 * 1024, |_| Vec3::ZERO);
+    } else {
+        *buf = vec![Vec3::ZERO; pixels];
+    }
+}
+
+/// The pieces of a window's chunks (`specs`, chunk by chunk) taken from `prepared` if they are
+/// there, else sampled and prepared now, the chunks side by side (two halves at a time: the
+/// two sides of a join, so that a chunk's serial steps run beside another's), with the seconds
+/// spent sampling and building.
+fn prepare_window(
+    scene: &Scene,
+    opts: &RenderOptions,
+    prepared: &[(Range<usize>, Arc<PreparedPlanes>)],
+    specs: &[Vec<PieceSpec>],
+    control: Control,
+) -> (Result<Vec<Vec<Piece>>>, (f64, f64)) {
+    if specs.len() <= 1 {
+        let mut preparer = Preparer::new(scene, opts, prepared);
+        let ready = specs.first().map(|s| preparer.pieces(s.clone(), control).map(|p| vec![p]));
+        return (ready.unwrap_or(Ok(Vec::new())), (preparer.seconds_sampling, preparer.seconds_build));
+    }
+    let (left, right) = specs.split_at(specs.len() / 2);
+    let ((a, sa), (b, sb)) = control.join(
+        |control| prepare_window(scene, opts, prepared, left, control),
+        |control| prepare_window(scene, opts, prepared, right, control),
+    );
+    let ready = a.and_then(|mut a| {
+        a.extend(b?);
+        Ok(a)
+    });
+    (ready, (sa.0 + sb.0, sa.1 + sb.1))
 }
 
 impl<'a> Gatherer<'a> {
@@ -161,8 +257,8 @@ impl<'a> Gatherer<'a> {
             let (sampling, build) = (preparer.seconds_sampling, preparer.seconds_build);
             self.stats.seconds_sampling += sampling;
             self.stats.seconds_build += build;
-            let (s, seconds) = self.gather_side(self.opts.weighting).gather(&pieces, sums, control)?;
-            self.stats.add_gather(s, seconds);
+            let (s, seconds) = self.gather_side(self.opts.weighting).gather(&[pieces], &mut [&mut *sums], control)?;
+            self.stats.add_gather(s[0], seconds);
         }
         self.count_rays();
         Ok(())
@@ -269,82 +365,104 @@ impl<'a> ChunkRenderer<'a> {
         let done = self.resumed_chunks(&root, &held)?;
         let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
         let pixels = scene.camera.width as usize * scene.camera.height as usize;
-        // Chunk c is gathered while chunk c + 1 is prepared (its planes sampled, projected and
-        // binned, its ray set made): the two sides of a join, so that the workers a chunk's last
-        // tiles leave idle prepare the next.
-        let specs: Vec<_> = (done..root.end).map(|c| self.chunk_pieces(self.chunk_range(c))).collect();
+        // The chunks go in windows of `at_once`, each gathered in one parallel loop (every
+        // chunk into its own sums: the same bits) while the next window is prepared (its planes
+        // sampled, projected and binned, its chunks side by side): the two sides of a join, so
+        // that the workers a window's last tiles leave idle prepare the next.
+        let at_once = chunks_at_once(scene, opts);
+        let windows: Vec<Range<usize>> =
+            (done..root.end).step_by(at_once).map(|c| c..(c + at_once).min(root.end)).collect();
+        let specs: Vec<Vec<Vec<PieceSpec>>> = windows
+            .iter()
+            .map(|w| w.clone().map(|c| self.chunk_pieces(self.chunk_range(c))).collect())
+            .collect();
         let mut next = match specs.first() {
-            Some(first) => Some(self.prepare(first.clone(), control)?),
+            Some(first) => Some(self.prepare(first, control)?),
             None => None,
         };
-        // The buffers of a chunk's f32 and f64 sums, reused from chunk to chunk.
-        let mut spare: (Vec<Vec3>, Vec<DVec3>) = (Vec::new(), Vec::new());
-        for c in done..root.end {
+        // The buffers of the chunks' f32 and f64 sums, reused from window to window.
+        let mut spare: (Vec<Vec<Vec3>>, Vec<Vec<DVec3>>) = (Vec::new(), Vec::new());
+        for (w, window) in windows.iter().enumerate() {
             let start = Instant::now();
-            let (work, (sampling, build)) = next.take().expect("the chunk's pieces, prepared before");
-            let mut preparer = Preparer::new(scene, opts, &self.prepared);
+            let (work, (sampling, build)) = next.take().expect("the window's pieces, prepared before");
+            let following = specs.get(w + 1);
+            let prepared = &self.prepared;
             let mut side = self.gatherer.gather_side(weighting);
-            let following = specs.get(c + 1 - done).cloned();
             let width = scene.camera.width as usize;
-            let (mut sums, mut wide) = (std::mem::take(&mut spare.0), std::mem::take(&mut spare.1));
+            let mut sums: Vec<Vec<Vec3>> = (0..window.len()).map(|_| spare.0.pop().unwrap_or_default()).collect();
+            let mut wide: Vec<Vec<DVec3>> = (0..window.len()).map(|_| spare.1.pop().unwrap_or_default()).collect();
             let (gathered, upcoming) = control.join(
                 |control| {
-                    sums.clear();
-                    sums.resize(pixels, Vec3::ZERO);
-                    let found = side.gather(&work, &mut sums, control)?;
-                    // The chunk's planes freed and its sums widened to f64 here, beside the next
-                    // chunk's preparation, not between the chunks.
+                    for s in &mut sums {
+                        zeroed(s, pixels, control);
+                    }
+                    let mut targets: Vec<&mut [Vec3]> = sums.iter_mut().map(|s| s.as_mut_slice()).collect();
+                    let found = side.gather(&work, &mut targets, control)?;
+                    // The window's planes freed and its sums widened to f64 here, beside the
+                    // next window's preparation, not between the windows.
                     drop(work);
-                    wide.resize(pixels, DVec3::ZERO);
-                    control.fill_units("partial", &mut wide, width * 16, |p| sums[p].as_dvec3());
-                    Ok::<_, Error>((wide, found))
+                    for (wide, sums) in wide.iter_mut().zip(&sums) {
+                        if wide.len() == pixels {
+                            control.fill_units("partial", wide, width * 16, |p| sums[p].as_dvec3());
+                        } else {
+                            *wide = control.map_units("partial", pixels, width * 16, |p| sums[p].as_dvec3());
+                        }
+                    }
+                    Ok::<_, Error>(found)
                 },
-                |control| {
-                    let ready = following.map(|specs| preparer.pieces(specs, control)).transpose();
-                    (ready, (preparer.seconds_sampling, preparer.seconds_build))
-                },
+                |control| following.map(|specs| prepare_window(scene, opts, prepared, specs, control)),
             );
-            let (wide, (stats, seconds)) = gathered?;
+            let (stats, seconds) = gathered?;
             spare.0 = sums;
-            let (ready, seconds_prepared) = upcoming;
             self.gatherer.stats.seconds_sampling += sampling;
             self.gatherer.stats.seconds_build += build;
-            self.gatherer.stats.add_gather(stats, seconds);
-            self.gatherer.count_rays();
-            let range = self.chunk_range(c);
-            held.push(Partial {
-                width: scene.camera.width,
-                height: scene.camera.height,
-                sums: wide,
-                start: range.start,
-                end: range.end,
-                planes_total: opts.planes,
-                fingerprint: self.fingerprint.clone(),
-                hits: stats.hits,
-                seconds: start.elapsed().as_secs_f64(),
+            let total = stats.iter().fold(GatherStats::default(), |mut a, &b| {
+                a += b;
+                a
             });
-            // The nodes this chunk completes, the innermost first.
-            let alive = frontier(root.clone(), c + 1).len();
-            while held.len() > alive {
-                let right = held.pop().expect("a right child");
-                let left = held.pop().expect("its left sibling");
-                held.push(combine_in(left, &right, control)?);
-                // Its buffer is the next chunk's (fresh pages cost their faults again).
-                spare.1 = right.sums;
+            self.gatherer.stats.add_gather(total, seconds);
+            self.gatherer.count_rays();
+            let seconds = start.elapsed().as_secs_f64() / window.len() as f64;
+            for ((c, sums), stats) in window.clone().zip(wide).zip(stats) {
+                let range = self.chunk_range(c);
+                held.push(Partial {
+                    width: scene.camera.width,
+                    height: scene.camera.height,
+                    sums,
+                    start: range.start,
+                    end: range.end,
+                    planes_total: opts.planes,
+                    fingerprint: self.fingerprint.clone(),
+                    hits: stats.hits,
+                    seconds,
+                });
+                // The nodes this chunk completes, the innermost first.
+                let alive = frontier(root.clone(), c + 1).len();
+                while held.len() > alive {
+                    let right = held.pop().expect("a right child");
+                    let left = held.pop().expect("its left sibling");
+                    held.push(combine_in(left, &right, control)?);
+                    // Its buffer is a later chunk's (fresh pages cost their faults again).
+                    spare.1.push(right.sums);
+                }
+                observer(&held, self.gatherer.spread.as_ref())?;
             }
-            observer(&held, self.gatherer.spread.as_ref())?;
-            // The next chunk's preparation failed (cancelled) only now that this chunk is told.
-            next = ready?.map(|pieces| (pieces, seconds_prepared));
+            // The next window's preparation failed (cancelled) only now that this one's chunks
+            // are told.
+            next = match upcoming {
+                Some((ready, seconds)) => Some((ready?, seconds)),
+                None => None,
+            };
         }
         Ok(held.pop().expect("the root node, checked or made above"))
     }
 
-    /// Prepares pieces now (not beside a gathering), with the seconds it spent sampling and
-    /// building.
-    fn prepare(&mut self, specs: Vec<PieceSpec>, control: Control) -> Result<(Vec<Piece>, (f64, f64))> {
-        let mut preparer = self.gatherer.preparer(&self.prepared);
-        let pieces = preparer.pieces(specs, control)?;
-        Ok((pieces, (preparer.seconds_sampling, preparer.seconds_build)))
+    /// Prepares a window's chunks now (not beside a gathering), with the seconds it spent
+    /// sampling and building.
+    fn prepare(&mut self, specs: &[Vec<PieceSpec>], control: Control) -> Result<(Vec<Vec<Piece>>, (f64, f64))> {
+        let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
+        let (ready, seconds) = prepare_window(scene, opts, &self.prepared, specs, control);
+        Ok((ready?, seconds))
     }
 
     /// The end of the chunks that `held` covers, if it is what this render of chunks `root`
@@ -387,7 +505,8 @@ pub type ChunkObserver<'o> = &'o mut dyn FnMut(&[Partial], Option<&GroupSpread>)
 ///
 /// The planes are rendered in the canonical chunks of [`crate::partial`] and added along its
 /// canonical tree, so that the same chunks rendered anywhere and merged give this image bit for
-/// bit; two chunks' planes exist at a time (one gathered while the next is prepared).
+/// bit; two windows of chunks' planes exist at a time (one gathered while the next is prepared:
+/// [`crate::raster::chunks_at_once`]).
 pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(Film, RenderStats)> {
     render_from(scene, opts, control, Resume::default(), &mut |_, _| Ok(()))
 }

@@ -21,6 +21,9 @@ impl Gpu {
     pub fn has_timestamps(&self) -> bool {
         match *self {}
     }
+    pub fn max_binding(&self) -> u64 {
+        match *self {}
+    }
 }
 
 /// Why there is no adapter.

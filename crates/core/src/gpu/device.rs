@@ -240,6 +240,11 @@ impl Gpu {
         self.cpu_adapter
     }
 
+    /// The most bytes one buffer binding holds on this device.
+    pub fn max_binding(&self) -> u64 {
+        self.max_binding
+    }
+
     /// Whether the gather is timed by the GPU's timestamps (else by the wall time of its
     /// submissions).
     pub fn has_timestamps(&self) -> bool {
@@ -327,6 +332,20 @@ impl GpuPlanes {
         assert_eq!(ctx.views.len(), bounds.len(), "a box per plane");
         let held = Arc::clone(&gpu);
         let _work = held.work.lock().unwrap_or_else(|p| p.into_inner());
+        // Every whole buffer within one binding: the image's rays (the largest per pixel), the
+        // planes and their occluders; refused here in one line, not by the driver's validation.
+        let pixels = width as u64 * height as u64;
+        let whole = [
+            ("the rays of a", pixels * std::mem::size_of::<RayRecord>() as u64),
+            ("the planes of a chunk for a", (ctx.views.len() * std::mem::size_of::<PlaneRecord>()) as u64),
+            ("the occluders of a chunk's planes for a", std::mem::size_of_val(ctx.occluders.as_slice()) as u64),
+        ];
+        if let Some((what, bytes)) = whole.into_iter().find(|&(_, bytes)| bytes > gpu.max_binding) {
+            return Err(Error::Device(format!(
+                "{what} {width}x{height} image take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
+                gpu.max_binding
+            )));
+        }
         let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
         let item = item_planes(gpu.cpu_adapter) as u64;
         // Batches of consecutive planes whose work items' partial sums fit one binding.
