@@ -188,13 +188,15 @@ fn chunks_at_once(scene: &Scene, opts: &RenderOptions) -> usize {
     crate::raster::chunks_at_once(crate::schedule::workers(), cam.width, cam.height)
 }
 
-/// `buf` as `pixels` zeros: a buffer of that size (an earlier chunk's) zeroed in parallel, else
-/// a fresh one (its pages zeroed by the system where they are first written, in parallel).
+/// `buf` as `pixels` zeros, written in parallel: in place where it has that size (an earlier
+/// chunk's buffer), else a fresh one (`vec![Vec3::ZERO; n]` writes every zero on one thread:
+/// 9 ms for a window of eight chunks at 640x360).
 fn zeroed(buf: &mut Vec<Vec3>, pixels: usize, control: Control) {
+    const UNIT: usize = 16 * 1024;
     if buf.len() == pixels {
-        control.fill_units("partial", buf, 16 * 1024, |_| Vec3::ZERO);
+        control.fill_units("partial", buf, UNIT, |_| Vec3::ZERO);
     } else {
-        *buf = vec![Vec3::ZERO; pixels];
+        *buf = control.map_units("partial", pixels, UNIT, |_| Vec3::ZERO);
     }
 }
 
