@@ -153,6 +153,8 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let images: Vec<&Path> = outputs.iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
+    // Before the progress bar: its units are the tiles cut for these workers.
+    fogplanes::schedule::cut_for(a.schedule_workers.filter(|&n| n > 0));
 
     let unit = if r.in_passes() { Unit::Passes } else { Unit::Planes(opts.planes() as u64) };
     let bar =
@@ -166,7 +168,6 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let (film, stats) = if !r.in_passes() {
         let held = watch.take_resumed();
         let strand = a.schedule_record.is_some().then(fogplanes::schedule::start);
-        fogplanes::schedule::cut_for(a.schedule_workers.filter(|&n| n > 0));
         let progress = || bar.inc(1);
         let mut control = Control::with_progress(&progress);
         if let Some(strand) = &strand {

@@ -241,9 +241,10 @@ impl ScreenRaster {
                 if poly.len < 3 {
                     return (poly, 0..0, [0.0; 4]);
                 }
-                let (lo, hi) = poly.points().iter().fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), v| {
-                    (lo.min(*v), hi.max(*v))
-                });
+                let (lo, hi) = poly
+                    .points()
+                    .iter()
+                    .fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
                 let rows = tiling.rows;
                 let first = (lo.y - SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows;
                 let last = ((hi.y + SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows).min(down - 1);

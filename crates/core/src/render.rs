@@ -374,10 +374,8 @@ impl<'a> ChunkRenderer<'a> {
         let at_once = chunks_at_once(scene, opts);
         let windows: Vec<Range<usize>> =
             (done..root.end).step_by(at_once).map(|c| c..(c + at_once).min(root.end)).collect();
-        let specs: Vec<Vec<Vec<PieceSpec>>> = windows
-            .iter()
-            .map(|w| w.clone().map(|c| self.chunk_pieces(self.chunk_range(c))).collect())
-            .collect();
+        let specs: Vec<Vec<Vec<PieceSpec>>> =
+            windows.iter().map(|w| w.clone().map(|c| self.chunk_pieces(self.chunk_range(c))).collect()).collect();
         let mut next = match specs.first() {
             Some(first) => Some(self.prepare(first, control)?),
             None => None,
