@@ -43,6 +43,10 @@ struct Gatherer<'a> {
 /// the render for the error image (`whole`: the piece is its whole group).
 type PieceSpec = (u32, Range<usize>, usize, bool);
 
+/// A window's pieces, chunk by chunk, with the seconds spent sampling their planes and building
+/// their structures.
+type Window = (Vec<Vec<Piece>>, (f64, f64));
+
 /// A piece ready to gather: its planes prepared.
 struct Piece {
     spec: PieceSpec,
@@ -459,7 +463,7 @@ impl<'a> ChunkRenderer<'a> {
 
     /// Prepares a window's chunks now (not beside a gathering), with the seconds it spent
     /// sampling and building.
-    fn prepare(&mut self, specs: &[Vec<PieceSpec>], control: Control) -> Result<(Vec<Vec<Piece>>, (f64, f64))> {
+    fn prepare(&mut self, specs: &[Vec<PieceSpec>], control: Control) -> Result<Window> {
         let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
         let (ready, seconds) = prepare_window(scene, opts, &self.prepared, specs, control);
         Ok((ready?, seconds))
