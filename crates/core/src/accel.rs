@@ -138,10 +138,24 @@ impl PreparedPlanes {
         accelerator: Accelerator,
         control: Control,
     ) -> Result<Self> {
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        Self::in_tiles(scene, set, range, accelerator, Tiling::new(w, h, crate::schedule::workers()), control)
+    }
+
+    /// [`PreparedPlanes::new`] with the raster's tiles `tiling` (a render's windows of chunks:
+    /// [`Tiling::for_window`]).
+    pub fn in_tiles(
+        scene: &Scene,
+        set: PlaneSet,
+        range: Range<usize>,
+        accelerator: Accelerator,
+        tiling: Tiling,
+        control: Control,
+    ) -> Result<Self> {
         let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
-        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty(&scene.camera));
+        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty_in(&scene.camera, tiling));
         // The GPU's boxes of pixels, plane by plane (`gpu::screen_bounds`).
         let mut bounds = Vec::new();
         // The BVH is built over the whole set at once; it keeps the planes while it does.

@@ -72,15 +72,28 @@ pub struct Tiling {
 }
 
 impl Tiling {
-    /// The tiles of an image for `threads` workers, each gathering a window of
-    /// [`chunks_at_once`] chunks: bands of 16 rows across the whole image while they are
-    /// [`TILES_PER_WORKER`] per worker for a window (23 bands make a 640x360 image: up to 5
-    /// workers for one chunk, 40 for eight), else each band cut into as few runs of columns as
-    /// make that many (at least 32 wide, a multiple of 8), and then bands of 8 or 4 rows
-    /// (640x360 for 64 workers, eight chunks at once: 23 x 2 tiles of 16 x 320). The heavy
-    /// tiles are cut further into parts of rows when gathered ([`gather_pieces`]).
+    /// The tiles of an image for `threads` workers gathering one chunk at a time: bands of 16
+    /// rows across the whole image while they are [`TILES_PER_WORKER`] per worker (23 bands make
+    /// a 640x360 image: up to 5 workers), else each band cut into as few runs of columns as make
+    /// that many (at least 32 wide, a multiple of 8), and then bands of 8 or 4 rows (640x360 for
+    /// 16 workers: 23 x 3 tiles of 16 x 216). The heavy tiles are cut further into parts of
+    /// rows when gathered ([`gather_pieces`]).
     pub fn new(width: u32, height: u32, threads: usize) -> Self {
+        Self::with_tiles(width, height, TILES_PER_WORKER * threads.max(1))
+    }
+
+    /// The tiles of an image for `threads` workers gathering a window of [`chunks_at_once`]
+    /// chunks: as [`Tiling::new`], the [`TILES_PER_WORKER`] tiles a worker wants shared by the
+    /// window's chunks (640x360: whole bands up to 32 workers; for 64, eight chunks at once,
+    /// 23 x 2 tiles of 16 x 320).
+    pub fn for_window(width: u32, height: u32, threads: usize) -> Self {
         let want = (TILES_PER_WORKER * threads.max(1)).div_ceil(chunks_at_once(threads, width, height));
+        Self::with_tiles(width, height, want)
+    }
+
+    /// At least `want` tiles (or bands of [`MIN_TILE_ROWS`] cut into columns of
+    /// [`MIN_TILE_COLS`]): bands of 16 rows, cut into runs of columns, then bands of 8 or 4.
+    fn with_tiles(width: u32, height: u32, want: usize) -> Self {
         let widest = width.max(1);
         let mut rows = BAND_ROWS;
         loop {
@@ -201,9 +214,15 @@ impl ScreenRaster {
     }
 
     /// A raster with no planes yet, for [`ScreenRaster::push_planes`], in tiles sized for the
-    /// workers of the current thread pool ([`Tiling::new`], [`crate::schedule::workers`]).
+    /// workers of the current thread pool gathering one chunk at a time ([`Tiling::new`],
+    /// [`crate::schedule::workers`]).
     pub fn empty(camera: &Camera) -> Self {
-        let tiling = Tiling::new(camera.width, camera.height, crate::schedule::workers());
+        Self::empty_in(camera, Tiling::new(camera.width, camera.height, crate::schedule::workers()))
+    }
+
+    /// A raster with no planes yet, in `tiling` (its image the camera's).
+    pub fn empty_in(camera: &Camera, tiling: Tiling) -> Self {
+        assert_eq!((tiling.width, tiling.height), (camera.width, camera.height), "the camera's tiles");
         ScreenRaster {
             tiling,
             width: camera.width,
@@ -793,12 +812,14 @@ mod tests {
     use super::*;
 
     /// Every pixel lies in exactly one tile, whatever the image and the workers; the benchmark's
-    /// image is bands of 16 rows for 2 and 16 workers, and as the docs say for 64.
+    /// image is tiled as the docs say, one chunk at a time and in windows.
     #[test]
     fn tiles_cover_the_image_once() {
         for (w, h) in [(640, 360), (96, 54), (7, 3), (1, 1), (1000, 17), (33, 700)] {
-            for threads in [1, 2, 3, 7, 16, 64, 1024] {
-                let t = Tiling::new(w, h, threads);
+            for t in
+                [1, 2, 3, 7, 16, 64, 1024].into_iter().flat_map(|n| [Tiling::new(w, h, n), Tiling::for_window(w, h, n)])
+            {
+                let threads = t.count();
                 let mut seen = vec![0u8; (w * h) as usize];
                 for k in 0..t.count() {
                     let (rows, cols) = t.tile(k);
@@ -818,11 +839,18 @@ mod tests {
             (t.down(), t.across(), t.rows, t.cols)
         };
         assert_eq!(shape(2), (23, 1, 16, 640));
-        assert_eq!(shape(16), (23, 1, 16, 640));
-        assert_eq!(shape(64), (23, 2, 16, 320));
+        assert_eq!(shape(16), (23, 3, 16, 216));
+        assert_eq!(shape(64), (23, 12, 16, 56));
+        let window = |threads| {
+            let t = Tiling::for_window(640, 360, threads);
+            (t.down(), t.across(), t.rows, t.cols)
+        };
+        assert_eq!(window(2), (23, 1, 16, 640));
+        assert_eq!(window(16), (23, 1, 16, 640));
+        assert_eq!(window(64), (23, 2, 16, 320));
         // A large image gathers one chunk at a time, in tiles for every worker.
         assert_eq!(chunks_at_once(64, 3840, 2160), 1);
-        assert_eq!(Tiling::new(3840, 2160, 64).count(), 270);
+        assert_eq!(Tiling::for_window(3840, 2160, 64), Tiling::new(3840, 2160, 64));
         assert_eq!([2, 16, 32, 64].map(|w| chunks_at_once(w, 640, 360)), [1, 3, 6, 8]);
     }
 }

@@ -20,7 +20,9 @@ use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
 use crate::options::{RenderOptions, RenderStats};
 use crate::partial::{Partial, Resume, chunk_indices, chunk_planes, chunks, combine_in, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
+use crate::raster::Tiling;
 use crate::scene::Scene;
+use crate::schedule;
 use crate::spread::{GroupSpread, relative_rms_error};
 use crate::weights::Weighting;
 use glam::{DVec3, Vec3};
@@ -63,6 +65,9 @@ struct Preparer<'g> {
     scene: &'g Scene,
     opts: &'g RenderOptions,
     prepared: &'g [(Range<usize>, Arc<PreparedPlanes>)],
+    /// Whether the pieces are gathered in windows of chunks ([`Tiling::for_window`]), else one
+    /// at a time ([`Tiling::new`]).
+    windowed: bool,
     /// Seconds spent sampling planes and building their structures.
     seconds_sampling: f64,
     seconds_build: f64,
@@ -70,7 +75,7 @@ struct Preparer<'g> {
 
 impl<'g> Preparer<'g> {
     fn new(scene: &'g Scene, opts: &'g RenderOptions, prepared: &'g [(Range<usize>, Arc<PreparedPlanes>)]) -> Self {
-        Preparer { scene, opts, prepared, seconds_sampling: 0.0, seconds_build: 0.0 }
+        Preparer { scene, opts, prepared, windowed: false, seconds_sampling: 0.0, seconds_build: 0.0 }
     }
 
     /// Each piece's planes taken from `prepared` if they are there, else sampled and prepared
@@ -82,7 +87,11 @@ impl<'g> Preparer<'g> {
                 Some((_, p)) => p.clone(),
                 None => {
                     let set = self.opts.plane_set();
-                    let p = PreparedPlanes::new(self.scene, set, spec.1.clone(), self.opts.structure(), control)?;
+                    let (w, h, workers) = (self.scene.camera.width, self.scene.camera.height, schedule::workers());
+                    let tiling =
+                        if self.windowed { Tiling::for_window(w, h, workers) } else { Tiling::new(w, h, workers) };
+                    let structure = self.opts.structure();
+                    let p = PreparedPlanes::in_tiles(self.scene, set, spec.1.clone(), structure, tiling, control)?;
                     self.seconds_sampling += p.seconds_sampling;
                     self.seconds_build += p.seconds_build;
                     Arc::new(p)
@@ -216,7 +225,7 @@ fn prepare_window(
     control: Control,
 ) -> (Result<Vec<Vec<Piece>>>, (f64, f64)) {
     if specs.len() <= 1 {
-        let mut preparer = Preparer::new(scene, opts, prepared);
+        let mut preparer = Preparer { windowed: true, ..Preparer::new(scene, opts, prepared) };
         let ready = specs.first().map(|s| preparer.pieces(s.clone(), control).map(|p| vec![p]));
         return (ready.unwrap_or(Ok(Vec::new())), (preparer.seconds_sampling, preparer.seconds_build));
     }
@@ -306,7 +315,7 @@ impl<'a> ChunkRenderer<'a> {
             prepared: Vec::new(),
         };
         let specs: Vec<_> = chunks(opts.planes).into_iter().flat_map(|c| r.chunk_pieces(c)).collect();
-        let mut preparer = r.gatherer.preparer(&[]);
+        let mut preparer = Preparer { windowed: true, ..r.gatherer.preparer(&[]) };
         let ready = preparer.pieces(specs, control)?;
         let (sampling, build) = (preparer.seconds_sampling, preparer.seconds_build);
         r.gatherer.stats.seconds_sampling += sampling;
@@ -588,7 +597,11 @@ pub fn render_chunk(
 /// whole [`render`]): one per unit of work of every gathering over the image, one gathering per
 /// piece of every chunk ([`crate::partial::gatherings`]).
 pub fn progress_units(scene: &Scene, opts: &RenderOptions, range: Range<usize>) -> u64 {
-    let per_gathering = opts.structure().units_per_gathering(scene.camera.width, scene.camera.height);
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let per_gathering = match opts.structure() {
+        Accelerator::Raster => Tiling::for_window(w, h, schedule::workers()).count() as u64,
+        other => other.units_per_gathering(w, h),
+    };
     per_gathering * crate::partial::gatherings(opts.planes, opts.ray_sets(), range)
 }
 
