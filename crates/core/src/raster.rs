@@ -834,20 +834,13 @@ mod tests {
                 assert!(seen.iter().all(|&n| n == 1), "{w}x{h} {threads}: {t:?}");
             }
         }
-        let shape = |threads| {
-            let t = Tiling::new(640, 360, threads);
-            (t.down(), t.across(), t.rows, t.cols)
+        // (tiles down, across, rows, columns) for 2, 16 and 64 workers: one chunk at a time,
+        // then in windows of chunks.
+        let shapes = |tiling: fn(u32, u32, usize) -> Tiling| {
+            [2, 16, 64].map(|n| tiling(640, 360, n)).map(|t| (t.down(), t.across(), t.rows, t.cols))
         };
-        assert_eq!(shape(2), (23, 1, 16, 640));
-        assert_eq!(shape(16), (23, 3, 16, 216));
-        assert_eq!(shape(64), (23, 12, 16, 56));
-        let window = |threads| {
-            let t = Tiling::for_window(640, 360, threads);
-            (t.down(), t.across(), t.rows, t.cols)
-        };
-        assert_eq!(window(2), (23, 1, 16, 640));
-        assert_eq!(window(16), (23, 1, 16, 640));
-        assert_eq!(window(64), (23, 2, 16, 320));
+        assert_eq!(shapes(Tiling::new), [(23, 1, 16, 640), (23, 3, 16, 216), (23, 12, 16, 56)]);
+        assert_eq!(shapes(Tiling::for_window), [(23, 1, 16, 640), (23, 1, 16, 640), (23, 2, 16, 320)]);
         // A large image gathers one chunk at a time, in tiles for every worker.
         assert_eq!(chunks_at_once(64, 3840, 2160), 1);
         assert_eq!(Tiling::for_window(3840, 2160, 64), Tiling::new(3840, 2160, 64));
