@@ -596,3 +596,66 @@ fn grid(n: u64) -> (u32, u32) {
     let x = n.clamp(1, 65_535);
     (x as u32, n.div_ceil(x).max(1) as u32)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::occlusion::Occluder;
+    use std::mem::{offset_of, size_of};
+    use wgpu::naga;
+
+    /// The size and members (name, byte offset) of WGSL struct `name` in `source`, laid out by
+    /// the WGSL front end that wgpu compiles the shaders with.
+    fn wgsl_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
+        let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+        for (_, ty) in module.types.iter() {
+            if let (Some(n), naga::TypeInner::Struct { members, span }) = (&ty.name, &ty.inner)
+                && n == name
+            {
+                let members = members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize));
+                return (*span as usize, members.collect());
+            }
+        }
+        panic!("no struct {name} in the shader")
+    }
+
+    /// Every record that crosses to the GPU is laid out as its WGSL twin: the same size, and
+    /// each Rust field at the offset of the WGSL member of its name (padding named `pad...` on
+    /// both sides). The two definitions are one by this test: a field added, moved or retyped
+    /// on one side only fails here, not as wrong pixels.
+    #[test]
+    fn records_are_laid_out_as_the_shaders_read_them() {
+        macro_rules! fields {
+            ($t:ty: $($f:ident),*) => {
+                (stringify!($t), size_of::<$t>(), vec![$((stringify!($f), offset_of!($t, $f))),*])
+            };
+        }
+        let pairs = [
+            (
+                GATHER_WGSL,
+                "Plane",
+                fields!(PlaneRecord: normal, t_det, a_axis, width, r_axis, occluders_start, normal_perp,
+                    occluders_end, scale, scale_max, cos_a, sin_a, p0, q0, light_w, light_h, perp_inv_abs_cos,
+                    perp_inv_sin, perp_cos_positive, unit, inv_unit, light),
+            ),
+            (GATHER_WGSL, "Occluder", fields!(Occluder: t0, t_a, p0, p_a, q0, q_a, width, height)),
+            (GATHER_WGSL, "Ray", fields!(RayRecord: dir, t0, t1, pad)),
+            (
+                GATHER_WGSL,
+                "Params",
+                fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
+                    pad),
+            ),
+            (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
+        ];
+        for (source, name, (rust, size, fields)) in pairs {
+            let (span, members) = wgsl_layout(source, name);
+            assert_eq!(span, size, "{rust} is {size} bytes, the shader's {name} {span}");
+            for (field, offset) in fields {
+                let member = members.iter().find(|(_, o)| *o == offset).map(|(m, _)| m.as_str());
+                let same = member == Some(field) || (field == "pad" && member.is_some_and(|m| m.starts_with("pad")));
+                assert!(same, "{rust}.{field} at byte {offset}: the shader's {name} has {member:?} there");
+            }
+        }
+    }
+}
