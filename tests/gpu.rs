@@ -202,7 +202,8 @@ fn gpu_images_match_the_reference() {
 
 /// Chunks rendered apart on the GPU and merged in any order give its render bit for bit; so does
 /// a render resumed from the nodes it held after its first chunk (a checkpoint), with its error
-/// image.
+/// image; and the render without the error image (whose pieces' sums cross back once a chunk,
+/// not once a piece).
 #[test]
 fn gpu_chunks_merges_and_a_resumed_render_give_the_render() {
     if !have_gpu("gpu_chunks_merges_and_a_resumed_render_give_the_render") {
@@ -217,7 +218,7 @@ fn gpu_chunks_merges_and_a_resumed_render_give_the_render() {
         device: Some(Device::Gpu),
         ..Overrides::default()
     };
-    let opts = options(&s, given);
+    let opts = options(&s, given.clone());
     let mut after_first: Option<(Vec<Partial>, Option<fogplanes::spread::GroupSpread>)> = None;
     let (whole, stats) = render_from(&s, &opts, Control::none(), Resume::default(), &mut |held, spread| {
         if after_first.is_none() {
@@ -236,6 +237,10 @@ fn gpu_chunks_merges_and_a_resumed_render_give_the_render() {
         render_from(&s, &opts, Control::none(), Resume { held, spread }, &mut |_, _| Ok(())).unwrap();
     assert!(resumed.pixels == whole.pixels, "the resumed render differs");
     assert!(resumed_stats.stderr.unwrap().pixels == stats.stderr.unwrap().pixels, "its error image differs");
+    let plain = options(&s, Overrides { stderr: false, ..given });
+    let (without, plain_stats) = render(&s, &plain, Control::none()).unwrap();
+    assert!(without.pixels == whole.pixels, "the image without the error image differs");
+    assert_eq!(plain_stats.hits, stats.hits);
 }
 
 /// On the command line: a part gathered on the CPU and one on the GPU merge, and the merge says
@@ -302,8 +307,9 @@ fn an_image_larger_than_the_gpu_binds_is_a_clear_error() {
         return;
     }
     let most = fogplanes::gpu::adapter().unwrap().max_binding();
-    // 32 bytes of rays a pixel: the image just over the limit, if that is a size to test here.
-    let pixels = most / 32 + 1;
+    // The rays take the most bytes a pixel (a `CameraRay` each, as it is): the image just over
+    // the limit, if that is a size to test here.
+    let pixels = most / std::mem::size_of::<fogplanes::camera::CameraRay>() as u64 + 1;
     if pixels > 20_000_000 {
         eprintln!("SKIPPED: this adapter binds {most} bytes: an image over it is too large to test here");
         return;

@@ -9,7 +9,7 @@ use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats};
-use crate::gpu::{self, GpuPlanes};
+use crate::gpu::{self, GpuPlanes, GpuRays, GpuSums};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::limits::PLANE_UNIT;
 use crate::photon_plane::{PlaneSet, sample_plane};
@@ -234,18 +234,73 @@ impl PreparedPlanes {
         if let Structure::Gpu(g) = &self.structure {
             return g.gather(weighting, rays, sums, control);
         }
-        let piece = GatherPiece { planes: self, rays, target: 0 };
+        let piece = GatherPiece { planes: self, rays, set: 0, target: 0 };
         Ok(gather_pieces(&[piece], weighting, kernel, &mut [sums], control)?[0])
     }
 }
 
-/// A piece of planes for [`gather_pieces`]: its planes, the ray set it is gathered along and
-/// the sums (of several) it adds to.
+/// A piece of planes for [`gather_pieces`]: its planes, the ray set it is gathered along (its
+/// rays and its index, which names them for the GPU's upload: [`OnGpu`]) and the sums (of
+/// several) it adds to.
 #[derive(Clone, Copy)]
 pub struct GatherPiece<'a> {
     pub planes: &'a PreparedPlanes,
     pub rays: &'a [CameraRay],
+    pub set: u32,
     pub target: usize,
+}
+
+/// Sums kept on the GPU across gatherings, a target's each, with the ray set uploaded last:
+/// [`gather_pieces_on_gpu`] adds there, and the sums cross back once, when the caller asks
+/// ([`OnGpu::read_into`]), not after each gathering: one image read back per chunk, not per
+/// piece, and a ray set uploaded once for the consecutive pieces along it.
+pub struct OnGpu {
+    sums: Vec<Option<GpuSums>>,
+    rays: Option<(u32, GpuRays)>,
+}
+
+impl OnGpu {
+    /// Nothing on the GPU yet, for `targets` sums.
+    pub fn new(targets: usize) -> Self {
+        OnGpu { sums: (0..targets).map(|_| None).collect(), rays: None }
+    }
+
+    /// Adds target `target`'s sums on the GPU to `sums` (untouched where none of its pieces was
+    /// gathered yet) and returns the hits they counted.
+    pub fn read_into(&self, target: usize, sums: &mut [Vec3]) -> Result<u64> {
+        match &self.sums[target] {
+            Some(held) => held.read_into(sums),
+            None => Ok(0),
+        }
+    }
+}
+
+/// [`gather_pieces`] of pieces on the GPU, into sums held there ([`OnGpu`]): piece after piece,
+/// each in its own submissions. The hits are counted when the sums are read back.
+pub fn gather_pieces_on_gpu(
+    pieces: &[GatherPiece],
+    weighting: Weighting,
+    on_gpu: &mut OnGpu,
+    control: Control,
+) -> Result<Vec<GatherStats>> {
+    let mut found = vec![GatherStats::default(); on_gpu.sums.len()];
+    for p in pieces {
+        let Structure::Gpu(g) = &p.planes.structure else {
+            unreachable!("a render's pieces all have one structure, here the GPU's")
+        };
+        if on_gpu.rays.as_ref().is_none_or(|(set, _)| *set != p.set) {
+            // The set before is freed first: two sets never take the GPU's memory at once.
+            on_gpu.rays = None;
+            on_gpu.rays = Some((p.set, g.upload_rays(p.rays)?));
+        }
+        let rays = &on_gpu.rays.as_ref().expect("uploaded above").1;
+        let sums = match &mut on_gpu.sums[p.target] {
+            Some(s) => s,
+            empty => empty.insert(g.new_sums()?),
+        };
+        found[p.target] += g.gather_into(weighting, rays, sums, control)?;
+    }
+    Ok(found)
 }
 
 /// Gathers several pieces of planes, each along its own ray set, adding each ray's estimate of
@@ -262,11 +317,13 @@ pub fn gather_pieces(
     sums: &mut [&mut [Vec3]],
     control: Control,
 ) -> Result<Vec<GatherStats>> {
-    // The GPU's pieces go one after another, each in its own submissions.
+    // The GPU's pieces go one after another, each in its own submissions, into sums on the GPU
+    // read back at the end.
     if pieces.iter().any(|p| matches!(p.planes.structure, Structure::Gpu(_))) {
-        let mut found = vec![GatherStats::default(); sums.len()];
-        for p in pieces {
-            found[p.target] += p.planes.gather(weighting, kernel, p.rays, sums[p.target], control)?;
+        let mut on_gpu = OnGpu::new(sums.len());
+        let mut found = gather_pieces_on_gpu(pieces, weighting, &mut on_gpu, control)?;
+        for (target, (f, sums)) in found.iter_mut().zip(sums.iter_mut()).enumerate() {
+            f.hits += on_gpu.read_into(target, sums)?;
         }
         return Ok(found);
     }

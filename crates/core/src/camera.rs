@@ -4,8 +4,10 @@ use glam::{DVec3, Vec3};
 
 /// A camera ray: unit direction (f32, origin at the camera) and its segment `[t0, t1]` inside
 /// the medium before the first light panel (empty, `t0 > t1`, when there is none). Both ends
-/// are finite (the medium is a bounded box): the hit test relies on it.
-#[derive(Clone, Copy, Debug, Default)]
+/// are finite (the medium is a bounded box): the hit test relies on it. Plain data: it crosses
+/// to the GPU as it is (`gpu/gather.wgsl`'s `RAY_FLOATS`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct CameraRay {
     pub dir: Vec3,
     pub t0: f32,

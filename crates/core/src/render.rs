@@ -9,7 +9,7 @@
 //! direct emission, [`crate::emission`]). The options come resolved and checked from
 //! [`crate::settings`]: nothing here checks them again.
 
-use crate::accel::{Accelerator, GatherPiece, PreparedPlanes, gather_pieces};
+use crate::accel::{Accelerator, GatherPiece, OnGpu, PreparedPlanes, gather_pieces, gather_pieces_on_gpu};
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::emission::direct_emission_and_variance_in;
@@ -131,13 +131,23 @@ impl GatherSide<'_> {
         let all: Vec<(usize, &Piece)> =
             chunks.iter().enumerate().flat_map(|(c, pieces)| pieces.iter().map(move |p| (c, p))).collect();
         let mut before = Vec::new();
+        // On the GPU the chunks' sums stay there from gathering to gathering and cross back once,
+        // added to the sums as they were (`start`); with an error image, after each gathering,
+        // so that the spread sees each piece's sums (and the image is the same bits with it or
+        // without).
+        let mut on_gpu = (self.opts.structure() == Accelerator::Gpu).then(|| OnGpu::new(chunks.len()));
+        let start: Vec<Vec<Vec3>> = match (&on_gpu, &self.spread) {
+            (Some(_), Some(_)) => sums.iter().map(|s| s.to_vec()).collect(),
+            _ => Vec::new(),
+        };
+        let mut hits = vec![0; chunks.len()];
         for group in gatherings(&all, self.spread.is_some()) {
             let rays: Vec<Arc<Vec<CameraRay>>> =
                 group.iter().map(|(_, p)| self.rays.rays(self.scene, p.spec.0, control)).collect();
             let pieces: Vec<GatherPiece> = group
                 .iter()
                 .zip(&rays)
-                .map(|(&(target, p), r)| GatherPiece { planes: &p.planes, rays: r.as_slice(), target })
+                .map(|(&(target, p), r)| GatherPiece { planes: &p.planes, rays: r.as_slice(), set: p.spec.0, target })
                 .collect();
             let each = if let Some(spread) = self.spread.as_mut() {
                 // Each piece is its chunk's only one in the gathering: its sums are its chunk's
@@ -147,18 +157,38 @@ impl GatherSide<'_> {
                     b.clear();
                     b.extend_from_slice(sums[c]);
                 }
-                let each = gather_pieces(&pieces, weighting, kernel, sums, control)?;
+                let each = match on_gpu.as_mut() {
+                    Some(on_gpu) => {
+                        let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, control)?;
+                        for &(c, _) in group {
+                            sums[c].copy_from_slice(&start[c]);
+                            hits[c] = on_gpu.read_into(c, sums[c])?;
+                        }
+                        each
+                    }
+                    None => gather_pieces(&pieces, weighting, kernel, sums, control)?,
+                };
                 for (b, &(c, piece)) in before.iter().zip(group) {
                     let (k, ref planes, quarter, whole) = piece.spec;
                     spread.add(k, quarter, planes.len(), whole, b, sums[c]);
                 }
                 each
+            } else if let Some(on_gpu) = on_gpu.as_mut() {
+                gather_pieces_on_gpu(&pieces, weighting, on_gpu, control)?
             } else {
                 gather_pieces(&pieces, weighting, kernel, sums, control)?
             };
             for (f, e) in found.iter_mut().zip(each) {
                 *f += e;
             }
+        }
+        if let Some(on_gpu) = on_gpu.filter(|_| self.spread.is_none()) {
+            for (c, sums) in sums.iter_mut().enumerate() {
+                hits[c] = on_gpu.read_into(c, sums)?;
+            }
+        }
+        for (f, h) in found.iter_mut().zip(hits) {
+            f.hits += h;
         }
         Ok((found, t.elapsed().as_secs_f64()))
     }

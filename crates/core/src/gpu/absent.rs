@@ -38,7 +38,28 @@ impl GpuPlanes {
     pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[[i32; 4]], _: u32, _: u32) -> Result<Self> {
         match *gpu {}
     }
+    pub fn new_sums(&self) -> Result<GpuSums> {
+        match *self {}
+    }
+    pub fn upload_rays(&self, _: &[CameraRay]) -> Result<GpuRays> {
+        match *self {}
+    }
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
+        match *self {}
+    }
+    pub fn gather_into(&self, _: Weighting, _: &GpuRays, _: &GpuSums, _: Control) -> Result<GatherStats> {
+        match *self {}
+    }
+}
+
+/// Never made: there is no [`Gpu`] to make them on.
+pub enum GpuRays {}
+
+/// Never made: there is no [`Gpu`] to make them on.
+pub enum GpuSums {}
+
+impl GpuSums {
+    pub fn read_into(&self, _: &mut [Vec3]) -> Result<u64> {
         match *self {}
     }
 }

@@ -48,16 +48,6 @@ struct BinParams {
     pad: u32,
 }
 
-/// `gather.wgsl`'s `Ray`.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct RayRecord {
-    dir: [f32; 3],
-    t0: f32,
-    t1: f32,
-    pad: [f32; 3],
-}
-
 /// The adapter and device, with the pipelines made so far.
 pub struct Gpu {
     device: wgpu::Device,
@@ -77,10 +67,10 @@ pub struct Gpu {
     gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 2]>>>,
     /// Errors the device reported (validation, out of memory), taken after each submission.
     errors: Arc<Mutex<Vec<String>>>,
-    /// Held by each upload ([`GpuPlanes::new`]) and gathering ([`GpuPlanes::gather`]) for its
-    /// whole work: the render prepares the next chunk while it gathers one, and the device's
-    /// errors, one list for the process, must be taken by the work that caused them.
-    work: Mutex<()>,
+    /// Held by each upload and gathering for its whole work (the render prepares the next chunk
+    /// while it gathers one, and the device's errors, one list for the process, must be taken
+    /// by the work that caused them), with the gatherings' scratch buffers.
+    work: Mutex<Scratch>,
 }
 
 /// The adapter of this process, found on first use: the high-performance one (a discrete GPU
@@ -172,7 +162,7 @@ impl Gpu {
         });
         let mut gather_entries = vec![uniform_entry()];
         gather_entries.extend((1..=7).map(|b| storage_entry(b, true)));
-        gather_entries.extend((8..=10).map(|b| storage_entry(b, false)));
+        gather_entries.extend((8..=9).map(|b| storage_entry(b, false)));
         let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gather"),
             entries: &gather_entries,
@@ -224,7 +214,7 @@ impl Gpu {
             gather_module,
             gather: Mutex::new(HashMap::new()),
             errors,
-            work: Mutex::new(()),
+            work: Mutex::new(Scratch::default()),
         };
         gpu.take_errors().map_err(|e| format!("the GPU's shaders: {e}"))?;
         Ok(gpu)
@@ -336,7 +326,7 @@ impl GpuPlanes {
         // planes and their occluders; refused here in one line, not by the driver's validation.
         let pixels = width as u64 * height as u64;
         let whole = [
-            ("the rays of a", pixels * std::mem::size_of::<RayRecord>() as u64),
+            ("the rays of a", pixels * std::mem::size_of::<CameraRay>() as u64),
             ("the planes of a chunk for a", (ctx.views.len() * std::mem::size_of::<PlaneRecord>()) as u64),
             ("the occluders of a chunk's planes for a", std::mem::size_of_val(ctx.occluders.as_slice()) as u64),
         ];
@@ -394,10 +384,20 @@ impl GpuPlanes {
         Ok(planes)
     }
 
+    /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
+    pub fn new_sums(&self) -> Result<GpuSums> {
+        GpuSums::new(self.gpu.clone(), self.width, self.height)
+    }
+
+    /// `rays` (one per pixel of this structure's image, row-major) uploaded to its GPU.
+    pub fn upload_rays(&self, rays: &[CameraRay]) -> Result<GpuRays> {
+        assert_eq!(rays.len(), self.width as usize * self.height as usize, "one ray per pixel");
+        GpuRays::new(&self.gpu, rays)
+    }
+
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
-    /// `sums`: the planes in batches, each binned and gathered on the GPU in a submission of its
-    /// own, then the image read back once. Checks `control` before each batch (a cancel stops
-    /// the work within one); reports one unit of progress.
+    /// `sums`: [`GpuPlanes::gather_into`] fresh sums on the GPU, read back once. Checks
+    /// `control` before each batch; reports one unit of progress.
     pub fn gather(
         &self,
         weighting: Weighting,
@@ -405,11 +405,32 @@ impl GpuPlanes {
         sums: &mut [Vec3],
         control: Control,
     ) -> Result<GatherStats> {
-        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
-        let pixels = w as usize * h as usize;
+        let pixels = self.width as usize * self.height as usize;
         assert!(rays.len() == pixels && sums.len() == pixels, "one ray and one sum per pixel");
         control.check()?;
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
+        let on_gpu = self.new_sums()?;
+        let rays = self.upload_rays(rays)?;
+        let mut stats = self.gather_into(weighting, &rays, &on_gpu, control)?;
+        stats.hits = on_gpu.read_into(sums)?;
+        Ok(stats)
+    }
+
+    /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
+    /// the planes in batches, each binned and gathered in a submission of its own. Checks
+    /// `control` before each batch (a cancel stops the work within one); reports one unit of
+    /// progress. The hits are counted in `into` ([`GpuSums::read_into`]), not in the result.
+    pub fn gather_into(
+        &self,
+        weighting: Weighting,
+        rays: &GpuRays,
+        into: &GpuSums,
+        control: Control,
+    ) -> Result<GatherStats> {
+        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
+        let pixels = w as usize * h as usize;
+        assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
+        control.check()?;
+        let mut scratch = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         if self.batches.is_empty() {
             control.progress();
             return Ok(GatherStats::default());
@@ -422,8 +443,6 @@ impl GpuPlanes {
             .map(|i| i as f64 * std::f64::consts::PI / k as f64)
             .map(|b| [b.cos() as f32, b.sin() as f32])
             .collect();
-        let ray_records: Vec<RayRecord> =
-            rays.iter().map(|r| RayRecord { dir: r.dir.to_array(), t0: r.t0, t1: r.t1, pad: [0.0; 3] }).collect();
         let gather_params = GatherParams {
             width: w,
             height: h,
@@ -438,20 +457,10 @@ impl GpuPlanes {
         let (storage, copy_src) = (wgpu::BufferUsages::STORAGE, wgpu::BufferUsages::COPY_SRC);
         let uniform = wgpu::BufferUsages::UNIFORM;
         let params = gpu.upload("gather params", bytemuck::bytes_of(&gather_params), uniform);
-        let rays_buf = gpu.upload("rays", bytemuck::cast_slice(&ray_records), storage);
         let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
         let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
         let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
-        let tile_words = (tiles as u64 + 1) * 4;
-        let tile_counts = gpu.scratch("tile counts", tile_words, storage);
-        let offsets = gpu.scratch("offsets", tile_words, storage);
-        let item_offsets = gpu.scratch("item offsets", tile_words, storage);
-        let list = gpu.scratch("list", max_pairs * 4, storage);
-        let items = gpu.scratch("items", max_items * 16, storage);
-        let partial = gpu.scratch("partial", max_items * ITEM_BYTES, storage);
-        let image_bytes = pixels as u64 * 16;
-        let image = gpu.scratch("image", image_bytes, storage | copy_src | wgpu::BufferUsages::COPY_DST);
-        let hits = gpu.scratch("hits", pixels as u64 * 4, storage | copy_src | wgpu::BufferUsages::COPY_DST);
+        let s = scratch.at_least(gpu, tiles as u64, max_pairs, max_items);
         let pipelines = gpu.gather_pipelines(estimator_id(weighting));
         let gather_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("gather"),
@@ -460,14 +469,13 @@ impl GpuPlanes {
                 entry(0, &params),
                 entry(1, &self.planes),
                 entry(2, &self.occluders),
-                entry(3, &rays_buf),
+                entry(3, &rays.buffer),
                 entry(4, &rotations_buf),
-                entry(5, &list),
-                entry(6, &item_offsets),
-                entry(7, &items),
-                entry(8, &partial),
-                entry(9, &image),
-                entry(10, &hits),
+                entry(5, &s.list),
+                entry(6, &s.item_offsets),
+                entry(7, &s.items),
+                entry(8, &s.partial),
+                entry(9, &into.image),
             ],
         });
         // A timestamp pair per batch (its first pass's start, its last pass's end), where the
@@ -480,24 +488,19 @@ impl GpuPlanes {
                 count: 2 * batches as u32,
             });
             let resolve = gpu.scratch("timestamps", 16 * batches as u64, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
-            (set, resolve)
+            let readback = gpu.scratch(
+                "timestamps read back",
+                16 * batches as u64,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            );
+            (set, resolve, readback)
         });
-        let stamps_at = image_bytes + pixels as u64 * 4;
-        let readback = gpu.scratch(
-            "readback",
-            stamps_at + 16 * batches as u64,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
         let tile_grid = grid(tiles as u64);
         let mut wall_ns = 0u64;
         // Batch by batch, each its own submission, so that a cancel stops the work within one.
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
-            if b == 0 {
-                encoder.clear_buffer(&image, 0, None);
-                encoder.clear_buffer(&hits, 0, None);
-            }
             let bin_params = BinParams {
                 width: w,
                 height: h,
@@ -515,11 +518,11 @@ impl GpuPlanes {
                 entries: &[
                     entry(0, &bin_params),
                     entry(1, &self.bounds),
-                    entry(2, &tile_counts),
-                    entry(3, &offsets),
-                    entry(4, &item_offsets),
-                    entry(5, &list),
-                    entry(6, &items),
+                    entry(2, &s.tile_counts),
+                    entry(3, &s.offsets),
+                    entry(4, &s.item_offsets),
+                    entry(5, &s.list),
+                    entry(6, &s.items),
                 ],
             });
             let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
@@ -531,7 +534,7 @@ impl GpuPlanes {
             ];
             for (k, (pipeline, group, (x, y))) in steps.into_iter().enumerate() {
                 let timestamp_writes =
-                    queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                    queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
                         query_set: set,
                         beginning_of_pass_write_index: (k == 0).then_some(2 * b as u32),
                         end_of_pass_write_index: (k == 4).then_some(2 * b as u32 + 1),
@@ -542,17 +545,14 @@ impl GpuPlanes {
                 pass.set_bind_group(0, group, &[]);
                 pass.dispatch_workgroups(x, y, 1);
             }
-            if b + 1 == batches {
-                encoder.copy_buffer_to_buffer(&image, 0, &readback, 0, image_bytes);
-                encoder.copy_buffer_to_buffer(&hits, 0, &readback, image_bytes, pixels as u64 * 4);
-                if let Some((set, resolve)) = &queries {
-                    encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
-                    encoder.copy_buffer_to_buffer(resolve, 0, &readback, stamps_at, 16 * batches as u64);
-                }
+            let last = b + 1 == batches;
+            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| last) {
+                encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
+                encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
             }
             let t = Instant::now();
             gpu.queue.submit([encoder.finish()]);
-            if b + 1 == batches {
+            if let Some((_, _, readback)) = queries.as_ref().filter(|_| last) {
                 readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             }
             let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
@@ -560,29 +560,147 @@ impl GpuPlanes {
             gpu.take_errors().map_err(Error::Device)?;
             polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
-        let slice = readback.slice(..);
-        let view = slice.get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's image back: {e}")))?;
-        let bytes: &[u8] = &view;
-        let sums_back: &[[f32; 4]] = bytemuck::cast_slice(&bytes[..image_bytes as usize]);
-        let hits_back: &[u32] = bytemuck::cast_slice(&bytes[image_bytes as usize..stamps_at as usize]);
-        let mut stats = GatherStats::default();
-        for ((sum, back), &n) in sums.iter_mut().zip(sums_back).zip(hits_back) {
-            *sum += Vec3::new(back[0], back[1], back[2]);
-            stats.hits += n as u64;
-        }
-        stats.tests = self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64;
-        stats.device_ns = if queries.is_some() {
-            let ts: &[u64] = bytemuck::cast_slice(&bytes[stamps_at as usize..]);
+        let mut stats = GatherStats {
+            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
+            device_ns: wall_ns,
+            ..GatherStats::default()
+        };
+        if let Some((_, _, readback)) = &queries {
+            let view = readback
+                .slice(..)
+                .get_mapped_range()
+                .map_err(|e| Error::Device(format!("reading the GPU's timestamps back: {e}")))?;
+            let ts: &[u64] = bytemuck::cast_slice(&view);
             let period = gpu.queue.get_timestamp_period() as f64;
             // A driver's timestamps out of order count 0, not 2^64 ticks.
-            ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum()
-        } else {
-            wall_ns
-        };
-        drop(view);
-        readback.unmap();
+            stats.device_ns = ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum();
+        }
         control.progress();
         Ok(stats)
+    }
+}
+
+/// The scratch buffers of the binning and the work items, kept from gathering to gathering
+/// (grown when one needs more): made a few times a process, not once a piece.
+#[derive(Default)]
+struct Scratch {
+    buffers: Option<ScratchBuffers>,
+}
+
+struct ScratchBuffers {
+    /// Tiles, (tile, plane) pairs and work items they hold.
+    capacity: (u64, u64, u64),
+    tile_counts: wgpu::Buffer,
+    offsets: wgpu::Buffer,
+    item_offsets: wgpu::Buffer,
+    list: wgpu::Buffer,
+    items: wgpu::Buffer,
+    partial: wgpu::Buffer,
+}
+
+impl Scratch {
+    /// Buffers for `tiles` tiles, `pairs` pairs and `items` work items: those held if they are
+    /// large enough, else new ones of the larger of each.
+    fn at_least(&mut self, gpu: &Gpu, tiles: u64, pairs: u64, items: u64) -> &ScratchBuffers {
+        let held = self.buffers.as_ref().map_or((0, 0, 0), |b| b.capacity);
+        if held.0 < tiles || held.1 < pairs || held.2 < items {
+            let (tiles, pairs, items) = (held.0.max(tiles), held.1.max(pairs), held.2.max(items));
+            let storage = wgpu::BufferUsages::STORAGE;
+            let tile_words = (tiles + 1) * 4;
+            // The old buffers go first, so that the largest of both never exist at once.
+            self.buffers = None;
+            self.buffers = Some(ScratchBuffers {
+                capacity: (tiles, pairs, items),
+                tile_counts: gpu.scratch("tile counts", tile_words, storage),
+                offsets: gpu.scratch("offsets", tile_words, storage),
+                item_offsets: gpu.scratch("item offsets", tile_words, storage),
+                list: gpu.scratch("list", pairs * 4, storage),
+                items: gpu.scratch("items", items * 16, storage),
+                partial: gpu.scratch("partial", items * ITEM_BYTES, storage),
+            });
+        }
+        self.buffers.as_ref().expect("made above")
+    }
+}
+
+/// Camera rays on the GPU, one per pixel, row-major: the [`CameraRay`]s as they are (20 bytes,
+/// `gather.wgsl`'s `RAY_FLOATS`), uploaded once for every piece gathered along them.
+pub struct GpuRays {
+    buffer: wgpu::Buffer,
+    len: usize,
+}
+
+impl GpuRays {
+    /// `rays` uploaded to `gpu`; refused in one line where they exceed one binding.
+    pub fn new(gpu: &Gpu, rays: &[CameraRay]) -> Result<Self> {
+        let bytes = std::mem::size_of_val(rays) as u64;
+        // The shader indexes their floats with u32.
+        if bytes > gpu.max_binding || bytes / 4 > u32::MAX as u64 {
+            return Err(Error::Device(format!(
+                "the rays of an image of {} pixels take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
+                rays.len(),
+                gpu.max_binding
+            )));
+        }
+        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
+        let buffer = gpu.upload("rays", bytemuck::cast_slice(rays), wgpu::BufferUsages::STORAGE);
+        gpu.take_errors().map_err(Error::Device)?;
+        Ok(GpuRays { buffer, len: rays.len() })
+    }
+}
+
+/// An image's f32 sums on the GPU: per pixel the bits of (r, g, b) and its hit count
+/// (`gather.wgsl`'s `image`, 16 bytes), zero when made (wgpu zeroes a new buffer). Every
+/// gathering into it ([`GpuPlanes::gather_into`]) adds there, in order, and it crosses back once
+/// ([`GpuSums::read_into`]): a chunk's pieces cost one image read back, not one each.
+pub struct GpuSums {
+    gpu: Arc<Gpu>,
+    image: wgpu::Buffer,
+    pixels: usize,
+}
+
+impl GpuSums {
+    /// Zero sums for a `width x height` image on `gpu`.
+    pub fn new(gpu: Arc<Gpu>, width: u32, height: u32) -> Result<Self> {
+        let pixels = width as usize * height as usize;
+        let bytes = pixels as u64 * 16;
+        if bytes > gpu.max_binding {
+            return Err(Error::Device(format!(
+                "the sums of a {width}x{height} image take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
+                gpu.max_binding
+            )));
+        }
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let image = gpu.scratch("image", bytes, usage);
+        Ok(GpuSums { gpu, image, pixels })
+    }
+
+    /// Adds the sums to `sums` (one per pixel) and returns the hits they counted.
+    pub fn read_into(&self, sums: &mut [Vec3]) -> Result<u64> {
+        assert_eq!(sums.len(), self.pixels, "one sum per pixel");
+        let gpu = &*self.gpu;
+        let bytes = self.pixels as u64 * 16;
+        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
+        let readback =
+            gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
+        gpu.queue.submit([encoder.finish()]);
+        readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        gpu.take_errors().map_err(Error::Device)?;
+        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        let view = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Device(format!("reading the GPU's image back: {e}")))?;
+        let back: &[[u32; 4]] = bytemuck::cast_slice(&view[..bytes as usize]);
+        let mut hits = 0u64;
+        for (sum, v) in sums.iter_mut().zip(back) {
+            *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+            hits += v[3] as u64;
+        }
+        Ok(hits)
     }
 }
 
@@ -639,7 +757,6 @@ mod tests {
                     perp_inv_sin, perp_cos_positive, unit, inv_unit, light),
             ),
             (GATHER_WGSL, "Occluder", fields!(Occluder: t0, t_a, p0, p_a, q0, q_a, width, height)),
-            (GATHER_WGSL, "Ray", fields!(RayRecord: dir, t0, t1, pad)),
             (
                 GATHER_WGSL,
                 "Params",
@@ -648,6 +765,19 @@ mod tests {
             ),
             (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
         ];
+        // A camera ray crosses as it is: `RAY_FLOATS` f32, its fields in the shader's order.
+        let module = naga::front::wgsl::parse_str(GATHER_WGSL).expect("the shader parses");
+        let ray_floats = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
+            .map(|(_, c)| &module.global_expressions[c.init]);
+        let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
+            panic!("the shader's RAY_FLOATS is a u32 literal")
+        };
+        assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+        let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
+        assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
         for (source, name, (rust, size, fields)) in pairs {
             let (span, members) = wgsl_layout(source, name);
             assert_eq!(span, size, "{rust} is {size} bytes, the shader's {name} {span}");

@@ -53,15 +53,9 @@ struct Occluder {
     height: f32,
 };
 
-// A camera ray (camera.rs `CameraRay`): unit direction and segment [t0, t1], empty when t0 > t1.
-struct Ray {
-    dir: vec3<f32>,
-    t0: f32,
-    t1: f32,
-    pad0: f32,
-    pad1: f32,
-    pad2: f32,
-};
+// A camera ray is camera.rs's `CameraRay` as it is, five f32 (no padding: 20 bytes, uploaded
+// without a copy): unit direction (x, y, z) and segment [t0, t1], empty when t0 > t1.
+const RAY_FLOATS: u32 = 5u;
 
 // gpu/mod.rs `GatherParams`.
 struct Params {
@@ -80,7 +74,7 @@ struct Params {
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> planes: array<Plane>;
 @group(0) @binding(2) var<storage, read> occluders: array<Occluder>;
-@group(0) @binding(3) var<storage, read> rays: array<Ray>;
+@group(0) @binding(3) var<storage, read> rays: array<f32>;
 // (cos, sin) of k pi / K for k = 1 .. K - 1 (weights/denominators.rs `StratifiedK`).
 @group(0) @binding(4) var<storage, read> rotations: array<vec2<f32>>;
 // The tiles' plane lists, each tile's first list entry and first work item (bin.wgsl).
@@ -90,9 +84,9 @@ struct Params {
 @group(0) @binding(7) var<storage, read> items: array<vec4<u32>>;
 // Each work item's 256 pixel sums: (rgb, hits).
 @group(0) @binding(8) var<storage, read_write> partial: array<vec4<f32>>;
-// The image: each pixel's sum of the gathering (rgb) and its hits, added batch after batch.
-@group(0) @binding(9) var<storage, read_write> image: array<vec4<f32>>;
-@group(0) @binding(10) var<storage, read_write> hits_image: array<u32>;
+// The image (device.rs `GpuSums`): each pixel's sum (rgb, the bits of f32) and its hits, added to
+// by every batch of every gathering into it, and read back once.
+@group(0) @binding(9) var<storage, read_write> image: array<vec4<u32>>;
 
 const TILE: u32 = 16u;
 const THREADS: u32 = 256u;
@@ -445,11 +439,11 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     let px = (tile % params.tiles_x) * TILE + lid.x;
     let py = (tile / params.tiles_x) * TILE + lid.y;
     let valid = px < params.width && py < params.height;
-    let ray = rays[min(py, params.height - 1u) * params.width + min(px, params.width - 1u)];
-    let dir = ray.dir;
-    let t0 = ray.t0;
+    let at = (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
+    let dir = vec3<f32>(rays[at], rays[at + 1u], rays[at + 2u]);
+    let t0 = rays[at + 3u];
     // A pixel outside the image has an empty segment.
-    let t1 = select(-1.0, ray.t1, valid);
+    let t1 = select(-1.0, rays[at + 4u], valid);
     var sum = vec3<f32>(0.0);
     var hits = 0u;
     for (var b = item.y; b < item.z; b += BATCH) {
@@ -500,6 +494,6 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
         hits += u32(v.w);
     }
     let pix = py * params.width + px;
-    image[pix] = vec4<f32>(image[pix].xyz + sum, 0.0);
-    hits_image[pix] += hits;
+    let held = image[pix];
+    image[pix] = vec4<u32>(bitcast<vec3<u32>>(bitcast<vec3<f32>>(held.xyz) + sum), held.w + hits);
 }

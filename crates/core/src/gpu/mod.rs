@@ -21,12 +21,12 @@ use glam::DVec2;
 #[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
-pub use device::{Gpu, GpuPlanes, adapter};
+pub use device::{Gpu, GpuPlanes, GpuRays, GpuSums, adapter};
 
 #[cfg(not(feature = "gpu"))]
 mod absent;
 #[cfg(not(feature = "gpu"))]
-pub use absent::{Gpu, GpuPlanes, adapter};
+pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, adapter};
 
 /// Which processor gathers (`--device`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
