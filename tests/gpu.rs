@@ -324,3 +324,30 @@ fn an_image_larger_than_the_gpu_binds_is_a_clear_error() {
     let text = err.to_string();
     assert!(text.contains("more than the GPU binds at once") && !text.contains('\n'), "{text}");
 }
+
+/// A GPU render cancelled after its first piece stops with `Cancelled` (its submissions are not
+/// waited for, and some may still be under way), and leaves nothing behind: the next render on
+/// the same GPU is the bits of one never interrupted.
+#[test]
+fn a_cancelled_gpu_render_stops_and_leaves_the_next_render_whole() {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    if !have_gpu("a_cancelled_gpu_render_stops_and_leaves_the_next_render_whole") {
+        return;
+    }
+    let s = scene("media_scenes/six_lights.toml", 48, 27);
+    let given =
+        Overrides { planes: Some(CHUNK_PLANES as u64 + 2000), device: Some(Device::Gpu), ..Overrides::default() };
+    let opts = options(&s, given);
+    let (whole, _) = render(&s, &opts, Control::none()).unwrap();
+    let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
+    let progress = || {
+        // The first piece gathered: cancel.
+        if units.fetch_add(1, Ordering::Relaxed) > 0 {
+            cancel.store(true, Ordering::Relaxed);
+        }
+    };
+    let err = render(&s, &opts, Control::new(&progress, &cancel)).unwrap_err();
+    assert!(matches!(err, fogplanes::Error::Cancelled), "{err}");
+    let (again, _) = render(&s, &opts, Control::none()).unwrap();
+    assert!(again.pixels == whole.pixels, "the render after a cancelled one differs");
+}

@@ -257,26 +257,34 @@ pub struct GatherPiece<'a> {
 pub struct OnGpu {
     sums: Vec<Option<GpuSums>>,
     rays: Option<(u32, GpuRays)>,
+    /// The set before, whose work may still be under way.
+    before: Option<GpuRays>,
+    /// Each target's hits told by earlier reads.
+    told: Vec<u64>,
 }
 
 impl OnGpu {
     /// Nothing on the GPU yet, for `targets` sums.
     pub fn new(targets: usize) -> Self {
-        OnGpu { sums: (0..targets).map(|_| None).collect(), rays: None }
+        OnGpu { sums: (0..targets).map(|_| None).collect(), rays: None, before: None, told: vec![0; targets] }
     }
 
-    /// Adds target `target`'s sums on the GPU to `sums` (untouched where none of its pieces was
-    /// gathered yet) and returns the hits they counted.
-    pub fn read_into(&self, target: usize, sums: &mut [Vec3]) -> Result<u64> {
-        match &self.sums[target] {
-            Some(held) => held.read_into(sums),
-            None => Ok(0),
-        }
+    /// Waits for target `target`'s gatherings, adds its sums on the GPU to `sums` (untouched
+    /// where none of its pieces was gathered yet) and returns the hits and the GPU's time of
+    /// its gatherings since the last read (so that the reads of a target add up).
+    pub fn read_into(&mut self, target: usize, sums: &mut [Vec3]) -> Result<GatherStats> {
+        let Some(held) = &mut self.sums[target] else {
+            return Ok(GatherStats::default());
+        };
+        let mut stats = held.read_into(sums)?;
+        stats.hits -= std::mem::replace(&mut self.told[target], stats.hits);
+        Ok(stats)
     }
 }
 
 /// [`gather_pieces`] of pieces on the GPU, into sums held there ([`OnGpu`]): piece after piece,
-/// each in its own submissions. The hits are counted when the sums are read back.
+/// each in its own submissions. The hits and the GPU's time are counted when the sums are read
+/// back.
 pub fn gather_pieces_on_gpu(
     pieces: &[GatherPiece],
     weighting: Weighting,
@@ -289,8 +297,13 @@ pub fn gather_pieces_on_gpu(
             unreachable!("a render's pieces all have one structure, here the GPU's")
         };
         if on_gpu.rays.as_ref().is_none_or(|(set, _)| *set != p.set) {
-            // The set before is freed first: two sets never take the GPU's memory at once.
-            on_gpu.rays = None;
+            // The submissions are not waited for, so that the CPU makes the next set while the
+            // GPU gathers; but at most two sets' work is under way: the one before last is
+            // waited for and let go before a new set is uploaded.
+            if let Some(done) = on_gpu.before.take() {
+                done.wait()?;
+            }
+            on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
             on_gpu.rays = Some((p.set, g.upload_rays(p.rays)?));
         }
         let rays = &on_gpu.rays.as_ref().expect("uploaded above").1;
@@ -323,7 +336,7 @@ pub fn gather_pieces(
         let mut on_gpu = OnGpu::new(sums.len());
         let mut found = gather_pieces_on_gpu(pieces, weighting, &mut on_gpu, control)?;
         for (target, (f, sums)) in found.iter_mut().zip(sums.iter_mut()).enumerate() {
-            f.hits += on_gpu.read_into(target, sums)?;
+            *f += on_gpu.read_into(target, sums)?;
         }
         return Ok(found);
     }

@@ -140,7 +140,8 @@ impl GatherSide<'_> {
             (Some(_), Some(_)) => sums.iter().map(|s| s.to_vec()).collect(),
             _ => Vec::new(),
         };
-        let mut hits = vec![0; chunks.len()];
+        // Each chunk's hits and GPU time, counted when its sums are read back.
+        let mut read = vec![GatherStats::default(); chunks.len()];
         for group in gatherings(&all, self.spread.is_some()) {
             let rays: Vec<Arc<Vec<CameraRay>>> =
                 group.iter().map(|(_, p)| self.rays.rays(self.scene, p.spec.0, control)).collect();
@@ -162,7 +163,7 @@ impl GatherSide<'_> {
                         let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, control)?;
                         for &(c, _) in group {
                             sums[c].copy_from_slice(&start[c]);
-                            hits[c] = on_gpu.read_into(c, sums[c])?;
+                            read[c] += on_gpu.read_into(c, sums[c])?;
                         }
                         each
                     }
@@ -182,13 +183,13 @@ impl GatherSide<'_> {
                 *f += e;
             }
         }
-        if let Some(on_gpu) = on_gpu.filter(|_| self.spread.is_none()) {
+        if let Some(mut on_gpu) = on_gpu.filter(|_| self.spread.is_none()) {
             for (c, sums) in sums.iter_mut().enumerate() {
-                hits[c] = on_gpu.read_into(c, sums)?;
+                read[c] += on_gpu.read_into(c, sums)?;
             }
         }
-        for (f, h) in found.iter_mut().zip(hits) {
-            f.hits += h;
+        for (f, r) in found.iter_mut().zip(read) {
+            *f += r;
         }
         Ok((found, t.elapsed().as_secs_f64()))
     }

@@ -47,7 +47,7 @@ impl GpuPlanes {
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
         match *self {}
     }
-    pub fn gather_into(&self, _: Weighting, _: &GpuRays, _: &GpuSums, _: Control) -> Result<GatherStats> {
+    pub fn gather_into(&self, _: Weighting, _: &GpuRays, _: &mut GpuSums, _: Control) -> Result<GatherStats> {
         match *self {}
     }
 }
@@ -55,11 +55,17 @@ impl GpuPlanes {
 /// Never made: there is no [`Gpu`] to make them on.
 pub enum GpuRays {}
 
+impl GpuRays {
+    pub fn wait(&self) -> Result<()> {
+        match *self {}
+    }
+}
+
 /// Never made: there is no [`Gpu`] to make them on.
 pub enum GpuSums {}
 
 impl GpuSums {
-    pub fn read_into(&self, _: &mut [Vec3]) -> Result<u64> {
+    pub fn read_into(&mut self, _: &mut [Vec3]) -> Result<GatherStats> {
         match *self {}
     }
 }

@@ -408,22 +408,24 @@ impl GpuPlanes {
         let pixels = self.width as usize * self.height as usize;
         assert!(rays.len() == pixels && sums.len() == pixels, "one ray and one sum per pixel");
         control.check()?;
-        let on_gpu = self.new_sums()?;
+        let mut on_gpu = self.new_sums()?;
         let rays = self.upload_rays(rays)?;
-        let mut stats = self.gather_into(weighting, &rays, &on_gpu, control)?;
-        stats.hits = on_gpu.read_into(sums)?;
+        let mut stats = self.gather_into(weighting, &rays, &mut on_gpu, control)?;
+        stats += on_gpu.read_into(sums)?;
         Ok(stats)
     }
 
     /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
-    /// the planes in batches, each binned and gathered in a submission of its own. Checks
-    /// `control` before each batch (a cancel stops the work within one); reports one unit of
-    /// progress. The hits are counted in `into` ([`GpuSums::read_into`]), not in the result.
+    /// the planes in batches, each binned and gathered in a submission of its own, not waited
+    /// for (the CPU makes the next piece's rays meanwhile: the queue keeps their order, and
+    /// [`GpuSums::read_into`] waits). Checks `control` before each batch (a cancel stops the
+    /// work after the batches submitted); reports one unit of progress. The result holds the
+    /// tests; the hits and the GPU's time are counted when `into` is read back.
     pub fn gather_into(
         &self,
         weighting: Weighting,
         rays: &GpuRays,
-        into: &GpuSums,
+        into: &mut GpuSums,
         control: Control,
     ) -> Result<GatherStats> {
         let (gpu, w, h) = (&*self.gpu, self.width, self.height);
@@ -479,7 +481,8 @@ impl GpuPlanes {
             ],
         });
         // A timestamp pair per batch (its first pass's start, its last pass's end), where the
-        // adapter has them; else the wall time of the submissions.
+        // adapter has them, read when the sums are; else the wall time from the first
+        // submission into the sums to their reading back.
         let batches = self.batches.len();
         let queries = (gpu.timestamps && batches <= 2048).then(|| {
             let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -496,8 +499,6 @@ impl GpuPlanes {
             (set, resolve, readback)
         });
         let tile_grid = grid(tiles as u64);
-        let mut wall_ns = 0u64;
-        // Batch by batch, each its own submission, so that a cancel stops the work within one.
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
@@ -545,38 +546,23 @@ impl GpuPlanes {
                 pass.set_bind_group(0, group, &[]);
                 pass.dispatch_workgroups(x, y, 1);
             }
-            let last = b + 1 == batches;
-            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| last) {
+            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| b + 1 == batches) {
                 encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
                 encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
             }
-            let t = Instant::now();
-            gpu.queue.submit([encoder.finish()]);
-            if let Some((_, _, readback)) = queries.as_ref().filter(|_| last) {
-                readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
-            }
-            let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
-            wall_ns += t.elapsed().as_nanos() as u64;
+            into.first_submission.get_or_insert_with(Instant::now);
+            let index = gpu.queue.submit([encoder.finish()]);
+            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = Some(index);
             gpu.take_errors().map_err(Error::Device)?;
-            polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
-        let mut stats = GatherStats {
-            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
-            device_ns: wall_ns,
-            ..GatherStats::default()
-        };
-        if let Some((_, _, readback)) = &queries {
-            let view = readback
-                .slice(..)
-                .get_mapped_range()
-                .map_err(|e| Error::Device(format!("reading the GPU's timestamps back: {e}")))?;
-            let ts: &[u64] = bytemuck::cast_slice(&view);
-            let period = gpu.queue.get_timestamp_period() as f64;
-            // A driver's timestamps out of order count 0, not 2^64 ticks.
-            stats.device_ns = ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum();
+        if let Some((_, _, readback)) = queries {
+            into.timestamps.push(readback);
         }
         control.progress();
-        Ok(stats)
+        Ok(GatherStats {
+            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
+            ..GatherStats::default()
+        })
     }
 }
 
@@ -628,11 +614,14 @@ impl Scratch {
 pub struct GpuRays {
     buffer: wgpu::Buffer,
     len: usize,
+    gpu: Arc<Gpu>,
+    /// The last submission that gathers along them.
+    last_use: Mutex<Option<wgpu::SubmissionIndex>>,
 }
 
 impl GpuRays {
     /// `rays` uploaded to `gpu`; refused in one line where they exceed one binding.
-    pub fn new(gpu: &Gpu, rays: &[CameraRay]) -> Result<Self> {
+    pub fn new(gpu: &Arc<Gpu>, rays: &[CameraRay]) -> Result<Self> {
         let bytes = std::mem::size_of_val(rays) as u64;
         // The shader indexes their floats with u32.
         if bytes > gpu.max_binding || bytes / 4 > u32::MAX as u64 {
@@ -645,7 +634,19 @@ impl GpuRays {
         let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         let buffer = gpu.upload("rays", bytemuck::cast_slice(rays), wgpu::BufferUsages::STORAGE);
         gpu.take_errors().map_err(Error::Device)?;
-        Ok(GpuRays { buffer, len: rays.len() })
+        Ok(GpuRays { buffer, len: rays.len(), gpu: gpu.clone(), last_use: Mutex::new(None) })
+    }
+
+    /// Waits until the GPU has done the work submitted along these rays (so that the caller
+    /// bounds the ray sets in flight: the CPU may otherwise run a chunk's pieces ahead).
+    pub fn wait(&self) -> Result<()> {
+        let last = self.last_use.lock().unwrap_or_else(|p| p.into_inner()).take();
+        if let Some(index) = last {
+            let polled = self.gpu.device.poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None });
+            self.gpu.take_errors().map_err(Error::Device)?;
+            polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        }
+        Ok(())
     }
 }
 
@@ -657,6 +658,11 @@ pub struct GpuSums {
     gpu: Arc<Gpu>,
     image: wgpu::Buffer,
     pixels: usize,
+    /// The gatherings' timestamps, resolved on the GPU, to read with the sums.
+    timestamps: Vec<wgpu::Buffer>,
+    /// When the first gathering into these sums was submitted (the GPU's time where the adapter
+    /// has no timestamps).
+    first_submission: Option<Instant>,
 }
 
 impl GpuSums {
@@ -672,11 +678,12 @@ impl GpuSums {
         }
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let image = gpu.scratch("image", bytes, usage);
-        Ok(GpuSums { gpu, image, pixels })
+        Ok(GpuSums { gpu, image, pixels, timestamps: Vec::new(), first_submission: None })
     }
 
-    /// Adds the sums to `sums` (one per pixel) and returns the hits they counted.
-    pub fn read_into(&self, sums: &mut [Vec3]) -> Result<u64> {
+    /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
+    /// returns the hits they counted and the GPU's time of the gatherings since the last read.
+    pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
         let gpu = &*self.gpu;
         let bytes = self.pixels as u64 * 16;
@@ -686,21 +693,36 @@ impl GpuSums {
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
         gpu.queue.submit([encoder.finish()]);
-        readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+        let timestamps = std::mem::take(&mut self.timestamps);
+        for b in timestamps.iter().chain([&readback]) {
+            b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+        }
         let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
         gpu.take_errors().map_err(Error::Device)?;
         polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
-        let view = readback
-            .slice(..)
-            .get_mapped_range()
-            .map_err(|e| Error::Device(format!("reading the GPU's image back: {e}")))?;
+        let mapped = |b: &wgpu::Buffer| {
+            b.slice(..).get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))
+        };
+        let mut stats = GatherStats { device_ns: waited, ..GatherStats::default() };
+        if !timestamps.is_empty() {
+            let period = gpu.queue.get_timestamp_period() as f64;
+            stats.device_ns = 0;
+            for b in &timestamps {
+                let view = mapped(b)?;
+                let ts: &[u64] = bytemuck::cast_slice(&view);
+                // A driver's timestamps out of order count 0, not 2^64 ticks.
+                stats.device_ns +=
+                    ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum::<u64>();
+            }
+        }
+        let view = mapped(&readback)?;
         let back: &[[u32; 4]] = bytemuck::cast_slice(&view[..bytes as usize]);
-        let mut hits = 0u64;
         for (sum, v) in sums.iter_mut().zip(back) {
             *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
-            hits += v[3] as u64;
+            stats.hits += v[3] as u64;
         }
-        Ok(hits)
+        Ok(stats)
     }
 }
 
