@@ -325,7 +325,7 @@ fn an_image_larger_than_the_gpu_binds_is_a_clear_error() {
     assert!(text.contains("more than the GPU binds at once") && !text.contains('\n'), "{text}");
 }
 
-/// A GPU render cancelled after its first piece stops with `Cancelled` (its submissions are not
+/// A GPU render cancelled after its second piece stops with `Cancelled` (its submissions are not
 /// waited for, and some may still be under way), and leaves nothing behind: the next render on
 /// the same GPU is the bits of one never interrupted.
 #[test]
@@ -341,7 +341,7 @@ fn a_cancelled_gpu_render_stops_and_leaves_the_next_render_whole() {
     let (whole, _) = render(&s, &opts, Control::none()).unwrap();
     let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));
     let progress = || {
-        // The first piece gathered: cancel.
+        // The second piece gathered (submitted): cancel.
         if units.fetch_add(1, Ordering::Relaxed) > 0 {
             cancel.store(true, Ordering::Relaxed);
         }

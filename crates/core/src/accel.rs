@@ -156,8 +156,8 @@ impl PreparedPlanes {
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
         let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty_in(&scene.camera, tiling));
-        // The GPU's boxes of pixels, plane by plane (`gpu::screen_bounds`).
-        let mut bounds = Vec::new();
+        // The tiles each plane reaches on the GPU (`gpu::tile_reach`).
+        let mut reach = Vec::new();
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
         let lights = scene.light_distribution();
@@ -177,10 +177,8 @@ impl PreparedPlanes {
             if accelerator == Accelerator::Gpu {
                 use rayon::prelude::*;
                 let (cam, medium) = (&scene.camera, &scene.medium);
-                bounds.par_extend(
-                    piece
-                        .par_iter()
-                        .map(|p| gpu::screen_bounds(&screen_polygon(cam, p, medium), cam.width, cam.height)),
+                reach.par_extend(
+                    piece.par_iter().map(|p| gpu::tile_reach(&screen_polygon(cam, p, medium), cam.width, cam.height)),
                 );
             }
             seconds_build += t.elapsed().as_secs_f64();
@@ -198,7 +196,7 @@ impl PreparedPlanes {
             (Accelerator::Gpu, _) => {
                 let gpu = gpu::adapter().map_err(Error::Device)?;
                 let (w, h) = (scene.camera.width, scene.camera.height);
-                Structure::Gpu(GpuPlanes::new(gpu, &context, &bounds, w, h)?)
+                Structure::Gpu(GpuPlanes::new(gpu, &context, &reach, w, h)?)
             }
             _ => Structure::Cpu(CpuStructure::BruteForce(BruteForce)),
         };

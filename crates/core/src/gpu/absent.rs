@@ -35,7 +35,7 @@ pub fn adapter() -> std::result::Result<Arc<Gpu>, String> {
 pub enum GpuPlanes {}
 
 impl GpuPlanes {
-    pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[[i32; 4]], _: u32, _: u32) -> Result<Self> {
+    pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[super::TileReach], _: u32, _: u32) -> Result<Self> {
         match *gpu {}
     }
     pub fn new_sums(&self) -> Result<GpuSums> {

@@ -1,9 +1,9 @@
 // Binning a batch of planes to 16 x 16 pixel tiles on the GPU (docs/gpu.md): count, prefix sum,
 // scatter, as tiled splatting rasterizers do, without atomics and without a sort.
 //
-// Each plane comes with the box of pixels its screen polygon can touch (gpu/mod.rs
-// `screen_bounds`, from raster.rs `screen_polygon`, made on the CPU with the plane's other
-// constants). `count`: a workgroup per tile counts the planes whose box meets the tile. `scan`:
+// Each plane comes with the tiles its screen polygon can touch, row of tiles by row (gpu/mod.rs
+// `tile_reach`, from raster.rs `screen_polygon`, made on the CPU with the plane's other
+// constants). `count`: a workgroup per tile counts the planes that reach the tile. `scan`:
 // one workgroup turns the counts into each tile's first list entry and first work item (a tile
 // of n planes is cut into ceil(n / item_planes) work items). `scatter`: a workgroup per tile
 // writes its list in plane order (a prefix sum of the flags of 256 planes at a time) and its
@@ -18,7 +18,7 @@ struct Params {
     height: u32,
     tiles_x: u32,
     tiles: u32,
-    // Planes in this batch, and the index of its first plane in `bounds` (and the planes buffer).
+    // Planes in this batch, and the index of its first plane in `reach` (and the planes buffer).
     count: u32,
     first: u32,
     item_planes: u32,
@@ -26,24 +26,33 @@ struct Params {
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
-// Per plane: first and last column, first and last row (inclusive); empty when first > last.
-@group(0) @binding(1) var<storage, read> bounds: array<vec4<i32>>;
+// Per plane (gpu/mod.rs `TileReach`): its first row of tiles, its rows, and where its spans start.
+@group(0) @binding(1) var<storage, read> reach: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read_write> tile_counts: array<u32>;
 @group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
 @group(0) @binding(4) var<storage, read_write> item_offsets: array<u32>;
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> items: array<vec4<u32>>;
+// Per plane and row of tiles: its first and last column of tiles (inclusive; empty when first >
+// last).
+@group(0) @binding(7) var<storage, read> spans: array<vec2<u32>>;
 
-const TILE: i32 = 16;
 const THREADS: u32 = 256u;
 
 var<workgroup> scratch: array<u32, 256>;
 var<workgroup> scratch_items: array<u32, 256>;
 
-fn covers(b: vec4<i32>, tile: u32) -> bool {
-    let tx = i32(tile % params.tiles_x) * TILE;
-    let ty = i32(tile / params.tiles_x) * TILE;
-    return b.x <= b.y && b.z <= b.w && b.x <= tx + TILE - 1 && b.y >= tx && b.z <= ty + TILE - 1 && b.w >= ty;
+// Whether plane `plane` reaches tile `tile`: the tile's row among the plane's and its column in
+// that row's span.
+fn covers(plane: u32, tile: u32) -> bool {
+    let r = reach[plane];
+    let row = tile / params.tiles_x;
+    if (row < r.x || row - r.x >= r.y) {
+        return false;
+    }
+    let span = spans[r.z + row - r.x];
+    let col = tile % params.tiles_x;
+    return span.x <= col && col <= span.y;
 }
 
 // Inclusive prefix sum of scratch over the workgroup (Hillis and Steele), in uniform control flow.
@@ -66,7 +75,7 @@ fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     }
     var c = 0u;
     for (var i = li; i < params.count; i += THREADS) {
-        c += select(0u, 1u, covers(bounds[params.first + i], tile));
+        c += select(0u, 1u, covers(params.first + i, tile));
     }
     scratch[li] = c;
     for (var s = THREADS / 2u; s > 0u; s >>= 1u) {
@@ -134,7 +143,7 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     var written = 0u;
     for (var b = 0u; b < params.count; b += THREADS) {
         let i = b + li;
-        let hit = i < params.count && covers(bounds[params.first + min(i, params.count - 1u)], tile);
+        let hit = i < params.count && covers(params.first + min(i, params.count - 1u), tile);
         let flag = select(0u, 1u, hit);
         workgroupBarrier();
         scratch[li] = flag;

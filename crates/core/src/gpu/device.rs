@@ -1,7 +1,7 @@
 //! The GPU through wgpu: the adapter, found once per process, its pipelines, and the planes of
 //! a structure on it ([`GpuPlanes`]).
 
-use super::{BATCH_PLANES, TILE, estimator_id, item_planes, tiles_of};
+use super::{BATCH_PLANES, TILE, TileReach, estimator_id, item_planes};
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -158,6 +158,7 @@ impl Gpu {
                 storage_entry(4, false),
                 storage_entry(5, false),
                 storage_entry(6, false),
+                storage_entry(7, true),
             ],
         });
         let mut gather_entries = vec![uniform_entry()];
@@ -235,8 +236,9 @@ impl Gpu {
         self.max_binding
     }
 
-    /// Whether the gather is timed by the GPU's timestamps (else by the wall time of its
-    /// submissions).
+    /// Whether the gather is timed by the GPU's timestamps (else by the wall time from a chunk's
+    /// first submission to its sums read back: an upper bound, the CPU's work between its
+    /// submissions included).
     pub fn has_timestamps(&self) -> bool {
         self.timestamps
     }
@@ -249,6 +251,13 @@ impl Gpu {
         let all = errors.join("; ");
         errors.clear();
         Err(all)
+    }
+
+    /// [`Gpu::take_errors`] under the work lock (for a wait made without it): an upload under
+    /// way keeps its own errors.
+    fn work_errors(&self) -> Result<()> {
+        let _work = self.work.lock().unwrap_or_else(|p| p.into_inner());
+        self.take_errors().map_err(Error::Device)
     }
 
     /// The gather and reduce pipelines of estimator `id`, made on first use.
@@ -309,17 +318,26 @@ pub struct GpuPlanes {
     height: u32,
     planes: wgpu::Buffer,
     occluders: wgpu::Buffer,
-    bounds: wgpu::Buffer,
+    /// Per plane (first row of tiles, rows, first span, 0), and the spans: `bin.wgsl`'s
+    /// `reach` and `spans`.
+    reach: wgpu::Buffer,
+    spans: wgpu::Buffer,
     batches: Vec<Batch>,
     sigma_t: Vec3,
     grey: bool,
 }
 
 impl GpuPlanes {
-    /// The planes of `ctx` on `gpu`, with each plane's box of pixels (`bounds`, from
-    /// [`super::screen_bounds`]) in a `width x height` image.
-    pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, bounds: &[[i32; 4]], width: u32, height: u32) -> Result<Self> {
-        assert_eq!(ctx.views.len(), bounds.len(), "a box per plane");
+    /// The planes of `ctx` on `gpu`, with the tiles each reaches (`reach`, from
+    /// [`super::tile_reach`]) in a `width x height` image.
+    pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
+        assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
+        let mut records = Vec::with_capacity(reach.len());
+        let mut spans: Vec<[u32; 2]> = Vec::new();
+        for r in reach {
+            records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
+            spans.extend_from_slice(&r.spans);
+        }
         let held = Arc::clone(&gpu);
         let _work = held.work.lock().unwrap_or_else(|p| p.into_inner());
         // Every whole buffer within one binding: the image's rays (the largest per pixel), the
@@ -329,6 +347,7 @@ impl GpuPlanes {
             ("the rays of a", pixels * std::mem::size_of::<CameraRay>() as u64),
             ("the planes of a chunk for a", (ctx.views.len() * std::mem::size_of::<PlaneRecord>()) as u64),
             ("the occluders of a chunk's planes for a", std::mem::size_of_val(ctx.occluders.as_slice()) as u64),
+            ("the rows of tiles a chunk's planes reach in a", std::mem::size_of_val(spans.as_slice()) as u64),
         ];
         if let Some((what, bytes)) = whole.into_iter().find(|&(_, bytes)| bytes > gpu.max_binding) {
             return Err(Error::Device(format!(
@@ -341,8 +360,8 @@ impl GpuPlanes {
         // Batches of consecutive planes whose work items' partial sums fit one binding.
         let max_items = gpu.max_binding / ITEM_BYTES;
         let mut batches: Vec<Batch> = Vec::new();
-        for (i, &b) in bounds.iter().enumerate() {
-            let pairs = tiles_of(b);
+        for (i, r) in reach.iter().enumerate() {
+            let pairs = r.tiles();
             let fits = |batch: &Batch| {
                 let p = batch.pairs + pairs;
                 (batch.count as usize) < BATCH_PLANES
@@ -366,13 +385,14 @@ impl GpuPlanes {
                 )));
             }
         }
-        let records: Vec<PlaneRecord> = ctx.views.iter().map(PlaneRecord::from).collect();
+        let planes: Vec<PlaneRecord> = ctx.views.iter().map(PlaneRecord::from).collect();
         let usage = wgpu::BufferUsages::STORAGE;
         let sigma_t = ctx.extinction.sigma_t;
         let planes = GpuPlanes {
-            planes: gpu.upload("planes", bytemuck::cast_slice(&records), usage),
+            planes: gpu.upload("planes", bytemuck::cast_slice(&planes), usage),
             occluders: gpu.upload("occluders", bytemuck::cast_slice(&ctx.occluders), usage),
-            bounds: gpu.upload("bounds", bytemuck::cast_slice(bounds), usage),
+            reach: gpu.upload("reach", bytemuck::cast_slice(&records), usage),
+            spans: gpu.upload("spans", bytemuck::cast_slice(&spans), usage),
             gpu,
             width,
             height,
@@ -481,8 +501,9 @@ impl GpuPlanes {
             ],
         });
         // A timestamp pair per batch (its first pass's start, its last pass's end), where the
-        // adapter has them, read when the sums are; else the wall time from the first
-        // submission into the sums to their reading back.
+        // adapter has them, read when the sums are; else (or for a gathering of more batches
+        // than a query set takes here) the sums are timed by the wall time from their first
+        // submission to their reading back.
         let batches = self.batches.len();
         let queries = (gpu.timestamps && batches <= 2048).then(|| {
             let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -518,12 +539,13 @@ impl GpuPlanes {
                 layout: &gpu.bin_layout,
                 entries: &[
                     entry(0, &bin_params),
-                    entry(1, &self.bounds),
+                    entry(1, &self.reach),
                     entry(2, &s.tile_counts),
                     entry(3, &s.offsets),
                     entry(4, &s.item_offsets),
                     entry(5, &s.list),
                     entry(6, &s.items),
+                    entry(7, &self.spans),
                 ],
             });
             let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
@@ -555,8 +577,9 @@ impl GpuPlanes {
             *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = Some(index);
             gpu.take_errors().map_err(Error::Device)?;
         }
-        if let Some((_, _, readback)) = queries {
-            into.timestamps.push(readback);
+        match queries {
+            Some((_, _, readback)) => into.timestamps.push(readback),
+            None => into.untimed = true,
         }
         control.progress();
         Ok(GatherStats {
@@ -593,7 +616,7 @@ impl Scratch {
             let (tiles, pairs, items) = (held.0.max(tiles), held.1.max(pairs), held.2.max(items));
             let storage = wgpu::BufferUsages::STORAGE;
             let tile_words = (tiles + 1) * 4;
-            // The old buffers go first, so that the largest of both never exist at once.
+            // The old buffers are let go first (wgpu frees them once the work using them is done).
             self.buffers = None;
             self.buffers = Some(ScratchBuffers {
                 capacity: (tiles, pairs, items),
@@ -624,11 +647,11 @@ impl GpuRays {
     pub fn new(gpu: &Arc<Gpu>, rays: &[CameraRay]) -> Result<Self> {
         let bytes = std::mem::size_of_val(rays) as u64;
         // The shader indexes their floats with u32.
-        if bytes > gpu.max_binding || bytes / 4 > u32::MAX as u64 {
+        let most = gpu.max_binding.min(4 * u32::MAX as u64);
+        if bytes > most {
             return Err(Error::Device(format!(
-                "the rays of an image of {} pixels take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
+                "the rays of an image of {} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
                 rays.len(),
-                gpu.max_binding
             )));
         }
         let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
@@ -643,7 +666,7 @@ impl GpuRays {
         let last = self.last_use.lock().unwrap_or_else(|p| p.into_inner()).take();
         if let Some(index) = last {
             let polled = self.gpu.device.poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None });
-            self.gpu.take_errors().map_err(Error::Device)?;
+            self.gpu.work_errors()?;
             polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
         Ok(())
@@ -663,6 +686,8 @@ pub struct GpuSums {
     /// When the first gathering into these sums was submitted (the GPU's time where the adapter
     /// has no timestamps).
     first_submission: Option<Instant>,
+    /// A gathering into them without timestamps: they are timed by the wall time.
+    untimed: bool,
 }
 
 impl GpuSums {
@@ -677,8 +702,11 @@ impl GpuSums {
             )));
         }
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         let image = gpu.scratch("image", bytes, usage);
-        Ok(GpuSums { gpu, image, pixels, timestamps: Vec::new(), first_submission: None })
+        gpu.take_errors().map_err(Error::Device)?;
+        drop(_work);
+        Ok(GpuSums { gpu, image, pixels, timestamps: Vec::new(), first_submission: None, untimed: false })
     }
 
     /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
@@ -687,7 +715,8 @@ impl GpuSums {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
         let gpu = &*self.gpu;
         let bytes = self.pixels as u64 * 16;
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
+        // The work lock for the submission only, not the wait: the next chunk's upload goes on.
+        let work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         let readback =
             gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
@@ -697,15 +726,18 @@ impl GpuSums {
         for b in timestamps.iter().chain([&readback]) {
             b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
         }
+        gpu.take_errors().map_err(Error::Device)?;
+        drop(work);
         let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
         let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
-        gpu.take_errors().map_err(Error::Device)?;
+        let untimed = std::mem::take(&mut self.untimed);
+        gpu.work_errors()?;
         polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         let mapped = |b: &wgpu::Buffer| {
             b.slice(..).get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))
         };
         let mut stats = GatherStats { device_ns: waited, ..GatherStats::default() };
-        if !timestamps.is_empty() {
+        if !untimed && !timestamps.is_empty() {
             let period = gpu.queue.get_timestamp_period() as f64;
             stats.device_ns = 0;
             for b in &timestamps {
