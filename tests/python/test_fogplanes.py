@@ -517,7 +517,7 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
         if os.environ.get("FOGPLANES_REQUIRE_GPU") == "1":
             raise AssertionError(f"FOGPLANES_REQUIRE_GPU=1 but there is no GPU adapter: {e}") from e
         pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
-    assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0
+    assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0 and stats["seconds_upload"] > 0
     cpu = fogplanes.render(SIX_LIGHTS, **kwargs)
     fog = cpu.max(axis=2) < 1  # the pixels that see no light directly
     rel_mse = float(np.mean((gpu[fog] - cpu[fog]) ** 2) / np.mean(cpu[fog] ** 2))

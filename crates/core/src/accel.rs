@@ -302,7 +302,9 @@ pub fn gather_pieces_on_gpu(
                 done.wait()?;
             }
             on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
+            let t = std::time::Instant::now();
             on_gpu.rays = Some((p.set, g.upload_rays(p.rays)?));
+            found[p.target].upload_ns += t.elapsed().as_nanos() as u64;
         }
         let rays = &on_gpu.rays.as_ref().expect("uploaded above").1;
         let sums = match &mut on_gpu.sums[p.target] {

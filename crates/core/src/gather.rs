@@ -360,8 +360,11 @@ pub struct GatherStats {
     pub tests: u64,
     pub hits: u64,
     /// Nanoseconds the device spent gathering, where one did (the GPU: its timestamps, or the
-    /// wall time of its submissions where it has none); 0 on the CPU.
+    /// wall time from a chunk's first submission to its sums read back where it has none); 0 on
+    /// the CPU.
     pub device_ns: u64,
+    /// Nanoseconds of wall time spent uploading camera rays to the GPU; 0 on the CPU.
+    pub upload_ns: u64,
 }
 
 impl std::ops::AddAssign for GatherStats {
@@ -369,6 +372,7 @@ impl std::ops::AddAssign for GatherStats {
         self.tests += o.tests;
         self.hits += o.hits;
         self.device_ns += o.device_ns;
+        self.upload_ns += o.upload_ns;
     }
 }
 

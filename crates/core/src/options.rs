@@ -142,8 +142,11 @@ pub struct RenderStats {
     /// The device that gathered (`cpu`, or `gpu: ` and the adapter).
     pub device: String,
     /// Seconds the GPU spent in its gather (binning included), by its timestamps where it has
-    /// them, else the wall time of its submissions; 0 on the CPU.
+    /// them, else the wall time from each chunk's first submission to its sums read back (an
+    /// upper bound); 0 on the CPU.
     pub seconds_device: f64,
+    /// Seconds of wall time spent uploading camera rays to the GPU; 0 on the CPU.
+    pub seconds_upload: f64,
     pub seconds_total: f64,
     /// The estimated standard error of each pixel, when the options asked for it
     /// (docs/mathematics.md section 10).
@@ -196,6 +199,7 @@ impl RenderStats {
     pub fn add_gather(&mut self, s: GatherStats, seconds: f64) {
         self.seconds_gather += seconds;
         self.seconds_device += s.device_ns as f64 * 1e-9;
+        self.seconds_upload += s.upload_ns as f64 * 1e-9;
         self.hits += s.hits;
         self.tests += s.tests;
     }
@@ -234,12 +238,18 @@ impl RenderStats {
         if self.seconds_device > 0.0 { self.hits as f64 / self.seconds_device } else { 0.0 }
     }
     pub fn summary(&self) -> String {
+        // On the GPU, also the CPU's share of the work (partly beside the GPU's): where an
+        // end-to-end time goes.
         let gathered_by = if self.seconds_device > 0.0 {
             format!(
-                "{}; GPU time {:.4} s, {:.4} G hits/s",
+                "{}; GPU time {:.4} s, {:.4} G hits/s; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays and the emission {:.4} s, rays uploaded {:.4} s",
                 self.device,
                 self.seconds_device,
-                self.device_hits_per_second() * 1e-9
+                self.device_hits_per_second() * 1e-9,
+                self.seconds_sampling,
+                self.seconds_build,
+                self.seconds_rays,
+                self.seconds_upload
             )
         } else {
             format!("{} kernel", self.kernel)

@@ -60,6 +60,7 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     d.set_item("kernel", &s.kernel)?;
     d.set_item("device", &s.device)?;
     d.set_item("seconds_device", s.seconds_device)?;
+    d.set_item("seconds_upload", s.seconds_upload)?;
     d.set_item("planes", s.planes)?;
     d.set_item("plane_passes", s.plane_passes)?;
     d.set_item("rays", s.rays)?;
