@@ -232,18 +232,26 @@ impl PreparedPlanes {
         if let Structure::Gpu(g) = &self.structure {
             return g.gather(weighting, rays, sums, control);
         }
-        let piece = GatherPiece { planes: self, rays, set: 0, target: 0 };
+        let piece = GatherPiece { planes: self, rays, target: 0 };
         Ok(gather_pieces(&[piece], weighting, kernel, &mut [sums], control)?[0])
     }
 }
 
-/// A piece of planes for [`gather_pieces`]: its planes, the ray set it is gathered along (its
-/// rays and its index, which names them for the GPU's upload: [`OnGpu`]) and the sums (of
-/// several) it adds to.
+/// A piece of planes for [`gather_pieces`]: its planes, the rays it is gathered along and the
+/// sums (of several) it adds to.
 #[derive(Clone, Copy)]
 pub struct GatherPiece<'a> {
     pub planes: &'a PreparedPlanes,
     pub rays: &'a [CameraRay],
+    pub target: usize,
+}
+
+/// A piece of planes on the GPU for [`gather_pieces_on_gpu`]: its planes, the ray set it is
+/// gathered along (made on the GPU's upload buffer when the set changes) and the sums it adds
+/// to.
+#[derive(Clone, Copy)]
+pub struct GpuPiece<'a> {
+    pub planes: &'a PreparedPlanes,
     pub set: u32,
     pub target: usize,
 }
@@ -280,13 +288,21 @@ impl OnGpu {
     }
 }
 
+/// A row of rays: `row(j, out)` writes row `j` of a ray set ([`crate::pixel::with_ray_rows`]).
+pub type RayRowFn<'r> = &'r (dyn Fn(usize, &mut [CameraRay]) + Sync);
+
+/// Makes ray set `k`: `make(k, with)` calls `with` with the function that writes a row of it.
+pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &mut dyn FnMut(RayRowFn));
+
 /// [`gather_pieces`] of pieces on the GPU, into sums held there ([`OnGpu`]): piece after piece,
-/// each in its own submissions. The hits and the GPU's time are counted when the sums are read
-/// back.
+/// each in its own submissions, a piece's ray set made by `make_rays` straight into the GPU's
+/// upload buffer where it is not the set uploaded last. The hits and the GPU's time are counted
+/// when the sums are read back.
 pub fn gather_pieces_on_gpu(
-    pieces: &[GatherPiece],
+    pieces: &[GpuPiece],
     weighting: Weighting,
     on_gpu: &mut OnGpu,
+    make_rays: RaySetMaker,
     control: Control,
 ) -> Result<Vec<GatherStats>> {
     let mut found = vec![GatherStats::default(); on_gpu.sums.len()];
@@ -302,9 +318,11 @@ pub fn gather_pieces_on_gpu(
                 done.wait()?;
             }
             on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
-            let t = std::time::Instant::now();
-            on_gpu.rays = Some((p.set, g.upload_rays(p.rays)?));
-            found[p.target].upload_ns += t.elapsed().as_nanos() as u64;
+            let mut made = None;
+            make_rays(p.set, &mut |row| made = Some(g.make_rays(row)));
+            let rays = made.expect("the maker gives the set's rows")?;
+            found[p.target].upload_ns += rays.upload_ns();
+            on_gpu.rays = Some((p.set, rays));
         }
         let rays = &on_gpu.rays.as_ref().expect("uploaded above").1;
         let sums = match &mut on_gpu.sums[p.target] {
@@ -334,7 +352,17 @@ pub fn gather_pieces(
     // read back at the end.
     if pieces.iter().any(|p| matches!(p.planes.structure, Structure::Gpu(_))) {
         let mut on_gpu = OnGpu::new(sums.len());
-        let mut found = gather_pieces_on_gpu(pieces, weighting, &mut on_gpu, control)?;
+        // Each piece's rays are its own set (`set`: its index).
+        let on: Vec<GpuPiece> = pieces
+            .iter()
+            .enumerate()
+            .map(|(i, p)| GpuPiece { planes: p.planes, set: i as u32, target: p.target })
+            .collect();
+        let mut copy = |i: u32, with: &mut dyn FnMut(RayRowFn)| {
+            let rays = pieces[i as usize].rays;
+            with(&|j, out: &mut [CameraRay]| out.copy_from_slice(&rays[j * out.len()..(j + 1) * out.len()]))
+        };
+        let mut found = gather_pieces_on_gpu(&on, weighting, &mut on_gpu, &mut copy, control)?;
         for (target, (f, sums)) in found.iter_mut().zip(sums.iter_mut()).enumerate() {
             *f += on_gpu.read_into(target, sums)?;
         }

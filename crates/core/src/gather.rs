@@ -363,7 +363,8 @@ pub struct GatherStats {
     /// wall time from a chunk's first submission to its sums read back where it has none); 0 on
     /// the CPU.
     pub device_ns: u64,
-    /// Nanoseconds of wall time spent uploading camera rays to the GPU; 0 on the CPU.
+    /// Nanoseconds of wall time spent uploading camera rays to the GPU, their writing aside; 0
+    /// on the CPU.
     pub upload_ns: u64,
 }
 

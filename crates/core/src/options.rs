@@ -145,7 +145,8 @@ pub struct RenderStats {
     /// them, else the wall time from each chunk's first submission to its sums read back (an
     /// upper bound); 0 on the CPU.
     pub seconds_device: f64,
-    /// Seconds of wall time spent uploading camera rays to the GPU; 0 on the CPU.
+    /// Seconds of wall time spent uploading camera rays to the GPU, their writing aside (they
+    /// are made straight into the upload buffers, in `seconds_rays`); 0 on the CPU.
     pub seconds_upload: f64,
     pub seconds_total: f64,
     /// The estimated standard error of each pixel, when the options asked for it
@@ -242,7 +243,7 @@ impl RenderStats {
         // end-to-end time goes.
         let gathered_by = if self.seconds_device > 0.0 {
             format!(
-                "{}; GPU time {:.4} s, {:.4} G hits/s; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays and the emission {:.4} s, rays uploaded {:.4} s",
+                "{}; GPU time {:.4} s, {:.4} G hits/s; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (written into the upload buffers) and the emission {:.4} s, the uploads' own {:.4} s",
                 self.device,
                 self.seconds_device,
                 self.device_hits_per_second() * 1e-9,

@@ -174,14 +174,39 @@ pub fn ray_set_rays_into(scene: &Scene, seed: u64, k: u32, pixel_center: bool, r
 /// ([`crate::schedule`]).
 fn ray_set_rays_in(scene: &Scene, seed: u64, k: u32, pixel_center: bool, rays: &mut Vec<CameraRay>, control: Control) {
     let cam = &scene.camera;
-    let w = cam.width as usize;
+    if rays.len() != cam.width as usize * cam.height as usize {
+        *rays = vec![CameraRay::default(); cam.width as usize * cam.height as usize];
+    }
+    ray_set_rays_to(scene, seed, k, pixel_center, rays, control)
+}
+
+/// [`ray_set_rays_in`] into `rays`, one per pixel (every one written), row by row in parallel.
+fn ray_set_rays_to(scene: &Scene, seed: u64, k: u32, pixel_center: bool, rays: &mut [CameraRay], control: Control) {
+    let w = scene.camera.width as usize;
+    assert_eq!(rays.len(), w * scene.camera.height as usize, "a ray per pixel");
+    with_ray_rows(scene, seed, k, pixel_center, control, |row| {
+        rays.par_chunks_mut(w).enumerate().for_each(|(j, out)| row(j, out));
+    });
+}
+
+/// Calls `with` with the function that writes row `j` of ray set `k` (its units of work
+/// recorded on `control`'s strand): for [`ray_set_rays_in`], and for memory that is not a
+/// slice of rays, such as the GPU's upload buffer, written row by row
+/// ([`crate::gpu::GpuRays::made`]). The same rays either way.
+pub fn with_ray_rows<R>(
+    scene: &Scene,
+    seed: u64,
+    k: u32,
+    pixel_center: bool,
+    control: Control,
+    with: impl FnOnce(&(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> R,
+) -> R {
+    let w = scene.camera.width as usize;
     let footprints = PanelFootprints::new(scene);
     let maker = RayRow::new(scene, &footprints, seed, k, pixel_center);
-    if rays.len() != w * cam.height as usize {
-        *rays = vec![CameraRay::default(); w * cam.height as usize];
-    }
     let section = control.section("rays");
-    rays.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
+    let row = |j: usize, row: &mut [CameraRay]| {
+        assert_eq!(row.len(), w, "a row of rays");
         section.unit(|| {
             let blocks = w / RAY_LANES * RAY_LANES;
             for i in (0..blocks).step_by(RAY_LANES) {
@@ -191,8 +216,10 @@ fn ray_set_rays_in(scene: &Scene, seed: u64, k: u32, pixel_center: bool, rays: &
                 *ray = ray_set_ray(scene, &footprints, seed, k, pixel_center, j * w + i);
             }
         })
-    });
+    };
+    let out = with(&row);
     section.close();
+    out
 }
 
 /// Pixels per block of [`ray_set_rays`]: one AVX-512 vector of f64, two AVX2 ones.
@@ -437,6 +464,23 @@ impl RaySets {
         let rays = Arc::new(rays);
         self.sets.push((k, rays.clone()));
         rays
+    }
+
+    /// The rays of ray set `k` (modulo the set count), not kept: `with` is given the function
+    /// that writes a row of them ([`with_ray_rows`]), for the GPU's upload buffer, written
+    /// once, in place ([`crate::accel::OnGpu`]). Counted as made (all of them) and timed.
+    pub fn make_rows<R>(
+        &mut self,
+        scene: &Scene,
+        k: u32,
+        control: Control,
+        with: impl FnOnce(&(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> R,
+    ) -> R {
+        let t = Instant::now();
+        let out = with_ray_rows(scene, self.seed, k % self.count, self.pixel_center, control, with);
+        self.seconds += t.elapsed().as_secs_f64();
+        self.made += scene.camera.width as u64 * scene.camera.height as u64;
+        out
     }
 
     /// Bytes the rays of `ray_sets` sets take at a resolution (for the memory check).

@@ -9,7 +9,9 @@
 //! direct emission, [`crate::emission`]). The options come resolved and checked from
 //! [`crate::settings`]: nothing here checks them again.
 
-use crate::accel::{Accelerator, GatherPiece, OnGpu, PreparedPlanes, gather_pieces, gather_pieces_on_gpu};
+use crate::accel::{
+    Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, RayRowFn, gather_pieces, gather_pieces_on_gpu,
+};
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::emission::direct_emission_and_variance_in;
@@ -143,42 +145,50 @@ impl GatherSide<'_> {
         // Each chunk's hits and GPU time, counted when its sums are read back.
         let mut read = vec![GatherStats::default(); chunks.len()];
         for group in gatherings(&all, self.spread.is_some()) {
-            let rays: Vec<Arc<Vec<CameraRay>>> =
-                group.iter().map(|(_, p)| self.rays.rays(self.scene, p.spec.0, control)).collect();
-            let pieces: Vec<GatherPiece> = group
-                .iter()
-                .zip(&rays)
-                .map(|(&(target, p), r)| GatherPiece { planes: &p.planes, rays: r.as_slice(), set: p.spec.0, target })
-                .collect();
-            let each = if let Some(spread) = self.spread.as_mut() {
-                // Each piece is its chunk's only one in the gathering: its sums are its chunk's
-                // after less before, told to the spread in piece order.
+            // With an error image, each piece is its chunk's only one in the gathering: its sums
+            // are its chunk's after less before, told to the spread in piece order.
+            if self.spread.is_some() {
                 before.resize_with(group.len(), Vec::new);
                 for (b, &(c, _)) in before.iter_mut().zip(group) {
                     b.clear();
                     b.extend_from_slice(sums[c]);
                 }
-                let each = match on_gpu.as_mut() {
-                    Some(on_gpu) => {
-                        let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, control)?;
+            }
+            let each = match on_gpu.as_mut() {
+                Some(on_gpu) => {
+                    let pieces: Vec<GpuPiece> = group
+                        .iter()
+                        .map(|&(target, p)| GpuPiece { planes: &p.planes, set: p.spec.0, target })
+                        .collect();
+                    // Each set made straight into the GPU's upload buffer, not kept here.
+                    let (rays, scene) = (&mut *self.rays, self.scene);
+                    let mut make = |k: u32, with: &mut dyn FnMut(RayRowFn)| rays.make_rows(scene, k, control, with);
+                    let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, &mut make, control)?;
+                    if self.spread.is_some() {
                         for &(c, _) in group {
                             sums[c].copy_from_slice(&start[c]);
                             read[c] += on_gpu.read_into(c, sums[c])?;
                         }
-                        each
                     }
-                    None => gather_pieces(&pieces, weighting, kernel, sums, control)?,
-                };
+                    each
+                }
+                None => {
+                    let rays: Vec<Arc<Vec<CameraRay>>> =
+                        group.iter().map(|(_, p)| self.rays.rays(self.scene, p.spec.0, control)).collect();
+                    let pieces: Vec<GatherPiece> = group
+                        .iter()
+                        .zip(&rays)
+                        .map(|(&(target, p), r)| GatherPiece { planes: &p.planes, rays: r.as_slice(), target })
+                        .collect();
+                    gather_pieces(&pieces, weighting, kernel, sums, control)?
+                }
+            };
+            if let Some(spread) = self.spread.as_mut() {
                 for (b, &(c, piece)) in before.iter().zip(group) {
                     let (k, ref planes, quarter, whole) = piece.spec;
                     spread.add(k, quarter, planes.len(), whole, b, sums[c]);
                 }
-                each
-            } else if let Some(on_gpu) = on_gpu.as_mut() {
-                gather_pieces_on_gpu(&pieces, weighting, on_gpu, control)?
-            } else {
-                gather_pieces(&pieces, weighting, kernel, sums, control)?
-            };
+            }
             for (f, e) in found.iter_mut().zip(each) {
                 *f += e;
             }

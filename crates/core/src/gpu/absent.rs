@@ -44,6 +44,9 @@ impl GpuPlanes {
     pub fn upload_rays(&self, _: &[CameraRay]) -> Result<GpuRays> {
         match *self {}
     }
+    pub fn make_rays(&self, _: &(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> Result<GpuRays> {
+        match *self {}
+    }
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
         match *self {}
     }
@@ -57,6 +60,9 @@ pub enum GpuRays {}
 
 impl GpuRays {
     pub fn wait(&self) -> Result<()> {
+        match *self {}
+    }
+    pub fn upload_ns(&self) -> u64 {
         match *self {}
     }
 }

@@ -415,6 +415,12 @@ impl GpuPlanes {
         GpuRays::new(&self.gpu, rays)
     }
 
+    /// Rays for this structure's image, each row made by `row` straight into the GPU's upload
+    /// buffer ([`GpuRays::made`]).
+    pub fn make_rays(&self, row: &(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> Result<GpuRays> {
+        GpuRays::made(&self.gpu, self.width as usize, self.height as usize, row)
+    }
+
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
     /// `sums`: [`GpuPlanes::gather_into`] fresh sums on the GPU, read back once. Checks
     /// `control` before each batch; reports one unit of progress.
@@ -640,24 +646,83 @@ pub struct GpuRays {
     gpu: Arc<Gpu>,
     /// The last submission that gathers along them.
     last_use: Mutex<Option<wgpu::SubmissionIndex>>,
+    upload_ns: u64,
 }
 
 impl GpuRays {
     /// `rays` uploaded to `gpu`; refused in one line where they exceed one binding.
     pub fn new(gpu: &Arc<Gpu>, rays: &[CameraRay]) -> Result<Self> {
-        let bytes = std::mem::size_of_val(rays) as u64;
+        Self::made(gpu, rays.len(), 1, &|_, out| out.copy_from_slice(rays))
+    }
+
+    /// `height` rows of `width` rays on `gpu`, row `j` made by `row(j, out)` and written
+    /// straight into the buffer that uploads them (mapped at its creation), the rows in
+    /// parallel: no copy of the set on the CPU. Refused in one line where they exceed one
+    /// binding.
+    pub fn made(
+        gpu: &Arc<Gpu>,
+        width: usize,
+        height: usize,
+        row: &(dyn Fn(usize, &mut [CameraRay]) + Sync),
+    ) -> Result<Self> {
+        use rayon::prelude::*;
+        let len = width * height;
+        let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
         // The shader indexes their floats with u32.
         let most = gpu.max_binding.min(4 * u32::MAX as u64);
         if bytes > most {
             return Err(Error::Device(format!(
-                "the rays of an image of {} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
-                rays.len(),
+                "the rays of an image of {len} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
             )));
         }
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let buffer = gpu.upload("rays", bytemuck::cast_slice(rays), wgpu::BufferUsages::STORAGE);
+        let t = Instant::now();
+        let work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
+        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rays"),
+            // A binding may not be empty; 20 bytes a ray keep the size a multiple of 4.
+            size: bytes.max(32),
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: true,
+        });
         gpu.take_errors().map_err(Error::Device)?;
-        Ok(GpuRays { buffer, len: rays.len(), gpu: gpu.clone(), last_use: Mutex::new(None) })
+        // Written without the work lock: the other side's upload goes on meanwhile.
+        drop(work);
+        let filling = Instant::now();
+        {
+            let mut view = buffer
+                .slice(..)
+                .get_mapped_range_mut()
+                .map_err(|e| Error::Device(format!("writing rays to the GPU: {e}")))?;
+            // Mapped memory may be write-combining, only to be written: each row is made in a
+            // buffer of the thread's and copied in whole.
+            let mut rest = view.slice(..bytes as usize);
+            let mut rows = Vec::with_capacity(height);
+            for _ in 0..height {
+                let (first, tail) = rest.split_at(width * std::mem::size_of::<CameraRay>());
+                rows.push(RowBytes(first));
+                rest = tail;
+            }
+            rows.into_par_iter().enumerate().for_each_init(
+                || vec![CameraRay::default(); width],
+                |made, (j, out)| {
+                    row(j, made);
+                    let RowBytes(mut out) = out;
+                    out.copy_from_slice(bytemuck::cast_slice(made));
+                },
+            );
+        }
+        let filled = filling.elapsed();
+        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
+        buffer.unmap();
+        gpu.take_errors().map_err(Error::Device)?;
+        let upload_ns = t.elapsed().saturating_sub(filled).as_nanos() as u64;
+        Ok(GpuRays { buffer, len, gpu: gpu.clone(), last_use: Mutex::new(None), upload_ns })
+    }
+
+    /// Nanoseconds spent making their buffer and handing it to the GPU, their rows' writing
+    /// aside.
+    pub fn upload_ns(&self) -> u64 {
+        self.upload_ns
     }
 
     /// Waits until the GPU has done the work submitted along these rays (so that the caller
@@ -672,6 +737,15 @@ impl GpuRays {
         Ok(())
     }
 }
+
+/// A row's bytes of a mapped buffer, written by one thread.
+struct RowBytes<'a>(wgpu::WriteOnly<'a, [u8]>);
+
+// SAFETY: a `WriteOnly<[u8]>` is an exclusive, write-only reference to bytes, as `&mut [u8]` is,
+// which may be sent to another thread; wgpu-types implements `Send` for `WriteOnly<T>` with
+// `T: Send` (implicitly sized), which leaves slices out, not for a reason of theirs. Each row is
+// a disjoint part of the mapping (`split_at`), which outlives the parallel loop that writes it.
+unsafe impl Send for RowBytes<'_> {}
 
 /// An image's f32 sums on the GPU: per pixel the bits of (r, g, b) and its hit count
 /// (`gather.wgsl`'s `image`, 16 bytes), zero when made (wgpu zeroes a new buffer). Every

@@ -149,7 +149,8 @@ class RenderStats(TypedDict):
     device: str
     #: Seconds of the GPU's own gather (its timestamps, else the wall time of its work); 0 on the CPU.
     seconds_device: float
-    #: Seconds of wall time uploading camera rays to the GPU; 0 on the CPU.
+    #: Seconds of wall time uploading camera rays to the GPU (their writing, straight into the
+    #: upload buffers, is in seconds_rays); 0 on the CPU.
     seconds_upload: float
     planes: int
     #: 1, or the passes of a render on a time budget.
