@@ -348,23 +348,12 @@ pub fn gather_pieces(
     sums: &mut [&mut [Vec3]],
     control: Control,
 ) -> Result<Vec<GatherStats>> {
-    // The GPU's pieces go one after another, each in its own submissions, into sums on the GPU
-    // read back at the end.
+    // The GPU's pieces go one after another, each in its own submissions and read back (a
+    // render keeps a chunk's sums on the GPU instead: [`gather_pieces_on_gpu`]).
     if pieces.iter().any(|p| matches!(p.planes.structure, Structure::Gpu(_))) {
-        let mut on_gpu = OnGpu::new(sums.len());
-        // Each piece's rays are its own set (`set`: its index).
-        let on: Vec<GpuPiece> = pieces
-            .iter()
-            .enumerate()
-            .map(|(i, p)| GpuPiece { planes: p.planes, set: i as u32, target: p.target })
-            .collect();
-        let mut copy = |i: u32, with: &mut dyn FnMut(RayRowFn)| {
-            let rays = pieces[i as usize].rays;
-            with(&|j, out: &mut [CameraRay]| out.copy_from_slice(&rays[j * out.len()..(j + 1) * out.len()]))
-        };
-        let mut found = gather_pieces_on_gpu(&on, weighting, &mut on_gpu, &mut copy, control)?;
-        for (target, (f, sums)) in found.iter_mut().zip(sums.iter_mut()).enumerate() {
-            *f += on_gpu.read_into(target, sums)?;
+        let mut found = vec![GatherStats::default(); sums.len()];
+        for p in pieces {
+            found[p.target] += p.planes.gather(weighting, kernel, p.rays, sums[p.target], control)?;
         }
         return Ok(found);
     }
