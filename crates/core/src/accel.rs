@@ -5,7 +5,7 @@
 //! weighting through the structure's [`Aggregate::gather`].
 
 use crate::bvh::PlaneBvh;
-use crate::camera::CameraRay;
+use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats};
@@ -287,9 +287,6 @@ impl OnGpu {
         Ok(stats)
     }
 }
-
-/// A row of rays: `row(j, out)` writes row `j` of a ray set ([`crate::pixel::with_ray_rows`]).
-pub type RayRowFn<'r> = &'r (dyn Fn(usize, &mut [CameraRay]) + Sync);
 
 /// Makes ray set `k`: `make(k, with)` calls `with` with the function that writes a row of it.
 pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &mut dyn FnMut(RayRowFn));

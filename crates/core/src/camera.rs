@@ -14,6 +14,11 @@ pub struct CameraRay {
     pub t1: f32,
 }
 
+/// Writes a row of camera rays: `row(j, out)` fills `out` with row `j` of a ray set (made by
+/// `pixel::with_ray_rows`, written where the caller keeps them: a slice, or the GPU's upload
+/// buffer).
+pub type RayRowFn<'r> = &'r (dyn Fn(usize, &mut [CameraRay]) + Sync);
+
 #[derive(Clone, Debug)]
 pub struct Camera {
     pub position: DVec3,

@@ -9,7 +9,7 @@
 //! ([`ray_set_of_plane`], [`plane_group`], [`ray_set_position`]). The direct emission is
 //! integrated over the pixel separately ([`crate::emission`]).
 
-use crate::camera::CameraRay;
+use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::light::Rectangle;
 use crate::numeric::dot;
@@ -199,7 +199,7 @@ pub fn with_ray_rows<R>(
     k: u32,
     pixel_center: bool,
     control: Control,
-    with: impl FnOnce(&(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> R,
+    with: impl FnOnce(RayRowFn) -> R,
 ) -> R {
     let w = scene.camera.width as usize;
     let footprints = PanelFootprints::new(scene);
@@ -469,13 +469,7 @@ impl RaySets {
     /// The rays of ray set `k` (modulo the set count), not kept: `with` is given the function
     /// that writes a row of them ([`with_ray_rows`]), for the GPU's upload buffer, written
     /// once, in place ([`crate::accel::OnGpu`]). Counted as made (all of them) and timed.
-    pub fn make_rows<R>(
-        &mut self,
-        scene: &Scene,
-        k: u32,
-        control: Control,
-        with: impl FnOnce(&(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> R,
-    ) -> R {
+    pub fn make_rows<R>(&mut self, scene: &Scene, k: u32, control: Control, with: impl FnOnce(RayRowFn) -> R) -> R {
         let t = Instant::now();
         let out = with_ray_rows(scene, self.seed, k % self.count, self.pixel_center, control, with);
         self.seconds += t.elapsed().as_secs_f64();

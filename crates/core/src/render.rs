@@ -9,10 +9,8 @@
 //! direct emission, [`crate::emission`]). The options come resolved and checked from
 //! [`crate::settings`]: nothing here checks them again.
 
-use crate::accel::{
-    Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, RayRowFn, gather_pieces, gather_pieces_on_gpu,
-};
-use crate::camera::CameraRay;
+use crate::accel::{Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, gather_pieces, gather_pieces_on_gpu};
+use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::emission::direct_emission_and_variance_in;
 use crate::error::{Error, Result, Setting};

@@ -1,6 +1,6 @@
 //! Built without the `gpu` feature: no adapter, and so no planes on one.
 
-use crate::camera::CameraRay;
+use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::Result;
 use crate::gather::{GatherContext, GatherStats};
@@ -44,7 +44,7 @@ impl GpuPlanes {
     pub fn upload_rays(&self, _: &[CameraRay]) -> Result<GpuRays> {
         match *self {}
     }
-    pub fn make_rays(&self, _: &(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> Result<GpuRays> {
+    pub fn make_rays(&self, _: RayRowFn) -> Result<GpuRays> {
         match *self {}
     }
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {

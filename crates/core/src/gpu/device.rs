@@ -2,7 +2,7 @@
 //! a structure on it ([`GpuPlanes`]).
 
 use super::{BATCH_PLANES, TILE, TileReach, estimator_id, item_planes};
-use crate::camera::CameraRay;
+use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats, PlaneRecord};
@@ -417,7 +417,7 @@ impl GpuPlanes {
 
     /// Rays for this structure's image, each row made by `row` straight into the GPU's upload
     /// buffer ([`GpuRays::made`]).
-    pub fn make_rays(&self, row: &(dyn Fn(usize, &mut [CameraRay]) + Sync)) -> Result<GpuRays> {
+    pub fn make_rays(&self, row: RayRowFn) -> Result<GpuRays> {
         GpuRays::made(&self.gpu, self.width as usize, self.height as usize, row)
     }
 
@@ -659,12 +659,7 @@ impl GpuRays {
     /// straight into the buffer that uploads them (mapped at its creation), the rows in
     /// parallel: no copy of the set on the CPU. Refused in one line where they exceed one
     /// binding.
-    pub fn made(
-        gpu: &Arc<Gpu>,
-        width: usize,
-        height: usize,
-        row: &(dyn Fn(usize, &mut [CameraRay]) + Sync),
-    ) -> Result<Self> {
+    pub fn made(gpu: &Arc<Gpu>, width: usize, height: usize, row: RayRowFn) -> Result<Self> {
         use rayon::prelude::*;
         let len = width * height;
         let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
