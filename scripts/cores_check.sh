@@ -1,4 +1,4 @@
-#!/bin/sh
+#!/usr/bin/env bash
 # Issue 38's measurement on a many-core machine (the device machine's CPU): wall and CPU seconds
 # of the benchmark render (six_lights, 640x360, smis-exact) at 1, 2, 4, 8 and 16 threads, for
 # 655,360 and 2,621,440 planes, and the speedup and CPU growth against 1 thread. Not run yet:
@@ -6,7 +6,9 @@
 #
 #   scripts/cores_check.sh [BINARY] [THREADS...]     (default: target/release/fogplanes, 1 2 4 8 16)
 #
-# Builds nothing: run `cargo build --release` first. About 4 minutes on 16 cores.
+# Builds nothing: run `cargo build --release` first. About 4 minutes on 16 cores. Times with
+# bash's own `time` and reckons with awk: the device machine's image may have neither GNU time
+# nor bc.
 set -eu
 bin=${1:-target/release/fogplanes}
 [ $# -gt 0 ] && shift
@@ -19,13 +21,14 @@ echo "|---:|---:|---:|---:|---:|---:|"
 for planes in 655360 2621440; do
     wall1=; cpu1=
     for t in $threads; do
-        # GNU time's %e wall, %U + %S CPU of the whole command.
-        /usr/bin/time -f "%e %U %S" -o "$out/time" "$bin" render media_scenes/six_lights.toml --quiet \
-            --resolution 640x360 -e smis-exact --planes "$planes" --threads "$t" -o "$out/x.exr"
+        # bash's `time`: wall, then user and sys of the command's process.
+        TIMEFORMAT='%R %U %S'
+        { time "$bin" render media_scenes/six_lights.toml --quiet --resolution 640x360 \
+            -e smis-exact --planes "$planes" --threads "$t" -o "$out/x.exr" >/dev/null 2>&1; } 2>"$out/time"
         read -r wall user sys < "$out/time"
-        cpu=$(echo "$user + $sys" | bc -l)
+        cpu=$(awk "BEGIN { print $user + $sys }")
         [ -z "$wall1" ] && { wall1=$wall; cpu1=$cpu; }
-        printf '| %s | %s | %.2f | %.2f | %.2fx | %.2f |\n' "$planes" "$t" "$wall" "$cpu" \
-            "$(echo "$wall1 / $wall" | bc -l)" "$(echo "$cpu / $cpu1" | bc -l)"
+        awk -v p="$planes" -v t="$t" -v w="$wall" -v c="$cpu" -v w1="$wall1" -v c1="$cpu1" \
+            'BEGIN { printf "| %s | %s | %.2f | %.2f | %.2fx | %.2f |\n", p, t, w, c, w1 / w, c / c1 }'
     done
 done

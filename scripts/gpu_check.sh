@@ -73,7 +73,9 @@ done
 for t in 1 2 4 8 all; do
     threads=()
     [ "$t" = all ] || threads=(--threads "$t")
-    /usr/bin/time -f "cpu threads $t: wall %e s, user %U s, sys %S s" "$B" render "$S" --resolution "$R" --planes 40960 -q "${threads[@]}" -o "$work/t.exr" 2>&1 | grep -v '^wrote' | sed "s/^/  /"
+    # bash's `time` (the device machine's image may have no GNU time).
+    TIMEFORMAT="cpu threads $t: wall %R s, user %U s, sys %S s"
+    { time "$B" render "$S" --resolution "$R" --planes 40960 -q "${threads[@]}" -o "$work/t.exr" 2>&1 | grep -v '^wrote' | sed "s/^/  /"; } 2>&1
 done
 date -u
 } 2>&1 | tee "$log"
