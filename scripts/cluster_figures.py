@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The figures of the README's section "On a cluster": fogplanes.distributed on this machine.
+"""The figures of docs/cluster.md ("On a cluster"): fogplanes.distributed on this machine.
 
 Needs the module and Dask: `pip install .[dask]` in a virtual environment. Three measures,
 printed as Markdown tables:

@@ -1,7 +1,8 @@
 //! docs/scenes.md against the loader: the keys it documents are the schema's keys (read from
 //! `fogplanes::scene::SceneFile` through serde, not from a list written here), `required` where
 //! the schema requires them, the `[render]` defaults and the limits are the code's, and every
-//! whole scene in it, every whole scene of the README, and every scene in media_scenes/, loads.
+//! whole scene in it, every whole scene of the guide (docs/guide.md), and every scene in
+//! media_scenes/, loads.
 //!
 //! The convention the doc follows (and states in its section "Key tables"): a markdown table
 //! whose first column is headed `key` lists keys, one per row, as a code span holding the key's
@@ -19,7 +20,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
 const DOC: &str = include_str!("../docs/scenes.md");
-const README: &str = include_str!("../README.md");
+const GUIDE: &str = include_str!("../docs/guide.md");
 
 // ---------------------------------------------------------------------------------------------
 // The schema's keys, through serde
@@ -421,13 +422,13 @@ fn the_docs_whole_scenes_load() {
     }
 }
 
-/// The README's own scene (which its test saves and renders) is a whole scene too.
+/// The guide's own scene (which its test saves and renders) is a whole scene too.
 #[test]
-fn the_readmes_whole_scenes_load() {
-    let scenes = blocks(README, "toml scene");
-    assert!(!scenes.is_empty(), "README.md has no `toml scene` block");
+fn the_guides_whole_scenes_load() {
+    let scenes = blocks(GUIDE, "toml scene");
+    assert!(!scenes.is_empty(), "docs/guide.md has no `toml scene` block");
     for (i, text) in scenes.iter().enumerate() {
-        load_text(text, &format!("README.md's `toml scene` block {}", i + 1));
+        load_text(text, &format!("docs/guide.md's `toml scene` block {}", i + 1));
     }
 }
 

@@ -1,9 +1,10 @@
-"""Shared by the Python tests: the README blocks' times, printed in pytest's closing summary
-(test_readme.py records them), so that CI's log shows what the README costs as it grows."""
+"""Shared by the Python tests: the documentation blocks' times (the front page's, the guide's and
+the reference pages', run by test_readme.py), printed in pytest's closing summary, so that CI's
+log shows what the walk costs as it grows."""
 
 import pytest
 
-# (README line, seconds) of every block run.
+# (page and line, seconds) of every block run.
 README_SECONDS = pytest.StashKey[list]()
 
 
@@ -14,8 +15,8 @@ def pytest_configure(config):
 def pytest_terminal_summary(terminalreporter, config):
     times = config.stash.get(README_SECONDS, [])
     if times:
-        line, longest = max(times, key=lambda t: t[1])
+        where, longest = max(times, key=lambda t: t[1])
         terminalreporter.write_line(
-            f"README.md: {len(times)} blocks ran in {sum(t[1] for t in times):.1f} s "
-            f"(the longest, line {line}: {longest:.1f} s)"
+            f"the documentation's blocks: {len(times)} ran in {sum(t[1] for t in times):.1f} s "
+            f"(the longest, {where}: {longest:.1f} s)"
         )

@@ -9,8 +9,8 @@ Needs Dask distributed (`pip install .[dask]`); `import fogplanes` alone never i
 Every function takes `client=None`: then it starts a `LocalCluster` of `workers` processes on
 this machine (bound to 127.0.0.1) and closes it afterwards. Pass a
 `distributed.Client` to use a cluster you started yourself: a scheduler address
-(`Client("tcp://host:8786")`) or a batch queue (dask-jobqueue's `SLURMCluster`); the README's
-section "On a cluster" shows all three. `client` is a Client, not an address: a string is a
+(`Client("tcp://host:8786")`) or a batch queue (dask-jobqueue's `SLURMCluster`); docs/cluster.md
+(the documentation's "On a cluster") shows all three. `client` is a Client, not an address: a string is a
 TypeError (connect with `distributed.Client(address)`, which you then own and close).
 
 Every function takes its `scene` as a `fogplanes.Scene` or the path of a scene file (str or
