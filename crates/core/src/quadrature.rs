@@ -212,7 +212,7 @@ mod tests {
             let s: f64 = if g < 0.0 { -1.0 } else { 1.0 };
             // x = 1 - s mu, from the peak (x = 0) to the far side (x = 2).
             let f = |x: f64| henyey_greenstein(g, s * (1.0 - x));
-            let (mut total, mut lo, mut hi) = (0.0, 0.0, 1e-9);
+            let (mut total, mut lo, mut hi) = (0.0, 0.0, 1e-9f64);
             while lo < 2.0 {
                 total += integrate(f, lo, hi.min(2.0), 1e-12, 0.0).value;
                 (lo, hi) = (hi, 2.0 * hi);

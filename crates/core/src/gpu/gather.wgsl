@@ -96,7 +96,7 @@ struct Params {
 
 const TILE: u32 = 16u;
 const THREADS: u32 = 256u;
-// Planes loaded into workgroup memory at a time: 64 x 128 bytes = 8 KiB.
+// Planes loaded into workgroup memory at a time: 64 x 144 bytes = 9 KiB.
 const BATCH: u32 = 64u;
 const F32_MAX: f32 = 3.4028234e38;
 // Stands in for an infinite chord length (a line along an axis is not bounded by that axis).
