@@ -9,6 +9,10 @@ shared machine falls on both alike. Reports the median CPU seconds (user + syste
 command) of each, the ratio new / old, and each build's ratio to its own smis-exact and
 unweighted. A configuration is an estimator name, optionally with `:K` orientations
 (smis-exact:4). Timings are reported, never asserted.
+
+`--new-scene` renders another scene with the new binary (the old one keeps `--scene`): a key the
+old build does not know, such as `[medium] g = 0.8`, measured against the old build's image of
+the same lights and planes (the same hits: g changes a hit's value, not which hits there are).
 """
 
 import argparse
@@ -40,6 +44,7 @@ def main():
     ap.add_argument("new")
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--scene", default="media_scenes/six_lights.toml")
+    ap.add_argument("--new-scene", default=None, help="the new binary's scene (default: --scene)")
     ap.add_argument("--config", nargs="*", default=DEFAULT_CONFIGS)
     ap.add_argument("--extra", nargs="*", default=[], help="further arguments for both renders")
     args = ap.parse_args()
@@ -48,7 +53,8 @@ def main():
         times = {"old": [], "new": []}
         for _ in range(args.runs):
             for name in ("old", "new"):
-                times[name].append(cpu_seconds(getattr(args, name), args.scene, config, args.extra))
+                scene = args.new_scene if name == "new" and args.new_scene else args.scene
+                times[name].append(cpu_seconds(getattr(args, name), scene, config, args.extra))
         medians[config] = {n: statistics.median(t) for n, t in times.items()}
         m = medians[config]
         print(

@@ -560,7 +560,8 @@ pub(crate) fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     reference.check_finite("reference").map_err(|e| input(anyhow!("{}: {e}", a.reference.display())))?;
     // The table's images record what `render` with its settings would.
     let cam = &scene.camera;
-    let made = ImageInfo::new("render", &scene.name, scene.fingerprint(), (cam.width, cam.height), r.pixel_center);
+    let made = ImageInfo::new("render", &scene.name, scene.fingerprint(), (cam.width, cam.height), r.pixel_center)
+        .with_medium_g(scene.medium.g);
     check_reference(Some(&made), reference_info.as_ref(), &a.reference)?;
     if (reference.width, reference.height) != (scene.camera.width, scene.camera.height) {
         return Err(input(anyhow!(

@@ -264,3 +264,31 @@ fn a_z_image_records_what_it_is() {
     assert!(err.contains("compare z-image"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A forward-scattering scene's render and reference record their g (`medium_g`, which `info`
+/// prints), an isotropic one's none; `compare` refuses a reference of another g, as it refuses
+/// one of another scene (the fingerprint holds g).
+#[test]
+fn images_record_the_phase_functions_g() {
+    let dir = scratch_dir("doors-g");
+    let [img, forward_ref, iso_ref] = ["img.exr", "forward_ref.exr", "iso_ref.exr"].map(|n| dir.join(n));
+    let forward = "media_scenes/forward_fog.toml";
+    let isotropic = dir.join("isotropic.toml");
+    let text = std::fs::read_to_string(forward).unwrap().replace("g = 0.85", "g = 0");
+    std::fs::write(&isotropic, text).unwrap();
+    let small = ["--resolution", "16x10", "-q"];
+    succeeded(&fogplanes(&[&["render", forward, "--planes", "1024", "-o", path(&img)][..], &small[..]].concat()), "render");
+    for (scene, out) in [(forward, &forward_ref), (path(&isotropic), &iso_ref)] {
+        succeeded(&fogplanes(&[&["reference", scene, "--spp", "16", "-o", path(out)][..], &small[..]].concat()), "reference");
+    }
+    for file in [&img, &forward_ref] {
+        let info = succeeded(&fogplanes(&["info", path(file)]), "info");
+        assert!(info.contains("medium_g: 0.85"), "{info}");
+    }
+    let info = succeeded(&fogplanes(&["info", path(&iso_ref)]), "info");
+    assert!(!info.contains("medium_g"), "{info}");
+    succeeded(&fogplanes(&["compare", path(&img), path(&forward_ref)]), "compare");
+    let err = refused(&["compare", path(&img), path(&iso_ref)]);
+    assert!(err.contains("scene"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -10,7 +10,8 @@
 //!   in whose plane a light lies is moved out by a thin shell, see [`mitsuba_box`]), with a
 //!   `null` BSDF and the `homogeneous` medium inside it: `sigma_t` per channel, given as a
 //!   `constvolume` because Mitsuba refuses plain RGB values above 1 for it, `albedo` =
-//!   sigma_s / sigma_t (0 where sigma_t is 0), an `isotropic` phase function.
+//!   sigma_s / sigma_t (0 where sigma_t is 0), an `isotropic` phase function, or `hg` with the
+//!   scene's `g` (the same sign convention: positive scatters forward).
 //! - Each light is a `rectangle` (which spans `[-1, 1]^2` in its local xy plane, normal +z)
 //!   whose `to_world` has the columns `edge_u / 2`, `edge_v / 2`, `n` and the centre
 //!   `corner + (edge_u + edge_v) / 2`, so that local `(-1, -1)`, `(1, -1)`, `(-1, 1)` are the
@@ -84,7 +85,14 @@ pub fn mitsuba_xml(scene: &Scene) -> String {
     let _ = writeln!(x, r#"            <rgb name="value" value="{}"/>"#, triple(sigma_t));
     let _ = writeln!(x, r#"        </volume>"#);
     let _ = writeln!(x, r#"        <rgb name="albedo" value="{}"/>"#, triple(albedo));
-    let _ = writeln!(x, r#"        <phase type="isotropic"/>"#);
+    // Mitsuba's `hg` has fogplanes' sign convention (positive g scatters forward), section 1.1.
+    if m.g == 0.0 {
+        let _ = writeln!(x, r#"        <phase type="isotropic"/>"#);
+    } else {
+        let _ = writeln!(x, r#"        <phase type="hg">"#);
+        let _ = writeln!(x, r#"            <float name="g" value="{}"/>"#, num(m.g));
+        let _ = writeln!(x, r#"        </phase>"#);
+    }
     let _ = writeln!(x, r#"    </medium>"#);
     let _ = writeln!(x);
 
@@ -405,6 +413,7 @@ min = [-2.0, 0.0, -2.0]
 max = [2.0, 2.0, 2.0]
 sigma_s = [0.1, 0.0, 2.3]
 sigma_a = [0.05, 0.0, 0.7]
+g = -0.7
 
 [[light]]
 name = "a <\"b\"> & c -- d"
@@ -493,6 +502,14 @@ radiance = 2.5
                 let want = if med.sigma_t()[c] > 0.0 { med.sigma_s[c] / med.sigma_t()[c] } else { 0.0 };
                 assert_eq!(albedo[c], want);
                 assert!((0.0..=1.0).contains(&albedo[c]));
+            }
+            let phase = medium.child("phase", None);
+            if med.g == 0.0 {
+                assert_eq!(phase.attr("type"), Some("isotropic"));
+            } else {
+                assert_eq!(phase.attr("type"), Some("hg"));
+                let g: f64 = phase.child("float", Some("g")).attr("value").unwrap().parse().unwrap();
+                assert_eq!(g, med.g);
             }
 
             let integrator = root.child("integrator", None);

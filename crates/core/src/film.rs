@@ -115,11 +115,12 @@ impl ImageInfo {
     /// [`crate::scene::Scene::fingerprint`]: the scene's content.
     pub const SCENE: &'static str = "scene";
     /// The order fields are printed in; others follow, sorted.
-    const ORDER: [&'static str; 18] = [
+    const ORDER: [&'static str; 19] = [
         "image",
         "fogplanes",
         "scene_name",
         "scene",
+        "medium_g",
         "resolution",
         "pixel_filter",
         "estimator",
@@ -160,6 +161,12 @@ impl ImageInfo {
             }
         }
         info.with(Self::RESOLUTION, format!("{width}x{height}")).with("compared", compared)
+    }
+
+    /// The fields with the medium's Henyey-Greenstein `g` recorded as `medium_g`, where it is not
+    /// 0 (an isotropic scene's record is what it was before g; the fingerprint holds g too).
+    pub fn with_medium_g(self, g: f64) -> Self {
+        if g == 0.0 { self } else { self.with("medium_g", g) }
     }
 
     /// The fields with `key` set to `value` (replaced if present).

@@ -60,6 +60,9 @@ pub struct PlaneView {
     pub a_axis: Vec3,
     pub r_axis: Vec3,
     pub t_det: f32,
+    /// The sweep direction wl times the sign of g (+1 for g = 0), for the phase function
+    /// ([`Phase`]): the same for every orientation that makes a hit, like the hit's path.
+    pub toward: Vec3,
     pub frame: PlaneFrame,
     /// power / N: the hit-independent factor of C, the same for every plane of a light (the
     /// raster and the brute-force loop apply it once per light, see [`PlaneJob::gather_block`]).
@@ -75,7 +78,7 @@ pub struct PlaneView {
 }
 
 /// A [`PlaneView`] as the GPU reads it: the one definition of what crosses for a plane
-/// (`gpu/gather.wgsl`'s `Plane`, eight rows of 16 bytes; the occluders cross as [`Occluder`]s).
+/// (`gpu/gather.wgsl`'s `Plane`, nine rows of 16 bytes; the occluders cross as [`Occluder`]s).
 /// The same f32 values as the view, except that a reciprocal the CPU lets be infinite (a chord
 /// direction along an axis) is 0 here, and the shader reads 0 as infinite: Vulkan does not
 /// promise IEEE infinities.
@@ -106,6 +109,9 @@ pub struct PlaneRecord {
     pub unit: f32,
     pub inv_unit: f32,
     pub light: u32,
+    /// [`PlaneView::toward`], for the phase function.
+    pub toward: [f32; 3],
+    pub pad: u32,
 }
 
 impl From<&PlaneView> for PlaneRecord {
@@ -136,6 +142,8 @@ impl From<&PlaneView> for PlaneRecord {
             unit,
             inv_unit: finite(1.0 / unit),
             light: v.light,
+            toward: v.toward.to_array(),
+            pad: 0,
         }
     }
 }
@@ -183,6 +191,7 @@ impl PlaneView {
     /// `occluders`: the plane's range in [`GatherContext::occluders`].
     pub fn new(plane: &PhotonPlane, scene: &Scene, origin: DVec3, planes_total: usize, occluders: (u32, u32)) -> Self {
         let light = &scene.lights[plane.light];
+        let sign = if scene.medium.g < 0.0 { -1.0 } else { 1.0 };
         let b = plane.origin - origin;
         let normal = plane.chord.cross(plane.direction);
         let (sin_a, cos_a) = plane.alpha.sin_cos();
@@ -193,6 +202,7 @@ impl PlaneView {
             a_axis: plane.direction.cross(b).as_vec3(),
             r_axis: b.cross(plane.chord).as_vec3(),
             t_det: b.dot(normal) as f32,
+            toward: (sign * plane.direction).as_vec3(),
             frame: PlaneFrame::new(plane.width, plane.alpha, plane.p0, plane.q0, light.width, light.height),
             scale: (plane.power / planes_total as f64).as_vec3(),
             scale_max: (plane.power / planes_total as f64).as_vec3().max_element(),
@@ -241,16 +251,24 @@ impl PlaneView {
     /// and a finite C: D vanishes, or underflows to a denormal, only on a set of probability ~0,
     /// and such a hit adds nothing rather than an infinity. In a grey medium the three channels
     /// are one value.
+    ///
+    /// `HG`: the medium is not isotropic, and `phase` is `4 pi rho` divided into D as
+    /// `D' = D / (4 pi rho)` ([`Phase::inverse_lanes`]; section 1.1: one more division avoided).
+    /// Without it the isotropic arithmetic is what it always was, bit for bit.
     #[inline(always)]
-    pub fn contribution<const L: usize, V: Lanes<L>, const GREY: bool>(
+    pub fn contribution<const L: usize, V: Lanes<L>, const GREY: bool, const HG: bool>(
         &self,
         sigma_t: Vec3,
         length: V,
         d: V,
+        inverse_phase: V,
         lit: V::Mask,
     ) -> [V; 3] {
         let (s, scale, zero) = (V::splat, self.scale, V::splat(0.0));
         let lit = lit & d.gt(zero);
+        // D' = D / (4 pi rho): positive and finite wherever D is (4 pi rho lies in
+        // [(1 - |g|) / (1 + |g|)^2, (1 + |g|) / (1 - |g|)^2], section 1.1).
+        let d = if HG { d * inverse_phase } else { d };
         if GREY {
             // One check serves the three channels: the scales are finite and non-negative, so
             // every scale * q is finite exactly when the largest is (rounding is monotone).
@@ -268,6 +286,59 @@ impl PlaneView {
     }
 }
 
+/// The Henyey-Greenstein phase function as the gather evaluates it, in f32 (docs/mathematics.md
+/// section 1.1): for a hit on a plane with sweep direction `wl` seen along `we`, the ratio to the
+/// isotropic `1 / (4 pi)` already in the plane's power is
+///
+/// ```text
+/// 4 pi rho = (1 - g^2) / (1 + g^2 + 2 g (we . wl))^(3/2)
+///          = (1 - g^2) / ((1 - |g|)^2 + |g| |we + sign(g) wl|^2)^(3/2)
+/// ```
+///
+/// The second form has no cancellation at the peak (`we = -sign(g) wl`), where the first
+/// subtracts numbers near `(1 + |g|)^2` to leave `(1 - |g|)^2`, 1e-4 at |g| = 0.99: both vectors
+/// are unit, so `|we + w|^2 = 2 + 2 we . w`, a sum of squares that is never negative.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Phase {
+    /// g, as the scene gives it (0: isotropic, and the gather takes its isotropic path).
+    pub g: f32,
+    /// `abs(g)`.
+    pub h: f32,
+    /// `(1 - abs(g))^2`, the smallest value of the bracket.
+    pub floor: f32,
+    /// `1 / (1 - g^2)`.
+    pub inv_numerator: f32,
+}
+
+impl Phase {
+    pub fn new(g: f64) -> Self {
+        let h = g.abs();
+        Phase {
+            g: g as f32,
+            h: h as f32,
+            floor: ((1.0 - h) * (1.0 - h)) as f32,
+            inv_numerator: (1.0 / (1.0 - g * g)) as f32,
+        }
+    }
+
+    pub fn is_isotropic(&self) -> bool {
+        self.g == 0.0
+    }
+
+    /// `1 / (4 pi rho)` for each ray of the block against a plane whose
+    /// [`PlaneView::toward`] is `toward`: `bracket^(3/2) / (1 - g^2)` with
+    /// `bracket = (1 - |g|)^2 + |g| |we + toward|^2`, in `[(1 - |g|)^2, (1 + |g|)^2]` (to
+    /// rounding), so the result is positive and finite for |g| <= 0.99.
+    #[inline(always)]
+    pub fn inverse_lanes<const L: usize, V: Lanes<L>>(&self, ray: &RayBlock<V>, toward: Vec3) -> V {
+        let s = V::splat;
+        let (x, y, z) = (ray.x + s(toward.x), ray.y + s(toward.y), ray.z + s(toward.z));
+        let squared = z.mul_add(z, y.mul_add(y, x * x));
+        let bracket = s(self.h).mul_add(squared, s(self.floor));
+        bracket * bracket.sqrt() * s(self.inv_numerator)
+    }
+}
+
 /// One plane ready for the per-hit arithmetic: everything it reads that is the same for every
 /// ray, gathered by [`GatherContext::job`]. A new per-plane constant is one field here.
 pub struct PlaneJob<'a, D: Denominator> {
@@ -279,6 +350,7 @@ pub struct PlaneJob<'a, D: Denominator> {
     /// The panels that may shadow the plane (empty for most planes).
     pub occluders: &'a [Occluder],
     pub extinction: Extinction,
+    pub phase: Phase,
 }
 
 impl<D: Denominator> Clone for PlaneJob<'_, D> {
@@ -297,8 +369,11 @@ impl<D: Denominator> PlaneJob<'_, D> {
     ///
     /// Every plane of a light has the same `scale`, so the caller sums a light's planes and
     /// multiplies once ([the sums light by light](self#sums-light-by-light)).
+    ///
+    /// `HG`: the medium scatters anisotropically (`!phase.is_isotropic()`, checked by the
+    /// caller), and each hit's contribution carries its phase value ([`Phase`]).
     #[inline(always)]
-    pub fn gather_block<const L: usize, V: Lanes<L>, const GREY: bool, const CONTRIBUTE: bool>(
+    pub fn gather_block<const L: usize, V: Lanes<L>, const GREY: bool, const HG: bool, const CONTRIBUTE: bool>(
         &self,
         ray: &RayBlock<V>,
         sums: [&mut [f32; L]; 3],
@@ -316,7 +391,11 @@ impl<D: Denominator> PlaneJob<'_, D> {
         let det_perp = ray.dot(view.normal_perp);
         let d = self.weights.denominators_of::<L, V>(self.prepared, c.det, det_perp, c.a);
         let length = (c.t - ray.t0) + c.r;
-        let contribution = view.contribution::<L, V, GREY>(self.extinction.sigma_t, length, d, lit);
+        // The hit's path (y', x, the eye) is the same for every orientation that makes it, so
+        // its phase value is a factor of C and no weight changes (section 1.1).
+        let inverse_phase = if HG { self.phase.inverse_lanes::<L, V>(ray, view.toward) } else { V::splat(1.0) };
+        let contribution =
+            view.contribution::<L, V, GREY, HG>(self.extinction.sigma_t, length, d, inverse_phase, lit);
         let channels = if GREY { 1 } else { 3 };
         for (sum, value) in sums.into_iter().zip(contribution).take(channels) {
             (V::load(sum) + value).store(sum);
@@ -324,18 +403,20 @@ impl<D: Denominator> PlaneJob<'_, D> {
         c.hit.count()
     }
 
-    /// [`PlaneJob::gather_block`] with the grey or RGB case of the medium's extinction chosen
-    /// at run time (the vector kernels choose it once per plane instead).
+    /// [`PlaneJob::gather_block`] with the grey or RGB case of the medium's extinction, and the
+    /// isotropic or Henyey-Greenstein phase function, chosen at run time (the vector kernels
+    /// choose them once per plane instead).
     #[inline(always)]
     pub fn gather_block_in<const L: usize, V: Lanes<L>, const CONTRIBUTE: bool>(
         &self,
         ray: &RayBlock<V>,
         sums: [&mut [f32; L]; 3],
     ) -> u32 {
-        if self.extinction.grey {
-            self.gather_block::<L, V, true, CONTRIBUTE>(ray, sums)
-        } else {
-            self.gather_block::<L, V, false, CONTRIBUTE>(ray, sums)
+        match (self.extinction.grey, self.phase.is_isotropic()) {
+            (true, true) => self.gather_block::<L, V, true, false, CONTRIBUTE>(ray, sums),
+            (false, true) => self.gather_block::<L, V, false, false, CONTRIBUTE>(ray, sums),
+            (true, false) => self.gather_block::<L, V, true, true, CONTRIBUTE>(ray, sums),
+            (false, false) => self.gather_block::<L, V, false, true, CONTRIBUTE>(ray, sums),
         }
     }
 }
@@ -385,6 +466,7 @@ pub struct GatherContext {
     /// [`PlaneView::occluders_start`]).
     pub occluders: Vec<Occluder>,
     pub extinction: Extinction,
+    pub phase: Phase,
     /// The N of the set the planes belong to, once some are pushed: one N, so that every plane
     /// of a light has one scale (what the sums light by light rely on).
     planes_total: Option<usize>,
@@ -408,6 +490,7 @@ impl GatherContext {
             views: Vec::new(),
             occluders: Vec::new(),
             extinction,
+            phase: Phase::new(scene.medium.g),
             planes_total: None,
             by_light: Vec::new(),
         }
@@ -512,7 +595,14 @@ impl GatherContext {
         view: &PlaneView,
         prepared: &'a D::Plane,
     ) -> PlaneJob<'a, D> {
-        PlaneJob { weights, prepared, view: *view, occluders: self.occluders_of(view), extinction: self.extinction }
+        PlaneJob {
+            weights,
+            prepared,
+            view: *view,
+            occluders: self.occluders_of(view),
+            extinction: self.extinction,
+            phase: self.phase,
+        }
     }
 
     /// The per-hit path: one ray against one plane. `None` if it misses; otherwise its
@@ -665,11 +755,11 @@ mod tests {
         assert_eq!(got, Vec3::new(3.0, 2.0, 5.0));
     }
 
-    /// The record that crosses to the GPU is 128 bytes, the layout `gpu/gather.wgsl`'s `Plane`
+    /// The record that crosses to the GPU is 144 bytes, the layout `gpu/gather.wgsl`'s `Plane`
     /// declares, and carries the view's values, an infinite reciprocal as 0.
     #[test]
     fn a_plane_record_carries_the_view_and_no_infinity() {
-        assert_eq!(std::mem::size_of::<PlaneRecord>(), 128);
+        assert_eq!(std::mem::size_of::<PlaneRecord>(), 144);
         assert_eq!(std::mem::size_of::<Occluder>(), 32);
         let text = include_str!("../../../media_scenes/six_lights.toml");
         let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
@@ -686,6 +776,41 @@ mod tests {
         v.frame.perp = crate::light::ChordDirection::<f32>::from_cos_sin(0.0, 1.0);
         let r = PlaneRecord::from(&v);
         assert_eq!((r.perp_inv_abs_cos, r.perp_inv_sin, r.perp_cos_positive), (0.0, 1.0, 0));
+    }
+
+    /// The gather's f32 phase factor against the f64 Henyey-Greenstein function of the medium
+    /// (docs/mathematics.md section 1.1): within 2e-5 relative for every g up to +-0.99 and every
+    /// angle, the exact peak and its opposite included, positive and finite throughout (the
+    /// values span more than six orders of magnitude at +-0.99). Also that the sign of g picks
+    /// the peak: forward (g > 0) is the eye looking against the light's travel.
+    #[test]
+    fn the_phase_factor_is_henyey_greenstein_in_f32() {
+        use crate::medium::{PHASE, henyey_greenstein};
+        for g in [-0.99, -0.9, -0.5, 0.3, 0.8, 0.9, 0.99] {
+            let phase = Phase::new(g);
+            let sign = if g < 0.0 { -1.0 } else { 1.0 };
+            let wl = DVec3::new(0.3, -0.8, 0.52).normalize();
+            let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+            for k in 0..=2000 {
+                // Directions from we = -wl (looking into the light's travel) to we = wl.
+                let theta = std::f64::consts::PI * k as f64 / 2000.0;
+                let side = wl.any_orthonormal_vector();
+                let we = (-wl * theta.cos() + side * theta.sin()).normalize();
+                let ray = RayBlock::one(&CameraRay { dir: we.as_vec3(), t0: 0.0, t1: 1.0 });
+                let inverse = phase.inverse_lanes::<1, f32>(&ray, (sign * wl).as_vec3());
+                let want = henyey_greenstein(g, wl.dot(-we)) / PHASE;
+                let got = 1.0 / inverse as f64;
+                assert!(inverse.is_finite() && inverse > 0.0, "g {g} theta {theta}: {inverse}");
+                assert!((got - want).abs() <= 2e-5 * want, "g {g} theta {theta}: {got} against {want}");
+                (lo, hi) = (lo.min(got), hi.max(got));
+            }
+            let (forward, backward) = (henyey_greenstein(g, 1.0) / PHASE, henyey_greenstein(g, -1.0) / PHASE);
+            assert_eq!(forward > backward, g > 0.0, "g {g}");
+            if g.abs() == 0.99 {
+                assert!(hi / lo > 1e6, "g {g}: the values span {lo} to {hi}");
+            }
+        }
+        assert!(Phase::new(0.0).is_isotropic() && !Phase::new(1e-3).is_isotropic());
     }
 
     #[test]

@@ -276,12 +276,15 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     spans: &[Span],
     band: &mut Band,
 ) -> u64 {
+    // Counting hits needs no phase function: one copy fewer of each kernel.
+    let hg = CONTRIBUTE && !job.phase.is_isotropic();
     macro_rules! run {
         ($f:ident) => {
-            if job.extinction.grey {
-                $f::<D, true, CONTRIBUTE>(job, spans, band)
-            } else {
-                $f::<D, false, CONTRIBUTE>(job, spans, band)
+            match (job.extinction.grey, hg) {
+                (true, false) => $f::<D, true, false, CONTRIBUTE>(job, spans, band),
+                (false, false) => $f::<D, false, false, CONTRIBUTE>(job, spans, band),
+                (true, true) => $f::<D, true, true, CONTRIBUTE>(job, spans, band),
+                (false, true) => $f::<D, false, true, CONTRIBUTE>(job, spans, band),
             }
         };
     }
@@ -379,12 +382,12 @@ macro_rules! plane_kernel {
     ($(#[$attr:meta])* $name:ident, $lanes:ty, $half:ty) => {
         $(#[$attr])*
         #[inline(never)]
-        fn $name<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+        fn $name<D: Denominator, const GREY: bool, const HG: bool, const CONTRIBUTE: bool>(
             job: &PlaneJob<D>,
             spans: &[Span],
             band: &mut Band,
         ) -> u64 {
-            plane_body::<$lanes, $half, D, GREY, CONTRIBUTE>(job, spans, band)
+            plane_body::<$lanes, $half, D, GREY, HG, CONTRIBUTE>(job, spans, band)
         }
     };
 }
@@ -416,7 +419,14 @@ plane_kernel!(
 /// on `V` (a span's last half block, if any, on `H`), the band's arrays loaded and stored in
 /// place.
 #[inline(always)]
-fn plane_body<V: Lanes<LANES>, H: Lanes<HALF_LANES>, D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+fn plane_body<
+    V: Lanes<LANES>,
+    H: Lanes<HALF_LANES>,
+    D: Denominator,
+    const GREY: bool,
+    const HG: bool,
+    const CONTRIBUTE: bool,
+>(
     job: &PlaneJob<D>,
     spans: &[Span],
     band: &mut Band,
@@ -434,11 +444,11 @@ fn plane_body<V: Lanes<LANES>, H: Lanes<HALF_LANES>, D: Denominator, const GREY:
         let whole = start + (end - start) / LANES * LANES;
         for i in (start..whole).step_by(LANES) {
             // SAFETY: i + LANES <= whole <= end <= len, checked above.
-            hits += unsafe { block::<LANES, V, D, GREY, CONTRIBUTE>(job, band, i) } as u64;
+            hits += unsafe { block::<LANES, V, D, GREY, HG, CONTRIBUTE>(job, band, i) } as u64;
         }
         if whole < end {
             // SAFETY: whole + HALF_LANES = end <= len (whole half blocks, checked above).
-            hits += unsafe { block::<HALF_LANES, H, D, GREY, CONTRIBUTE>(job, band, whole) } as u64;
+            hits += unsafe { block::<HALF_LANES, H, D, GREY, HG, CONTRIBUTE>(job, band, whole) } as u64;
         }
     }
     hits
@@ -451,7 +461,14 @@ fn plane_body<V: Lanes<LANES>, H: Lanes<HALF_LANES>, D: Denominator, const GREY:
 /// `i + L <= band.pixels()`. (Checked per span by the caller: eight bounds checks per block were
 /// about 1% of the benchmark's CPU time.)
 #[inline(always)]
-unsafe fn block<const L: usize, V: Lanes<L>, D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
+unsafe fn block<
+    const L: usize,
+    V: Lanes<L>,
+    D: Denominator,
+    const GREY: bool,
+    const HG: bool,
+    const CONTRIBUTE: bool,
+>(
     job: &PlaneJob<D>,
     band: &mut Band,
     i: usize,
@@ -481,7 +498,7 @@ unsafe fn block<const L: usize, V: Lanes<L>, D: Denominator, const GREY: bool, c
     };
     // SAFETY: as above (three distinct arrays).
     let block_sums: [&mut [f32; L]; 3] = unsafe { [lanes_mut(sums.r, i), lanes_mut(sums.g, i), lanes_mut(sums.b, i)] };
-    job.gather_block::<L, V, GREY, CONTRIBUTE>(&block, block_sums)
+    job.gather_block::<L, V, GREY, HG, CONTRIBUTE>(&block, block_sums)
 }
 
 #[cfg(test)]

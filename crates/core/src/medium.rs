@@ -5,13 +5,46 @@ use glam::DVec3;
 /// Isotropic phase function rho = 1 / (4 pi).
 pub const PHASE: f64 = 1.0 / (4.0 * std::f64::consts::PI);
 
-#[derive(Clone, Debug)]
+/// The largest `abs(g)` a scene may ask for: at 0.99 the phase function already spans more than
+/// six orders of magnitude (docs/mathematics.md section 1.1).
+pub const G_MAX: f64 = 0.99;
+
+#[derive(Clone)]
 pub struct Medium {
     pub min: DVec3,
     pub max: DVec3,
     /// Scattering and absorption coefficients per unit length, RGB.
     pub sigma_s: DVec3,
     pub sigma_a: DVec3,
+    /// The Henyey-Greenstein asymmetry in [-G_MAX, G_MAX]; 0 is isotropic, positive scatters
+    /// forward (docs/mathematics.md section 1.1).
+    pub g: f64,
+}
+
+/// As derived, with `g` written only when it is not 0: the scene's fingerprint
+/// ([`crate::scene::Scene::fingerprint`]) of an isotropic medium stays what it was before `g`.
+impl std::fmt::Debug for Medium {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut d = f.debug_struct("Medium");
+        d.field("min", &self.min).field("max", &self.max).field("sigma_s", &self.sigma_s).field("sigma_a", &self.sigma_a);
+        if self.g != 0.0 {
+            d.field("g", &self.g);
+        }
+        d.finish()
+    }
+}
+
+/// The Henyey-Greenstein phase function (docs/mathematics.md section 1.1), per steradian:
+/// `(1 - g^2) / (4 pi (1 + g^2 - 2 g mu)^(3/2))`, `mu` the cosine of the scattering angle, between
+/// the direction the light travels before the scattering and the direction it leaves in (toward
+/// the eye). `g = 0` is [`PHASE`]. In f64, for the reference renderer and the quadrature; the
+/// gather has its own f32 form (`gather::Phase`).
+pub fn henyey_greenstein(g: f64, mu: f64) -> f64 {
+    if g == 0.0 {
+        return PHASE;
+    }
+    let denom = 1.0 + g * g - 2.0 * g * mu.clamp(-1.0, 1.0);
+    PHASE * (1.0 - g * g) / (denom * denom.sqrt())
 }
 
 impl Medium {
@@ -60,6 +93,12 @@ impl Medium {
         (p.cmpge(self.min - tolerance) & p.cmple(self.max + tolerance)).all()
     }
 
+    /// The phase function for light travelling along `travel` that scatters toward `out` (both
+    /// unit): [`henyey_greenstein`] with `mu = travel . out`.
+    pub fn phase(&self, travel: DVec3, out: DVec3) -> f64 {
+        henyey_greenstein(self.g, travel.dot(out))
+    }
+
     /// The box diagonal: no segment inside the box is longer.
     pub fn diagonal(&self) -> f64 {
         (self.max - self.min).length()
@@ -71,7 +110,7 @@ mod tests {
     use super::*;
 
     fn unit_box() -> Medium {
-        Medium { min: DVec3::ZERO, max: DVec3::ONE, sigma_s: DVec3::splat(0.5), sigma_a: DVec3::splat(0.5) }
+        Medium { min: DVec3::ZERO, max: DVec3::ONE, sigma_s: DVec3::splat(0.5), sigma_a: DVec3::splat(0.5), g: 0.0 }
     }
 
     #[test]

@@ -111,6 +111,7 @@ impl RenderOptions {
         let (cam, w) = (&scene.camera, &self.weighting);
         let info =
             ImageInfo::new("render", &scene.name, scene.fingerprint(), (cam.width, cam.height), self.pixel_center)
+                .with_medium_g(scene.medium.g)
                 .with("estimator", w.estimator.name());
         let info = if w.estimator.has_orientations() { info.with("orientations", w.orientations) } else { info };
         info.with("planes", planes)

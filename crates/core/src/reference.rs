@@ -11,7 +11,6 @@
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::film::{Film, ImageInfo};
-use crate::medium::PHASE;
 use crate::sampling::{Discrete, Kronecker, rng_for, unit_f64};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
@@ -38,6 +37,7 @@ impl ReferenceOptions {
         let what = if stderr { "reference standard error" } else { "reference" };
         let cam = &scene.camera;
         ImageInfo::new(what, &scene.name, scene.fingerprint(), (cam.width, cam.height), self.pixel_center)
+            .with_medium_g(scene.medium.g)
             .with("spp", self.spp)
             .with("seed", self.seed)
             .with("samples", if self.uniform { "uniform" } else { "adaptive" })
@@ -97,7 +97,10 @@ pub fn scattering_sample(
     let medium = &scene.medium;
     let tr = medium.transmittance((t - t0) + d);
     let weight = cos * (theta_b - theta_a) / dist * light.area() / lights.probability(k);
-    medium.sigma_s * PHASE * light.radiance * tr * weight
+    // The phase function at the angle between the light's travel (y to x) and the way to the
+    // eye (-we), section 1.1: PHASE itself when g = 0.
+    let phase = medium.phase(to_x / d, -we);
+    medium.sigma_s * phase * light.radiance * tr * weight
 }
 
 /// Independent replicates per pixel: the standard error comes from their spread.

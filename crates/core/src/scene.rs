@@ -9,7 +9,7 @@ use crate::limits::{
     DEFAULT_PLANES, DEFAULT_RAY_SETS, DEFAULT_SEED, MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_planes,
     check_render_memory, check_resolution, check_spp,
 };
-use crate::medium::Medium;
+use crate::medium::{G_MAX, Medium};
 use crate::sampling::{Discrete, Sampler};
 use crate::weights::{Estimator, Weighting};
 use glam::DVec3;
@@ -84,6 +84,9 @@ pub struct MediumDesc {
     pub max: [f64; 3],
     pub sigma_s: Rgb,
     pub sigma_a: Rgb,
+    /// The Henyey-Greenstein asymmetry; absent is 0 (isotropic).
+    #[serde(default)]
+    pub g: f64,
 }
 
 #[derive(Deserialize, Debug)]
@@ -239,6 +242,11 @@ impl Scene {
             max,
             sigma_s: non_negative("medium.sigma_s", m.sigma_s)?,
             sigma_a: non_negative("medium.sigma_a", m.sigma_a)?,
+            g: if m.g.is_finite() && m.g.abs() <= G_MAX {
+                m.g
+            } else {
+                return Err(err("medium.g".into(), format!("must be a finite number in [-{G_MAX}, {G_MAX}], got {}", m.g)));
+            },
         };
         let scale = medium.diagonal();
 
@@ -527,6 +535,15 @@ radiance = 4
         expect_error(&MINIMAL.replace("[32, 16]", "[0, 16]"), "camera.resolution", "between 1");
         expect_error(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"), "medium.sigma_a", "non-negative");
         expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"), "medium", "empty");
+        for g in ["1.0", "-0.995", "nan", "inf"] {
+            expect_error(&MINIMAL.replace("sigma_a = 0.05", &format!("sigma_a = 0.05\ng = {g}")), "medium.g", "[-0.99, 0.99]");
+        }
+        let forward = parse(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = 0.05\ng = 0.99")).unwrap();
+        assert_eq!((forward.medium.g, parse(MINIMAL).unwrap().medium.g), (0.99, 0.0));
+        // g joins the fingerprint only when it is not 0: an isotropic scene's is as before g.
+        assert_ne!(forward.fingerprint(), parse(MINIMAL).unwrap().fingerprint());
+        let zero = parse(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = 0.05\ng = 0.0")).unwrap();
+        assert_eq!(zero.fingerprint(), parse(MINIMAL).unwrap().fingerprint());
         expect_error(
             &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [0.0, 0.0, 0.0]"),
             "light[0] (top).edge_u",

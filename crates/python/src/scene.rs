@@ -47,6 +47,8 @@ pub(crate) struct PyMedium {
     pub(crate) sigma_a: Vec3,
     /// Extinction sigma_s + sigma_a.
     pub(crate) sigma_t: Vec3,
+    /// Henyey-Greenstein asymmetry in [-0.99, 0.99]: 0 isotropic, positive scatters forward.
+    pub(crate) g: f64,
 }
 
 /// A one-sided rectangular light: corner + p edge_u/|edge_u| + q edge_v/|edge_v|.
@@ -97,11 +99,12 @@ impl PyCamera {
 impl PyMedium {
     fn __repr__(&self) -> String {
         format!(
-            "Medium(min={}, max={}, sigma_s={}, sigma_a={})",
+            "Medium(min={}, max={}, sigma_s={}, sigma_a={}, g={})",
             fmt3(self.min),
             fmt3(self.max),
             fmt3(self.sigma_s),
-            fmt3(self.sigma_a)
+            fmt3(self.sigma_a),
+            self.g
         )
     }
 }
@@ -227,6 +230,7 @@ impl PyScene {
             sigma_s: triple(m.sigma_s),
             sigma_a: triple(m.sigma_a),
             sigma_t: triple(m.sigma_t()),
+            g: m.g,
         }
     }
 

@@ -5,7 +5,7 @@ use super::{BATCH_PLANES, TILE, TileReach, estimator_id, item_planes};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
-use crate::gather::{GatherContext, GatherStats, PlaneRecord};
+use crate::gather::{GatherContext, GatherStats, Phase, PlaneRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
 use std::collections::HashMap;
@@ -31,6 +31,11 @@ struct GatherParams {
     grey: u32,
     orientations: u32,
     inv_orientations: f32,
+    /// gather.rs `Phase`: `abs(g)`, `(1 - abs(g))^2`, `1 / (1 - g^2)`, and whether g != 0.
+    phase_h: f32,
+    phase_floor: f32,
+    phase_inv_numerator: f32,
+    phase_hg: u32,
     pad: [u32; 2],
 }
 
@@ -325,6 +330,7 @@ pub struct GpuPlanes {
     batches: Vec<Batch>,
     sigma_t: Vec3,
     grey: bool,
+    phase: Phase,
 }
 
 impl GpuPlanes {
@@ -399,6 +405,7 @@ impl GpuPlanes {
             batches,
             sigma_t,
             grey: ctx.extinction.grey,
+            phase: ctx.phase,
         };
         planes.gpu.take_errors().map_err(Error::Device)?;
         Ok(planes)
@@ -480,6 +487,10 @@ impl GpuPlanes {
             grey: self.grey as u32,
             orientations: k,
             inv_orientations: 1.0 / k as f32,
+            phase_h: self.phase.h,
+            phase_floor: self.phase.floor,
+            phase_inv_numerator: self.phase.inv_numerator,
+            phase_hg: !self.phase.is_isotropic() as u32,
             pad: [0; 2],
         };
         let (storage, copy_src) = (wgpu::BufferUsages::STORAGE, wgpu::BufferUsages::COPY_SRC);
@@ -877,14 +888,14 @@ mod tests {
                 "Plane",
                 fields!(PlaneRecord: normal, t_det, a_axis, width, r_axis, occluders_start, normal_perp,
                     occluders_end, scale, scale_max, cos_a, sin_a, p0, q0, light_w, light_h, perp_inv_abs_cos,
-                    perp_inv_sin, perp_cos_positive, unit, inv_unit, light),
+                    perp_inv_sin, perp_cos_positive, unit, inv_unit, light, toward, pad),
             ),
             (GATHER_WGSL, "Occluder", fields!(Occluder: t0, t_a, p0, p_a, q0, q_a, width, height)),
             (
                 GATHER_WGSL,
                 "Params",
                 fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
-                    pad),
+                    phase_h, phase_floor, phase_inv_numerator, phase_hg, pad),
             ),
             (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
         ];

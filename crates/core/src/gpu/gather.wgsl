@@ -15,7 +15,7 @@
 // 5 smis-cosine with K orientations, 6 smis-exact with K orientations (gpu/mod.rs `estimator_id`).
 override ESTIMATOR: u32 = 0u;
 
-// gather.rs `PlaneRecord`, 128 bytes (eight rows of 16).
+// gather.rs `PlaneRecord`, 144 bytes (nine rows of 16).
 struct Plane {
     normal: vec3<f32>,
     t_det: f32,
@@ -39,6 +39,8 @@ struct Plane {
     unit: f32,
     inv_unit: f32,
     light: u32,
+    toward: vec3<f32>,
+    pad0: u32,
 };
 
 // occlusion.rs `Occluder`.
@@ -67,6 +69,10 @@ struct Params {
     grey: u32,
     orientations: u32,
     inv_orientations: f32,
+    phase_h: f32,
+    phase_floor: f32,
+    phase_inv_numerator: f32,
+    phase_hg: u32,
     pad0: u32,
     pad1: u32,
 };
@@ -90,7 +96,7 @@ struct Params {
 
 const TILE: u32 = 16u;
 const THREADS: u32 = 256u;
-// Planes loaded into workgroup memory at a time: 64 x 128 bytes = 8 KiB.
+// Planes loaded into workgroup memory at a time: 64 x 144 bytes = 9 KiB.
 const BATCH: u32 = 64u;
 const F32_MAX: f32 = 3.4028234e38;
 // Stands in for an infinite chord length (a line along an axis is not bounded by that axis).
@@ -415,6 +421,17 @@ fn contribution(pl: Plane, length: f32, d: f32) -> vec3<f32> {
     return pl.scale * (e / d);
 }
 
+// 1 / (4 pi rho) of the Henyey-Greenstein phase function for a hit seen along dir on a plane
+// swept along pl.toward / sign(g) (gather.rs `Phase::inverse_lanes`, docs/mathematics.md section
+// 1.1): bracket^(3/2) / (1 - g^2), bracket = (1 - |g|)^2 + |g| |dir + toward|^2, in
+// [(1 - |g|)^2, (1 + |g|)^2]: positive and finite.
+fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
+    let v = dir + toward;
+    let squared = fma(v.z, v.z, fma(v.y, v.y, v.x * v.x));
+    let bracket = fma(params.phase_h, squared, params.phase_floor);
+    return bracket * sqrt(bracket) * params.phase_inv_numerator;
+}
+
 // ---------------------------------------------------------------------------------------------
 // The gather over work items, and the reduction of a tile's items.
 
@@ -467,7 +484,12 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
                 hits += 1u;
                 if (!blocked(pl, a, r)) {
                     let det_perp = dot3(dir, pl.normal_perp);
-                    let d = denominator(pl, det, det_perp, a);
+                    var d = denominator(pl, det, det_perp, a);
+                    // The phase value divides D (section 1.1); D > 0 is tested after, as the
+                    // CPU's D > 0 and finite test drop the same hits.
+                    if (params.phase_hg != 0u && d > 0.0) {
+                        d = d * inverse_phase(dir, pl.toward);
+                    }
                     sum += contribution(pl, (t - t0) + r, d);
                 }
             }

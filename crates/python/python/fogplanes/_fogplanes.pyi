@@ -59,6 +59,9 @@ class Medium:
     @property
     def sigma_t(self) -> Vec3:
         """Extinction sigma_s + sigma_a."""
+    @property
+    def g(self) -> float:
+        """Henyey-Greenstein asymmetry in [-0.99, 0.99]: 0 isotropic, positive scatters forward."""
 
 class Light:
     """A one-sided rectangular light: corner + p edge_u/|edge_u| + q edge_v/|edge_v|."""
