@@ -133,18 +133,24 @@ fn default_output(scene: &Scene, suffix: &str) -> PathBuf {
 pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     refuse_unused(a.unused())?;
     let scene = Scene::load(&a.scene).map_err(input)?;
-    let r = settings::resolve_render(&scene, &Overrides::from(&a))?;
-    let (scene, opts) = (&r.scene, &r.options);
+    // Every refusal the arguments decide, the command's own among them, before the device is
+    // found: a GPU's driver starts only for a render that goes on.
+    let pending = settings::check_render(&scene, &Overrides::from(&a))?;
     if let Some(part) = &a.partial {
         settings::check_exposure_applies(a.exposure, &[])?;
-        return render_part(&a, scene, opts, part, r.threads);
+        check_partial_output(part, &[&a.scene])?;
+        if let Some((start, end)) = a.plane_range {
+            fogplanes::partial::chunk_indices(pending.settings().options.planes(), &(start as usize..end as usize))?;
+        }
+        let r = pending.find_device()?;
+        return render_part(&a, &r.scene, &r.options, part, r.threads);
     }
-    let output = a.output.clone().unwrap_or_else(|| default_output(scene, ""));
+    let output = a.output.clone().unwrap_or_else(|| default_output(&pending.settings().scene, ""));
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
     outputs.extend(a.schedule_record.as_deref().map(Output::File));
     check_outputs(&outputs, &[&a.scene])?;
-    if r.in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
+    if pending.settings().in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
         return Err(input(anyhow!(
             "{flag}: a render in passes (on a time budget or to a target error) has no chunks to follow: give --planes"
@@ -152,6 +158,8 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     }
     let images: Vec<&Path> = outputs.iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
+    let r = pending.find_device()?;
+    let (scene, opts) = (&r.scene, &r.options);
     start_threads(r.threads)?;
     // Before the progress bar: its units are the tiles cut for these workers.
     fogplanes::schedule::cut_for(a.schedule_workers.filter(|&n| n > 0));
@@ -162,7 +170,12 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let mut watch = RenderWatch::start(&a.watch, scene, opts, &bar)?;
     if let (Some(ck), resumed @ 1..) = (&a.watch.checkpoint, watch.resumed_planes()) {
         bar.set_position(progress_units(scene, opts, 0..resumed));
-        say!("resuming from {}: {resumed} of {} planes are done", ck.display(), opts.planes());
+        // On another device than the checkpoint's, the render goes on, and says so here and
+        // in its summary; the image records every device (docs/gpu.md).
+        let devices = watch.resumed_devices();
+        let on =
+            if devices.names() == [opts.device_label()] { String::new() } else { format!(" (gathered on {devices})") };
+        say!("resuming from {}: {resumed} of {} planes are done{on}", ck.display(), opts.planes());
     }
     let cpu = system::cpu_seconds();
     let (film, stats) = if !r.in_passes() {
@@ -199,7 +212,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
-    let info = opts.image_info(scene, stats.planes);
+    let info = opts.image_info(scene, stats.planes, &stats.devices);
     film.save_with_info(&output, r.exposure, Some(&info))?;
     if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
         se.save_with_info(path, r.exposure, Some(&info.clone().with(ImageInfo::IMAGE, "render standard error")))?;
@@ -220,6 +233,10 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     }
     if let Some(b) = system::peak_memory_bytes() {
         summary += &format!(", peak memory {:.0} MB", b as f64 / 1e6);
+    }
+    // A render resumed from a checkpoint begun on another device goes on, and says so.
+    if let Some(note) = stats.devices_note() {
+        summary += &format!("; {note}");
     }
     say!("{summary}");
     if let Some(why) = out_of_reach(&stats, r.target_error) {
@@ -252,7 +269,8 @@ fn out_of_reach(stats: &fogplanes::options::RenderStats, target: Option<f64>) ->
     }
 }
 
-/// `render --partial`: planes `--plane-range` (all by default) into a partial file.
+/// `render --partial`: planes `--plane-range` (all by default, a union of the render's chunks)
+/// into a partial file (a .npz that is none of the inputs).
 fn render_part(
     a: &RenderArgs,
     scene: &Scene,
@@ -260,10 +278,9 @@ fn render_part(
     part: &std::path::Path,
     threads: Option<usize>,
 ) -> Result<(), Failure> {
-    check_partial_output(part, &[&a.scene])?;
+    // Its output and its plane range were checked before the device was found.
     let (start, end) = a.plane_range.unwrap_or((0, opts.planes() as u64));
     let range = start as usize..end as usize;
-    fogplanes::partial::chunk_indices(opts.planes(), &range)?;
     start_threads(threads)?;
     let units = progress_units(scene, opts, range.clone());
     let planes = (range.end - range.start) as u64;
@@ -287,13 +304,14 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
     let merged = merge_parts(&a.parts)?;
     let exposure = settings::exposure(a.exposure)?;
     match merged {
-        Merged::Render { scene, options, partial, image, devices } => {
+        Merged::Render { scene, options, partial, image } => {
             if a.stderr_image.is_some() {
                 return Err(input(anyhow!("--stderr-image: render parts have no standard error")));
             }
             check_outputs(&[Output::Image(&a.output)], &parts)?;
             settings::check_exposure_applies(a.exposure, &[&a.output])?;
-            image.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, partial.planes_total)))?;
+            let info = options.image_info(&scene, partial.planes_total, &partial.devices);
+            image.save_with_info(&a.output, exposure, Some(&info))?;
             if !a.quiet {
                 say!(
                     "merged {} parts: {} planes, {} hits, {:.3} s of rendering",
@@ -302,10 +320,10 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                     partial.hits,
                     partial.seconds
                 );
-                if devices.len() > 1 {
+                if partial.devices.len() > 1 {
                     say!(
                         "note: the parts were gathered on different devices ({}): the image agrees with each one's render within f32 rounding, and is the bits of neither",
-                        devices.join(", ")
+                        partial.devices
                     );
                 }
                 say!(
@@ -554,7 +572,9 @@ const TABLE_PLOTS: [&str; 2] = ["error_vs_time.png", "error_vs_time.svg"];
 
 pub(crate) fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     let scene = Scene::load(&a.scene).map_err(input)?;
-    let r = settings::resolve_table(&scene, &TableOverrides::from(&a))?;
+    // The device is found after every refusal the arguments and files decide.
+    let pending = settings::check_table(&scene, &TableOverrides::from(&a))?;
+    let r = pending.settings();
     let scene = &r.scene;
     let (reference, reference_info) = Film::load_exr_with_info(&a.reference).map_err(input)?;
     reference.check_finite("reference").map_err(|e| input(anyhow!("{}: {e}", a.reference.display())))?;
@@ -592,6 +612,7 @@ pub(crate) fn cmd_table(a: TableArgs) -> Result<(), Failure> {
     let outputs: Vec<Output> =
         std::iter::once(Output::Image(&panel)).chain(files.iter().map(|p| Output::File(p))).collect();
     check_outputs(&outputs, &[&a.scene, &a.reference])?;
+    let r = pending.find_device()?;
     start_threads(r.threads)?;
     let opts =
         TableOptions { settings: &r, out: a.out.clone(), quiet: a.common.quiet, reference_path: a.reference.clone() };
@@ -608,12 +629,13 @@ pub(crate) fn cmd_scaling(a: ScalingArgs) -> Result<(), Failure> {
     if a.common.resolution.is_some() {
         return Err(input(anyhow!("--resolution: scaling measures the sizes of --resolutions")));
     }
-    let r = settings::resolve_scaling(&ScalingOverrides::from(&a))?;
+    let pending = settings::check_scaling(&ScalingOverrides::from(&a))?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))
         .map_err(input)?;
     let (plot, files) = (a.out.join("seconds_vs_hits.png"), SCALING_FILES.map(|f| a.out.join(f)));
     check_outputs(&[&[Output::Image(&plot)][..], &files.each_ref().map(|p| Output::File(p))].concat(), &[&a.scene])?;
+    let r = pending.find_device()?;
     start_threads(r.threads)?;
     let md = experiments::run_scaling(&scene, &r, &a.out, a.common.quiet)?;
     say!("{md}");

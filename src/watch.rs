@@ -101,6 +101,15 @@ impl<'a> RenderWatch<'a> {
         self.resumed.held.last().map_or(0, |p| p.end)
     }
 
+    /// The devices whose gathering the checkpoint held at the start.
+    pub(crate) fn resumed_devices(&self) -> fogplanes::options::Devices {
+        let mut devices = fogplanes::options::Devices::default();
+        for p in &self.resumed.held {
+            devices.add(&p.devices);
+        }
+        devices
+    }
+
     /// What the checkpoint held at the start, for the render to resume from.
     pub(crate) fn take_resumed(&mut self) -> Resume {
         std::mem::take(&mut self.resumed)

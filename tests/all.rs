@@ -9,6 +9,7 @@ mod craft;
 mod benchmark_scene;
 mod cli;
 mod cmis_f32;
+mod devices;
 mod doors;
 mod error_image;
 mod fuzz_exr;

@@ -65,7 +65,7 @@ fn sets() -> Vec<Vec<PartFile>> {
             let p = render_chunk(&scene, &o, r, Control::none()).unwrap().0;
             let mut m = meta(PartKind::Render, p.fingerprint.clone(), &scene, (p.start, p.end, p.planes_total));
             m.hits = p.hits;
-            m.render = Some(render_record(&o));
+            m.render = Some(render_record(&o, &fogplanes::options::Devices::one("cpu")));
             let sums = Array::f64s("sums", vec![H as usize, W as usize, 3], p.sums.iter().flat_map(|s| s.to_array()));
             PartFile { meta: serde_json::to_value(&m).unwrap(), arrays: vec![sums] }
         })

@@ -305,10 +305,10 @@ fn gpu_parts_record_their_device_and_a_mixed_merge_says_so() {
     run(&["--plane-range", "0:16384", "--partial", &p("a.npz")]);
     run(&["--plane-range", "16384:20000", "--partial", &p("b.npz"), "--device", "gpu"]);
     let part = fogplanes::partial::parts::read_part(std::path::Path::new(&p("b.npz"))).unwrap();
-    assert!(part.meta.render.unwrap().device.starts_with("gpu: "));
+    assert!(part.meta.render.unwrap().devices[0].starts_with("gpu: "));
     let o = crate::common::fogplanes(&["merge", &p("a.npz"), &p("b.npz"), "-o", &p("merged.exr")]);
     let out = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success() && out.contains("different devices (cpu, gpu: "), "{out}");
+    assert!(o.status.success() && out.contains("different devices (cpu; gpu: "), "{out}");
     let (a, b) = (Film::load_exr(&dir.join("merged.exr")).unwrap(), Film::load_exr(&dir.join("cpu.exr")).unwrap());
     let to64 = |f: &Film| f.pixels.iter().map(|v| v.as_dvec3()).collect::<Vec<_>>();
     let (rel, _) = relative_mse(&to64(&a), &to64(&b));

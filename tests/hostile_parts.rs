@@ -77,7 +77,7 @@ fn meta(kind: PartKind, fingerprint: String, scene: &Scene, range: (usize, usize
 fn render_part(scene: &Scene, o: &RenderOptions, p: &Partial) -> (PartMeta, Vec<f64>) {
     let mut m = meta(PartKind::Render, p.fingerprint.clone(), scene, (p.start, p.end, p.planes_total));
     m.hits = p.hits;
-    m.render = Some(render_record(o));
+    m.render = Some(render_record(o, &fogplanes::options::Devices::one("cpu")));
     (m, p.sums.iter().flat_map(|v| v.to_array()).collect())
 }
 

@@ -7,6 +7,7 @@ files with the arrays of the module, bit for bit.
 
 import importlib.resources
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -518,6 +519,16 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
             raise AssertionError(f"FOGPLANES_REQUIRE_GPU=1 but there is no GPU adapter: {e}") from e
         pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
     assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0 and stats["seconds_upload"] > 0
+    assert stats["devices"] == [stats["device"]]
+    # Partials gathered on both devices: the finished image's stats name both, each once.
+    chunked = dict(resolution=(16, 9), planes=16400)
+    on_cpu = fogplanes.render_chunk(SIX_LIGHTS, (0, 16384), **chunked)
+    on_gpu = fogplanes.render_chunk(SIX_LIGHTS, (16384, 16400), device="gpu", **chunked)
+    assert on_cpu.devices == ["cpu"] and on_gpu.devices == [stats["device"]]
+    both = pickle.loads(pickle.dumps(on_cpu + on_gpu))
+    assert both.devices == ["cpu", stats["device"]]
+    _, merged = fogplanes.finish_render(SIX_LIGHTS, both, return_stats=True, **chunked)
+    assert merged["devices"] == ["cpu", stats["device"]]
     cpu = fogplanes.render(SIX_LIGHTS, **kwargs)
     fog = cpu.max(axis=2) < 1  # the pixels that see no light directly
     rel_mse = float(np.mean((gpu[fog] - cpu[fog]) ** 2) / np.mean(cpu[fog] ** 2))

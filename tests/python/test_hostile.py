@@ -69,7 +69,7 @@ def test_the_chunked_and_reference_functions_name_theirs(scene):
 def _state_with(partial, **changes):
     """The pickled state of `partial` (what __reduce__ gives) with fields changed."""
     rebuild, (state,) = partial.__reduce__()
-    names = ["width", "height", "sums", "start", "end", "planes_total", "fingerprint", "hits", "seconds"]
+    names = ["width", "height", "sums", "start", "end", "planes_total", "fingerprint", "hits", "seconds", "devices"]
     fields = dict(zip(names, state))
     fields.update(changes)
     return rebuild, tuple(fields[n] for n in names)
@@ -98,6 +98,9 @@ def test_an_unpickled_partial_holding_sums_no_render_makes_is_refused(scene, val
         (dict(seconds=float("nan")), "seconds"),
         (dict(width=True), "expected"),
         (dict(start=1), "not a union of the render's chunks"),
+        (dict(devices=[]), "0 devices named"),
+        (dict(devices=["cpu\nerror: forged"]), "is not a device's name"),
+        (dict(devices="cpu"), "expected"),
     ],
 )
 def test_an_unpickled_partial_claiming_counts_no_render_has_is_refused(scene, changes, says):

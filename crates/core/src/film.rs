@@ -557,11 +557,16 @@ fn read_exr_headers(path: &Path) -> Result<exr::meta::MetaData> {
 }
 
 /// What an EXR file's header records of how the image was made ([`ImageInfo`], `None` if
-/// nothing), and its size, reading no pixel.
+/// nothing), and its size; the file is read whole, every layer and channel decoded, so that a
+/// file whose pixels are incomplete (truncated) or damaged is refused, not described as an
+/// image.
 pub fn read_image_info(path: &Path) -> Result<(Option<ImageInfo>, (u32, u32))> {
     let meta = read_exr_headers(path)?;
     let header = meta.headers.first().ok_or_else(|| Error::bad_input(path, "an EXR file without a header"))?;
     let size = (header.layer_size.width() as u32, header.layer_size.height() as u32);
+    exr::prelude::read_all_flat_layers_from_file(path).map_err(|e| {
+        Error::bad_input(path, format!("its header reads, but its pixel data is incomplete or damaged: {e}"))
+    })?;
     Ok((ImageInfo::of_header(header), size))
 }
 

@@ -33,10 +33,11 @@ fn recorded_options(scene: &Scene, r: &RenderRecord) -> std::result::Result<Rend
 
 /// What parts merge into.
 pub enum Merged {
-    /// A whole render: its image, the scene, the settings and the merged sums; the devices its
-    /// parts were gathered on, each once (more than one: the image agrees with each device's
-    /// render within f32 rounding, docs/gpu.md, but is the bits of neither).
-    Render { scene: Scene, options: RenderOptions, partial: Partial, image: Film, devices: Vec<String> },
+    /// A whole render: its image, the scene, the settings and the merged sums, which hold the
+    /// devices its parts were gathered on ([`Partial::devices`]: more than one, and the image
+    /// agrees with each device's render within f32 rounding, docs/gpu.md, but is the bits of
+    /// neither).
+    Render { scene: Scene, options: RenderOptions, partial: Partial, image: Film },
     /// A whole reference: mean and standard error.
     Reference { scene: Scene, options: ReferenceOptions, mean: Film, stderr: Film, seconds: f64 },
     /// A whole pilot pass.
@@ -53,7 +54,8 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     // band whose recorded width had been changed was stacked as it was, shifting every later
     // row (or indexing past the image).
     // The device is not a setting of the image: parts of different devices merge.
-    let settings = |r: &Option<RenderRecord>| r.clone().map(|r| RenderRecord { device: String::new(), ..r });
+    let settings =
+        |r: &Option<RenderRecord>| r.clone().map(|r| RenderRecord { devices: Vec::new(), device: None, ..r });
     for p in &parts[1..] {
         let (a, b) = (&first.meta, &p.meta);
         if b.kind != a.kind
@@ -92,13 +94,7 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
             let partials = parts.iter().map(Part::partial).collect::<Result<Vec<_>>>()?;
             let partial = merge_in_canonical_order(partials).map_err(|e| named(&parts, e))?;
             let image = finish(&scene, &options, &partial)?;
-            let mut devices: Vec<String> = Vec::new();
-            for r in parts.iter().filter_map(|p| p.meta.render.as_ref()) {
-                if !devices.contains(&r.device) {
-                    devices.push(r.device.clone());
-                }
-            }
-            Ok(Merged::Render { scene, options, partial, image, devices })
+            Ok(Merged::Render { scene, options, partial, image })
         }
         kind => {
             let record = first.meta.reference.as_ref().ok_or_else(|| first.bad("no reference settings"))?;

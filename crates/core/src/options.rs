@@ -106,8 +106,9 @@ impl RenderOptions {
     }
 
     /// What an image of this render of `scene` records of how it was made ([`ImageInfo`]);
-    /// `planes` is the count it gathered (a render on a time budget chooses its own).
-    pub fn image_info(&self, scene: &Scene, planes: usize) -> ImageInfo {
+    /// `planes` is the count it gathered (a render on a time budget chooses its own), on
+    /// `devices` (a render's [`RenderStats::devices`], a merge's partial's).
+    pub fn image_info(&self, scene: &Scene, planes: usize, devices: &Devices) -> ImageInfo {
         let (cam, w) = (&scene.camera, &self.weighting);
         let info =
             ImageInfo::new("render", &scene.name, scene.fingerprint(), (cam.width, cam.height), self.pixel_center)
@@ -120,7 +121,87 @@ impl RenderOptions {
             .with("spp", self.spp)
             .with("ray_sets", self.ray_sets())
             .with("accelerator", self.accelerator.name())
-            .with("device", self.device_label())
+            .with("devices", devices)
+    }
+}
+
+/// The devices whose gathering a result holds, each once, in order: `cpu`, or `gpu: ` and the
+/// adapter ([`RenderOptions::device_label`]). One for a render; several for a merge of parts
+/// gathered on different devices, or a render resumed from a checkpoint on another device than
+/// the one that began it (the image agrees with each device's render within f32 rounding,
+/// docs/gpu.md, and is the bits of neither). Not in a render's fingerprint: such parts merge.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Devices(Vec<String>);
+
+impl Devices {
+    /// The most devices a record may name (a merge of parts from many machines).
+    pub const MOST: usize = 256;
+    /// The most bytes of one device's name.
+    pub const MOST_BYTES: usize = 256;
+
+    /// One device.
+    pub fn one(label: impl Into<String>) -> Self {
+        Devices(vec![label.into()])
+    }
+
+    /// The devices a record names (a part file, a pickle), trusted no more than an argument:
+    /// one at least, at most [`Devices::MOST`], each a line of text of at most
+    /// [`Devices::MOST_BYTES`] bytes without control characters (`fogplanes info` prints
+    /// them, an EXR header holds them); repeats kept once.
+    pub fn from_names(names: Vec<String>) -> std::result::Result<Self, String> {
+        let mut d = Devices::default();
+        for n in names {
+            d.add(&Devices(vec![n]));
+        }
+        d.check()?;
+        Ok(d)
+    }
+
+    /// Checks the names as [`Devices::from_names`] does.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.0.is_empty() || self.0.len() > Self::MOST {
+            return Err(format!("{} devices named, not 1 to {}", self.0.len(), Self::MOST));
+        }
+        for n in &self.0 {
+            if n.is_empty() || n.len() > Self::MOST_BYTES || n.chars().any(char::is_control) || n.contains("; ") {
+                return Err(format!(
+                    "{n:?} is not a device's name (1 to {} bytes of text on one line, without \"; \")",
+                    Self::MOST_BYTES
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds the devices of `other` not already here.
+    pub fn add(&mut self, other: &Devices) {
+        for n in &other.0 {
+            if !self.0.contains(n) {
+                self.0.push(n.clone());
+            }
+        }
+        self.0.sort();
+    }
+
+    /// The devices' names, in order.
+    pub fn names(&self) -> &[String] {
+        &self.0
+    }
+
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+impl std::fmt::Display for Devices {
+    /// The names joined by `; ` (a name holds commas: `gpu: llvmpipe (LLVM 15.0.6, 256 bits)
+    /// (Vulkan, CPU adapter)`).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0.join("; "))
     }
 }
 
@@ -142,6 +223,9 @@ pub struct RenderStats {
     pub seconds_gather: f64,
     /// The device that gathered (`cpu`, or `gpu: ` and the adapter).
     pub device: String,
+    /// The devices whose gathering the result holds: this render's device, and those of the
+    /// planes it resumed from (a checkpoint begun on another device).
+    pub devices: Devices,
     /// Seconds the GPU spent in its gather (binning included), by its timestamps where it has
     /// them, else the wall time from each chunk's first submission to its sums read back (an
     /// upper bound); 0 on the CPU.
@@ -173,6 +257,7 @@ impl RenderStats {
             estimator: opts.weighting.label(),
             kernel: opts.kernel.to_string(),
             device: opts.device_label(),
+            devices: Devices::one(opts.device_label()),
             planes: opts.planes,
             plane_passes: 1,
             ..Default::default()
@@ -239,6 +324,22 @@ impl RenderStats {
     pub fn device_hits_per_second(&self) -> f64 {
         if self.seconds_device > 0.0 { self.hits as f64 / self.seconds_device } else { 0.0 }
     }
+    /// What the summary says of the devices where the result holds the gathering of another
+    /// device than this render's (a resumed checkpoint's, a merge's parts'); `None` otherwise.
+    pub fn devices_note(&self) -> Option<String> {
+        if self.devices.is_empty() || self.devices.names() == [self.device.as_str()] {
+            return None;
+        }
+        Some(if self.devices.len() > 1 {
+            format!(
+                "its planes were gathered on several devices ({}): the image agrees with each one's render within f32 rounding, and is the bits of neither",
+                self.devices
+            )
+        } else {
+            format!("its planes were gathered on {}", self.devices)
+        })
+    }
+
     pub fn summary(&self) -> String {
         // On the GPU, also the CPU's share of the work (partly beside the GPU's): where an
         // end-to-end time goes.

@@ -17,7 +17,7 @@ use crate::error::{Error, Result, Setting};
 use crate::film::Film;
 use crate::gather::GatherStats;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
-use crate::options::{RenderOptions, RenderStats};
+use crate::options::{Devices, RenderOptions, RenderStats};
 use crate::partial::{Partial, Resume, chunk_indices, chunk_planes, chunks, combine_in, fingerprint, frontier, pieces};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::raster::Tiling;
@@ -483,6 +483,7 @@ impl<'a> ChunkRenderer<'a> {
                     fingerprint: self.fingerprint.clone(),
                     hits: stats.hits,
                     seconds,
+                    devices: Devices::one(opts.device_label()),
                 });
                 // The nodes this chunk completes, the innermost first.
                 let alive = frontier(root.clone(), c + 1).len();
@@ -590,6 +591,7 @@ pub fn render_from(
     let partial = chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)?;
     let (mut stats, spread) = (chunks.gatherer.stats, chunks.gatherer.spread);
     stats.planes = opts.planes - resumed;
+    stats.devices = partial.devices.clone();
     let t = Instant::now();
     let (emission, emission_variance) =
         direct_emission_and_variance_in(scene, opts.seed, opts.spp, opts.pixel_center, control);
@@ -624,6 +626,7 @@ pub fn render_chunk(
     let partial = r.render(range)?;
     let mut stats = r.gatherer.stats;
     stats.planes = partial.end - partial.start;
+    stats.devices = partial.devices.clone();
     stats.seconds_total = start.elapsed().as_secs_f64();
     Ok((partial, stats))
 }

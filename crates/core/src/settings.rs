@@ -113,25 +113,68 @@ fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
     Weighting::new(estimator, Some(k)).map(|_| ()).map_err(from_caller(Setting::Orientations))
 }
 
-/// The device that gathers, resolved once: `auto` takes the GPU when a GPU adapter is found
-/// (not a CPU adapter such as lavapipe) and the CPU otherwise; `gpu` without an adapter is refused in one line saying why. The CPU's
-/// accelerator and kernel (`cpu_options`: the caller gave one) do not apply to the GPU.
-pub fn device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
-    let wanted = given.unwrap_or_default();
+/// The device asked for, with what the arguments alone decide of it, no adapter touched: `gpu`
+/// with the CPU's accelerator or kernel (`cpu_options`: the caller gave one) is refused, since
+/// they do not apply to the GPU; `auto` with them is the CPU.
+fn wanted_device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
+    match given.unwrap_or_default() {
+        Device::Gpu if cpu_options => Err(Error::option(
+            Setting::Device,
+            "gpu: the accelerator and the kernel choose how the CPU gathers; give them with --device cpu",
+        )),
+        // `auto` wants speed, and the caller chose how the CPU gathers.
+        Device::Auto if cpu_options => Ok(Device::Cpu),
+        d => Ok(d),
+    }
+}
+
+/// The device that gathers, found for `wanted` ([`wanted_device`]): the CPU without touching
+/// any adapter; `auto` the GPU when a GPU adapter is found (not a CPU adapter such as
+/// lavapipe, slower than the CPU's own kernels), else the CPU; `gpu` without an adapter is
+/// refused in one line saying why.
+fn find_device(wanted: Device) -> Result<Device> {
     if wanted == Device::Cpu {
         return Ok(Device::Cpu);
     }
     match (wanted, crate::gpu::adapter()) {
-        // `auto` wants speed: not an adapter that runs on the CPU (lavapipe is slower than the
-        // CPU's own kernels), nor the GPU where the caller chose how the CPU gathers.
-        (Device::Auto, Err(_)) => Ok(Device::Cpu),
-        (Device::Auto, Ok(g)) if g.is_cpu_adapter() || cpu_options => Ok(Device::Cpu),
+        (Device::Auto, Ok(g)) if !g.is_cpu_adapter() => Ok(Device::Gpu),
+        (Device::Auto, _) => Ok(Device::Cpu),
         (_, Err(why)) => Err(Error::option(Setting::Device, format!("gpu: {why}"))),
-        (_, Ok(_)) if cpu_options => Err(Error::option(
-            Setting::Device,
-            format!("{wanted}: the accelerator and the kernel choose how the CPU gathers; give them with --device cpu"),
-        )),
         (_, Ok(_)) => Ok(Device::Gpu),
+    }
+}
+
+/// Settings whose device is set last ([`Pending::find_device`]).
+pub trait OnDevice {
+    #[doc(hidden)]
+    fn set_device(&mut self, device: Device);
+}
+
+/// Settings checked but for their device: every refusal that the arguments alone decide is
+/// made, and no GPU adapter has been touched (a driver's start-up takes a fraction of a second,
+/// and a driver may print). A caller makes its own such refusals (its outputs, its files)
+/// before [`Pending::find_device`], so that they too come before any driver.
+pub struct Pending<T> {
+    settings: T,
+    wanted: Device,
+}
+
+impl<T: OnDevice> Pending<T> {
+    fn new(mut settings: T, wanted: Device) -> Self {
+        settings.set_device(Device::Cpu);
+        Pending { settings, wanted }
+    }
+
+    /// The settings before their device is found: their device is the CPU until then.
+    pub fn settings(&self) -> &T {
+        &self.settings
+    }
+
+    /// The settings whole: the device found (`auto` resolved, the GPU's adapter found or
+    /// refused in one line).
+    pub fn find_device(mut self) -> Result<T> {
+        self.settings.set_device(find_device(self.wanted)?);
+        Ok(self.settings)
     }
 }
 
@@ -196,8 +239,21 @@ impl ResolvedRender {
 
 /// Resolves a photon-plane render: the scene's `[render]` defaults where `given` has none,
 /// its K only for its own estimator, and every check a render would make (ranges, memory at
-/// the resolution, the kernel on this CPU).
+/// the resolution, the kernel on this CPU); the device last ([`check_render`], then
+/// [`Pending::find_device`]).
 pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender> {
+    check_render(scene, given)?.find_device()
+}
+
+impl OnDevice for ResolvedRender {
+    fn set_device(&mut self, device: Device) {
+        self.options.device = device;
+    }
+}
+
+/// [`resolve_render`] but for the device: every refusal the arguments decide, no adapter
+/// touched.
+pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<ResolvedRender>> {
     let scene = scene_at(scene, given.resolution)?;
     let defaults = &scene.render;
     let weighting = weighting(&scene, given.estimator, given.orientations)?;
@@ -244,6 +300,8 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
     let extra = if stderr { GroupSpread::BYTES_PER_PIXEL + 12 } else { 0 };
     check_render_memory_with(scene.camera.width, scene.camera.height, held, extra)
         .map_err(invalid(Setting::Resolution, origin(&given.resolution)))?;
+    let kernel = given.kernel.unwrap_or_default().resolve()?;
+    let wanted = wanted_device(given.device, given.accelerator.is_some() || given.kernel.is_some())?;
     let options = RenderOptions {
         planes: planes as usize,
         weighting,
@@ -252,18 +310,19 @@ pub fn resolve_render(scene: &Scene, given: &Overrides) -> Result<ResolvedRender
         spp,
         pixel_center: given.pixel_center,
         accelerator: given.accelerator.unwrap_or_default(),
-        kernel: given.kernel.unwrap_or_default().resolve()?,
-        device: device(given.device, given.accelerator.is_some() || given.kernel.is_some())?,
+        kernel,
+        device: Device::Cpu,
         stderr,
     };
-    Ok(ResolvedRender {
+    let render = ResolvedRender {
         scene,
         options,
         time_budget: given.time_budget,
         target_error: given.target_error,
         exposure: exposure(given.exposure)?,
         threads: threads(given.threads)?,
-    })
+    };
+    Ok(Pending::new(render, wanted))
 }
 
 impl Overrides {
@@ -380,6 +439,19 @@ pub struct ResolvedTable {
 }
 
 pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTable> {
+    check_table(scene, given)?.find_device()
+}
+
+impl OnDevice for ResolvedTable {
+    fn set_device(&mut self, device: Device) {
+        self.device = device;
+    }
+}
+
+/// [`resolve_table`] but for the device: every refusal the arguments decide, no adapter
+/// touched.
+pub fn check_table(scene: &Scene, given: &TableOverrides) -> Result<Pending<ResolvedTable>> {
+    let wanted = wanted_device(given.device, false)?;
     let scene = scene_at(scene, given.resolution)?;
     let resolution = origin(&given.resolution);
     let planes = given.planes.unwrap_or(scene.render.planes);
@@ -405,7 +477,7 @@ pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTa
     for &k in &given.orientations {
         check_orientations(Estimator::SmisExact, k)?;
     }
-    Ok(ResolvedTable {
+    let table = ResolvedTable {
         planes: planes as usize,
         seed: given.seed.unwrap_or(scene.render.seed),
         spp: scene.render.spp,
@@ -417,9 +489,10 @@ pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTa
         equal_time: given.equal_time,
         exposure: exposure(given.exposure)?,
         threads: threads(given.threads)?,
-        device: device(given.device, false)?,
+        device: Device::Cpu,
         scene,
-    })
+    };
+    Ok(Pending::new(table, wanted))
 }
 
 impl ResolvedTable {
@@ -495,6 +568,19 @@ impl ResolvedScaling {
 }
 
 pub fn resolve_scaling(given: &ScalingOverrides) -> Result<ResolvedScaling> {
+    check_scaling(given)?.find_device()
+}
+
+impl OnDevice for ResolvedScaling {
+    fn set_device(&mut self, device: Device) {
+        self.device = device;
+    }
+}
+
+/// [`resolve_scaling`] but for the device: every refusal the arguments decide, no adapter
+/// touched.
+pub fn check_scaling(given: &ScalingOverrides) -> Result<Pending<ResolvedScaling>> {
+    let wanted = wanted_device(given.device, false)?;
     let planes = given.planes.clone().unwrap_or_else(|| SCALING_PLANES.to_vec());
     for &n in &planes {
         check_planes(n).map_err(from_caller(Setting::Planes))?;
@@ -506,15 +592,16 @@ pub fn resolve_scaling(given: &ScalingOverrides) -> Result<ResolvedScaling> {
             check_memory(w, h, n).map_err(from_caller(Setting::Resolutions))?;
         }
     }
-    Ok(ResolvedScaling {
+    let scaling = ResolvedScaling {
         weighting: Weighting::new(given.estimator.unwrap_or(Estimator::DEFAULT), None)
             .map_err(from_caller(Setting::Estimator))?,
         sampler: given.sampler.unwrap_or_default(),
         planes: planes.iter().map(|&n| n as usize).collect(),
         resolutions,
         threads: threads(given.threads)?,
-        device: device(given.device, false)?,
-    })
+        device: Device::Cpu,
+    };
+    Ok(Pending::new(scaling, wanted))
 }
 
 #[cfg(test)]

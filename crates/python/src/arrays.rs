@@ -59,6 +59,7 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     d.set_item("estimator", &s.estimator)?;
     d.set_item("kernel", &s.kernel)?;
     d.set_item("device", &s.device)?;
+    d.set_item("devices", s.devices.names().to_vec())?;
     d.set_item("seconds_device", s.seconds_device)?;
     d.set_item("seconds_upload", s.seconds_upload)?;
     d.set_item("planes", s.planes)?;

@@ -92,6 +92,12 @@ impl PyPartial {
     fn seconds(&self) -> f64 {
         self.inner.seconds
     }
+    /// The devices whose gathering it holds ("cpu", or "gpu: " and the adapter), each once:
+    /// several for a merge of partials gathered on different devices.
+    #[getter]
+    fn devices(&self) -> Vec<String> {
+        self.inner.devices.names().to_vec()
+    }
     /// (height, width, 3).
     #[getter]
     fn shape(&self) -> (u32, u32, u32) {
@@ -105,15 +111,16 @@ impl PyPartial {
     }
 
     /// Rebuilds a pickled partial from its state, the tuple `__reduce__` gives: (width, height,
-    /// sums as little-endian f64 bytes, start, end, planes_total, fingerprint, hits, seconds).
+    /// sums as little-endian f64 bytes, start, end, planes_total, fingerprint, hits, seconds,
+    /// devices).
     /// A state is trusted no more than a file: anything a render cannot make is a ValueError
     /// (the core's `Partial::check`, naming the pixel).
     #[staticmethod]
     fn _from_state(state: &Bound<'_, PyTuple>) -> PyResult<Self> {
         let not_a_state =
             |why: &dyn std::fmt::Display| PyValueError::new_err(format!("not the state of a fogplanes.Partial: {why}"));
-        if state.len() != 9 {
-            return Err(not_a_state(&format!("{} items, not 9", state.len())));
+        if state.len() != 10 {
+            return Err(not_a_state(&format!("{} items, not 10", state.len())));
         }
         // Item `k`, named `name`, of the type of its place (a bool is no count).
         fn item<'py, T: FromPyObjectOwned<'py>>(state: &Bound<'py, PyTuple>, k: usize, name: &str) -> PyResult<T> {
@@ -143,7 +150,9 @@ impl PyPartial {
         let values: Vec<f64> =
             sums.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
         let sums = values.chunks_exact(3).map(|c| glam::DVec3::new(c[0], c[1], c[2])).collect();
-        let inner = Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds };
+        let devices: Vec<String> = item(state, 9, "devices")?;
+        let devices = fogplanes::options::Devices::from_names(devices).map_err(|e| not_a_state(&e))?;
+        let inner = Partial { width, height, sums, start, end, planes_total, fingerprint, hits, seconds, devices };
         inner.check().map_err(|e| not_a_state(&e))?;
         Ok(PyPartial { inner })
     }
@@ -162,6 +171,7 @@ impl PyPartial {
             p.fingerprint.clone(),
             p.hits,
             p.seconds,
+            p.devices.names().to_vec(),
         )
             .into_pyobject(py)?;
         Ok((slf.get_type().getattr("_from_state")?, PyTuple::new(py, [args])?))
@@ -277,6 +287,7 @@ pub(crate) fn finish_render<'py>(
         rays: film.pixels.len() as u64 * o.ray_sets() as u64,
         hits: p.hits,
         seconds_total: p.seconds,
+        devices: p.devices.clone(),
         ..Default::default()
     };
     Ok(PyTuple::new(py, [image, stats_dict(py, &stats)?.into_any()])?.into_any())

@@ -9,7 +9,7 @@ use crate::gather::{GatherContext, GatherStats, Phase, PlaneRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
@@ -78,15 +78,8 @@ pub struct Gpu {
     work: Mutex<Scratch>,
 }
 
-/// The adapter of this process, found on first use: the high-performance one (a discrete GPU
-/// before an integrated one or a CPU adapter such as lavapipe) among Vulkan, Metal and DX12.
-/// `Err` says in one line why there is none.
-pub fn adapter() -> std::result::Result<Arc<Gpu>, String> {
-    static GPU: OnceLock<std::result::Result<Arc<Gpu>, String>> = OnceLock::new();
-    GPU.get_or_init(|| Gpu::new().map(Arc::new)).clone()
-}
-
-fn block_on<F: std::future::Future>(f: F) -> F::Output {
+/// Runs a future of wgpu's to its end on this thread.
+pub(super) fn block_on<F: std::future::Future>(f: F) -> F::Output {
     let mut f = std::pin::pin!(f);
     let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
     loop {
@@ -124,20 +117,8 @@ fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
 }
 
 impl Gpu {
-    fn new() -> std::result::Result<Self, String> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
-            backends: wgpu::Backends::PRIMARY,
-            ..wgpu::InstanceDescriptor::new_without_display_handle()
-        });
-        let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| {
-            format!(
-                "no GPU adapter through Vulkan, Metal or DX12 ({e}): install a Vulkan driver (the GPU vendor's, or Mesa's lavapipe on the CPU: Debian's mesa-vulkan-drivers)"
-            )
-        })?;
+    /// The device on `adapter`, with its pipelines ([`super::adapter`] finds the adapter).
+    pub(super) fn new(adapter: wgpu::Adapter) -> std::result::Result<Self, String> {
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let limits = adapter.limits();

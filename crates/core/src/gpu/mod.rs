@@ -19,9 +19,13 @@ use crate::weights::{Estimator, Weighting};
 use glam::DVec2;
 
 #[cfg(feature = "gpu")]
+mod adapter;
+#[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
-pub use device::{Gpu, GpuPlanes, GpuRays, GpuSums, adapter};
+pub use adapter::adapter;
+#[cfg(feature = "gpu")]
+pub use device::{Gpu, GpuPlanes, GpuRays, GpuSums};
 
 #[cfg(not(feature = "gpu"))]
 mod absent;

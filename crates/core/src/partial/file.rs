@@ -57,15 +57,28 @@ pub struct RenderRecord {
     pub pixel_center: bool,
     pub accelerator: String,
     pub kernel: String,
-    /// The device that gathered (`cpu`, or `gpu: ` and the adapter); `cpu` in parts written
-    /// before there was a GPU path. Not in the fingerprint: parts of different devices merge,
-    /// and the merge says so ([`crate::merge::Merged::Render`]'s `devices`).
-    #[serde(default = "cpu_device")]
-    pub device: String,
+    /// The devices whose gathering the part holds (`cpu`, or `gpu: ` and the adapter): one, or
+    /// several for a node of a checkpoint resumed on another device. Not in the fingerprint:
+    /// parts of different devices merge, and the merge records and says so
+    /// ([`crate::options::Devices`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub devices: Vec<String>,
+    /// What parts written before `devices` recorded: the one device that gathered (absent
+    /// before there was a GPU path: the CPU). Read, never written.
+    #[serde(default, skip_serializing)]
+    pub device: Option<String>,
 }
 
-fn cpu_device() -> String {
-    "cpu".into()
+impl RenderRecord {
+    /// The devices the part records, checked ([`crate::options::Devices::from_names`]).
+    pub fn devices(&self) -> std::result::Result<crate::options::Devices, String> {
+        let names = match (&self.devices[..], &self.device) {
+            ([], Some(d)) => vec![d.clone()],
+            ([], None) => vec!["cpu".to_string()],
+            (names, _) => names.to_vec(),
+        };
+        crate::options::Devices::from_names(names).map_err(|e| format!("its devices: {e}"))
+    }
 }
 
 /// The resolved settings of a reference.

@@ -34,7 +34,7 @@ use crate::emission::{direct_emission, direct_emission_and_variance};
 use crate::error::{Error, Result};
 use crate::film::{Film, first_outside};
 use crate::limits::CHUNK_PLANES;
-use crate::options::RenderOptions;
+use crate::options::{Devices, RenderOptions};
 use crate::pixel::plane_group;
 pub use crate::sampling::stable_hash;
 use crate::scene::Scene;
@@ -100,6 +100,8 @@ pub struct Partial {
     pub hits: u64,
     /// Wall-clock seconds spent rendering it (added up over merged parts).
     pub seconds: f64,
+    /// The devices whose gathering it holds (the union over merged parts).
+    pub devices: Devices,
 }
 
 impl Partial {
@@ -147,6 +149,7 @@ impl Partial {
         }
         crate::limits::check_recorded_seconds(self.seconds)
             .or_else(|m| bad(format!("its seconds of rendering: {m}")))?;
+        self.devices.check().or_else(|m| bad(format!("its devices: {m}")))?;
         let most = self.most_per_channel();
         let rows = self.width as usize * 16;
         let fine = |s: &DVec3| s.to_array().iter().all(|&c| c >= 0.0 && c <= most);
@@ -214,6 +217,7 @@ pub fn combine_in(mut a: Partial, b: &Partial, control: Control) -> Result<Parti
         })
     });
     section.close();
+    a.devices.add(&b.devices);
     Ok(Partial { end: b.end, hits: a.hits.saturating_add(b.hits), seconds: a.seconds + b.seconds, ..a })
 }
 
@@ -590,6 +594,7 @@ mod tests {
             fingerprint: "f".into(),
             hits: 2 * 2 * CHUNK_PLANES as u64,
             seconds: 0.5,
+            devices: Devices::one("cpu"),
         };
         let most = 2.0 * f32::MAX as f64;
         assert_eq!(valid.most_per_channel(), most);
@@ -610,7 +615,7 @@ mod tests {
             assert!(e.starts_with("planes 16384:49152: sums: pixel (x 1, y 0) ") && e.contains(says), "{value}: {e}");
         }
         type Change = (fn(&mut Partial), &'static str);
-        let changes: [Change; 7] = [
+        let changes: [Change; 8] = [
             (|p| p.hits += 1, "hits, more than one per plane and pixel"),
             (|p| p.planes_total = usize::MAX, "the plane count must be between"),
             (|p| (p.end, p.planes_total) = (usize::MAX, usize::MAX), "plane count"),
@@ -618,6 +623,7 @@ mod tests {
             (|p| p.width = 3, "2 sums for 3x1 pixels"),
             (|p| p.width = 0, "each side must be between"),
             (|p| p.seconds = f64::NAN, "its seconds of rendering: NaN"),
+            (|p| p.devices = Devices::default(), "its devices: 0 devices named"),
         ];
         for (f, says) in changes {
             let e = with(&f).unwrap_err();

@@ -6,7 +6,7 @@ use super::file::{self, Array, PartKind, PartMeta, ReferenceRecord, RenderRecord
 use super::{Partial, stable_hash};
 use crate::error::{Error, Result};
 use crate::film::Film;
-use crate::options::RenderOptions;
+use crate::options::{Devices, RenderOptions};
 use crate::reference::ReferenceOptions;
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
@@ -30,8 +30,9 @@ pub fn scene_of(r: &SceneRecord) -> Result<Scene> {
     Scene::parse(&r.text, &r.file, &r.name)?.with_resolution(r.resolution[0], r.resolution[1])
 }
 
-/// The settings of a render as its parts record them.
-pub fn render_record(o: &RenderOptions) -> RenderRecord {
+/// The settings of a render as its parts record them, with the devices whose gathering a
+/// part holds.
+pub fn render_record(o: &RenderOptions, devices: &Devices) -> RenderRecord {
     RenderRecord {
         planes: o.planes,
         estimator: o.weighting.estimator.name().into(),
@@ -42,7 +43,8 @@ pub fn render_record(o: &RenderOptions) -> RenderRecord {
         pixel_center: o.pixel_center,
         accelerator: o.accelerator.name().into(),
         kernel: o.kernel.name().into(),
-        device: o.device_label(),
+        devices: devices.names().to_vec(),
+        device: None,
     }
 }
 
@@ -104,7 +106,7 @@ fn f32s(film: &Film) -> impl Iterator<Item = f32> + '_ {
 /// Writes the partial of a render of `scene` with `opts`.
 pub fn save_render_part(path: &Path, scene: &Scene, opts: &RenderOptions, p: &Partial) -> Result<()> {
     let mut meta = meta_of(PartKind::Render, p.fingerprint.clone(), scene, (p.start, p.end, p.planes_total))?;
-    (meta.hits, meta.seconds, meta.render) = (p.hits, p.seconds, Some(render_record(opts)));
+    (meta.hits, meta.seconds, meta.render) = (p.hits, p.seconds, Some(render_record(opts, &p.devices)));
     let sums = Array::f64s("sums", pixel_shape(p.height as usize, p.width), p.sums.iter().flat_map(|s| s.to_array()));
     file::write_npz(path, &[meta_array(&meta), sums])
 }
@@ -201,6 +203,12 @@ impl Part {
             fingerprint: m.fingerprint.clone(),
             hits: m.hits,
             seconds: m.seconds,
+            devices: m
+                .render
+                .as_ref()
+                .ok_or_else(|| self.bad("no render settings"))?
+                .devices()
+                .map_err(|e| self.bad(e))?,
         };
         partial.check().map_err(|e| self.bad(e))?;
         Ok(partial)

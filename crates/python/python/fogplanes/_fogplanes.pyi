@@ -150,6 +150,9 @@ class RenderStats(TypedDict):
     kernel: str
     #: The device that gathered: "cpu", or "gpu: " and the adapter's name.
     device: str
+    #: The devices whose gathering the image holds, each once (a `finish_render` of partials
+    #: gathered on several devices names them all).
+    devices: list[str]
     #: Seconds of the GPU's own gather (its timestamps, else the wall time of its work); 0 on the CPU.
     seconds_device: float
     #: Seconds of wall time uploading camera rays to the GPU (their writing, straight into the
@@ -390,6 +393,9 @@ class Partial:
     def hits(self) -> int: ...
     @property
     def seconds(self) -> float: ...
+    @property
+    def devices(self) -> list[str]:
+        """The devices whose gathering it holds ("cpu", or "gpu: " and the adapter), each once."""
     @property
     def shape(self) -> tuple[int, int, int]: ...
     def __add__(self, other: Partial) -> Partial: ...

@@ -1,0 +1,214 @@
+//! Hostile inputs V: every output says which devices made it, refusals come before any driver,
+//! and a GPU render's stderr holds fogplanes' lines alone. Each test failed before its mend
+//! (the test's comment says how).
+//!
+//! The GPU's tests run on lavapipe (Mesa's Vulkan on the CPU) where there is no GPU; without
+//! any Vulkan adapter they say SKIPPED, unless `FOGPLANES_REQUIRE_GPU=1`.
+
+use crate::common::fogplanes;
+use crate::gpu::have_gpu;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const SCENE: &str = "media_scenes/six_lights.toml";
+
+/// A fresh directory for `test`.
+fn dir(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("fogplanes-devices-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The command line with `args`, in the crate's root, with `env` set and `unset` removed.
+fn run_with(args: &[&str], env: &[(&str, &str)], unset: &[&str]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_fogplanes"));
+    c.args(args).current_dir(env!("CARGO_MANIFEST_DIR"));
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    for k in unset {
+        c.env_remove(k);
+    }
+    c.output().unwrap()
+}
+
+fn text(o: &Output) -> (String, String) {
+    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+/// What `fogplanes info` prints of `image`'s devices.
+fn devices_of(image: &Path) -> String {
+    let o = fogplanes(&["info", path(image)]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    out.lines().find_map(|l| l.strip_prefix("devices: ")).unwrap_or_else(|| panic!("no devices: {out}")).to_string()
+}
+
+/// A render's image and its part files record the device that gathered; a merge of parts
+/// gathered on the CPU and on the GPU records both (it recorded `device: cpu`, its settings
+/// remade without the device).
+#[test]
+fn a_merge_of_cpu_and_gpu_parts_records_both_devices() {
+    if !have_gpu("a_merge_of_cpu_and_gpu_parts_records_both_devices") {
+        return;
+    }
+    let d = dir("merge");
+    let common = ["render", SCENE, "--resolution", "16x9", "--planes", "16400", "-q"];
+    let run = |extra: &[&str]| {
+        let args: Vec<&str> = common.iter().chain(extra).copied().collect();
+        let o = fogplanes(&args);
+        assert!(o.status.success(), "{args:?}: {}", text(&o).1);
+    };
+    let (a, b, merged, whole) = (d.join("a.npz"), d.join("b.npz"), d.join("merged.exr"), d.join("cpu.exr"));
+    run(&["-o", path(&whole)]);
+    assert_eq!(devices_of(&whole), "cpu");
+    run(&["--plane-range", "0:16384", "--partial", path(&a)]);
+    run(&["--plane-range", "16384:16400", "--partial", path(&b), "--device", "gpu"]);
+    let part = fogplanes::partial::parts::read_part(&b).unwrap();
+    let recorded = part.meta.render.unwrap().devices;
+    assert!(recorded.len() == 1 && recorded[0].starts_with("gpu: "), "{recorded:?}");
+    let o = fogplanes(&["merge", path(&a), path(&b), "-o", path(&merged)]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let devices = devices_of(&merged);
+    assert!(devices.starts_with("cpu; gpu: ") && devices == format!("cpu; {}", recorded[0]), "{devices}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A render checkpointed on the GPU and resumed on the CPU goes on, and says so: the resume line
+/// and the summary name the GPU, and the image records both devices (it named the CPU alone,
+/// and said nothing).
+#[test]
+fn a_checkpoint_begun_on_the_gpu_and_resumed_on_the_cpu_says_so() {
+    use fogplanes::control::Control;
+    use fogplanes::settings::Overrides;
+    if !have_gpu("a_checkpoint_begun_on_the_gpu_and_resumed_on_the_cpu_says_so") {
+        return;
+    }
+    let d = dir("resume");
+    let ck = d.join("ck");
+    std::fs::create_dir_all(&ck).unwrap();
+    // What a GPU render of 16,400 planes leaves in its checkpoint after its first chunk.
+    let scene = fogplanes::scene::Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(SCENE)).unwrap();
+    let given = Overrides {
+        planes: Some(16_400),
+        resolution: Some((16, 9)),
+        device: Some(fogplanes::gpu::Device::Gpu),
+        ..Overrides::default()
+    };
+    let r = given.resolve(&scene).unwrap();
+    let (first, _) = fogplanes::render::render_chunk(&r.scene, &r.options, 0..16_384, Control::none()).unwrap();
+    let file = ck.join("planes_0-16384.npz");
+    fogplanes::partial::parts::save_render_part(&file, &r.scene, &r.options, &first).unwrap();
+    let gpu = first.devices.names()[0].clone();
+    assert!(gpu.starts_with("gpu: "), "{gpu}");
+    let out = d.join("resumed.exr");
+    let o = fogplanes(&[
+        "render",
+        SCENE,
+        "--resolution",
+        "16x9",
+        "--planes",
+        "16400",
+        "--checkpoint",
+        path(&ck),
+        "-o",
+        path(&out),
+    ]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.contains(&format!("16384 of 16400 planes are done (gathered on {gpu})")), "{stdout}");
+    assert!(stdout.contains(&format!("its planes were gathered on several devices (cpu; {gpu})")), "{stdout}");
+    assert_eq!(devices_of(&out), format!("cpu; {gpu}"));
+    // The checkpoint's node of both chunks records both devices too.
+    let node = fogplanes::partial::parts::read_part(&ck.join("planes_0-16400.npz")).unwrap();
+    assert_eq!(node.meta.render.unwrap().devices, vec!["cpu".to_string(), gpu]);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Refusals that the arguments alone decide come before any Vulkan driver is touched: with the
+/// loader told to log (`VK_LOADER_DEBUG=info`), each is one line and exit 2, with no line of
+/// the loader's (each was preceded by the loader and the driver: the CPU options with
+/// `--device gpu` were three lines on a headless machine, two of them the driver's). A render
+/// that goes on shows the loader's lines, so the test sees a driver where one is touched.
+#[test]
+fn refusals_the_arguments_decide_come_before_any_driver() {
+    let d = dir("refusals");
+    let (txt, npz) = (d.join("out.txt"), d.join("part.npz"));
+    let exr = d.join("out.exr");
+    let common = ["render", SCENE, "--resolution", "16x9", "--planes", "64", "--device", "gpu"];
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["--kernel", "avx2"],
+        vec!["--accelerator", "bvh"],
+        vec!["-o", path(&txt)],
+        vec!["--time-budget", "1", "--checkpoint", path(&d), "-o", path(&exr)],
+        vec!["--partial", path(&txt)],
+        vec!["--plane-range", "1:64", "--partial", path(&npz)],
+        vec!["--exposure", "1", "-o", path(&exr)],
+        vec!["--target-error", "2", "-o", path(&exr)],
+    ];
+    let log = [("VK_LOADER_DEBUG", "info")];
+    for extra in &cases {
+        let args: Vec<&str> = common.iter().chain(extra).copied().collect();
+        let o = run_with(&args, &log, &[]);
+        let (_, err) = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.lines().count() == 1 && err.starts_with("error: "), "{extra:?}: {err}");
+    }
+    let table = ["table", SCENE, "--reference", "tests/hostile/not_an_exr.exr", "--device", "gpu", "--out"];
+    let o = run_with(&[&table[..], &[path(&d)]].concat(), &log, &[]);
+    assert!(o.status.code() == Some(2) && text(&o).1.lines().count() == 1, "{}", text(&o).1);
+    if have_gpu("refusals_the_arguments_decide_come_before_any_driver") {
+        let o = run_with(&[&common[..], &["-q", "-o", path(&exr)]].concat(), &log, &[]);
+        let (_, err) = text(&o);
+        assert!(o.status.success() && err.contains("Vulkan Loader"), "the loader does not log here: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A GPU render on a machine without a desktop session (no `XDG_RUNTIME_DIR`, no Wayland or X
+/// display: CI's case) prints nothing on stderr: Mesa's device-selection layer asked the
+/// Wayland compositor for the default GPU when the instance enabled Wayland surfaces, and
+/// libwayland-client printed `error: XDG_RUNTIME_DIR is invalid or not set in the environment.`
+/// twice, which reads as a failure of ours.
+#[test]
+fn a_gpu_render_without_a_desktop_session_prints_nothing_on_stderr() {
+    if !have_gpu("a_gpu_render_without_a_desktop_session_prints_nothing_on_stderr") {
+        return;
+    }
+    let d = dir("quiet");
+    let out = d.join("gpu.exr");
+    let args = ["render", SCENE, "--resolution", "16x9", "--planes", "64", "--device", "gpu", "-o", path(&out)];
+    let o = run_with(&args, &[], &["XDG_RUNTIME_DIR", "WAYLAND_DISPLAY", "WAYLAND_SOCKET", "DISPLAY"]);
+    let (stdout, stderr) = text(&o);
+    assert!(o.status.success(), "{stderr}");
+    assert_eq!(stderr, "", "a GPU render's stderr holds lines that are not fogplanes'");
+    assert!(stdout.contains("gpu: ") && stdout.contains("wrote "), "{stdout}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `fogplanes info` reads the file whole: a render's EXR cut short (half its bytes, or its last
+/// ten) is refused in one line saying its pixel data is incomplete (it was described as a fine
+/// image from its header alone); the whole file is described.
+#[test]
+fn info_tells_a_whole_exr_from_a_truncated_one() {
+    let d = dir("info");
+    let whole = d.join("whole.exr");
+    let o = fogplanes(&["render", SCENE, "--resolution", "32x18", "--planes", "256", "-q", "-o", path(&whole)]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    assert_eq!(devices_of(&whole), "cpu");
+    let bytes = std::fs::read(&whole).unwrap();
+    for keep in [bytes.len() / 2, bytes.len() - 10] {
+        let cut = d.join(format!("cut_{keep}.exr"));
+        std::fs::write(&cut, &bytes[..keep]).unwrap();
+        let o = fogplanes(&["info", path(&cut)]);
+        let (out, err) = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{keep} of {} bytes: {out}{err}", bytes.len());
+        assert!(err.lines().count() == 1 && err.contains("pixel data is incomplete"), "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
