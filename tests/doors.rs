@@ -279,9 +279,15 @@ fn images_record_the_phase_functions_g() {
     let text = std::fs::read_to_string(forward).unwrap().replace("g = 0.85", "g = 0");
     std::fs::write(&isotropic, text).unwrap();
     let small = ["--resolution", "16x10", "-q"];
-    succeeded(&fogplanes(&[&["render", forward, "--planes", "1024", "-o", path(&img)][..], &small[..]].concat()), "render");
+    succeeded(
+        &fogplanes(&[&["render", forward, "--planes", "1024", "-o", path(&img)][..], &small[..]].concat()),
+        "render",
+    );
     for (scene, out) in [(forward, &forward_ref), (path(&isotropic), &iso_ref)] {
-        succeeded(&fogplanes(&[&["reference", scene, "--spp", "16", "-o", path(out)][..], &small[..]].concat()), "reference");
+        succeeded(
+            &fogplanes(&[&["reference", scene, "--spp", "16", "-o", path(out)][..], &small[..]].concat()),
+            "reference",
+        );
     }
     for file in [&img, &forward_ref] {
         let info = succeeded(&fogplanes(&["info", path(file)]), "info");
