@@ -214,6 +214,18 @@ def test_scene_fields_are_those_of_the_file():
         scene.name = "other"
 
 
+def test_forward_scattering_fog_renders_as_on_the_command_line(tmp_path):
+    """`[medium] g` reaches Python through the scene (Medium.g) and its render is the command
+    line's, bit for bit."""
+    forward_fog = ROOT / "media_scenes" / "forward_fog.toml"
+    assert fogplanes.load_scene(forward_fog).medium.g == 0.85
+    assert fogplanes.load_scene(SIX_LIGHTS).medium.g == 0.0
+    image = fogplanes.render(forward_fog, resolution=(64, 40), planes=2048)
+    out = tmp_path / "cli.exr"
+    run_cli("render", forward_fog, "--resolution", "64x40", "--planes", "2048", "-q", "-o", out)
+    assert_bit_identical(image, fogplanes.load_image(out))
+
+
 def test_scene_from_toml_equals_the_file():
     scene = fogplanes.Scene.from_toml(SIX_LIGHTS.read_text(), name="six_lights")
     assert scene.name == "six_lights" and len(scene.lights) == 6

@@ -394,8 +394,7 @@ impl<D: Denominator> PlaneJob<'_, D> {
         // The hit's path (y', x, the eye) is the same for every orientation that makes it, so
         // its phase value is a factor of C and no weight changes (section 1.1).
         let inverse_phase = if HG { self.phase.inverse_lanes::<L, V>(ray, view.toward) } else { V::splat(1.0) };
-        let contribution =
-            view.contribution::<L, V, GREY, HG>(self.extinction.sigma_t, length, d, inverse_phase, lit);
+        let contribution = view.contribution::<L, V, GREY, HG>(self.extinction.sigma_t, length, d, inverse_phase, lit);
         let channels = if GREY { 1 } else { 3 };
         for (sum, value) in sums.into_iter().zip(contribution).take(channels) {
             (V::load(sum) + value).store(sum);

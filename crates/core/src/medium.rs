@@ -26,7 +26,10 @@ pub struct Medium {
 impl std::fmt::Debug for Medium {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let mut d = f.debug_struct("Medium");
-        d.field("min", &self.min).field("max", &self.max).field("sigma_s", &self.sigma_s).field("sigma_a", &self.sigma_a);
+        d.field("min", &self.min)
+            .field("max", &self.max)
+            .field("sigma_s", &self.sigma_s)
+            .field("sigma_a", &self.sigma_a);
         if self.g != 0.0 {
             d.field("g", &self.g);
         }

@@ -245,7 +245,10 @@ impl Scene {
             g: if m.g.is_finite() && m.g.abs() <= G_MAX {
                 m.g
             } else {
-                return Err(err("medium.g".into(), format!("must be a finite number in [-{G_MAX}, {G_MAX}], got {}", m.g)));
+                return Err(err(
+                    "medium.g".into(),
+                    format!("must be a finite number in [-{G_MAX}, {G_MAX}], got {}", m.g),
+                ));
             },
         };
         let scale = medium.diagonal();
@@ -536,7 +539,11 @@ radiance = 4
         expect_error(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"), "medium.sigma_a", "non-negative");
         expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"), "medium", "empty");
         for g in ["1.0", "-0.995", "nan", "inf"] {
-            expect_error(&MINIMAL.replace("sigma_a = 0.05", &format!("sigma_a = 0.05\ng = {g}")), "medium.g", "[-0.99, 0.99]");
+            expect_error(
+                &MINIMAL.replace("sigma_a = 0.05", &format!("sigma_a = 0.05\ng = {g}")),
+                "medium.g",
+                "[-0.99, 0.99]",
+            );
         }
         let forward = parse(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = 0.05\ng = 0.99")).unwrap();
         assert_eq!((forward.medium.g, parse(MINIMAL).unwrap().medium.g), (0.99, 0.0));
