@@ -204,6 +204,31 @@ fn the_command_line_renders_in_parts_and_merges_them_into_the_render() {
     assert!(!dir.join("x.exr").exists() && !dir.join("y.npz").exists());
 }
 
+/// Forward-scattering fog in parts: the merge is the whole render, bit for bit, and a part of
+/// the same scene file at another g (docs/mathematics.md section 1.1) is refused as a part of
+/// another image, as another seed is.
+#[test]
+fn parts_of_forward_scattering_fog_merge_and_another_g_is_refused() {
+    let dir = scratch("forward");
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let text = std::fs::read_to_string("media_scenes/forward_fog.toml").unwrap();
+    std::fs::create_dir_all(dir.join("other")).unwrap();
+    std::fs::write(dir.join("other/forward_fog.toml"), text.replace("g = 0.85", "g = 0.5")).unwrap();
+    let render = |scene: &str, extra: &[&str]| {
+        let common = ["render", scene, "--resolution", "24x15", "--planes", "20000", "-q"];
+        run(&[&common[..], extra].concat());
+    };
+    render("media_scenes/forward_fog.toml", &["-o", &p("whole.exr")]);
+    render("media_scenes/forward_fog.toml", &["--plane-range", "0:16384", "--partial", &p("a.npz")]);
+    render("media_scenes/forward_fog.toml", &["--plane-range", "16384:20000", "--partial", &p("b.npz")]);
+    render(&p("other/forward_fog.toml"), &["--plane-range", "16384:20000", "--partial", &p("other.npz")]);
+    run(&["merge", &p("a.npz"), &p("b.npz"), "-o", &p("merged.exr"), "-q"]);
+    let load = |name: &str| Film::load_exr(&dir.join(name)).unwrap();
+    assert!(load("merged.exr").pixels == load("whole.exr").pixels);
+    assert!(refused(&["merge", &p("a.npz"), &p("other.npz"), "-o", &p("x.exr")]).contains("different images"));
+    assert!(!dir.join("x.exr").exists());
+}
+
 #[test]
 fn the_command_line_renders_reference_bands_and_merges_them_into_the_reference() {
     let dir = scratch("reference");
