@@ -72,6 +72,13 @@ pub(crate) enum Command {
     /// max_depth 2, no Russian roulette); resolution, samples and seed are its parameters resx,
     /// resy, spp and seed. tests/mitsuba/check_export.py compares it with `reference`.
     Export(ExportArgs),
+    /// List the GPU adapters wgpu finds (Vulkan, Metal, DX12): index, name, back end, kind
+    /// (discrete, integrated, virtual GPU, CPU emulation) and largest buffer binding.
+    ///
+    /// `--device gpu:N` gathers on adapter N; `--device gpu` on the one marked default (a real
+    /// GPU first, else an emulated one such as lavapipe). Without any adapter: one line saying
+    /// why, exit 2.
+    Devices,
 }
 
 #[derive(Args)]
@@ -150,10 +157,11 @@ pub(crate) struct ScalingArgs {
 /// that it shares nothing with the gather).
 #[derive(Args)]
 pub(crate) struct DeviceArgs {
-    /// The processor that gathers: cpu, gpu (through Vulkan, Metal or DX12; refused where no
-    /// adapter is found) or auto (the GPU when one is found, which the summary names)
+    /// The processor that gathers: cpu, gpu (through Vulkan, Metal or DX12: a real GPU first,
+    /// else an emulated one; refused where no adapter is found), gpu:N (adapter N of
+    /// `fogplanes devices`) or auto (a real GPU when one is found, which the summary names)
     /// [default: cpu].
-    #[arg(long, value_parser = device_parser())]
+    #[arg(long, value_name = "DEVICE", value_parser = device_parser())]
     pub(crate) device: Option<Device>,
 }
 
@@ -412,8 +420,9 @@ pub(crate) fn accelerator_parser() -> impl TypedValueParser<Value = Accelerator>
     named(Accelerator::ALL.iter().map(|a| a.name()).collect())
 }
 
-pub(crate) fn device_parser() -> impl TypedValueParser<Value = Device> {
-    named(Device::ALL.iter().map(|d| d.name()).collect())
+/// `cpu`, `gpu`, `auto` or `gpu:N`.
+pub(crate) fn device_parser() -> impl Fn(&str) -> Result<Device, String> + Clone + Send + Sync + 'static {
+    |s: &str| s.parse::<Device>()
 }
 
 pub(crate) fn sampler_parser() -> impl TypedValueParser<Value = Sampler> {

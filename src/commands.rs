@@ -651,6 +651,22 @@ pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+pub(crate) fn cmd_devices() -> Result<(), Failure> {
+    let all = fogplanes::gpu::adapters().map_err(|e| input(anyhow!("{e}")))?;
+    for a in &all {
+        say!(
+            "gpu:{}  {} ({}, {}), largest binding {} MiB{}",
+            a.index,
+            a.name,
+            a.backend,
+            a.kind,
+            a.max_binding >> 20,
+            if a.default { "  [default: --device gpu]" } else { "" }
+        );
+    }
+    Ok(())
+}
+
 pub(crate) fn cmd_export(a: ExportArgs) -> Result<(), Failure> {
     let mut scene = Scene::load(&a.scene).map_err(input)?;
     if let Some((w, h)) = a.resolution {

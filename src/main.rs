@@ -37,6 +37,7 @@ fn main() -> ExitCode {
         Command::Scaling(a) => cmd_scaling(a),
         Command::Info(a) => cmd_info(a),
         Command::Export(a) => cmd_export(a),
+        Command::Devices => cmd_devices(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -97,7 +97,7 @@ fn a_checkpoint_begun_on_the_gpu_and_resumed_on_the_cpu_says_so() {
     let given = Overrides {
         planes: Some(16_400),
         resolution: Some((16, 9)),
-        device: Some(fogplanes::gpu::Device::Gpu),
+        device: Some(fogplanes::gpu::Device::GPU),
         ..Overrides::default()
     };
     let r = given.resolve(&scene).unwrap();
@@ -209,6 +209,61 @@ fn info_tells_a_whole_exr_from_a_truncated_one() {
         let (out, err) = text(&o);
         assert_eq!(o.status.code(), Some(2), "{keep} of {} bytes: {out}{err}", bytes.len());
         assert!(err.lines().count() == 1 && err.contains("pixel data is incomplete"), "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// `fogplanes devices` lists every adapter with its index, back end, kind and largest binding,
+/// one marked default; `--device gpu:N` gathers on adapter N (the default's image is
+/// `--device gpu`'s, bit for bit); an index out of range, or a `FOGPLANES_GPU` one, is one line
+/// naming the count, exit 2; a bad index is refused when parsed.
+#[test]
+fn devices_lists_the_adapters_and_gpu_n_picks_one() {
+    if !have_gpu("devices_lists_the_adapters_and_gpu_n_picks_one") {
+        return;
+    }
+    let o = fogplanes(&["devices"]);
+    let (out, err) = text(&o);
+    assert!(o.status.success() && err.is_empty(), "{err}");
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(!lines.is_empty());
+    for (i, l) in lines.iter().enumerate() {
+        assert!(
+            l.starts_with(&format!("gpu:{i}  ")) && l.contains("(Vulkan, ") && l.contains("largest binding "),
+            "{l}"
+        );
+    }
+    let defaults: Vec<usize> = (0..lines.len()).filter(|&i| lines[i].ends_with("[default: --device gpu]")).collect();
+    assert_eq!(defaults.len(), 1, "{out}");
+    let n = lines.len();
+    let d = dir("gpu-n");
+    let render = |device: &str, out: &Path, env: &[(&str, &str)]| {
+        let args =
+            ["render", SCENE, "--resolution", "16x9", "--planes", "64", "-q", "--device", device, "-o", path(out)];
+        run_with(&args, env, &[])
+    };
+    let (by_name, by_index) = (d.join("gpu.exr"), d.join("gpu_n.exr"));
+    assert!(render("gpu", &by_name, &[]).status.success());
+    let o = render(&format!("gpu:{}", defaults[0]), &by_index, &[]);
+    assert!(o.status.success(), "{}", text(&o).1);
+    let load = |p: &Path| fogplanes::film::Film::load_exr(p).unwrap().pixels;
+    assert!(load(&by_name) == load(&by_index), "gpu:{} is not gpu's default", defaults[0]);
+    let count = if n == 1 { "there is 1 adapter, gpu:0".to_string() } else { format!("there are {n} adapters") };
+    for (device, env, says) in [
+        (format!("gpu:{n}"), vec![], format!("--device: gpu:{n}: {count}")),
+        ("gpu".to_string(), vec![("FOGPLANES_GPU", "99")], format!("--device: FOGPLANES_GPU=99: {count}")),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU", "one")],
+            "FOGPLANES_GPU=\"one\": not an adapter's index".to_string(),
+        ),
+        ("gpu:x".to_string(), vec![], "gpu:N takes an adapter's index".to_string()),
+    ] {
+        let o = render(&device, &d.join("no.exr"), &env);
+        let (_, err) = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{device} {env:?}: {err}");
+        assert!(err.contains(&says), "{device} {env:?}: {err}");
+        assert!(err.trim_end().lines().count() == 1 || device == "gpu:x", "{err}");
     }
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -110,7 +110,7 @@ fn gpu_agrees_with_the_cpu_for_every_estimator_and_filter() {
                     ..Overrides::default()
                 };
                 let (c, cs) = render_on(&s, &given, Device::Cpu);
-                let (g, gs) = render_on(&s, &given, Device::Gpu);
+                let (g, gs) = render_on(&s, &given, Device::GPU);
                 let (fc, fg) = (fog(&s, &given, &c), fog(&s, &given, &g));
                 let (rel, worst) = relative_mse(&fg, &fc);
                 hits_cpu += cs.hits;
@@ -196,7 +196,7 @@ fn gpu_loses_no_plane_in_long_tile_lists() {
             ..Overrides::default()
         };
         let (c, cs) = render_on(&s, &given, Device::Cpu);
-        let (g, gs) = render_on(&s, &given, Device::Gpu);
+        let (g, gs) = render_on(&s, &given, Device::GPU);
         let (rel, _) = relative_mse(&fog(&s, &given, &g), &fog(&s, &given, &c));
         println!("{w}: {} hits on the GPU, {} on the CPU; fog relative MSE {rel:.2e}", gs.hits, cs.hits);
         assert!((gs.hits as f64 - cs.hits as f64).abs() <= 1e-6 * cs.hits as f64, "{} vs {}", gs.hits, cs.hits);
@@ -213,8 +213,8 @@ fn gpu_images_are_the_same_bits_from_run_to_run() {
     }
     let s = scene("media_scenes/six_lights.toml", 64, 36);
     let given = Overrides { planes: Some(3000), estimator: Some(Estimator::CmisExact), ..Overrides::default() };
-    let (a, sa) = render_on(&s, &given, Device::Gpu);
-    let (b, sb) = render_on(&s, &given, Device::Gpu);
+    let (a, sa) = render_on(&s, &given, Device::GPU);
+    let (b, sb) = render_on(&s, &given, Device::GPU);
     assert!(a.pixels == b.pixels, "two GPU renders differ");
     assert_eq!(sa.hits, sb.hits);
     assert!(sa.device.starts_with("gpu") && sa.seconds_device > 0.0, "{} {}", sa.device, sa.seconds_device);
@@ -234,7 +234,7 @@ fn gpu_images_match_the_reference() {
     for (s, pixel_center) in [(scene("media_scenes/six_lights.toml", 32, 18), false), (two, true)] {
         failures.extend(against_reference("gpu", &s, pixel_center, 24, &|seed| {
             let given = Overrides { planes: Some(1500), seed: Some(40 + seed), pixel_center, ..Overrides::default() };
-            render_on(&s, &given, Device::Gpu).0
+            render_on(&s, &given, Device::GPU).0
         }));
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -255,7 +255,7 @@ fn gpu_chunks_merges_and_a_resumed_render_give_the_render() {
         planes: Some(planes as u64),
         seed: Some(5),
         stderr: true,
-        device: Some(Device::Gpu),
+        device: Some(Device::GPU),
         ..Overrides::default()
     };
     let opts = options(&s, given.clone());
@@ -357,7 +357,7 @@ fn an_image_larger_than_the_gpu_binds_is_a_clear_error() {
     let width = 2048u32;
     let height = pixels.div_ceil(width as u64) as u32;
     let s = scene("media_scenes/six_lights.toml", width, height);
-    let given = Overrides { planes: Some(64), device: Some(Device::Gpu), ..Overrides::default() };
+    let given = Overrides { planes: Some(64), device: Some(Device::GPU), ..Overrides::default() };
     let Err(err) = render(&s, &options(&s, given), Control::none()) else {
         panic!("an image over the binding rendered")
     };
@@ -376,7 +376,7 @@ fn a_cancelled_gpu_render_stops_and_leaves_the_next_render_whole() {
     }
     let s = scene("media_scenes/six_lights.toml", 48, 27);
     let given =
-        Overrides { planes: Some(CHUNK_PLANES as u64 + 2000), device: Some(Device::Gpu), ..Overrides::default() };
+        Overrides { planes: Some(CHUNK_PLANES as u64 + 2000), device: Some(Device::GPU), ..Overrides::default() };
     let opts = options(&s, given);
     let (whole, _) = render(&s, &opts, Control::none()).unwrap();
     let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));

@@ -30,9 +30,10 @@ pub enum Accelerator {
     Bvh,
     /// Every ray tests every plane (for checking the others).
     BruteForce,
-    /// The GPU ([`crate::gpu`]): chosen by the device (`--device gpu`), never by name, so it is
-    /// not among [`Accelerator::ALL`], the CPU's structures.
-    Gpu,
+    /// The GPU ([`crate::gpu`]), adapter N of [`gpu::adapters`]: chosen by the device
+    /// (`--device gpu`, `gpu:N`), never by name, so it is not among [`Accelerator::ALL`], the
+    /// CPU's structures.
+    Gpu(usize),
 }
 
 impl Accelerator {
@@ -44,7 +45,7 @@ impl Accelerator {
             Accelerator::Raster => "raster",
             Accelerator::Bvh => "bvh",
             Accelerator::BruteForce => "brute-force",
-            Accelerator::Gpu => "gpu",
+            Accelerator::Gpu(_) => "gpu",
         }
     }
 
@@ -54,7 +55,7 @@ impl Accelerator {
     pub fn units_per_gathering(self, width: u32, height: u32) -> u64 {
         match self {
             Accelerator::Raster => Tiling::new(width, height, crate::schedule::workers()).count() as u64,
-            Accelerator::Gpu => 1,
+            Accelerator::Gpu(_) => 1,
             _ => (width as u64 * height as u64).div_ceil(RAY_CHUNK as u64),
         }
     }
@@ -174,7 +175,7 @@ impl PreparedPlanes {
             if let Some(r) = &mut raster {
                 r.push_planes_in(&scene.camera, &piece, &scene.medium, control);
             }
-            if accelerator == Accelerator::Gpu {
+            if matches!(accelerator, Accelerator::Gpu(_)) {
                 use rayon::prelude::*;
                 let (cam, medium) = (&scene.camera, &scene.medium);
                 reach.par_extend(
@@ -193,8 +194,8 @@ impl PreparedPlanes {
             (Accelerator::Bvh, _) => {
                 Structure::Cpu(CpuStructure::Bvh(PlaneBvh::build(&all, &scene.medium, origin, control)?))
             }
-            (Accelerator::Gpu, _) => {
-                let gpu = gpu::adapter().map_err(Error::Device)?;
+            (Accelerator::Gpu(index), _) => {
+                let (_, gpu) = gpu::adapter_at(Some(index)).map_err(Error::Device)?;
                 let (w, h) = (scene.camera.width, scene.camera.height);
                 Structure::Gpu(GpuPlanes::new(gpu, &context, &reach, w, h)?)
             }

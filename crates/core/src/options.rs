@@ -77,13 +77,16 @@ impl RenderOptions {
     /// The structure the planes are gathered through: the GPU's on [`Device::Gpu`], else the
     /// accelerator's.
     pub fn structure(&self) -> Accelerator {
-        if self.device == Device::Gpu { Accelerator::Gpu } else { self.accelerator }
+        match self.device {
+            Device::Gpu(index) => Accelerator::Gpu(index.unwrap_or_default()),
+            _ => self.accelerator,
+        }
     }
     /// The device as parts and images record it: `cpu`, or `gpu` with the adapter's name.
     pub fn device_label(&self) -> String {
         match self.device {
-            Device::Gpu => match crate::gpu::adapter() {
-                Ok(g) => format!("gpu: {}", g.name()),
+            Device::Gpu(index) => match crate::gpu::adapter_at(index) {
+                Ok((_, g)) => format!("gpu: {}", g.name()),
                 Err(_) => "gpu".into(),
             },
             d => d.name().into(),
@@ -199,7 +202,7 @@ impl Devices {
 
 impl std::fmt::Display for Devices {
     /// The names joined by `; ` (a name holds commas: `gpu: llvmpipe (LLVM 15.0.6, 256 bits)
-    /// (Vulkan, CPU adapter)`).
+    /// (Vulkan, CPU emulation)`).
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.0.join("; "))
     }

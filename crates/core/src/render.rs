@@ -135,7 +135,7 @@ impl GatherSide<'_> {
         // added to the sums as they were (`start`); with an error image, after each gathering,
         // so that the spread sees each piece's sums (and the image is the same bits with it or
         // without).
-        let mut on_gpu = (self.opts.structure() == Accelerator::Gpu).then(|| OnGpu::new(chunks.len()));
+        let mut on_gpu = matches!(self.opts.structure(), Accelerator::Gpu(_)).then(|| OnGpu::new(chunks.len()));
         let start: Vec<Vec<Vec3>> = match (&on_gpu, &self.spread) {
             (Some(_), Some(_)) => sums.iter().map(|s| s.to_vec()).collect(),
             _ => Vec::new(),

@@ -118,9 +118,9 @@ fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
 /// they do not apply to the GPU; `auto` with them is the CPU.
 fn wanted_device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
     match given.unwrap_or_default() {
-        Device::Gpu if cpu_options => Err(Error::option(
+        d @ Device::Gpu(_) if cpu_options => Err(Error::option(
             Setting::Device,
-            "gpu: the accelerator and the kernel choose how the CPU gathers; give them with --device cpu",
+            format!("{d}: the accelerator and the kernel choose how the CPU gathers; give them with --device cpu"),
         )),
         // `auto` wants speed, and the caller chose how the CPU gathers.
         Device::Auto if cpu_options => Ok(Device::Cpu),
@@ -133,14 +133,20 @@ fn wanted_device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
 /// lavapipe, slower than the CPU's own kernels), else the CPU; `gpu` without an adapter is
 /// refused in one line saying why.
 fn find_device(wanted: Device) -> Result<Device> {
-    if wanted == Device::Cpu {
-        return Ok(Device::Cpu);
-    }
-    match (wanted, crate::gpu::adapter()) {
-        (Device::Auto, Ok(g)) if !g.is_cpu_adapter() => Ok(Device::Gpu),
-        (Device::Auto, _) => Ok(Device::Cpu),
-        (_, Err(why)) => Err(Error::option(Setting::Device, format!("gpu: {why}"))),
-        (_, Ok(_)) => Ok(Device::Gpu),
+    match wanted {
+        Device::Cpu => Ok(Device::Cpu),
+        Device::Auto => match crate::gpu::adapter_at(None) {
+            Ok((i, g)) if !g.is_cpu_adapter() => Ok(Device::Gpu(Some(i))),
+            _ => Ok(Device::Cpu),
+        },
+        Device::Gpu(index) => match crate::gpu::adapter_at(index) {
+            Ok((i, _)) => Ok(Device::Gpu(Some(i))),
+            // An index out of range names itself (or FOGPLANES_GPU) and the count.
+            Err(why) if why.starts_with("gpu:") || why.starts_with(crate::gpu::GPU_VARIABLE) => {
+                Err(Error::option(Setting::Device, why))
+            }
+            Err(why) => Err(Error::option(Setting::Device, format!("{wanted}: {why}"))),
+        },
     }
 }
 

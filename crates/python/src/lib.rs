@@ -28,6 +28,7 @@ use fogplanes::weights::Estimator;
 use numpy::PyArray3;
 use partials::*;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use pyo3::types::PyTuple;
 use references::*;
 use renders::*;
@@ -53,6 +54,7 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLight>()?;
     m.add_class::<PyRenderDefaults>()?;
     m.add_function(wrap_pyfunction!(load_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(devices, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(reference, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
@@ -75,4 +77,25 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEVICES", PyTuple::new(m.py(), fogplanes::gpu::Device::ALL.iter().map(|d| d.name()))?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
+}
+
+/// The GPU adapters wgpu finds (Vulkan, Metal, DX12), as `fogplanes devices` lists them: a
+/// list of dicts with `index` (`device=f"gpu:{index}"`), `name`, `backend`, `kind` ("discrete
+/// GPU", "integrated GPU", "virtual GPU", "CPU emulation", "other"), `max_binding` (bytes) and
+/// `default` (the one `device="gpu"` takes). An empty list where there is none.
+#[pyfunction]
+fn devices(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+    let all = py.detach(fogplanes::gpu::adapters).unwrap_or_default();
+    all.iter()
+        .map(|a| {
+            let d = PyDict::new(py);
+            d.set_item("index", a.index)?;
+            d.set_item("name", &a.name)?;
+            d.set_item("backend", &a.backend)?;
+            d.set_item("kind", a.kind)?;
+            d.set_item("max_binding", a.max_binding)?;
+            d.set_item("default", a.default)?;
+            Ok(d)
+        })
+        .collect()
 }

@@ -42,7 +42,7 @@ pub(crate) fn plan_render<'py>(
     d.set_item("pixel_center", o.pixel_center())?;
     d.set_item("accelerator", o.accelerator().name())?;
     d.set_item("kernel", o.kernel().name())?;
-    d.set_item("device", o.device().name())?;
+    d.set_item("device", o.device().to_string())?;
     d.set_item("resolution", (scene.camera.width, scene.camera.height))?;
     d.set_item("threads", r.threads)?;
     Ok(d)

@@ -12,7 +12,7 @@
 //! surface, and the layer has nothing to look up.
 
 use super::device::{Gpu, block_on};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// The instance of this process, made once; `Err` says why there is none (no Vulkan loader
 /// or driver).
@@ -70,18 +70,137 @@ fn no_adapter(why: &dyn std::fmt::Display) -> String {
     )
 }
 
-/// The adapter of this process, found on first use: the high-performance one (a discrete GPU
-/// before an integrated one or a CPU adapter such as lavapipe) among Vulkan, Metal and DX12.
-/// `Err` says in one line why there is none.
+/// An adapter as `fogplanes devices` lists it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AdapterInfo {
+    /// Its index in the list: `--device gpu:N`.
+    pub index: usize,
+    pub name: String,
+    /// `Vulkan`, `Metal` or `Dx12`.
+    pub backend: String,
+    /// `discrete GPU`, `integrated GPU`, `virtual GPU`, `CPU emulation` or `other`.
+    pub kind: &'static str,
+    /// The most bytes one storage buffer binding holds (the rays of an image must fit one).
+    pub max_binding: u64,
+    /// Whether `--device gpu` takes it (the first real GPU, else the first adapter).
+    pub default: bool,
+}
+
+/// The adapters of this process, in the order wgpu finds them, found once.
+fn found() -> Result<&'static [wgpu::Adapter], String> {
+    static FOUND: OnceLock<Result<Vec<wgpu::Adapter>, String>> = OnceLock::new();
+    FOUND
+        .get_or_init(|| {
+            let all = block_on(instance()?.enumerate_adapters(wgpu::Backends::PRIMARY));
+            if all.is_empty() {
+                return Err(no_adapter(&"no adapter found"));
+            }
+            Ok(all)
+        })
+        .as_ref()
+        .map(Vec::as_slice)
+        .map_err(Clone::clone)
+}
+
+/// How much `--device gpu` prefers an adapter of this kind: a real GPU first (discrete, then
+/// integrated, then virtual), an emulated one (lavapipe) last.
+fn rank(kind: wgpu::DeviceType) -> u32 {
+    match kind {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// The words for an adapter's kind.
+pub(super) fn kind_name(kind: wgpu::DeviceType) -> &'static str {
+    match kind {
+        wgpu::DeviceType::DiscreteGpu => "discrete GPU",
+        wgpu::DeviceType::IntegratedGpu => "integrated GPU",
+        wgpu::DeviceType::VirtualGpu => "virtual GPU",
+        wgpu::DeviceType::Cpu => "CPU emulation",
+        wgpu::DeviceType::Other => "other",
+    }
+}
+
+/// The index `--device gpu` takes: the first adapter of the best rank.
+fn default_index(all: &[wgpu::Adapter]) -> usize {
+    (0..all.len()).min_by_key(|&i| (rank(all[i].get_info().device_type), i)).unwrap_or(0)
+}
+
+/// Every adapter wgpu finds (Vulkan, Metal, DX12), with its index; `Err` says in one line why
+/// there is none.
+pub fn adapters() -> Result<Vec<AdapterInfo>, String> {
+    let all = found()?;
+    let default = default_index(all);
+    Ok(all
+        .iter()
+        .enumerate()
+        .map(|(index, a)| {
+            let (info, limits) = (a.get_info(), a.limits());
+            AdapterInfo {
+                index,
+                name: info.name,
+                backend: format!("{:?}", info.backend),
+                kind: kind_name(info.device_type),
+                max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
+                default: index == default,
+            }
+        })
+        .collect())
+}
+
+/// A device made on an adapter, or why it could not be.
+type Made = Result<Arc<Gpu>, String>;
+
+/// The variable a launcher sets per process to give each its own adapter (as dask-cuda sets
+/// `CUDA_VISIBLE_DEVICES` per worker): `--device gpu` (Python's `device="gpu"`) then takes
+/// adapter `FOGPLANES_GPU` of [`adapters`].
+pub const GPU_VARIABLE: &str = "FOGPLANES_GPU";
+
+/// The adapter `index` of [`adapters`] (`None`: the one `--device gpu` takes, adapter
+/// [`GPU_VARIABLE`] where it is set, else a real GPU first), its device made on first use and
+/// kept for the process, with its index; `Err` says in one line why there is none (an index
+/// out of range names the count).
+pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
+    static GPUS: Mutex<Vec<(usize, Made)>> = Mutex::new(Vec::new());
+    let all = found()?;
+    let set = std::env::var(GPU_VARIABLE).ok().filter(|v| !v.is_empty());
+    let (index, named) = match (index, set) {
+        (None, Some(v)) => {
+            let i = v.trim().parse::<usize>().map_err(|_| {
+                format!("{GPU_VARIABLE}={v:?}: not an adapter's index (0, 1, ...: `fogplanes devices` lists them)")
+            })?;
+            (Some(i), format!("{GPU_VARIABLE}={i}"))
+        }
+        (index, _) => (index, format!("gpu:{}", index.unwrap_or_default())),
+    };
+    let i = match index {
+        None => default_index(all),
+        Some(i) if i < all.len() => i,
+        Some(_) => {
+            let n = all.len();
+            let which = if n == 1 {
+                "is 1 adapter, gpu:0".to_string()
+            } else {
+                format!("are {n} adapters, gpu:0 to gpu:{}", n - 1)
+            };
+            return Err(format!("{named}: there {which} (`fogplanes devices` lists them)"));
+        }
+    };
+    // Held while the device is made: two threads asking for one adapter make it once.
+    let mut gpus = GPUS.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((_, g)) = gpus.iter().find(|(k, _)| *k == i) {
+        return g.clone().map(|g| (i, g));
+    }
+    let made = Gpu::new(all[i].clone()).map(Arc::new);
+    gpus.push((i, made.clone()));
+    made.map(|g| (i, g))
+}
+
+/// The adapter `--device gpu` takes ([`adapter_at`] of `None`).
 pub fn adapter() -> Result<Arc<Gpu>, String> {
-    static GPU: OnceLock<Result<Arc<Gpu>, String>> = OnceLock::new();
-    GPU.get_or_init(|| {
-        let adapter = block_on(instance()?.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| no_adapter(&e))?;
-        Gpu::new(adapter).map(Arc::new)
-    })
-    .clone()
+    adapter_at(None).map(|(_, g)| g)
 }

@@ -180,13 +180,7 @@ impl Gpu {
             label: Some("gather.wgsl"),
             source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
         });
-        let kind = match info.device_type {
-            wgpu::DeviceType::Cpu => "CPU adapter",
-            wgpu::DeviceType::DiscreteGpu => "discrete GPU",
-            wgpu::DeviceType::IntegratedGpu => "integrated GPU",
-            wgpu::DeviceType::VirtualGpu => "virtual GPU",
-            wgpu::DeviceType::Other => "adapter",
-        };
+        let kind = super::adapter::kind_name(info.device_type);
         let gpu = Gpu {
             name: format!("{} ({:?}, {kind})", info.name, info.backend),
             cpu_adapter: info.device_type == wgpu::DeviceType::Cpu,

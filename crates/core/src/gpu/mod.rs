@@ -23,14 +23,14 @@ mod adapter;
 #[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
-pub use adapter::adapter;
+pub use adapter::{AdapterInfo, GPU_VARIABLE, adapter, adapter_at, adapters};
 #[cfg(feature = "gpu")]
 pub use device::{Gpu, GpuPlanes, GpuRays, GpuSums};
 
 #[cfg(not(feature = "gpu"))]
 mod absent;
 #[cfg(not(feature = "gpu"))]
-pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, adapter};
+pub use absent::{AdapterInfo, GPU_VARIABLE, Gpu, GpuPlanes, GpuRays, GpuSums, adapter, adapter_at, adapters};
 
 /// Which processor gathers (`--device`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -38,25 +38,58 @@ pub enum Device {
     /// The CPU's structures and kernels.
     #[default]
     Cpu,
-    /// The GPU ([`GpuPlanes`]); refused where there is no adapter.
-    Gpu,
+    /// The GPU ([`GpuPlanes`]): adapter N of [`adapters`] (`gpu:N`), or `None` (`gpu`) the one
+    /// [`adapter`] takes, a real GPU before an emulated one; refused where there is none.
+    /// Resolved settings always hold the index.
+    Gpu(Option<usize>),
     /// The GPU when an adapter is found, else the CPU (resolved once, by the settings).
     Auto,
 }
 
 impl Device {
-    pub const ALL: [Device; 3] = [Device::Cpu, Device::Gpu, Device::Auto];
+    /// `gpu`: the adapter [`adapter`] takes.
+    pub const GPU: Device = Device::Gpu(None);
+    pub const ALL: [Device; 3] = [Device::Cpu, Device::GPU, Device::Auto];
 
+    /// The processor's name (`gpu` for every adapter).
     pub fn name(self) -> &'static str {
         match self {
             Device::Cpu => "cpu",
-            Device::Gpu => "gpu",
+            Device::Gpu(_) => "gpu",
             Device::Auto => "auto",
+        }
+    }
+
+    pub fn is_gpu(self) -> bool {
+        matches!(self, Device::Gpu(_))
+    }
+}
+
+impl std::fmt::Display for Device {
+    /// `cpu`, `gpu`, `gpu:N`, `auto`: what parses back to it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Device::Gpu(Some(i)) => write!(f, "gpu:{i}"),
+            d => f.write_str(d.name()),
         }
     }
 }
 
-crate::named_choice!(Device, "device");
+impl std::str::FromStr for Device {
+    type Err = String;
+    /// A name of [`Device::ALL`], or `gpu:N` with N an adapter's index.
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.strip_prefix("gpu:") {
+            Some(n) => n.parse::<usize>().map(|i| Device::Gpu(Some(i))).map_err(|_| {
+                format!(
+                    "unknown device {s:?}; gpu:N takes an adapter's index N (0, 1, ...: `fogplanes devices` lists them)"
+                )
+            }),
+            None => crate::parse_name("device", s, &Device::ALL, Device::name)
+                .map_err(|e| format!("{e}, or gpu:N for adapter N")),
+        }
+    }
+}
 
 /// Pixels on a tile's side: a tile is a workgroup of 16 x 16 threads, a pixel each.
 pub const TILE: u32 = 16;
@@ -241,8 +274,11 @@ mod tests {
     fn every_estimator_has_a_shader_id_and_device_names_round_trip() {
         let ids: Vec<u32> = Weighting::all(&[4]).into_iter().map(estimator_id).collect();
         assert_eq!(ids, vec![0, 1, 2, 3, 4, 5, 6]);
-        for d in Device::ALL {
-            assert_eq!(d.name().parse::<Device>().unwrap(), d);
+        for d in Device::ALL.into_iter().chain([Device::Gpu(Some(0)), Device::Gpu(Some(12))]) {
+            assert_eq!(d.to_string().parse::<Device>().unwrap(), d);
+        }
+        for bad in ["gpu:", "gpu:x", "gpu:-1", "tpu"] {
+            assert!(bad.parse::<Device>().is_err(), "{bad}");
         }
     }
 }

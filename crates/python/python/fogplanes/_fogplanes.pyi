@@ -239,8 +239,9 @@ def render(
     With `return_stderr=True`, also the estimated standard error of each pixel (as `render
     --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
     `device="gpu"` gathers on the GPU through wgpu (a Vulkan, Metal or DX12 adapter; ValueError
-    without one), `"auto"` on the GPU when one is found; the image agrees with the CPU's within
-    f32 rounding (docs/gpu.md), and the stats' "device" says which gathered.
+    without one), `"gpu:N"` on adapter N of `devices()`, `"auto"` on the GPU when one is found;
+    the image agrees with the CPU's within f32 rounding (docs/gpu.md), and the stats' "device"
+    says which gathered.
     `progress=True` shows progress on standard error (one line redrawn on a terminal, else a
     line per tenth of the work).
 
@@ -369,10 +370,29 @@ class RenderPlan(TypedDict):
     pixel_center: bool
     accelerator: str
     kernel: str
-    #: "cpu" or "gpu" (`device="auto"` resolved where the plan is made).
+    #: "cpu" or "gpu:N" (`device="auto"` and "gpu" resolved where the plan is made).
     device: str
     resolution: tuple[int, int]
     threads: int | None
+
+class AdapterInfo(TypedDict):
+    """A GPU adapter as `fogplanes devices` lists it."""
+
+    #: `device=f"gpu:{index}"` gathers on it.
+    index: int
+    name: str
+    #: "Vulkan", "Metal" or "Dx12".
+    backend: str
+    #: "discrete GPU", "integrated GPU", "virtual GPU", "CPU emulation" or "other".
+    kind: str
+    #: The most bytes one storage buffer binding holds.
+    max_binding: int
+    #: Whether `device="gpu"` takes it.
+    default: bool
+
+def devices() -> list[AdapterInfo]:
+    """The GPU adapters wgpu finds (Vulkan, Metal, DX12), as `fogplanes devices` lists them;
+    empty where there is none."""
 
 class Partial:
     """The unnormalised float64 sums of planes start..end of a render. Picklable; `a + b`
