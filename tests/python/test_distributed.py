@@ -401,3 +401,35 @@ def test_table_computes_the_metrics_on_the_workers(client, scene):
         assert {k: r[k] for k in ("smape", "mse", "rel_mse", "max_abs")} == {
             k: expected[k] for k in ("smape", "mse", "rel_mse", "max_abs")}
         assert r["hits"] > 0 and r["seconds"] >= 0
+
+
+def _gpu_or_skip():
+    if fogplanes.devices():
+        return
+    if os.environ.get("FOGPLANES_REQUIRE_GPU") == "1":
+        raise AssertionError("FOGPLANES_REQUIRE_GPU=1 but fogplanes.devices() finds no GPU adapter")
+    pytest.skip("SKIPPED LOUDLY: no GPU adapter here; install mesa-vulkan-drivers")
+
+
+def test_a_gpu_render_on_two_workers_is_one_machines(scene, client):
+    """`device="gpu"` on two workers (each its adapter: the default one, or FOGPLANES_GPU's where
+    the launcher sets it) gives one machine's GPU image bit for bit."""
+    _gpu_or_skip()
+    kwargs = dict(resolution=(16, 9), planes=2 * chunk_planes(scene) + 100, device="gpu")
+    image = fd.render(scene, client=client, threads=1, progress=False, chunks_per_task=1, **kwargs)
+    assert_bit_identical(image, fogplanes.render(scene, **kwargs))
+
+
+def test_a_worker_without_its_adapter_fails_the_job_with_a_clear_error_at_the_client(scene):
+    """A worker whose FOGPLANES_GPU names an adapter it does not have fails the job, and the
+    client is told why in one line (the count of adapters there)."""
+    _gpu_or_skip()
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0",
+                           env={"RAYON_NUM_THREADS": "1", "FOGPLANES_GPU": "99"})
+    try:
+        with Client(cluster) as c, pytest.raises(ValueError, match=r"FOGPLANES_GPU=99: there (is|are) \d+ adapter"):
+            fd.render(scene, client=c, threads=1, progress=False, retries=0, resolution=(16, 9), planes=256,
+                      device="gpu")
+    finally:
+        cluster.close()

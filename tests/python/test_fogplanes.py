@@ -532,6 +532,14 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
         pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
     assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0 and stats["seconds_upload"] > 0
     assert stats["devices"] == [stats["device"]]
+    # Every adapter listed; `gpu:N` picks one by its index: the default's is "gpu"'s image.
+    adapters = fogplanes.devices()
+    assert [a["index"] for a in adapters] == list(range(len(adapters)))
+    assert sum(a["default"] for a in adapters) == 1 and all(a["max_binding"] > 0 for a in adapters)
+    default = next(a["index"] for a in adapters if a["default"])
+    assert_bit_identical(fogplanes.render(SIX_LIGHTS, device=f"gpu:{default}", **kwargs), gpu)
+    with pytest.raises(ValueError, match=rf"^device='gpu:{len(adapters)}': gpu:{len(adapters)}: there (is|are) "):
+        fogplanes.render(SIX_LIGHTS, device=f"gpu:{len(adapters)}", **kwargs)
     # Partials gathered on both devices: the finished image's stats name both, each once.
     chunked = dict(resolution=(16, 9), planes=16400)
     on_cpu = fogplanes.render_chunk(SIX_LIGHTS, (0, 16384), **chunked)

@@ -50,6 +50,12 @@ node's cores (`threads`). Dask sets OMP_NUM_THREADS for its workers but not rayo
 count, so a worker with k Dask threads whose renders each used every core would run k x cores
 threads. `threads=None` gives each render the cores of its node divided by the Dask threads
 there (the smallest over the nodes), and the local cluster also sets RAYON_NUM_THREADS.
+
+GPUs: with `device="gpu"`, each worker gathers on the adapter its environment variable
+FOGPLANES_GPU names (an index of `fogplanes.devices()` on its machine), which the launcher sets
+per worker as dask-cuda sets CUDA_VISIBLE_DEVICES; where it is unset, on its machine's default
+adapter (a real GPU first). A worker whose FOGPLANES_GPU names no adapter there fails the job,
+and the client gets the worker's one-line ValueError (docs/gpu.md).
 """
 
 from __future__ import annotations
