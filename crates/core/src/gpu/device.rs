@@ -65,12 +65,14 @@ pub struct Gpu {
     gather_pipeline_layout: wgpu::PipelineLayout,
     /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
     gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 2]>>>,
-    /// Errors the device reported (validation, out of memory), taken after each submission.
+    /// Errors the device reported outside every error scope ([`Gpu::checked`]: each call's own
+    /// errors are caught on its thread), taken after each wait.
     errors: Arc<Mutex<Vec<String>>>,
-    /// Held by each upload and gathering for its whole work (the render prepares the next chunk
-    /// while it gathers one, and the device's errors, one list for the process, must be taken
-    /// by the work that caused them), with the gatherings' scratch buffers.
-    work: Mutex<Scratch>,
+    /// The gatherings' scratch buffers, held by a gathering for its submissions. No lock is
+    /// held by an upload: the render prepares the next chunk's planes while it gathers one, and
+    /// a lock held across a submission (which a CPU adapter runs before it returns) kept the
+    /// preparation waiting for the other side's whole gathering.
+    scratch: Mutex<Scratch>,
 }
 
 /// The adapter of this process, found on first use: the high-performance one (a discrete GPU
@@ -215,7 +217,7 @@ impl Gpu {
             gather_module,
             gather: Mutex::new(HashMap::new()),
             errors,
-            work: Mutex::new(Scratch::default()),
+            scratch: Mutex::new(Scratch::default()),
         };
         gpu.take_errors().map_err(|e| format!("the GPU's shaders: {e}"))?;
         Ok(gpu)
@@ -253,11 +255,26 @@ impl Gpu {
         Err(all)
     }
 
-    /// [`Gpu::take_errors`] under the work lock (for a wait made without it): an upload under
-    /// way keeps its own errors.
+    /// [`Gpu::take_errors`] as an [`Error::Device`] (after a wait).
     fn work_errors(&self) -> Result<()> {
-        let _work = self.work.lock().unwrap_or_else(|p| p.into_inner());
         self.take_errors().map_err(Error::Device)
+    }
+
+    /// `f()` with the device's errors that it causes caught and returned in one line: wgpu's
+    /// error scopes are the calling thread's own, so that work on another thread (the render's
+    /// other side) neither sees these errors nor waits for this work.
+    fn checked<T>(&self, f: impl FnOnce() -> T) -> Result<T> {
+        let filters = [wgpu::ErrorFilter::Validation, wgpu::ErrorFilter::OutOfMemory, wgpu::ErrorFilter::Internal];
+        let scopes = filters.map(|filter| self.device.push_error_scope(filter));
+        let out = f();
+        // Popped innermost first, as they were pushed.
+        let errors: Vec<String> = scopes
+            .into_iter()
+            .rev()
+            .filter_map(|scope| block_on(scope.pop()))
+            .map(|e| crate::error::one_line(&e.to_string()))
+            .collect();
+        if errors.is_empty() { Ok(out) } else { Err(Error::Device(errors.join("; "))) }
     }
 
     /// The gather and reduce pipelines of estimator `id`, made on first use.
@@ -311,24 +328,40 @@ struct Batch {
     items: u64,
 }
 
-/// A structure's planes on the GPU, for gathering camera rays of one image size.
+/// A structure's planes for the GPU, for gathering camera rays of one image size: made on the
+/// CPU, uploaded by their first gathering ([`GpuPlanes::buffers`]).
 pub struct GpuPlanes {
     gpu: Arc<Gpu>,
     width: u32,
     height: u32,
-    planes: wgpu::Buffer,
-    occluders: wgpu::Buffer,
-    /// Per plane (first row of tiles, rows, first span, 0), and the spans: `bin.wgsl`'s
-    /// `reach` and `spans`.
-    reach: wgpu::Buffer,
-    spans: wgpu::Buffer,
+    /// What crosses, until it has.
+    host: Mutex<Option<PlaneData>>,
+    buffers: OnceLock<PlaneBuffers>,
     batches: Vec<Batch>,
     sigma_t: Vec3,
     grey: bool,
 }
 
+/// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and per plane its
+/// reach (first row of tiles, rows, first span, 0) and the spans (`bin.wgsl`'s `reach` and
+/// `spans`).
+struct PlaneData {
+    planes: Vec<PlaneRecord>,
+    occluders: Vec<crate::occlusion::Occluder>,
+    reach: Vec<[u32; 4]>,
+    spans: Vec<[u32; 2]>,
+}
+
+/// [`PlaneData`] on the GPU.
+struct PlaneBuffers {
+    planes: wgpu::Buffer,
+    occluders: wgpu::Buffer,
+    reach: wgpu::Buffer,
+    spans: wgpu::Buffer,
+}
+
 impl GpuPlanes {
-    /// The planes of `ctx` on `gpu`, with the tiles each reaches (`reach`, from
+    /// The planes of `ctx` for `gpu`, with the tiles each reaches (`reach`, from
     /// [`super::tile_reach`]) in a `width x height` image.
     pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
         assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
@@ -338,8 +371,6 @@ impl GpuPlanes {
             records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
             spans.extend_from_slice(&r.spans);
         }
-        let held = Arc::clone(&gpu);
-        let _work = held.work.lock().unwrap_or_else(|p| p.into_inner());
         // Every whole buffer within one binding: the image's rays (the largest per pixel), the
         // planes and their occluders; refused here in one line, not by the driver's validation.
         let pixels = width as u64 * height as u64;
@@ -385,23 +416,42 @@ impl GpuPlanes {
                 )));
             }
         }
-        let planes: Vec<PlaneRecord> = ctx.views.iter().map(PlaneRecord::from).collect();
-        let usage = wgpu::BufferUsages::STORAGE;
-        let sigma_t = ctx.extinction.sigma_t;
-        let planes = GpuPlanes {
-            planes: gpu.upload("planes", bytemuck::cast_slice(&planes), usage),
-            occluders: gpu.upload("occluders", bytemuck::cast_slice(&ctx.occluders), usage),
-            reach: gpu.upload("reach", bytemuck::cast_slice(&records), usage),
-            spans: gpu.upload("spans", bytemuck::cast_slice(&spans), usage),
+        let planes: Vec<PlaneRecord> = {
+            use rayon::prelude::*;
+            ctx.views.par_iter().map(PlaneRecord::from).collect()
+        };
+        // Not uploaded here: the render prepares planes beside its gathering, and an upload
+        // waits for the device while a submission is under way (on a CPU adapter, which runs a
+        // submission before it returns, for the other side's whole gathering).
+        let host = PlaneData { planes, occluders: ctx.occluders.clone(), reach: records, spans };
+        Ok(GpuPlanes {
             gpu,
             width,
             height,
+            host: Mutex::new(Some(host)),
+            buffers: OnceLock::new(),
             batches,
-            sigma_t,
+            sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
-        };
-        planes.gpu.take_errors().map_err(Error::Device)?;
-        Ok(planes)
+        })
+    }
+
+    /// The planes on the GPU, uploaded by the first call, with the nanoseconds this call spent
+    /// uploading.
+    fn buffers(&self) -> Result<(&PlaneBuffers, u64)> {
+        if let Some(b) = self.buffers.get() {
+            return Ok((b, 0));
+        }
+        let t = Instant::now();
+        let host = self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
+        let (gpu, usage) = (&self.gpu, wgpu::BufferUsages::STORAGE);
+        let made = gpu.checked(|| PlaneBuffers {
+            planes: gpu.upload("planes", bytemuck::cast_slice(&host.planes), usage),
+            occluders: gpu.upload("occluders", bytemuck::cast_slice(&host.occluders), usage),
+            reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), usage),
+            spans: gpu.upload("spans", bytemuck::cast_slice(&host.spans), usage),
+        })?;
+        Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64))
     }
 
     /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
@@ -458,11 +508,35 @@ impl GpuPlanes {
         let pixels = w as usize * h as usize;
         assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
         control.check()?;
-        let mut scratch = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         if self.batches.is_empty() {
             control.progress();
             return Ok(GatherStats::default());
         }
+        // Compiled on first use, before the scratch buffers are held.
+        let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
+        let (planes, upload_ns) = self.buffers()?;
+        let mut scratch = gpu.scratch.lock().unwrap_or_else(|p| p.into_inner());
+        gpu.checked(|| self.submit(weighting, &pipelines, planes, rays, into, &mut scratch, control))??;
+        control.progress();
+        Ok(GatherStats {
+            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
+            upload_ns,
+            ..GatherStats::default()
+        })
+    }
+
+    /// [`GpuPlanes::gather_into`]'s submissions, a batch each.
+    fn submit(
+        &self,
+        weighting: Weighting,
+        pipelines: &[wgpu::ComputePipeline; 2],
+        planes: &PlaneBuffers,
+        rays: &GpuRays,
+        into: &mut GpuSums,
+        scratch: &mut Scratch,
+        control: Control,
+    ) -> Result<()> {
+        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let tiles = tiles_x * tiles_y;
         let item = item_planes(gpu.cpu_adapter);
@@ -489,14 +563,13 @@ impl GpuPlanes {
         let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
         let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
         let s = scratch.at_least(gpu, tiles as u64, max_pairs, max_items);
-        let pipelines = gpu.gather_pipelines(estimator_id(weighting));
         let gather_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("gather"),
             layout: &gpu.gather_layout,
             entries: &[
                 entry(0, &params),
-                entry(1, &self.planes),
-                entry(2, &self.occluders),
+                entry(1, &planes.planes),
+                entry(2, &planes.occluders),
                 entry(3, &rays.buffer),
                 entry(4, &rotations_buf),
                 entry(5, &s.list),
@@ -545,13 +618,13 @@ impl GpuPlanes {
                 layout: &gpu.bin_layout,
                 entries: &[
                     entry(0, &bin_params),
-                    entry(1, &self.reach),
+                    entry(1, &planes.reach),
                     entry(2, &s.tile_counts),
                     entry(3, &s.offsets),
                     entry(4, &s.item_offsets),
                     entry(5, &s.list),
                     entry(6, &s.items),
-                    entry(7, &self.spans),
+                    entry(7, &planes.spans),
                 ],
             });
             let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
@@ -581,17 +654,12 @@ impl GpuPlanes {
             into.first_submission.get_or_insert_with(Instant::now);
             let index = gpu.queue.submit([encoder.finish()]);
             *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = Some(index);
-            gpu.take_errors().map_err(Error::Device)?;
         }
         match queries {
             Some((_, _, readback)) => into.timestamps.push(readback),
             None => into.untimed = true,
         }
-        control.progress();
-        Ok(GatherStats {
-            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
-            ..GatherStats::default()
-        })
+        Ok(())
     }
 }
 
@@ -671,17 +739,15 @@ impl GpuRays {
             )));
         }
         let t = Instant::now();
-        let work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("rays"),
-            // A binding may not be empty; 20 bytes a ray keep the size a multiple of 4.
-            size: bytes.max(32),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: true,
-        });
-        gpu.take_errors().map_err(Error::Device)?;
-        // Written without the work lock: the other side's upload goes on meanwhile.
-        drop(work);
+        let buffer = gpu.checked(|| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("rays"),
+                // A binding may not be empty; 20 bytes a ray keep the size a multiple of 4.
+                size: bytes.max(32),
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: true,
+            })
+        })?;
         let filling = Instant::now();
         {
             let mut view = buffer
@@ -707,9 +773,7 @@ impl GpuRays {
             );
         }
         let filled = filling.elapsed();
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        buffer.unmap();
-        gpu.take_errors().map_err(Error::Device)?;
+        gpu.checked(|| buffer.unmap())?;
         let upload_ns = t.elapsed().saturating_sub(filled).as_nanos() as u64;
         Ok(GpuRays { buffer, len, gpu: gpu.clone(), last_use: Mutex::new(None), upload_ns })
     }
@@ -771,10 +835,7 @@ impl GpuSums {
             )));
         }
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let image = gpu.scratch("image", bytes, usage);
-        gpu.take_errors().map_err(Error::Device)?;
-        drop(_work);
+        let image = gpu.checked(|| gpu.scratch("image", bytes, usage))?;
         Ok(GpuSums { gpu, image, pixels, timestamps: Vec::new(), first_submission: None, untimed: false })
     }
 
@@ -784,19 +845,18 @@ impl GpuSums {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
         let gpu = &*self.gpu;
         let bytes = self.pixels as u64 * 16;
-        // The work lock for the submission only, not the wait: the next chunk's upload goes on.
-        let work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let readback =
-            gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
-        gpu.queue.submit([encoder.finish()]);
         let timestamps = std::mem::take(&mut self.timestamps);
-        for b in timestamps.iter().chain([&readback]) {
-            b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
-        }
-        gpu.take_errors().map_err(Error::Device)?;
-        drop(work);
+        let readback = gpu.checked(|| {
+            let readback =
+                gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
+            gpu.queue.submit([encoder.finish()]);
+            for b in timestamps.iter().chain([&readback]) {
+                b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            }
+            readback
+        })?;
         let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
         let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
         let untimed = std::mem::take(&mut self.untimed);
