@@ -6,6 +6,7 @@ use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats, PlaneRecord};
+use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
 use std::collections::HashMap;
@@ -15,6 +16,7 @@ use wgpu::util::DeviceExt;
 
 const GATHER_WGSL: &str = include_str!("gather.wgsl");
 const BIN_WGSL: &str = include_str!("bin.wgsl");
+const RAYS_WGSL: &str = include_str!("rays.wgsl");
 
 /// Bytes of one work item's partial sums: 256 pixels of (r, g, b, hits) in f32.
 const ITEM_BYTES: u64 = (TILE * TILE) as u64 * 16;
@@ -61,6 +63,8 @@ pub struct Gpu {
     bin_layout: wgpu::BindGroupLayout,
     gather_layout: wgpu::BindGroupLayout,
     bin: [wgpu::ComputePipeline; 3],
+    rays_layout: wgpu::BindGroupLayout,
+    rays: wgpu::ComputePipeline,
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
     /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
@@ -192,6 +196,22 @@ impl Gpu {
                 cache: None,
             })
         });
+        let rays_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("rays"),
+            entries: &[uniform_entry(), storage_entry(1, true), storage_entry(2, false)],
+        });
+        let rays_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("rays.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RAYS_WGSL.into()),
+        });
+        let rays = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("rays"),
+            layout: Some(&pipeline_layout(&rays_layout)),
+            module: &rays_module,
+            entry_point: Some("rays_main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
         let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("gather.wgsl"),
             source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
@@ -214,6 +234,8 @@ impl Gpu {
             bin_layout,
             gather_layout,
             bin,
+            rays_layout,
+            rays,
             gather_module,
             gather: Mutex::new(HashMap::new()),
             errors,
@@ -437,13 +459,14 @@ impl GpuPlanes {
     }
 
     /// The planes on the GPU, uploaded by the first call, with the nanoseconds this call spent
-    /// uploading.
-    fn buffers(&self) -> Result<(&PlaneBuffers, u64)> {
+    /// uploading and the bytes it uploaded.
+    fn buffers(&self) -> Result<(&PlaneBuffers, u64, u64)> {
         if let Some(b) = self.buffers.get() {
-            return Ok((b, 0));
+            return Ok((b, 0, 0));
         }
         let t = Instant::now();
-        let host = self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
+        let host =
+            self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
         let (gpu, usage) = (&self.gpu, wgpu::BufferUsages::STORAGE);
         let made = gpu.checked(|| PlaneBuffers {
             planes: gpu.upload("planes", bytemuck::cast_slice(&host.planes), usage),
@@ -451,7 +474,8 @@ impl GpuPlanes {
             reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), usage),
             spans: gpu.upload("spans", bytemuck::cast_slice(&host.spans), usage),
         })?;
-        Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64))
+        let bytes = [made.planes.size(), made.occluders.size(), made.reach.size(), made.spans.size()].iter().sum();
+        Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64, bytes))
     }
 
     /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
@@ -469,6 +493,13 @@ impl GpuPlanes {
     /// buffer ([`GpuRays::made`]).
     pub fn make_rays(&self, row: RayRowFn) -> Result<GpuRays> {
         GpuRays::made(&self.gpu, self.width as usize, self.height as usize, row)
+    }
+
+    /// Ray set `set` (with its panels) made on the GPU ([`GpuRays::on_gpu`]), for this
+    /// structure's image.
+    pub fn rays_on_gpu(&self, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<GpuRays> {
+        assert_eq!((set.width, set.height), (self.width, self.height), "a ray per pixel");
+        GpuRays::on_gpu(&self.gpu, set, panels)
     }
 
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
@@ -492,11 +523,12 @@ impl GpuPlanes {
     }
 
     /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
-    /// the planes in batches, each binned and gathered in a submission of its own, not waited
-    /// for (the CPU makes the next piece's rays meanwhile: the queue keeps their order, and
-    /// [`GpuSums::read_into`] waits). Checks `control` before each batch (a cancel stops the
-    /// work after the batches submitted); reports one unit of progress. The result holds the
-    /// tests; the hits and the GPU's time are counted when `into` is read back.
+    /// the planes in batches, each binned and gathered in turn, the work kept with `into` and
+    /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
+    /// or sooner where the work held passes [`PENDING_RAY_BYTES`] of ray sets. Checks `control`
+    /// before each batch (a cancel drops the work not submitted); reports one unit of progress.
+    /// The result holds the tests and the planes' upload; the hits and the GPU's time are
+    /// counted when `into` is read back.
     pub fn gather_into(
         &self,
         weighting: Weighting,
@@ -514,28 +546,29 @@ impl GpuPlanes {
         }
         // Compiled on first use, before the scratch buffers are held.
         let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
-        let (planes, upload_ns) = self.buffers()?;
-        let mut scratch = gpu.scratch.lock().unwrap_or_else(|p| p.into_inner());
-        gpu.checked(|| self.submit(weighting, &pipelines, planes, rays, into, &mut scratch, control))??;
+        let (planes, upload_ns, bytes_crossed) = self.buffers()?;
+        gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
         control.progress();
         Ok(GatherStats {
             tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
             upload_ns,
+            bytes_crossed,
             ..GatherStats::default()
         })
     }
 
-    /// [`GpuPlanes::gather_into`]'s submissions, a batch each.
-    fn submit(
+    /// [`GpuPlanes::gather_into`]'s work, its batches one after another in one command buffer,
+    /// kept with `into` (submitted with its reading, or sooner where it holds many ray sets).
+    fn encode(
         &self,
         weighting: Weighting,
         pipelines: &[wgpu::ComputePipeline; 2],
         planes: &PlaneBuffers,
         rays: &GpuRays,
         into: &mut GpuSums,
-        scratch: &mut Scratch,
         control: Control,
     ) -> Result<()> {
+        let mut scratch = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner());
         let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let tiles = tiles_x * tiles_y;
@@ -599,9 +632,11 @@ impl GpuPlanes {
             (set, resolve, readback)
         });
         let tile_grid = grid(tiles as u64);
+        // Every batch in one command buffer (the passes run in order, the scratch buffers
+        // reused from batch to batch), kept with the sums to submit with their reading.
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
-            let mut encoder = gpu.device.create_command_encoder(&Default::default());
             let bin_params = BinParams {
                 width: w,
                 height: h,
@@ -651,9 +686,14 @@ impl GpuPlanes {
                 encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
                 encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
             }
-            into.first_submission.get_or_insert_with(Instant::now);
-            let index = gpu.queue.submit([encoder.finish()]);
-            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = Some(index);
+        }
+        into.pending.extend(rays.take_pending());
+        into.pending.push(encoder.finish());
+        into.pending_rays += (rays.len * std::mem::size_of::<CameraRay>()) as u64;
+        into.bytes_up += (std::mem::size_of_val(&gather_params) + std::mem::size_of_val(rotations.as_slice())) as u64
+            + (self.batches.len() * std::mem::size_of::<BinParams>()) as u64;
+        if !rays.made_on_gpu || into.pending_rays > PENDING_RAY_BYTES {
+            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = into.submit();
         }
         match queries {
             Some((_, _, readback)) => into.timestamps.push(readback),
@@ -706,21 +746,101 @@ impl Scratch {
     }
 }
 
-/// Camera rays on the GPU, one per pixel, row-major: the [`CameraRay`]s as they are (20 bytes,
-/// `gather.wgsl`'s `RAY_FLOATS`), uploaded once for every piece gathered along them.
+/// Camera rays on the GPU, one per pixel, row-major: [`CameraRay`]s (20 bytes, `gather.wgsl`'s
+/// `RAY_FLOATS`), made there by `rays.wgsl` ([`GpuRays::on_gpu`]) or uploaded
+/// ([`GpuRays::new`]), for every piece gathered along them.
 pub struct GpuRays {
     buffer: wgpu::Buffer,
     len: usize,
     gpu: Arc<Gpu>,
+    /// The pass that makes them, submitted with the first gathering along them (or when they
+    /// are read back).
+    pending: Mutex<Option<wgpu::CommandBuffer>>,
+    upload_ns: u64,
+    /// Bytes that crossed to the GPU to make them.
+    bytes_up: u64,
+    /// Made by the GPU: the work along them is kept to be submitted with the sums' reading
+    /// (rays made on the CPU are gathered along at once, so that the CPU makes the next set
+    /// while the GPU gathers).
+    made_on_gpu: bool,
     /// The last submission that gathers along them.
     last_use: Mutex<Option<wgpu::SubmissionIndex>>,
-    upload_ns: u64,
 }
 
 impl GpuRays {
+    /// Refused in one line where the rays of `len` pixels exceed one binding.
+    fn check(gpu: &Gpu, len: usize) -> Result<u64> {
+        let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
+        // The shaders index their floats with u32.
+        let most = gpu.max_binding.min(4 * u32::MAX as u64);
+        if bytes > most {
+            return Err(Error::Device(format!(
+                "the rays of an image of {len} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
+            )));
+        }
+        Ok(bytes)
+    }
+
     /// `rays` uploaded to `gpu`; refused in one line where they exceed one binding.
     pub fn new(gpu: &Arc<Gpu>, rays: &[CameraRay]) -> Result<Self> {
-        Self::made(gpu, rays.len(), 1, &|_, out| out.copy_from_slice(rays))
+        let bytes = Self::check(gpu, rays.len())?;
+        let t = Instant::now();
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let buffer = gpu.checked(|| gpu.upload("rays", bytemuck::cast_slice(rays), usage))?;
+        Ok(GpuRays {
+            buffer,
+            len: rays.len(),
+            gpu: gpu.clone(),
+            pending: Mutex::new(None),
+            upload_ns: t.elapsed().as_nanos() as u64,
+            bytes_up: bytes,
+            made_on_gpu: false,
+            last_use: Mutex::new(None),
+        })
+    }
+
+    /// The ray set `set` (with its light panels `panels`) made on `gpu` by `rays.wgsl`, a
+    /// thread a pixel: only the record and the panels cross. The pass is submitted with the
+    /// first gathering along the rays. Refused in one line where they exceed one binding.
+    pub fn on_gpu(gpu: &Arc<Gpu>, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<Self> {
+        let (w, h) = (set.width, set.height);
+        let bytes = Self::check(gpu, w as usize * h as usize)?;
+        let groups = (w.div_ceil(super::TILE), h.div_ceil(super::TILE));
+        if groups.0 > 65_535 || groups.1 > 65_535 {
+            return Err(Error::Device(format!(
+                "a {w}x{h} image has more than 65,535 x 16 pixels on a side, more than the GPU makes rays for: render a smaller image on it, or on the CPU"
+            )));
+        }
+        let t = Instant::now();
+        let (buffer, commands) = gpu.checked(|| {
+            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+            let buffer = gpu.scratch("rays", bytes, usage);
+            let record = gpu.upload("ray set", bytemuck::bytes_of(set), wgpu::BufferUsages::UNIFORM);
+            let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
+            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("rays"),
+                layout: &gpu.rays_layout,
+                entries: &[entry(0, &record), entry(1, &panels), entry(2, &buffer)],
+            });
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&gpu.rays);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(groups.0, groups.1, 1);
+            }
+            (buffer, encoder.finish())
+        })?;
+        Ok(GpuRays {
+            buffer,
+            len: w as usize * h as usize,
+            gpu: gpu.clone(),
+            pending: Mutex::new(Some(commands)),
+            upload_ns: t.elapsed().as_nanos() as u64,
+            bytes_up: (std::mem::size_of_val(set) + std::mem::size_of_val(panels)) as u64,
+            made_on_gpu: true,
+            last_use: Mutex::new(None),
+        })
     }
 
     /// `height` rows of `width` rays on `gpu`, row `j` made by `row(j, out)` and written
@@ -730,14 +850,7 @@ impl GpuRays {
     pub fn made(gpu: &Arc<Gpu>, width: usize, height: usize, row: RayRowFn) -> Result<Self> {
         use rayon::prelude::*;
         let len = width * height;
-        let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
-        // The shader indexes their floats with u32.
-        let most = gpu.max_binding.min(4 * u32::MAX as u64);
-        if bytes > most {
-            return Err(Error::Device(format!(
-                "the rays of an image of {len} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
-            )));
-        }
+        let bytes = Self::check(gpu, len)?;
         let t = Instant::now();
         let buffer = gpu.checked(|| {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -775,13 +888,16 @@ impl GpuRays {
         let filled = filling.elapsed();
         gpu.checked(|| buffer.unmap())?;
         let upload_ns = t.elapsed().saturating_sub(filled).as_nanos() as u64;
-        Ok(GpuRays { buffer, len, gpu: gpu.clone(), last_use: Mutex::new(None), upload_ns })
-    }
-
-    /// Nanoseconds spent making their buffer and handing it to the GPU, their rows' writing
-    /// aside.
-    pub fn upload_ns(&self) -> u64 {
-        self.upload_ns
+        Ok(GpuRays {
+            buffer,
+            len,
+            gpu: gpu.clone(),
+            pending: Mutex::new(None),
+            upload_ns,
+            bytes_up: bytes,
+            made_on_gpu: false,
+            last_use: Mutex::new(None),
+        })
     }
 
     /// Waits until the GPU has done the work submitted along these rays (so that the caller
@@ -794,6 +910,46 @@ impl GpuRays {
             polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
         Ok(())
+    }
+
+    /// The pass that makes them, if it is not submitted yet: to submit before the work that
+    /// reads them.
+    fn take_pending(&self) -> Option<wgpu::CommandBuffer> {
+        self.pending.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
+
+    /// Nanoseconds spent making their buffer and handing it to the GPU.
+    pub fn upload_ns(&self) -> u64 {
+        self.upload_ns
+    }
+
+    /// Bytes that crossed to the GPU for them: the rays themselves where they were uploaded, a
+    /// record and the panels where the GPU made them.
+    pub fn bytes_up(&self) -> u64 {
+        self.bytes_up
+    }
+
+    /// The rays, read back from the GPU (for holding the GPU's rays to the CPU's).
+    pub fn read(&self) -> Result<Vec<CameraRay>> {
+        let gpu = &*self.gpu;
+        let bytes = (self.len * std::mem::size_of::<CameraRay>()) as u64;
+        let readback = gpu.checked(|| {
+            let readback =
+                gpu.scratch("rays read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.buffer, 0, &readback, 0, bytes);
+            gpu.queue.submit(self.take_pending().into_iter().chain([encoder.finish()]));
+            readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            readback
+        })?;
+        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        gpu.work_errors()?;
+        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        let view = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Device(format!("reading the GPU's rays back: {e}")))?;
+        Ok(bytemuck::cast_slice(&view[..bytes as usize]).to_vec())
     }
 }
 
@@ -821,7 +977,21 @@ pub struct GpuSums {
     first_submission: Option<Instant>,
     /// A gathering into them without timestamps: they are timed by the wall time.
     untimed: bool,
+    /// The gatherings' command buffers (and their rays' passes) not submitted yet: submitted
+    /// together when the sums are read ([`GpuSums::read_into`]), so that a chunk's pieces are one
+    /// submission, not one each.
+    pending: Vec<wgpu::CommandBuffer>,
+    /// Bytes of the ray sets the pending work holds on the GPU ([`PENDING_RAY_BYTES`]).
+    pending_rays: u64,
+    /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
+    /// the last read.
+    bytes_up: u64,
+    submissions: u64,
 }
+
+/// The most bytes of ray sets that work not yet submitted holds: past it, the work is submitted
+/// at once (a large image's ray sets are then let go as their gatherings end).
+const PENDING_RAY_BYTES: u64 = 256 << 20;
 
 impl GpuSums {
     /// Zero sums for a `width x height` image on `gpu`.
@@ -836,14 +1006,43 @@ impl GpuSums {
         }
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let image = gpu.checked(|| gpu.scratch("image", bytes, usage))?;
-        Ok(GpuSums { gpu, image, pixels, timestamps: Vec::new(), first_submission: None, untimed: false })
+        Ok(GpuSums {
+            gpu,
+            image,
+            pixels,
+            timestamps: Vec::new(),
+            first_submission: None,
+            untimed: false,
+            pending: Vec::new(),
+            pending_rays: 0,
+            bytes_up: 0,
+            submissions: 0,
+        })
+    }
+
+    /// Submits the work not submitted yet, with `then` after it, in one submission.
+    fn submit_with(&mut self, then: Option<wgpu::CommandBuffer>) -> Option<wgpu::SubmissionIndex> {
+        let work: Vec<wgpu::CommandBuffer> = self.pending.drain(..).chain(then).collect();
+        if work.is_empty() {
+            return None;
+        }
+        self.first_submission.get_or_insert_with(Instant::now);
+        self.submissions += 1;
+        self.pending_rays = 0;
+        Some(self.gpu.queue.submit(work))
+    }
+
+    /// Submits the work not submitted yet.
+    fn submit(&mut self) -> Option<wgpu::SubmissionIndex> {
+        self.submit_with(None)
     }
 
     /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
     /// returns the hits they counted and the GPU's time of the gatherings since the last read.
     pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
-        let gpu = &*self.gpu;
+        let held = self.gpu.clone();
+        let gpu = &*held;
         let bytes = self.pixels as u64 * 16;
         let timestamps = std::mem::take(&mut self.timestamps);
         let readback = gpu.checked(|| {
@@ -851,7 +1050,7 @@ impl GpuSums {
                 gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
-            gpu.queue.submit([encoder.finish()]);
+            let _ = self.submit_with(Some(encoder.finish()));
             for b in timestamps.iter().chain([&readback]) {
                 b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             }
@@ -865,7 +1064,13 @@ impl GpuSums {
         let mapped = |b: &wgpu::Buffer| {
             b.slice(..).get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))
         };
-        let mut stats = GatherStats { device_ns: waited, ..GatherStats::default() };
+        let timestamp_bytes: u64 = timestamps.iter().map(|b| b.size()).sum();
+        let mut stats = GatherStats {
+            device_ns: waited,
+            bytes_crossed: std::mem::take(&mut self.bytes_up) + bytes + timestamp_bytes,
+            submissions: std::mem::take(&mut self.submissions),
+            ..GatherStats::default()
+        };
         if !untimed && !timestamps.is_empty() {
             let period = gpu.queue.get_timestamp_period() as f64;
             stats.device_ns = 0;
@@ -879,10 +1084,17 @@ impl GpuSums {
         }
         let view = mapped(&readback)?;
         let back: &[[u32; 4]] = bytemuck::cast_slice(&view[..bytes as usize]);
-        for (sum, v) in sums.iter_mut().zip(back) {
-            *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
-            stats.hits += v[3] as u64;
-        }
+        // Added pixel by pixel in parallel (the same bits: each pixel's one addition).
+        use rayon::prelude::*;
+        stats.hits = sums
+            .par_iter_mut()
+            .zip(back)
+            .with_min_len(4096)
+            .map(|(sum, v)| {
+                *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+                v[3] as u64
+            })
+            .sum();
         Ok(stats)
     }
 }
@@ -947,18 +1159,28 @@ mod tests {
                     pad),
             ),
             (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
+            (
+                RAYS_WGSL,
+                "RaySet",
+                fields!(RaySetRecord: forward, tan_x, right, tan_y, up, width, lo, height, hi, outside, scramble,
+                    sobol, pixel_center, panels, pad),
+            ),
+            (RAYS_WGSL, "Panel", fields!(PanelRecord: corner, to_plane, n, width, u, height, v, pad, footprint)),
         ];
-        // A camera ray crosses as it is: `RAY_FLOATS` f32, its fields in the shader's order.
-        let module = naga::front::wgsl::parse_str(GATHER_WGSL).expect("the shader parses");
-        let ray_floats = module
-            .constants
-            .iter()
-            .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
-            .map(|(_, c)| &module.global_expressions[c.init]);
-        let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
-            panic!("the shader's RAY_FLOATS is a u32 literal")
-        };
-        assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+        // A camera ray is `RAY_FLOATS` f32 where it is made and where it is read, its fields in
+        // the shaders' order.
+        for source in [GATHER_WGSL, RAYS_WGSL] {
+            let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+            let ray_floats = module
+                .constants
+                .iter()
+                .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
+                .map(|(_, c)| &module.global_expressions[c.init]);
+            let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
+                panic!("the shader's RAY_FLOATS is a u32 literal")
+            };
+            assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+        }
         let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
         assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
         for (source, name, (rust, size, fields)) in pairs {
