@@ -165,11 +165,13 @@ impl Gpu {
                 storage_entry(5, false),
                 storage_entry(6, false),
                 storage_entry(7, true),
+                storage_entry(8, false),
             ],
         });
         let mut gather_entries = vec![uniform_entry()];
         gather_entries.extend((1..=7).map(|b| storage_entry(b, true)));
         gather_entries.extend((8..=9).map(|b| storage_entry(b, false)));
+        gather_entries.push(storage_entry(10, true));
         let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gather"),
             entries: &gather_entries,
@@ -360,6 +362,8 @@ pub struct GpuPlanes {
     host: Mutex<Option<PlaneData>>,
     buffers: OnceLock<PlaneBuffers>,
     batches: Vec<Batch>,
+    /// The pixels a gathering tests the planes at ([`TileReach::tests`]).
+    tests: u64,
     sigma_t: Vec3,
     grey: bool,
 }
@@ -371,7 +375,8 @@ struct PlaneData {
     planes: Vec<PlaneRecord>,
     occluders: Vec<crate::occlusion::Occluder>,
     reach: Vec<[u32; 4]>,
-    spans: Vec<[u32; 2]>,
+    /// Per row of tiles: its span of tiles and its box of pixels ([`TileReach`]).
+    spans: Vec<[u32; 4]>,
 }
 
 /// [`PlaneData`] on the GPU.
@@ -388,10 +393,10 @@ impl GpuPlanes {
     pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
         assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
         let mut records = Vec::with_capacity(reach.len());
-        let mut spans: Vec<[u32; 2]> = Vec::new();
+        let mut spans: Vec<[u32; 4]> = Vec::new();
         for r in reach {
             records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
-            spans.extend_from_slice(&r.spans);
+            spans.extend(r.spans.iter().zip(&r.pixels).map(|(&[a, b], &[x, y])| [a, b, x, y]));
         }
         // Every whole buffer within one binding: the image's rays (the largest per pixel), the
         // planes and their occluders; refused here in one line, not by the driver's validation.
@@ -453,6 +458,7 @@ impl GpuPlanes {
             host: Mutex::new(Some(host)),
             buffers: OnceLock::new(),
             batches,
+            tests: reach.iter().map(TileReach::tests).sum(),
             sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
         })
@@ -549,12 +555,7 @@ impl GpuPlanes {
         let (planes, upload_ns, bytes_crossed) = self.buffers()?;
         gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
         control.progress();
-        Ok(GatherStats {
-            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
-            upload_ns,
-            bytes_crossed,
-            ..GatherStats::default()
-        })
+        Ok(GatherStats { tests: self.tests, upload_ns, bytes_crossed, ..GatherStats::default() })
     }
 
     /// [`GpuPlanes::gather_into`]'s work, its batches one after another in one command buffer,
@@ -610,6 +611,7 @@ impl GpuPlanes {
                 entry(7, &s.items),
                 entry(8, &s.partial),
                 entry(9, &into.image),
+                entry(10, &s.boxes),
             ],
         });
         // A timestamp pair per batch (its first pass's start, its last pass's end), where the
@@ -660,6 +662,7 @@ impl GpuPlanes {
                     entry(5, &s.list),
                     entry(6, &s.items),
                     entry(7, &planes.spans),
+                    entry(8, &s.boxes),
                 ],
             });
             let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
@@ -717,6 +720,8 @@ struct ScratchBuffers {
     offsets: wgpu::Buffer,
     item_offsets: wgpu::Buffer,
     list: wgpu::Buffer,
+    /// Per list entry, the plane's box of pixels in the tile (`bin.wgsl`'s `boxes`).
+    boxes: wgpu::Buffer,
     items: wgpu::Buffer,
     partial: wgpu::Buffer,
 }
@@ -738,6 +743,7 @@ impl Scratch {
                 offsets: gpu.scratch("offsets", tile_words, storage),
                 item_offsets: gpu.scratch("item offsets", tile_words, storage),
                 list: gpu.scratch("list", pairs * 4, storage),
+                boxes: gpu.scratch("boxes", pairs * 4, storage),
                 items: gpu.scratch("items", items * 16, storage),
                 partial: gpu.scratch("partial", items * ITEM_BYTES, storage),
             });
