@@ -5,7 +5,7 @@
 //! weighting through the structure's [`Aggregate::gather`].
 
 use crate::bvh::PlaneBvh;
-use crate::camera::{CameraRay, RayRowFn};
+use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats};
@@ -248,8 +248,7 @@ pub struct GatherPiece<'a> {
 }
 
 /// A piece of planes on the GPU for [`gather_pieces_on_gpu`]: its planes, the ray set it is
-/// gathered along (made on the GPU's upload buffer when the set changes) and the sums it adds
-/// to.
+/// gathered along (made on the GPU when the set changes) and the sums it adds to.
 #[derive(Clone, Copy)]
 pub struct GpuPiece<'a> {
     pub planes: &'a PreparedPlanes,
@@ -257,10 +256,11 @@ pub struct GpuPiece<'a> {
     pub target: usize,
 }
 
-/// Sums kept on the GPU across gatherings, a target's each, with the ray set uploaded last:
+/// Sums kept on the GPU across gatherings, a target's each, with the ray set made last there:
 /// [`gather_pieces_on_gpu`] adds there, and the sums cross back once, when the caller asks
 /// ([`OnGpu::read_into`]), not after each gathering: one image read back per chunk, not per
-/// piece, and a ray set uploaded once for the consecutive pieces along it.
+/// piece, the chunk's work submitted with it, and a ray set made once for the consecutive
+/// pieces along it.
 pub struct OnGpu {
     sums: Vec<Option<GpuSums>>,
     rays: Option<(u32, GpuRays)>,
@@ -289,13 +289,16 @@ impl OnGpu {
     }
 }
 
-/// Makes ray set `k`: `make(k, with)` calls `with` with the function that writes a row of it.
-pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &mut dyn FnMut(RayRowFn));
+/// Makes ray set `k` for the GPU structure given: on the CPU, written into the buffer that
+/// uploads it ([`GpuPlanes::make_rays`]), or on the GPU from its record
+/// ([`GpuPlanes::rays_on_gpu`]).
+pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &GpuPlanes) -> Result<GpuRays>;
 
 /// [`gather_pieces`] of pieces on the GPU, into sums held there ([`OnGpu`]): piece after piece,
-/// each in its own submissions, a piece's ray set made by `make_rays` straight into the GPU's
-/// upload buffer where it is not the set uploaded last. The hits and the GPU's time are counted
-/// when the sums are read back.
+/// a piece's ray set made on the GPU from `make_rays`'s record where it is not the set made
+/// last. Nothing is submitted before the sums are read (a target's gatherings go in one
+/// submission with its reading). The hits and the GPU's time are counted when the sums are
+/// read back.
 pub fn gather_pieces_on_gpu(
     pieces: &[GpuPiece],
     weighting: Weighting,
@@ -309,17 +312,17 @@ pub fn gather_pieces_on_gpu(
             unreachable!("a render's pieces all have one structure, here the GPU's")
         };
         if on_gpu.rays.as_ref().is_none_or(|(set, _)| *set != p.set) {
-            // The submissions are not waited for, so that the CPU makes the next set while the
-            // GPU gathers; but at most two sets' work is under way: the one before last is
-            // waited for and let go before a new set is uploaded.
+            // The submissions along rays made on the CPU are not waited for, so that the CPU
+            // makes the next set while the GPU gathers; but at most two sets' work is under way:
+            // the one before last is waited for and let go before a new set is made. (The work
+            // along rays made on the GPU is submitted when the sums are read: no wait here.)
             if let Some(done) = on_gpu.before.take() {
                 done.wait()?;
             }
             on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
-            let mut made = None;
-            make_rays(p.set, &mut |row| made = Some(g.make_rays(row)));
-            let rays = made.expect("the maker gives the set's rows")?;
+            let rays = make_rays(p.set, g)?;
             found[p.target].upload_ns += rays.upload_ns();
+            found[p.target].bytes_crossed += rays.bytes_up();
             on_gpu.rays = Some((p.set, rays));
         }
         let rays = &on_gpu.rays.as_ref().expect("uploaded above").1;

@@ -443,9 +443,13 @@ pub struct GatherStats {
     /// wall time from a chunk's first submission to its sums read back where it has none); 0 on
     /// the CPU.
     pub device_ns: u64,
-    /// Nanoseconds of wall time spent uploading camera rays to the GPU, their writing aside; 0
-    /// on the CPU.
+    /// Nanoseconds of wall time spent uploading to the GPU (planes, ray sets' records or rays);
+    /// 0 on the CPU.
     pub upload_ns: u64,
+    /// Bytes that crossed between the CPU and the GPU (planes and parameters up, sums and
+    /// timestamps back), and the GPU's queue submissions; 0 on the CPU.
+    pub bytes_crossed: u64,
+    pub submissions: u64,
 }
 
 impl std::ops::AddAssign for GatherStats {
@@ -454,6 +458,8 @@ impl std::ops::AddAssign for GatherStats {
         self.hits += o.hits;
         self.device_ns += o.device_ns;
         self.upload_ns += o.upload_ns;
+        self.bytes_crossed += o.bytes_crossed;
+        self.submissions += o.submissions;
     }
 }
 

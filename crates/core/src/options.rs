@@ -233,9 +233,13 @@ pub struct RenderStats {
     /// them, else the wall time from each chunk's first submission to its sums read back (an
     /// upper bound); 0 on the CPU.
     pub seconds_device: f64,
-    /// Seconds of wall time spent uploading camera rays to the GPU, their writing aside (they
-    /// are made straight into the upload buffers, in `seconds_rays`); 0 on the CPU.
+    /// Seconds of wall time spent uploading to the GPU (the planes, and each ray set's rays, or
+    /// its record where the GPU makes them), their rays' writing aside; 0 on the CPU.
     pub seconds_upload: f64,
+    /// Bytes that crossed between the CPU and the GPU (planes up, sums back), and the GPU's
+    /// queue submissions; 0 on the CPU.
+    pub bytes_crossed: u64,
+    pub submissions: u64,
     pub seconds_total: f64,
     /// The estimated standard error of each pixel, when the options asked for it
     /// (docs/mathematics.md section 10).
@@ -290,6 +294,8 @@ impl RenderStats {
         self.seconds_gather += seconds;
         self.seconds_device += s.device_ns as f64 * 1e-9;
         self.seconds_upload += s.upload_ns as f64 * 1e-9;
+        self.bytes_crossed += s.bytes_crossed;
+        self.submissions += s.submissions;
         self.hits += s.hits;
         self.tests += s.tests;
     }
@@ -348,10 +354,12 @@ impl RenderStats {
         // end-to-end time goes.
         let gathered_by = if self.seconds_device > 0.0 {
             format!(
-                "{}; GPU time {:.4} s, {:.4} G hits/s; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (written into the upload buffers) and the emission {:.4} s, the uploads' own {:.4} s",
+                "{}; GPU time {:.4} s, {:.4} G hits/s, {:.1} MB crossed in {} submissions; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s",
                 self.device,
                 self.seconds_device,
                 self.device_hits_per_second() * 1e-9,
+                self.bytes_crossed as f64 * 1e-6,
+                self.submissions,
                 self.seconds_sampling,
                 self.seconds_build,
                 self.seconds_rays,

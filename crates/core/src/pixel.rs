@@ -403,6 +403,96 @@ impl RayRow {
     }
 }
 
+/// A ray set as the GPU makes it (`gpu/rays.wgsl`'s `RaySet`, a ray a thread): what
+/// [`RayRow`] shares across the set, relative to the camera and rounded to f32 once, with the
+/// per-pixel hash's seed and the set's Sobol point as they are (so that the jitter is the same
+/// bits). Plain data, defined once: it crosses as it is.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RaySetRecord {
+    pub forward: [f32; 3],
+    /// tan(vfov / 2) times the aspect ratio: X's scale along `right`.
+    pub tan_x: f32,
+    pub right: [f32; 3],
+    /// tan(vfov / 2): Y's scale along `up`.
+    pub tan_y: f32,
+    pub up: [f32; 3],
+    pub width: u32,
+    /// The medium's corners less the camera's position.
+    pub lo: [f32; 3],
+    pub height: u32,
+    pub hi: [f32; 3],
+    /// Bit `a`: the camera lies outside the box's slab along axis `a`.
+    pub outside: u32,
+    /// `splitmix64(seed ^ RAY_SET_STREAM)` as (low, high) words.
+    pub scramble: [u32; 2],
+    pub sobol: [u32; 2],
+    pub pixel_center: u32,
+    /// The light panels that follow ([`PanelRecord`]).
+    pub panels: u32,
+    pub pad: [u32; 2],
+}
+
+/// A light panel as `gpu/rays.wgsl` tests it ([`PanelTest`] relative to the camera, in f32).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PanelRecord {
+    /// The rectangle's corner less the camera's position.
+    pub corner: [f32; 3],
+    /// `(corner - o) . n`, made in f64.
+    pub to_plane: f32,
+    pub n: [f32; 3],
+    pub width: f32,
+    pub u: [f32; 3],
+    pub height: f32,
+    pub v: [f32; 3],
+    pub pad: u32,
+    /// First and last column, first and last row of the pixels it can cover.
+    pub footprint: [i32; 4],
+}
+
+/// Ray set `k` of a render (seed `seed`) as the GPU makes it: its record and its panels, from
+/// the values the CPU's rows share ([`RayRow`]).
+pub fn ray_set_record(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> (RaySetRecord, Vec<PanelRecord>) {
+    let footprints = PanelFootprints::new(scene);
+    let r = RayRow::new(scene, &footprints, seed, k, pixel_center);
+    let f = |v: [f64; 3]| v.map(|x| x as f32);
+    let panels: Vec<PanelRecord> = r
+        .panels
+        .iter()
+        .map(|p| PanelRecord {
+            corner: f(std::array::from_fn(|a| p.rect.corner[a] - r.origin[a])),
+            to_plane: p.to_plane as f32,
+            n: f(p.rect.n),
+            width: p.rect.width as f32,
+            u: f(p.rect.u),
+            height: p.rect.height as f32,
+            v: f(p.rect.v),
+            pad: 0,
+            // Clamped to [-2, side + 1] ([`PanelFootprints::new`]): an i32.
+            footprint: p.footprint.map(|b| b as i32),
+        })
+        .collect();
+    let record = RaySetRecord {
+        forward: f(r.forward),
+        tan_x: (r.tan_half_fov * r.aspect) as f32,
+        right: f(r.right),
+        tan_y: r.tan_half_fov as f32,
+        up: f(r.up),
+        width: r.width as u32,
+        lo: f(r.lo),
+        height: r.height as u32,
+        hi: f(r.hi),
+        outside: (0..3).map(|a| (r.outside[a] as u32) << a).sum(),
+        scramble: [r.scramble_base as u32, (r.scramble_base >> 32) as u32],
+        sobol: r.sobol,
+        pixel_center: pixel_center as u32,
+        panels: panels.len() as u32,
+        pad: [0; 2],
+    };
+    (record, panels)
+}
+
 /// Which ray sets a [`RaySets`] keeps once made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Keep {
@@ -472,6 +562,17 @@ impl RaySets {
     pub fn make_rows<R>(&mut self, scene: &Scene, k: u32, control: Control, with: impl FnOnce(RayRowFn) -> R) -> R {
         let t = Instant::now();
         let out = with_ray_rows(scene, self.seed, k % self.count, self.pixel_center, control, with);
+        self.seconds += t.elapsed().as_secs_f64();
+        self.made += scene.camera.width as u64 * scene.camera.height as u64;
+        out
+    }
+
+    /// Ray set `k` (modulo the set count) as the GPU makes it ([`ray_set_record`]): the rays are
+    /// made where they are gathered ([`crate::accel::OnGpu`]), counted as made here, and timed
+    /// (their record's making).
+    pub fn gpu_record(&mut self, scene: &Scene, k: u32) -> (RaySetRecord, Vec<PanelRecord>) {
+        let t = Instant::now();
+        let out = ray_set_record(scene, self.seed, k % self.count, self.pixel_center);
         self.seconds += t.elapsed().as_secs_f64();
         self.made += scene.camera.width as u64 * scene.camera.height as u64;
         out

@@ -10,7 +10,7 @@
 //! [`crate::settings`]: nothing here checks them again.
 
 use crate::accel::{Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, gather_pieces, gather_pieces_on_gpu};
-use crate::camera::{CameraRay, RayRowFn};
+use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::emission::direct_emission_and_variance_in;
 use crate::error::{Error, Result, Setting};
@@ -158,9 +158,18 @@ impl GatherSide<'_> {
                         .iter()
                         .map(|&(target, p)| GpuPiece { planes: &p.planes, set: p.spec.0, target })
                         .collect();
-                    // Each set made straight into the GPU's upload buffer, not kept here.
-                    let (rays, scene) = (&mut *self.rays, self.scene);
-                    let mut make = |k: u32, with: &mut dyn FnMut(RayRowFn)| rays.make_rows(scene, k, control, with);
+                    // Each set made straight into the GPU's upload buffer, not kept here; or,
+                    // where asked (`gpu::rays_on_gpu`), on the GPU from its record.
+                    let (rays, scene, on) = (&mut *self.rays, self.scene, crate::gpu::rays_on_gpu());
+                    let mut make = |k: u32, g: &crate::gpu::GpuPlanes| {
+                        if on {
+                            let (record, panels) = rays.gpu_record(scene, k);
+                            return g.rays_on_gpu(&record, &panels);
+                        }
+                        let mut made = None;
+                        rays.make_rows(scene, k, control, |row| made = Some(g.make_rays(row)));
+                        made.expect("the maker gives the set's rows")
+                    };
                     let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, &mut make, control)?;
                     if self.spread.is_some() {
                         for &(c, _) in group {

@@ -4,6 +4,7 @@ use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::Result;
 use crate::gather::{GatherContext, GatherStats};
+use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
 use std::sync::Arc;
@@ -73,6 +74,9 @@ impl GpuPlanes {
     pub fn make_rays(&self, _: RayRowFn) -> Result<GpuRays> {
         match *self {}
     }
+    pub fn rays_on_gpu(&self, _: &RaySetRecord, _: &[PanelRecord]) -> Result<GpuRays> {
+        match *self {}
+    }
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
         match *self {}
     }
@@ -85,7 +89,19 @@ impl GpuPlanes {
 pub enum GpuRays {}
 
 impl GpuRays {
+    pub fn new(gpu: &Arc<Gpu>, _: &[CameraRay]) -> Result<Self> {
+        match **gpu {}
+    }
+    pub fn on_gpu(gpu: &Arc<Gpu>, _: &RaySetRecord, _: &[PanelRecord]) -> Result<Self> {
+        match **gpu {}
+    }
     pub fn wait(&self) -> Result<()> {
+        match *self {}
+    }
+    pub fn read(&self) -> Result<Vec<CameraRay>> {
+        match *self {}
+    }
+    pub fn bytes_up(&self) -> u64 {
         match *self {}
     }
     pub fn upload_ns(&self) -> u64 {

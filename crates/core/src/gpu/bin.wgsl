@@ -34,10 +34,15 @@ struct Params {
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> items: array<vec4<u32>>;
 // Per plane and row of tiles: its first and last column of tiles (inclusive; empty when first >
-// last).
-@group(0) @binding(7) var<storage, read> spans: array<vec2<u32>>;
+// last), and its box of pixels in the row: first and last column, first and last row, each
+// pair packed `first | last << 16`.
+@group(0) @binding(7) var<storage, read> spans: array<vec4<u32>>;
+// Per list entry, the plane's box of pixels within the tile (gather.wgsl tests only those):
+// first and last column, first and last row, relative to the tile, 4 bits each.
+@group(0) @binding(8) var<storage, read_write> boxes: array<u32>;
 
 const THREADS: u32 = 256u;
+const TILE: u32 = 16u;
 
 var<workgroup> scratch: array<u32, 256>;
 var<workgroup> scratch_items: array<u32, 256>;
@@ -53,6 +58,19 @@ fn covers(plane: u32, tile: u32) -> bool {
     let span = spans[r.z + row - r.x];
     let col = tile % params.tiles_x;
     return span.x <= col && col <= span.y;
+}
+
+// The box of pixels of plane `plane` within tile `tile` (which it reaches), packed for `boxes`.
+fn box_in(plane: u32, tile: u32) -> u32 {
+    let r = reach[plane];
+    let row = tile / params.tiles_x;
+    let span = spans[r.z + row - r.x];
+    let x = vec2<u32>(span.z & 0xffffu, span.z >> 16u);
+    let y = vec2<u32>(span.w & 0xffffu, span.w >> 16u);
+    let corner = vec2<u32>((tile % params.tiles_x) * TILE, row * TILE);
+    let bx = min(max(x, vec2<u32>(corner.x)), vec2<u32>(corner.x + TILE - 1u)) - corner.x;
+    let by = min(max(y, vec2<u32>(corner.y)), vec2<u32>(corner.y + TILE - 1u)) - corner.y;
+    return bx.x | (bx.y << 4u) | (by.x << 8u) | (by.y << 12u);
 }
 
 // Inclusive prefix sum of scratch over the workgroup (Hillis and Steele), in uniform control flow.
@@ -149,7 +167,9 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         scratch[li] = flag;
         scan_scratch(li);
         if (hit) {
-            list[base + written + scratch[li] - 1u] = params.first + i;
+            let at = base + written + scratch[li] - 1u;
+            list[at] = params.first + i;
+            boxes[at] = box_in(params.first + i, tile);
         }
         written += scratch[THREADS - 1u];
     }

@@ -6,15 +6,17 @@ use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherContext, GatherStats, Phase, PlaneRecord};
+use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 const GATHER_WGSL: &str = include_str!("gather.wgsl");
 const BIN_WGSL: &str = include_str!("bin.wgsl");
+const RAYS_WGSL: &str = include_str!("rays.wgsl");
 
 /// Bytes of one work item's partial sums: 256 pixels of (r, g, b, hits) in f32.
 const ITEM_BYTES: u64 = (TILE * TILE) as u64 * 16;
@@ -66,16 +68,20 @@ pub struct Gpu {
     bin_layout: wgpu::BindGroupLayout,
     gather_layout: wgpu::BindGroupLayout,
     bin: [wgpu::ComputePipeline; 3],
+    rays_layout: wgpu::BindGroupLayout,
+    rays: wgpu::ComputePipeline,
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
     /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
     gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 2]>>>,
-    /// Errors the device reported (validation, out of memory), taken after each submission.
+    /// Errors the device reported outside every error scope ([`Gpu::checked`]: each call's own
+    /// errors are caught on its thread), taken after each wait.
     errors: Arc<Mutex<Vec<String>>>,
-    /// Held by each upload and gathering for its whole work (the render prepares the next chunk
-    /// while it gathers one, and the device's errors, one list for the process, must be taken
-    /// by the work that caused them), with the gatherings' scratch buffers.
-    work: Mutex<Scratch>,
+    /// The gatherings' scratch buffers, held by a gathering for its submissions. No lock is
+    /// held by an upload: the render prepares the next chunk's planes while it gathers one, and
+    /// a lock held across a submission (which a CPU adapter runs before it returns) kept the
+    /// preparation waiting for the other side's whole gathering.
+    scratch: Mutex<Scratch>,
 }
 
 /// Runs a future of wgpu's to its end on this thread.
@@ -145,11 +151,13 @@ impl Gpu {
                 storage_entry(5, false),
                 storage_entry(6, false),
                 storage_entry(7, true),
+                storage_entry(8, false),
             ],
         });
         let mut gather_entries = vec![uniform_entry()];
         gather_entries.extend((1..=7).map(|b| storage_entry(b, true)));
         gather_entries.extend((8..=9).map(|b| storage_entry(b, false)));
+        gather_entries.push(storage_entry(10, true));
         let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gather"),
             entries: &gather_entries,
@@ -176,6 +184,22 @@ impl Gpu {
                 cache: None,
             })
         });
+        let rays_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("rays"),
+            entries: &[uniform_entry(), storage_entry(1, true), storage_entry(2, false)],
+        });
+        let rays_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("rays.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RAYS_WGSL.into()),
+        });
+        let rays = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("rays"),
+            layout: Some(&pipeline_layout(&rays_layout)),
+            module: &rays_module,
+            entry_point: Some("rays_main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
         let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("gather.wgsl"),
             source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
@@ -192,10 +216,12 @@ impl Gpu {
             bin_layout,
             gather_layout,
             bin,
+            rays_layout,
+            rays,
             gather_module,
             gather: Mutex::new(HashMap::new()),
             errors,
-            work: Mutex::new(Scratch::default()),
+            scratch: Mutex::new(Scratch::default()),
         };
         gpu.take_errors().map_err(|e| format!("the GPU's shaders: {e}"))?;
         Ok(gpu)
@@ -233,11 +259,26 @@ impl Gpu {
         Err(all)
     }
 
-    /// [`Gpu::take_errors`] under the work lock (for a wait made without it): an upload under
-    /// way keeps its own errors.
+    /// [`Gpu::take_errors`] as an [`Error::Device`] (after a wait).
     fn work_errors(&self) -> Result<()> {
-        let _work = self.work.lock().unwrap_or_else(|p| p.into_inner());
         self.take_errors().map_err(Error::Device)
+    }
+
+    /// `f()` with the device's errors that it causes caught and returned in one line: wgpu's
+    /// error scopes are the calling thread's own, so that work on another thread (the render's
+    /// other side) neither sees these errors nor waits for this work.
+    fn checked<T>(&self, f: impl FnOnce() -> T) -> Result<T> {
+        let filters = [wgpu::ErrorFilter::Validation, wgpu::ErrorFilter::OutOfMemory, wgpu::ErrorFilter::Internal];
+        let scopes = filters.map(|filter| self.device.push_error_scope(filter));
+        let out = f();
+        // Popped innermost first, as they were pushed.
+        let errors: Vec<String> = scopes
+            .into_iter()
+            .rev()
+            .filter_map(|scope| block_on(scope.pop()))
+            .map(|e| crate::error::one_line(&e.to_string()))
+            .collect();
+        if errors.is_empty() { Ok(out) } else { Err(Error::Device(errors.join("; "))) }
     }
 
     /// The gather and reduce pipelines of estimator `id`, made on first use.
@@ -291,36 +332,53 @@ struct Batch {
     items: u64,
 }
 
-/// A structure's planes on the GPU, for gathering camera rays of one image size.
+/// A structure's planes for the GPU, for gathering camera rays of one image size: made on the
+/// CPU, uploaded by their first gathering ([`GpuPlanes::buffers`]).
 pub struct GpuPlanes {
     gpu: Arc<Gpu>,
     width: u32,
     height: u32,
-    planes: wgpu::Buffer,
-    occluders: wgpu::Buffer,
-    /// Per plane (first row of tiles, rows, first span, 0), and the spans: `bin.wgsl`'s
-    /// `reach` and `spans`.
-    reach: wgpu::Buffer,
-    spans: wgpu::Buffer,
+    /// What crosses, until it has.
+    host: Mutex<Option<PlaneData>>,
+    buffers: OnceLock<PlaneBuffers>,
     batches: Vec<Batch>,
+    /// The pixels a gathering tests the planes at ([`TileReach::tests`]).
+    tests: u64,
     sigma_t: Vec3,
     grey: bool,
     phase: Phase,
 }
 
+/// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and per plane its
+/// reach (first row of tiles, rows, first span, 0) and the spans (`bin.wgsl`'s `reach` and
+/// `spans`).
+struct PlaneData {
+    planes: Vec<PlaneRecord>,
+    occluders: Vec<crate::occlusion::Occluder>,
+    reach: Vec<[u32; 4]>,
+    /// Per row of tiles: its span of tiles and its box of pixels ([`TileReach`]).
+    spans: Vec<[u32; 4]>,
+}
+
+/// [`PlaneData`] on the GPU.
+struct PlaneBuffers {
+    planes: wgpu::Buffer,
+    occluders: wgpu::Buffer,
+    reach: wgpu::Buffer,
+    spans: wgpu::Buffer,
+}
+
 impl GpuPlanes {
-    /// The planes of `ctx` on `gpu`, with the tiles each reaches (`reach`, from
+    /// The planes of `ctx` for `gpu`, with the tiles each reaches (`reach`, from
     /// [`super::tile_reach`]) in a `width x height` image.
     pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
         assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
         let mut records = Vec::with_capacity(reach.len());
-        let mut spans: Vec<[u32; 2]> = Vec::new();
+        let mut spans: Vec<[u32; 4]> = Vec::new();
         for r in reach {
             records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
-            spans.extend_from_slice(&r.spans);
+            spans.extend(r.spans.iter().zip(&r.pixels).map(|(&[a, b], &[x, y])| [a, b, x, y]));
         }
-        let held = Arc::clone(&gpu);
-        let _work = held.work.lock().unwrap_or_else(|p| p.into_inner());
         // Every whole buffer within one binding: the image's rays (the largest per pixel), the
         // planes and their occluders; refused here in one line, not by the driver's validation.
         let pixels = width as u64 * height as u64;
@@ -366,24 +424,46 @@ impl GpuPlanes {
                 )));
             }
         }
-        let planes: Vec<PlaneRecord> = ctx.views.iter().map(PlaneRecord::from).collect();
-        let usage = wgpu::BufferUsages::STORAGE;
-        let sigma_t = ctx.extinction.sigma_t;
-        let planes = GpuPlanes {
-            planes: gpu.upload("planes", bytemuck::cast_slice(&planes), usage),
-            occluders: gpu.upload("occluders", bytemuck::cast_slice(&ctx.occluders), usage),
-            reach: gpu.upload("reach", bytemuck::cast_slice(&records), usage),
-            spans: gpu.upload("spans", bytemuck::cast_slice(&spans), usage),
+        let planes: Vec<PlaneRecord> = {
+            use rayon::prelude::*;
+            ctx.views.par_iter().map(PlaneRecord::from).collect()
+        };
+        // Not uploaded here: the render prepares planes beside its gathering, and an upload
+        // waits for the device while a submission is under way (on a CPU adapter, which runs a
+        // submission before it returns, for the other side's whole gathering).
+        let host = PlaneData { planes, occluders: ctx.occluders.clone(), reach: records, spans };
+        Ok(GpuPlanes {
             gpu,
             width,
             height,
+            host: Mutex::new(Some(host)),
+            buffers: OnceLock::new(),
             batches,
-            sigma_t,
+            tests: reach.iter().map(TileReach::tests).sum(),
+            sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
             phase: ctx.phase,
-        };
-        planes.gpu.take_errors().map_err(Error::Device)?;
-        Ok(planes)
+        })
+    }
+
+    /// The planes on the GPU, uploaded by the first call, with the nanoseconds this call spent
+    /// uploading and the bytes it uploaded.
+    fn buffers(&self) -> Result<(&PlaneBuffers, u64, u64)> {
+        if let Some(b) = self.buffers.get() {
+            return Ok((b, 0, 0));
+        }
+        let t = Instant::now();
+        let host =
+            self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
+        let (gpu, usage) = (&self.gpu, wgpu::BufferUsages::STORAGE);
+        let made = gpu.checked(|| PlaneBuffers {
+            planes: gpu.upload("planes", bytemuck::cast_slice(&host.planes), usage),
+            occluders: gpu.upload("occluders", bytemuck::cast_slice(&host.occluders), usage),
+            reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), usage),
+            spans: gpu.upload("spans", bytemuck::cast_slice(&host.spans), usage),
+        })?;
+        let bytes = [made.planes.size(), made.occluders.size(), made.reach.size(), made.spans.size()].iter().sum();
+        Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64, bytes))
     }
 
     /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
@@ -401,6 +481,13 @@ impl GpuPlanes {
     /// buffer ([`GpuRays::made`]).
     pub fn make_rays(&self, row: RayRowFn) -> Result<GpuRays> {
         GpuRays::made(&self.gpu, self.width as usize, self.height as usize, row)
+    }
+
+    /// Ray set `set` (with its panels) made on the GPU ([`GpuRays::on_gpu`]), for this
+    /// structure's image.
+    pub fn rays_on_gpu(&self, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<GpuRays> {
+        assert_eq!((set.width, set.height), (self.width, self.height), "a ray per pixel");
+        GpuRays::on_gpu(&self.gpu, set, panels)
     }
 
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
@@ -424,11 +511,12 @@ impl GpuPlanes {
     }
 
     /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
-    /// the planes in batches, each binned and gathered in a submission of its own, not waited
-    /// for (the CPU makes the next piece's rays meanwhile: the queue keeps their order, and
-    /// [`GpuSums::read_into`] waits). Checks `control` before each batch (a cancel stops the
-    /// work after the batches submitted); reports one unit of progress. The result holds the
-    /// tests; the hits and the GPU's time are counted when `into` is read back.
+    /// the planes in batches, each binned and gathered in turn, the work kept with `into` and
+    /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
+    /// or sooner where the work held passes [`PENDING_RAY_BYTES`] of ray sets. Checks `control`
+    /// before each batch (a cancel drops the work not submitted); reports one unit of progress.
+    /// The result holds the tests and the planes' upload; the hits and the GPU's time are
+    /// counted when `into` is read back.
     pub fn gather_into(
         &self,
         weighting: Weighting,
@@ -440,11 +528,31 @@ impl GpuPlanes {
         let pixels = w as usize * h as usize;
         assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
         control.check()?;
-        let mut scratch = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
         if self.batches.is_empty() {
             control.progress();
             return Ok(GatherStats::default());
         }
+        // Compiled on first use, before the scratch buffers are held.
+        let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
+        let (planes, upload_ns, bytes_crossed) = self.buffers()?;
+        gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
+        control.progress();
+        Ok(GatherStats { tests: self.tests, upload_ns, bytes_crossed, ..GatherStats::default() })
+    }
+
+    /// [`GpuPlanes::gather_into`]'s work, its batches one after another in one command buffer,
+    /// kept with `into` (submitted with its reading, or sooner where it holds many ray sets).
+    fn encode(
+        &self,
+        weighting: Weighting,
+        pipelines: &[wgpu::ComputePipeline; 2],
+        planes: &PlaneBuffers,
+        rays: &GpuRays,
+        into: &mut GpuSums,
+        control: Control,
+    ) -> Result<()> {
+        let mut scratch = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner());
+        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let tiles = tiles_x * tiles_y;
         let item = item_planes(gpu.cpu_adapter);
@@ -475,14 +583,13 @@ impl GpuPlanes {
         let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
         let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
         let s = scratch.at_least(gpu, tiles as u64, max_pairs, max_items);
-        let pipelines = gpu.gather_pipelines(estimator_id(weighting));
         let gather_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("gather"),
             layout: &gpu.gather_layout,
             entries: &[
                 entry(0, &params),
-                entry(1, &self.planes),
-                entry(2, &self.occluders),
+                entry(1, &planes.planes),
+                entry(2, &planes.occluders),
                 entry(3, &rays.buffer),
                 entry(4, &rotations_buf),
                 entry(5, &s.list),
@@ -490,6 +597,7 @@ impl GpuPlanes {
                 entry(7, &s.items),
                 entry(8, &s.partial),
                 entry(9, &into.image),
+                entry(10, &s.boxes),
             ],
         });
         // A timestamp pair per batch (its first pass's start, its last pass's end), where the
@@ -512,9 +620,11 @@ impl GpuPlanes {
             (set, resolve, readback)
         });
         let tile_grid = grid(tiles as u64);
+        // Every batch in one command buffer (the passes run in order, the scratch buffers
+        // reused from batch to batch), kept with the sums to submit with their reading.
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
-            let mut encoder = gpu.device.create_command_encoder(&Default::default());
             let bin_params = BinParams {
                 width: w,
                 height: h,
@@ -531,13 +641,14 @@ impl GpuPlanes {
                 layout: &gpu.bin_layout,
                 entries: &[
                     entry(0, &bin_params),
-                    entry(1, &self.reach),
+                    entry(1, &planes.reach),
                     entry(2, &s.tile_counts),
                     entry(3, &s.offsets),
                     entry(4, &s.item_offsets),
                     entry(5, &s.list),
                     entry(6, &s.items),
-                    entry(7, &self.spans),
+                    entry(7, &planes.spans),
+                    entry(8, &s.boxes),
                 ],
             });
             let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
@@ -564,20 +675,20 @@ impl GpuPlanes {
                 encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
                 encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
             }
-            into.first_submission.get_or_insert_with(Instant::now);
-            let index = gpu.queue.submit([encoder.finish()]);
-            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = Some(index);
-            gpu.take_errors().map_err(Error::Device)?;
+        }
+        into.pending.extend(rays.take_pending());
+        into.pending.push(encoder.finish());
+        into.pending_rays += (rays.len * std::mem::size_of::<CameraRay>()) as u64;
+        into.bytes_up += (std::mem::size_of_val(&gather_params) + std::mem::size_of_val(rotations.as_slice())) as u64
+            + (self.batches.len() * std::mem::size_of::<BinParams>()) as u64;
+        if !rays.made_on_gpu || into.pending_rays > PENDING_RAY_BYTES {
+            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = into.submit();
         }
         match queries {
             Some((_, _, readback)) => into.timestamps.push(readback),
             None => into.untimed = true,
         }
-        control.progress();
-        Ok(GatherStats {
-            tests: self.batches.iter().map(|b| b.pairs).sum::<u64>() * (TILE * TILE) as u64,
-            ..GatherStats::default()
-        })
+        Ok(())
     }
 }
 
@@ -595,6 +706,8 @@ struct ScratchBuffers {
     offsets: wgpu::Buffer,
     item_offsets: wgpu::Buffer,
     list: wgpu::Buffer,
+    /// Per list entry, the plane's box of pixels in the tile (`bin.wgsl`'s `boxes`).
+    boxes: wgpu::Buffer,
     items: wgpu::Buffer,
     partial: wgpu::Buffer,
 }
@@ -616,6 +729,7 @@ impl Scratch {
                 offsets: gpu.scratch("offsets", tile_words, storage),
                 item_offsets: gpu.scratch("item offsets", tile_words, storage),
                 list: gpu.scratch("list", pairs * 4, storage),
+                boxes: gpu.scratch("boxes", pairs * 4, storage),
                 items: gpu.scratch("items", items * 16, storage),
                 partial: gpu.scratch("partial", items * ITEM_BYTES, storage),
             });
@@ -624,21 +738,101 @@ impl Scratch {
     }
 }
 
-/// Camera rays on the GPU, one per pixel, row-major: the [`CameraRay`]s as they are (20 bytes,
-/// `gather.wgsl`'s `RAY_FLOATS`), uploaded once for every piece gathered along them.
+/// Camera rays on the GPU, one per pixel, row-major: [`CameraRay`]s (20 bytes, `gather.wgsl`'s
+/// `RAY_FLOATS`), made there by `rays.wgsl` ([`GpuRays::on_gpu`]) or uploaded
+/// ([`GpuRays::new`]), for every piece gathered along them.
 pub struct GpuRays {
     buffer: wgpu::Buffer,
     len: usize,
     gpu: Arc<Gpu>,
+    /// The pass that makes them, submitted with the first gathering along them (or when they
+    /// are read back).
+    pending: Mutex<Option<wgpu::CommandBuffer>>,
+    upload_ns: u64,
+    /// Bytes that crossed to the GPU to make them.
+    bytes_up: u64,
+    /// Made by the GPU: the work along them is kept to be submitted with the sums' reading
+    /// (rays made on the CPU are gathered along at once, so that the CPU makes the next set
+    /// while the GPU gathers).
+    made_on_gpu: bool,
     /// The last submission that gathers along them.
     last_use: Mutex<Option<wgpu::SubmissionIndex>>,
-    upload_ns: u64,
 }
 
 impl GpuRays {
+    /// Refused in one line where the rays of `len` pixels exceed one binding.
+    fn check(gpu: &Gpu, len: usize) -> Result<u64> {
+        let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
+        // The shaders index their floats with u32.
+        let most = gpu.max_binding.min(4 * u32::MAX as u64);
+        if bytes > most {
+            return Err(Error::Device(format!(
+                "the rays of an image of {len} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
+            )));
+        }
+        Ok(bytes)
+    }
+
     /// `rays` uploaded to `gpu`; refused in one line where they exceed one binding.
     pub fn new(gpu: &Arc<Gpu>, rays: &[CameraRay]) -> Result<Self> {
-        Self::made(gpu, rays.len(), 1, &|_, out| out.copy_from_slice(rays))
+        let bytes = Self::check(gpu, rays.len())?;
+        let t = Instant::now();
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let buffer = gpu.checked(|| gpu.upload("rays", bytemuck::cast_slice(rays), usage))?;
+        Ok(GpuRays {
+            buffer,
+            len: rays.len(),
+            gpu: gpu.clone(),
+            pending: Mutex::new(None),
+            upload_ns: t.elapsed().as_nanos() as u64,
+            bytes_up: bytes,
+            made_on_gpu: false,
+            last_use: Mutex::new(None),
+        })
+    }
+
+    /// The ray set `set` (with its light panels `panels`) made on `gpu` by `rays.wgsl`, a
+    /// thread a pixel: only the record and the panels cross. The pass is submitted with the
+    /// first gathering along the rays. Refused in one line where they exceed one binding.
+    pub fn on_gpu(gpu: &Arc<Gpu>, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<Self> {
+        let (w, h) = (set.width, set.height);
+        let bytes = Self::check(gpu, w as usize * h as usize)?;
+        let groups = (w.div_ceil(super::TILE), h.div_ceil(super::TILE));
+        if groups.0 > 65_535 || groups.1 > 65_535 {
+            return Err(Error::Device(format!(
+                "a {w}x{h} image has more than 65,535 x 16 pixels on a side, more than the GPU makes rays for: render a smaller image on it, or on the CPU"
+            )));
+        }
+        let t = Instant::now();
+        let (buffer, commands) = gpu.checked(|| {
+            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+            let buffer = gpu.scratch("rays", bytes, usage);
+            let record = gpu.upload("ray set", bytemuck::bytes_of(set), wgpu::BufferUsages::UNIFORM);
+            let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
+            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("rays"),
+                layout: &gpu.rays_layout,
+                entries: &[entry(0, &record), entry(1, &panels), entry(2, &buffer)],
+            });
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&gpu.rays);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(groups.0, groups.1, 1);
+            }
+            (buffer, encoder.finish())
+        })?;
+        Ok(GpuRays {
+            buffer,
+            len: w as usize * h as usize,
+            gpu: gpu.clone(),
+            pending: Mutex::new(Some(commands)),
+            upload_ns: t.elapsed().as_nanos() as u64,
+            bytes_up: (std::mem::size_of_val(set) + std::mem::size_of_val(panels)) as u64,
+            made_on_gpu: true,
+            last_use: Mutex::new(None),
+        })
     }
 
     /// `height` rows of `width` rays on `gpu`, row `j` made by `row(j, out)` and written
@@ -648,26 +842,17 @@ impl GpuRays {
     pub fn made(gpu: &Arc<Gpu>, width: usize, height: usize, row: RayRowFn) -> Result<Self> {
         use rayon::prelude::*;
         let len = width * height;
-        let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
-        // The shader indexes their floats with u32.
-        let most = gpu.max_binding.min(4 * u32::MAX as u64);
-        if bytes > most {
-            return Err(Error::Device(format!(
-                "the rays of an image of {len} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
-            )));
-        }
+        let bytes = Self::check(gpu, len)?;
         let t = Instant::now();
-        let work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("rays"),
-            // A binding may not be empty; 20 bytes a ray keep the size a multiple of 4.
-            size: bytes.max(32),
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: true,
-        });
-        gpu.take_errors().map_err(Error::Device)?;
-        // Written without the work lock: the other side's upload goes on meanwhile.
-        drop(work);
+        let buffer = gpu.checked(|| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("rays"),
+                // A binding may not be empty; 20 bytes a ray keep the size a multiple of 4.
+                size: bytes.max(32),
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: true,
+            })
+        })?;
         let filling = Instant::now();
         {
             let mut view = buffer
@@ -693,17 +878,18 @@ impl GpuRays {
             );
         }
         let filled = filling.elapsed();
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        buffer.unmap();
-        gpu.take_errors().map_err(Error::Device)?;
+        gpu.checked(|| buffer.unmap())?;
         let upload_ns = t.elapsed().saturating_sub(filled).as_nanos() as u64;
-        Ok(GpuRays { buffer, len, gpu: gpu.clone(), last_use: Mutex::new(None), upload_ns })
-    }
-
-    /// Nanoseconds spent making their buffer and handing it to the GPU, their rows' writing
-    /// aside.
-    pub fn upload_ns(&self) -> u64 {
-        self.upload_ns
+        Ok(GpuRays {
+            buffer,
+            len,
+            gpu: gpu.clone(),
+            pending: Mutex::new(None),
+            upload_ns,
+            bytes_up: bytes,
+            made_on_gpu: false,
+            last_use: Mutex::new(None),
+        })
     }
 
     /// Waits until the GPU has done the work submitted along these rays (so that the caller
@@ -716,6 +902,46 @@ impl GpuRays {
             polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
         Ok(())
+    }
+
+    /// The pass that makes them, if it is not submitted yet: to submit before the work that
+    /// reads them.
+    fn take_pending(&self) -> Option<wgpu::CommandBuffer> {
+        self.pending.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
+
+    /// Nanoseconds spent making their buffer and handing it to the GPU.
+    pub fn upload_ns(&self) -> u64 {
+        self.upload_ns
+    }
+
+    /// Bytes that crossed to the GPU for them: the rays themselves where they were uploaded, a
+    /// record and the panels where the GPU made them.
+    pub fn bytes_up(&self) -> u64 {
+        self.bytes_up
+    }
+
+    /// The rays, read back from the GPU (for holding the GPU's rays to the CPU's).
+    pub fn read(&self) -> Result<Vec<CameraRay>> {
+        let gpu = &*self.gpu;
+        let bytes = (self.len * std::mem::size_of::<CameraRay>()) as u64;
+        let readback = gpu.checked(|| {
+            let readback =
+                gpu.scratch("rays read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.buffer, 0, &readback, 0, bytes);
+            gpu.queue.submit(self.take_pending().into_iter().chain([encoder.finish()]));
+            readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            readback
+        })?;
+        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        gpu.work_errors()?;
+        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        let view = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Device(format!("reading the GPU's rays back: {e}")))?;
+        Ok(bytemuck::cast_slice(&view[..bytes as usize]).to_vec())
     }
 }
 
@@ -743,7 +969,21 @@ pub struct GpuSums {
     first_submission: Option<Instant>,
     /// A gathering into them without timestamps: they are timed by the wall time.
     untimed: bool,
+    /// The gatherings' command buffers (and their rays' passes) not submitted yet: submitted
+    /// together when the sums are read ([`GpuSums::read_into`]), so that a chunk's pieces are one
+    /// submission, not one each.
+    pending: Vec<wgpu::CommandBuffer>,
+    /// Bytes of the ray sets the pending work holds on the GPU ([`PENDING_RAY_BYTES`]).
+    pending_rays: u64,
+    /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
+    /// the last read.
+    bytes_up: u64,
+    submissions: u64,
 }
+
+/// The most bytes of ray sets that work not yet submitted holds: past it, the work is submitted
+/// at once (a large image's ray sets are then let go as their gatherings end).
+const PENDING_RAY_BYTES: u64 = 256 << 20;
 
 impl GpuSums {
     /// Zero sums for a `width x height` image on `gpu`.
@@ -757,32 +997,57 @@ impl GpuSums {
             )));
         }
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let _work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let image = gpu.scratch("image", bytes, usage);
-        gpu.take_errors().map_err(Error::Device)?;
-        drop(_work);
-        Ok(GpuSums { gpu, image, pixels, timestamps: Vec::new(), first_submission: None, untimed: false })
+        let image = gpu.checked(|| gpu.scratch("image", bytes, usage))?;
+        Ok(GpuSums {
+            gpu,
+            image,
+            pixels,
+            timestamps: Vec::new(),
+            first_submission: None,
+            untimed: false,
+            pending: Vec::new(),
+            pending_rays: 0,
+            bytes_up: 0,
+            submissions: 0,
+        })
+    }
+
+    /// Submits the work not submitted yet, with `then` after it, in one submission.
+    fn submit_with(&mut self, then: Option<wgpu::CommandBuffer>) -> Option<wgpu::SubmissionIndex> {
+        let work: Vec<wgpu::CommandBuffer> = self.pending.drain(..).chain(then).collect();
+        if work.is_empty() {
+            return None;
+        }
+        self.first_submission.get_or_insert_with(Instant::now);
+        self.submissions += 1;
+        self.pending_rays = 0;
+        Some(self.gpu.queue.submit(work))
+    }
+
+    /// Submits the work not submitted yet.
+    fn submit(&mut self) -> Option<wgpu::SubmissionIndex> {
+        self.submit_with(None)
     }
 
     /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
     /// returns the hits they counted and the GPU's time of the gatherings since the last read.
     pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
-        let gpu = &*self.gpu;
+        let held = self.gpu.clone();
+        let gpu = &*held;
         let bytes = self.pixels as u64 * 16;
-        // The work lock for the submission only, not the wait: the next chunk's upload goes on.
-        let work = gpu.work.lock().unwrap_or_else(|p| p.into_inner());
-        let readback =
-            gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
-        gpu.queue.submit([encoder.finish()]);
         let timestamps = std::mem::take(&mut self.timestamps);
-        for b in timestamps.iter().chain([&readback]) {
-            b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
-        }
-        gpu.take_errors().map_err(Error::Device)?;
-        drop(work);
+        let readback = gpu.checked(|| {
+            let readback =
+                gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
+            let _ = self.submit_with(Some(encoder.finish()));
+            for b in timestamps.iter().chain([&readback]) {
+                b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            }
+            readback
+        })?;
         let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
         let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
         let untimed = std::mem::take(&mut self.untimed);
@@ -791,7 +1056,13 @@ impl GpuSums {
         let mapped = |b: &wgpu::Buffer| {
             b.slice(..).get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))
         };
-        let mut stats = GatherStats { device_ns: waited, ..GatherStats::default() };
+        let timestamp_bytes: u64 = timestamps.iter().map(|b| b.size()).sum();
+        let mut stats = GatherStats {
+            device_ns: waited,
+            bytes_crossed: std::mem::take(&mut self.bytes_up) + bytes + timestamp_bytes,
+            submissions: std::mem::take(&mut self.submissions),
+            ..GatherStats::default()
+        };
         if !untimed && !timestamps.is_empty() {
             let period = gpu.queue.get_timestamp_period() as f64;
             stats.device_ns = 0;
@@ -805,10 +1076,17 @@ impl GpuSums {
         }
         let view = mapped(&readback)?;
         let back: &[[u32; 4]] = bytemuck::cast_slice(&view[..bytes as usize]);
-        for (sum, v) in sums.iter_mut().zip(back) {
-            *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
-            stats.hits += v[3] as u64;
-        }
+        // Added pixel by pixel in parallel (the same bits: each pixel's one addition).
+        use rayon::prelude::*;
+        stats.hits = sums
+            .par_iter_mut()
+            .zip(back)
+            .with_min_len(4096)
+            .map(|(sum, v)| {
+                *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+                v[3] as u64
+            })
+            .sum();
         Ok(stats)
     }
 }
@@ -873,18 +1151,28 @@ mod tests {
                     phase_h, phase_floor, phase_inv_numerator, phase_hg, pad),
             ),
             (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
+            (
+                RAYS_WGSL,
+                "RaySet",
+                fields!(RaySetRecord: forward, tan_x, right, tan_y, up, width, lo, height, hi, outside, scramble,
+                    sobol, pixel_center, panels, pad),
+            ),
+            (RAYS_WGSL, "Panel", fields!(PanelRecord: corner, to_plane, n, width, u, height, v, pad, footprint)),
         ];
-        // A camera ray crosses as it is: `RAY_FLOATS` f32, its fields in the shader's order.
-        let module = naga::front::wgsl::parse_str(GATHER_WGSL).expect("the shader parses");
-        let ray_floats = module
-            .constants
-            .iter()
-            .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
-            .map(|(_, c)| &module.global_expressions[c.init]);
-        let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
-            panic!("the shader's RAY_FLOATS is a u32 literal")
-        };
-        assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+        // A camera ray is `RAY_FLOATS` f32 where it is made and where it is read, its fields in
+        // the shaders' order.
+        for source in [GATHER_WGSL, RAYS_WGSL] {
+            let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+            let ray_floats = module
+                .constants
+                .iter()
+                .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
+                .map(|(_, c)| &module.global_expressions[c.init]);
+            let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
+                panic!("the shader's RAY_FLOATS is a u32 literal")
+            };
+            assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+        }
         let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
         assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
         for (source, name, (rust, size, fields)) in pairs {

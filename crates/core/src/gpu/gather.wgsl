@@ -93,6 +93,8 @@ struct Params {
 // The image (device.rs `GpuSums`): each pixel's sum (rgb, the bits of f32) and its hits, added to
 // by every batch of every gathering into it, and read back once.
 @group(0) @binding(9) var<storage, read_write> image: array<vec4<u32>>;
+// Per list entry, the plane's box of pixels within the tile (bin.wgsl).
+@group(0) @binding(10) var<storage, read> boxes: array<u32>;
 
 const TILE: u32 = 16u;
 const THREADS: u32 = 256u;
@@ -436,6 +438,7 @@ fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
 // The gather over work items, and the reduction of a tile's items.
 
 var<workgroup> batch: array<Plane, BATCH>;
+var<workgroup> batch_box: array<u32, BATCH>;
 var<workgroup> wg_item: vec4<u32>;
 var<workgroup> wg_total: u32;
 
@@ -468,9 +471,16 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         workgroupBarrier();
         if (li < n) {
             batch[li] = planes[list[b + li]];
+            batch_box[li] = boxes[b + li];
         }
         workgroupBarrier();
         for (var j = 0u; j < n; j++) {
+            // Only the pixels of the plane's box in the tile (bin.wgsl's `boxes`): the others
+            // are more than a pixel from its screen polygon.
+            let bx = batch_box[j];
+            if (lid.x < (bx & 15u) || lid.x > ((bx >> 4u) & 15u) || lid.y < ((bx >> 8u) & 15u) || lid.y > (bx >> 12u)) {
+                continue;
+            }
             let pl = batch[j];
             // Section 2.3: Cramer's rule with det = we . n_P; a hit needs det != 0 (tested as
             // |det| > 1e-30, so that 1/det is finite), t in [t0, t1], a on the chord, r > 0.

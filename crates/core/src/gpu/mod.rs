@@ -106,6 +106,15 @@ pub fn item_planes(cpu_adapter: bool) -> u32 {
     if cpu_adapter { 256 } else { 512 }
 }
 
+/// Whether a render's ray sets are made on the GPU (`rays.wgsl`: only a record crosses, and a
+/// chunk's work is one submission) rather than on the CPU (uploaded, each piece submitted at
+/// once so that the CPU makes the next set meanwhile): asked by `FOGPLANES_GPU_RAYS=1`, for
+/// measuring on a device. Not the default: the GPU's directions are within f32 rounding of the
+/// CPU's, not the same bits, which moves grazing hits (`docs/gpu.md`).
+pub fn rays_on_gpu() -> bool {
+    std::env::var("FOGPLANES_GPU_RAYS").is_ok_and(|v| v == "1")
+}
+
 /// The estimator as `gather.wgsl`'s `ESTIMATOR` names it.
 pub fn estimator_id(w: Weighting) -> u32 {
     match (w.estimator, w.orientations) {
@@ -124,17 +133,29 @@ pub fn estimator_id(w: Weighting) -> u32 {
 /// (inclusive; `[1, 0]` where none) whose pixels' squares come within a pixel of the polygon
 /// (far above its rounding). What `bin.wgsl`'s `covers` tests: binning to these spans, not to
 /// the polygon's box, keeps a thin diagonal plane out of the tiles its box crosses but it does
-/// not (the benchmark's tests per hit: 4.2 with boxes).
+/// not (the benchmark's tests per hit: 4.2 with boxes). Per row of tiles, too, the box of
+/// pixels within it that come within a pixel of the polygon (`pixels`): the gather tests only
+/// a tile's pixels in it (tighter tiles: a tile's 256 pixels tested per plane were 1.79 tests
+/// per hit on the benchmark).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TileReach {
     pub first_row: u32,
     pub spans: Vec<[u32; 2]>,
+    /// Per row of tiles: its first and last pixel column, packed `first | last << 16`, and its
+    /// first and last pixel row, packed alike (`[1, 0]` where the row is empty).
+    pub pixels: Vec<[u32; 2]>,
 }
 
 impl TileReach {
     /// The (tile, plane) pairs: how many tiles the plane is binned to.
     pub fn tiles(&self) -> u64 {
         self.spans.iter().map(|&[a, b]| (b + 1).saturating_sub(a) as u64).sum()
+    }
+
+    /// The pixels the gather tests the plane at: each row of tiles' box of pixels.
+    pub fn tests(&self) -> u64 {
+        let len = |v: u32| ((v >> 16) + 1).saturating_sub(v & 0xffff) as u64;
+        self.spans.iter().zip(&self.pixels).filter(|(s, _)| s[0] <= s[1]).map(|(_, &[x, y])| len(x) * len(y)).sum()
     }
 }
 
@@ -189,18 +210,26 @@ pub fn tile_reach(poly: &Polygon<DVec2>, width: u32, height: u32) -> TileReach {
             hi[j] = hi[j].max(xa.max(xb));
         }
     }
-    let spans = lo
-        .iter()
-        .zip(&hi)
-        .map(|(&lo, &hi)| {
-            // Pixel px's square [px, px + 1] comes within a pixel of [lo, hi] where
-            // lo - 2 <= px <= hi + 1; its tile is px / 16.
-            let a = (lo - 2.0 * M).ceil().max(0.0);
-            let b = (hi + M).floor().min(width as f64 - 1.0);
-            if !(a <= b) { [1, 0] } else { [(a / t) as u32, (b / t) as u32] }
-        })
-        .collect();
-    TileReach { first_row: first, spans }
+    // The polygon's pixel rows, as above: ylo - 2 <= py <= yhi + 1.
+    let (row_lo, row_hi) = ((ylo - 2.0 * M).ceil().max(0.0) as u32, (yhi + M).floor().min(height as f64 - 1.0) as u32);
+    let (mut spans, mut pixels) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for (j, (&lo, &hi)) in lo.iter().zip(&hi).enumerate() {
+        // Pixel px's square [px, px + 1] comes within a pixel of [lo, hi] where
+        // lo - 2 <= px <= hi + 1; its tile is px / 16.
+        let a = (lo - 2.0 * M).ceil().max(0.0);
+        let b = (hi + M).floor().min(width as f64 - 1.0);
+        if !(a <= b) {
+            spans.push([1, 0]);
+            pixels.push([1, 0]);
+            continue;
+        }
+        let (a, b) = (a as u32, b as u32);
+        let row = (first as usize + j) as u32 * TILE;
+        let (r0, r1) = (row_lo.max(row), row_hi.min(row + TILE - 1));
+        spans.push([a / TILE, b / TILE]);
+        pixels.push([a | b << 16, r0 | r1 << 16]);
+    }
+    TileReach { first_row: first, spans, pixels }
 }
 
 #[cfg(test)]
@@ -235,8 +264,14 @@ mod tests {
             let reach = tile_reach(&poly, w, h);
             let covered = |px: i64, py: i64| {
                 let (tx, ty) = ((px / TILE as i64) as u32, (py / TILE as i64) as u32);
-                ty >= reach.first_row
-                    && reach.spans.get((ty - reach.first_row) as usize).is_some_and(|&[f, l]| f <= tx && tx <= l)
+                let (px, py) = (px as u32, py as u32);
+                let row = (ty >= reach.first_row).then(|| (ty - reach.first_row) as usize);
+                let inside = |v: u32, packed: u32| packed & 0xffff <= v && v <= packed >> 16;
+                row.is_some_and(|r| {
+                    reach.spans.get(r).is_some_and(|&[f, l]| f <= tx && tx <= l)
+                        && inside(px, reach.pixels[r][0])
+                        && inside(py, reach.pixels[r][1])
+                })
             };
             // Points of the polygon and each pixel square within a pixel of them.
             for i in 0..k {

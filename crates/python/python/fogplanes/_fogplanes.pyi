@@ -155,9 +155,13 @@ class RenderStats(TypedDict):
     devices: list[str]
     #: Seconds of the GPU's own gather (its timestamps, else the wall time of its work); 0 on the CPU.
     seconds_device: float
-    #: Seconds of wall time uploading camera rays to the GPU (their writing, straight into the
-    #: upload buffers, is in seconds_rays); 0 on the CPU.
+    #: Seconds of wall time uploading to the GPU (the planes, each ray set's rays: their
+    #: writing, straight into the upload buffers, is in seconds_rays); 0 on the CPU.
     seconds_upload: float
+    #: Bytes that crossed between the CPU and the GPU (planes up, sums back); 0 on the CPU.
+    bytes_crossed: int
+    #: The GPU's queue submissions; 0 on the CPU.
+    submissions: int
     planes: int
     #: 1, or the passes of a render on a time budget.
     plane_passes: int
