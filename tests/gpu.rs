@@ -160,7 +160,7 @@ fn gpu_agrees_with_the_cpu_in_forward_scattering_fog() {
             ..Overrides::default()
         };
         let (c, cs) = render_on(&s, &given, Device::Cpu);
-        let (gp, gs) = render_on(&s, &given, Device::Gpu);
+        let (gp, gs) = render_on(&s, &given, Device::GPU);
         let (fc, fg) = (fog(&s, &given, &c), fog(&s, &given, &gp));
         let (rel, worst) = relative_mse(&fg, &fc);
         let line = format!(
