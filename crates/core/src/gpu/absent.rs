@@ -1,5 +1,6 @@
 //! Built without the `gpu` feature: no adapter, and so no planes on one.
 
+use super::AdapterInfo;
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::Result;
@@ -27,9 +28,6 @@ impl Gpu {
     }
 }
 
-/// The variable that names a process's adapter (unread in this build).
-pub const GPU_VARIABLE: &str = "FOGPLANES_GPU";
-
 const WITHOUT: &str = "this fogplanes was built without the `gpu` cargo feature: rebuild with it (on by default)";
 
 /// Why there is no adapter.
@@ -40,17 +38,6 @@ pub fn adapter() -> std::result::Result<Arc<Gpu>, String> {
 /// Why there is no adapter.
 pub fn adapter_at(_: Option<usize>) -> std::result::Result<(usize, Arc<Gpu>), String> {
     Err(WITHOUT.into())
-}
-
-/// Never made: there is no adapter to list.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct AdapterInfo {
-    pub index: usize,
-    pub name: String,
-    pub backend: String,
-    pub kind: &'static str,
-    pub max_binding: u64,
-    pub default: bool,
 }
 
 /// Why there is no adapter.

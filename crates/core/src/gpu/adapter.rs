@@ -11,7 +11,8 @@
 //! enumeration of the adapters. A compute-only render presents nothing, so it asks for no
 //! surface, and the layer has nothing to look up.
 
-use super::device::{Gpu, block_on};
+use super::device::{Gpu, block_on, kind_name};
+use super::{AdapterInfo, GPU_VARIABLE};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// The instance of this process, made once; `Err` says why there is none (no Vulkan loader
@@ -70,22 +71,6 @@ fn no_adapter(why: &dyn std::fmt::Display) -> String {
     )
 }
 
-/// An adapter as `fogplanes devices` lists it.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct AdapterInfo {
-    /// Its index in the list: `--device gpu:N`.
-    pub index: usize,
-    pub name: String,
-    /// `Vulkan`, `Metal` or `Dx12`.
-    pub backend: String,
-    /// `discrete GPU`, `integrated GPU`, `virtual GPU`, `CPU emulation` or `other`.
-    pub kind: &'static str,
-    /// The most bytes one storage buffer binding holds (the rays of an image must fit one).
-    pub max_binding: u64,
-    /// Whether `--device gpu` takes it (the first real GPU, else the first adapter).
-    pub default: bool,
-}
-
 /// The adapters of this process, in the order wgpu finds them, found once.
 fn found() -> Result<&'static [wgpu::Adapter], String> {
     static FOUND: OnceLock<Result<Vec<wgpu::Adapter>, String>> = OnceLock::new();
@@ -111,17 +96,6 @@ fn rank(kind: wgpu::DeviceType) -> u32 {
         wgpu::DeviceType::VirtualGpu => 2,
         wgpu::DeviceType::Other => 3,
         wgpu::DeviceType::Cpu => 4,
-    }
-}
-
-/// The words for an adapter's kind.
-pub(super) fn kind_name(kind: wgpu::DeviceType) -> &'static str {
-    match kind {
-        wgpu::DeviceType::DiscreteGpu => "discrete GPU",
-        wgpu::DeviceType::IntegratedGpu => "integrated GPU",
-        wgpu::DeviceType::VirtualGpu => "virtual GPU",
-        wgpu::DeviceType::Cpu => "CPU emulation",
-        wgpu::DeviceType::Other => "other",
     }
 }
 
@@ -154,11 +128,6 @@ pub fn adapters() -> Result<Vec<AdapterInfo>, String> {
 
 /// A device made on an adapter, or why it could not be.
 type Made = Result<Arc<Gpu>, String>;
-
-/// The variable a launcher sets per process to give each its own adapter (as dask-cuda sets
-/// `CUDA_VISIBLE_DEVICES` per worker): `--device gpu` (Python's `device="gpu"`) then takes
-/// adapter `FOGPLANES_GPU` of [`adapters`].
-pub const GPU_VARIABLE: &str = "FOGPLANES_GPU";
 
 /// The adapter `index` of [`adapters`] (`None`: the one `--device gpu` takes, adapter
 /// [`GPU_VARIABLE`] where it is set, else a real GPU first), its device made on first use and

@@ -84,6 +84,18 @@ pub struct Gpu {
     scratch: Mutex<Scratch>,
 }
 
+/// The words for an adapter's kind (the summary's label here, `fogplanes devices` in
+/// `adapter.rs`, which builds on this file: the adapters' list makes a [`Gpu`] of the one it picks).
+pub(super) fn kind_name(kind: wgpu::DeviceType) -> &'static str {
+    match kind {
+        wgpu::DeviceType::DiscreteGpu => "discrete GPU",
+        wgpu::DeviceType::IntegratedGpu => "integrated GPU",
+        wgpu::DeviceType::VirtualGpu => "virtual GPU",
+        wgpu::DeviceType::Cpu => "CPU emulation",
+        wgpu::DeviceType::Other => "other",
+    }
+}
+
 /// Runs a future of wgpu's to its end on this thread.
 pub(super) fn block_on<F: std::future::Future>(f: F) -> F::Output {
     let mut f = std::pin::pin!(f);
@@ -204,7 +216,7 @@ impl Gpu {
             label: Some("gather.wgsl"),
             source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
         });
-        let kind = super::adapter::kind_name(info.device_type);
+        let kind = kind_name(info.device_type);
         let gpu = Gpu {
             name: format!("{} ({:?}, {kind})", info.name, info.backend),
             cpu_adapter: info.device_type == wgpu::DeviceType::Cpu,

@@ -23,14 +23,35 @@ mod adapter;
 #[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
-pub use adapter::{AdapterInfo, GPU_VARIABLE, adapter, adapter_at, adapters};
+pub use adapter::{adapter, adapter_at, adapters};
 #[cfg(feature = "gpu")]
 pub use device::{Gpu, GpuPlanes, GpuRays, GpuSums};
 
 #[cfg(not(feature = "gpu"))]
 mod absent;
 #[cfg(not(feature = "gpu"))]
-pub use absent::{AdapterInfo, GPU_VARIABLE, Gpu, GpuPlanes, GpuRays, GpuSums, adapter, adapter_at, adapters};
+pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, adapter, adapter_at, adapters};
+
+/// An adapter as `fogplanes devices` lists it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AdapterInfo {
+    /// Its index in the list: `--device gpu:N`.
+    pub index: usize,
+    pub name: String,
+    /// `Vulkan`, `Metal` or `Dx12`.
+    pub backend: String,
+    /// `discrete GPU`, `integrated GPU`, `virtual GPU`, `CPU emulation` or `other`.
+    pub kind: &'static str,
+    /// The most bytes one storage buffer binding holds (the rays of an image must fit one).
+    pub max_binding: u64,
+    /// Whether `--device gpu` takes it (the first real GPU, else the first adapter).
+    pub default: bool,
+}
+
+/// The variable a launcher sets per process to give each its own adapter (as dask-cuda sets
+/// `CUDA_VISIBLE_DEVICES` per worker): `--device gpu` (Python's `device="gpu"`) then takes
+/// adapter `FOGPLANES_GPU` of [`adapters`].
+pub const GPU_VARIABLE: &str = "FOGPLANES_GPU";
 
 /// Which processor gathers (`--device`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
