@@ -90,7 +90,7 @@ struct Params {
 @group(0) @binding(7) var<storage, read> items: array<vec4<u32>>;
 // Each work item's 256 pixel sums: (rgb, hits).
 @group(0) @binding(8) var<storage, read_write> partial: array<vec4<f32>>;
-// The image (device.rs `GpuSums`): each pixel's sum (rgb, the bits of f32) and its hits, added to
+// The image (sums.rs `GpuSums`): each pixel's sum (rgb, the bits of f32) and its hits, added to
 // by every batch of every gathering into it, and read back once.
 @group(0) @binding(9) var<storage, read_write> image: array<vec4<u32>>;
 // Per list entry, the plane's box of pixels within the tile (bin.wgsl).

@@ -23,9 +23,25 @@ mod adapter;
 #[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
+mod planes;
+#[cfg(feature = "gpu")]
+mod rays;
+#[cfg(feature = "gpu")]
+mod records;
+#[cfg(feature = "gpu")]
+mod scratch;
+#[cfg(feature = "gpu")]
+mod sums;
+#[cfg(feature = "gpu")]
 pub use adapter::{adapter, adapter_at, adapters};
 #[cfg(feature = "gpu")]
-pub use device::{Gpu, GpuPlanes, GpuRays, GpuSums};
+pub use device::Gpu;
+#[cfg(feature = "gpu")]
+pub use planes::GpuPlanes;
+#[cfg(feature = "gpu")]
+pub use rays::GpuRays;
+#[cfg(feature = "gpu")]
+pub use sums::GpuSums;
 
 #[cfg(not(feature = "gpu"))]
 mod absent;

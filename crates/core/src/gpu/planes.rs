@@ -1,0 +1,412 @@
+//! A structure's planes on the GPU ([`GpuPlanes`]): cut into batches on the CPU, uploaded by
+//! their first gathering, and each gathering's passes (per batch: the binning's three, the
+//! gather and its reduction) encoded into one command buffer kept with the sums.
+
+use super::device::{Gpu, entry, grid};
+use super::rays::GpuRays;
+use super::records::{BinParams, GatherParams, ITEM_BYTES};
+use super::scratch::ScratchBuffers;
+use super::sums::{GpuSums, PENDING_RAY_BYTES};
+use super::{BATCH_PLANES, TILE, TileReach, estimator_id, item_planes};
+use crate::camera::{CameraRay, RayRowFn};
+use crate::control::Control;
+use crate::error::{Error, Result};
+use crate::gather::{GatherContext, GatherStats, Phase, PlaneRecord};
+use crate::pixel::{PanelRecord, RaySetRecord};
+use crate::weights::Weighting;
+use glam::Vec3;
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Instant;
+
+/// One batch of planes: binned and gathered together.
+struct Batch {
+    first: u32,
+    count: u32,
+    /// (tile, plane) pairs: the tiles' lists' total length.
+    pairs: u64,
+    /// A bound on its work items.
+    items: u64,
+}
+
+/// A structure's planes for the GPU, for gathering camera rays of one image size: made on the
+/// CPU, uploaded by their first gathering ([`GpuPlanes::buffers`]).
+pub struct GpuPlanes {
+    gpu: Arc<Gpu>,
+    width: u32,
+    height: u32,
+    /// What crosses, until it has.
+    host: Mutex<Option<PlaneData>>,
+    buffers: OnceLock<PlaneBuffers>,
+    batches: Vec<Batch>,
+    /// The pixels a gathering tests the planes at ([`TileReach::tests`]).
+    tests: u64,
+    sigma_t: Vec3,
+    grey: bool,
+    phase: Phase,
+}
+
+/// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and per plane its
+/// reach (first row of tiles, rows, first span, 0) and the spans (`bin.wgsl`'s `reach` and
+/// `spans`).
+struct PlaneData {
+    planes: Vec<PlaneRecord>,
+    occluders: Vec<crate::occlusion::Occluder>,
+    reach: Vec<[u32; 4]>,
+    /// Per row of tiles: its span of tiles and its box of pixels ([`TileReach`]).
+    spans: Vec<[u32; 4]>,
+}
+
+/// [`PlaneData`] on the GPU.
+struct PlaneBuffers {
+    planes: wgpu::Buffer,
+    occluders: wgpu::Buffer,
+    reach: wgpu::Buffer,
+    spans: wgpu::Buffer,
+}
+
+impl GpuPlanes {
+    /// The planes of `ctx` for `gpu`, with the tiles each reaches (`reach`, from
+    /// [`super::tile_reach`]) in a `width x height` image.
+    pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
+        assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
+        let mut records = Vec::with_capacity(reach.len());
+        let mut spans: Vec<[u32; 4]> = Vec::new();
+        for r in reach {
+            records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
+            spans.extend(r.spans.iter().zip(&r.pixels).map(|(&[a, b], &[x, y])| [a, b, x, y]));
+        }
+        // Every whole buffer within one binding: the image's rays (the largest per pixel), the
+        // planes and their occluders; refused here in one line, not by the driver's validation.
+        let pixels = width as u64 * height as u64;
+        let whole = [
+            ("the rays of a", pixels * std::mem::size_of::<CameraRay>() as u64),
+            ("the planes of a chunk for a", (ctx.views.len() * std::mem::size_of::<PlaneRecord>()) as u64),
+            ("the occluders of a chunk's planes for a", std::mem::size_of_val(ctx.occluders.as_slice()) as u64),
+            ("the rows of tiles a chunk's planes reach in a", std::mem::size_of_val(spans.as_slice()) as u64),
+        ];
+        if let Some((what, bytes)) = whole.into_iter().find(|&(_, bytes)| bytes > gpu.max_binding()) {
+            return Err(Error::Device(format!(
+                "{what} {width}x{height} image take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
+                gpu.max_binding()
+            )));
+        }
+        let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
+        let item = item_planes(gpu.is_cpu_adapter()) as u64;
+        // Batches of consecutive planes whose work items' partial sums fit one binding.
+        let max_items = gpu.max_binding() / ITEM_BYTES;
+        let mut batches: Vec<Batch> = Vec::new();
+        for (i, r) in reach.iter().enumerate() {
+            let pairs = r.tiles();
+            let fits = |batch: &Batch| {
+                let p = batch.pairs + pairs;
+                (batch.count as usize) < BATCH_PLANES
+                    && p.min(tiles) + p / item <= max_items
+                    && p * 4 <= gpu.max_binding()
+            };
+            match batches.last_mut() {
+                Some(batch) if fits(batch) => {
+                    batch.count += 1;
+                    batch.pairs += pairs;
+                }
+                _ => batches.push(Batch { first: i as u32, count: 1, pairs, items: 0 }),
+            }
+        }
+        for b in &mut batches {
+            b.items = b.pairs.min(tiles) + b.pairs / item;
+            if b.items > max_items || b.pairs * 4 > gpu.max_binding() {
+                return Err(Error::Device(format!(
+                    "a plane covers more of this {width}x{height} image than the GPU's buffers hold ({} bytes a binding): render smaller images on it",
+                    gpu.max_binding()
+                )));
+            }
+        }
+        let planes: Vec<PlaneRecord> = {
+            use rayon::prelude::*;
+            ctx.views.par_iter().map(PlaneRecord::from).collect()
+        };
+        // Not uploaded here: the render prepares planes beside its gathering, and an upload
+        // waits for the device while a submission is under way (on a CPU adapter, which runs a
+        // submission before it returns, for the other side's whole gathering).
+        let host = PlaneData { planes, occluders: ctx.occluders.clone(), reach: records, spans };
+        Ok(GpuPlanes {
+            gpu,
+            width,
+            height,
+            host: Mutex::new(Some(host)),
+            buffers: OnceLock::new(),
+            batches,
+            tests: reach.iter().map(TileReach::tests).sum(),
+            sigma_t: ctx.extinction.sigma_t,
+            grey: ctx.extinction.grey,
+            phase: ctx.phase,
+        })
+    }
+
+    /// The planes on the GPU, uploaded by the first call, with the nanoseconds this call spent
+    /// uploading and the bytes it uploaded.
+    fn buffers(&self) -> Result<(&PlaneBuffers, u64, u64)> {
+        if let Some(b) = self.buffers.get() {
+            return Ok((b, 0, 0));
+        }
+        let t = Instant::now();
+        let host =
+            self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
+        let (gpu, usage) = (&self.gpu, wgpu::BufferUsages::STORAGE);
+        let made = gpu.checked(|| PlaneBuffers {
+            planes: gpu.upload("planes", bytemuck::cast_slice(&host.planes), usage),
+            occluders: gpu.upload("occluders", bytemuck::cast_slice(&host.occluders), usage),
+            reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), usage),
+            spans: gpu.upload("spans", bytemuck::cast_slice(&host.spans), usage),
+        })?;
+        let bytes = [made.planes.size(), made.occluders.size(), made.reach.size(), made.spans.size()].iter().sum();
+        Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64, bytes))
+    }
+
+    /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
+    pub fn new_sums(&self) -> Result<GpuSums> {
+        GpuSums::new(self.gpu.clone(), self.width, self.height)
+    }
+
+    /// `rays` (one per pixel of this structure's image, row-major) uploaded to its GPU.
+    pub fn upload_rays(&self, rays: &[CameraRay]) -> Result<GpuRays> {
+        assert_eq!(rays.len(), self.width as usize * self.height as usize, "one ray per pixel");
+        GpuRays::new(&self.gpu, rays)
+    }
+
+    /// Rays for this structure's image, each row made by `row` straight into the GPU's upload
+    /// buffer ([`GpuRays::made`]).
+    pub fn make_rays(&self, row: RayRowFn) -> Result<GpuRays> {
+        GpuRays::made(&self.gpu, self.width as usize, self.height as usize, row)
+    }
+
+    /// Ray set `set` (with its panels) made on the GPU ([`GpuRays::on_gpu`]), for this
+    /// structure's image.
+    pub fn rays_on_gpu(&self, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<GpuRays> {
+        assert_eq!((set.width, set.height), (self.width, self.height), "a ray per pixel");
+        GpuRays::on_gpu(&self.gpu, set, panels)
+    }
+
+    /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
+    /// `sums`: [`GpuPlanes::gather_into`] fresh sums on the GPU, read back once. Checks
+    /// `control` before each batch; reports one unit of progress.
+    pub fn gather(
+        &self,
+        weighting: Weighting,
+        rays: &[CameraRay],
+        sums: &mut [Vec3],
+        control: Control,
+    ) -> Result<GatherStats> {
+        let pixels = self.width as usize * self.height as usize;
+        assert!(rays.len() == pixels && sums.len() == pixels, "one ray and one sum per pixel");
+        control.check()?;
+        let mut on_gpu = self.new_sums()?;
+        let rays = self.upload_rays(rays)?;
+        let mut stats = self.gather_into(weighting, &rays, &mut on_gpu, control)?;
+        stats += on_gpu.read_into(sums)?;
+        Ok(stats)
+    }
+
+    /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
+    /// the planes in batches, each binned and gathered in turn, the work kept with `into` and
+    /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
+    /// or sooner where the work held passes [`PENDING_RAY_BYTES`] of ray sets. Checks `control`
+    /// before each batch (a cancel drops the work not submitted); reports one unit of progress.
+    /// The result holds the tests and the planes' upload; the hits and the GPU's time are
+    /// counted when `into` is read back.
+    pub fn gather_into(
+        &self,
+        weighting: Weighting,
+        rays: &GpuRays,
+        into: &mut GpuSums,
+        control: Control,
+    ) -> Result<GatherStats> {
+        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
+        let pixels = w as usize * h as usize;
+        assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
+        control.check()?;
+        if self.batches.is_empty() {
+            control.progress();
+            return Ok(GatherStats::default());
+        }
+        // Compiled on first use, before the scratch buffers are held.
+        let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
+        let (planes, upload_ns, bytes_crossed) = self.buffers()?;
+        gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
+        control.progress();
+        Ok(GatherStats { tests: self.tests, upload_ns, bytes_crossed, ..GatherStats::default() })
+    }
+
+    /// [`GpuPlanes::gather_into`]'s work, its batches one after another in one command buffer,
+    /// kept with `into` (submitted with its reading, or sooner where it holds many ray sets).
+    fn encode(
+        &self,
+        weighting: Weighting,
+        pipelines: &[wgpu::ComputePipeline; 2],
+        planes: &PlaneBuffers,
+        rays: &GpuRays,
+        into: &mut GpuSums,
+        control: Control,
+    ) -> Result<()> {
+        let mut scratch = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner());
+        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
+        let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        let tiles = tiles_x * tiles_y;
+        let item = item_planes(gpu.is_cpu_adapter());
+        let k = weighting.orientations.max(1);
+        let rotations: Vec<[f32; 2]> = (1..k)
+            .map(|i| i as f64 * std::f64::consts::PI / k as f64)
+            .map(|b| [b.cos() as f32, b.sin() as f32])
+            .collect();
+        let gather_params = GatherParams {
+            width: w,
+            height: h,
+            tiles_x,
+            tiles,
+            sigma_t: self.sigma_t.to_array(),
+            grey: self.grey as u32,
+            orientations: k,
+            inv_orientations: 1.0 / k as f32,
+            phase_h: self.phase.h,
+            phase_floor: self.phase.floor,
+            phase_inv_numerator: self.phase.inv_numerator,
+            phase_hg: !self.phase.is_isotropic() as u32,
+            pad: [0; 2],
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let uniform = wgpu::BufferUsages::UNIFORM;
+        let params = gpu.upload("gather params", bytemuck::bytes_of(&gather_params), uniform);
+        let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
+        let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
+        let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
+        let s = scratch.at_least(&gpu.device, tiles as u64, max_pairs, max_items);
+        let gather_group = gather_group(gpu, &params, planes, rays, &rotations_buf, s, &into.image);
+        let batches = self.batches.len();
+        let queries = timestamp_queries(gpu, batches);
+        let tile_grid = grid(tiles as u64);
+        // Every batch in one command buffer (the passes run in order, the scratch buffers
+        // reused from batch to batch), kept with the sums to submit with their reading.
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        for (b, batch) in self.batches.iter().enumerate() {
+            control.check()?;
+            let bin_params = BinParams {
+                width: w,
+                height: h,
+                tiles_x,
+                tiles,
+                count: batch.count,
+                first: batch.first,
+                item_planes: item,
+                pad: 0,
+            };
+            let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
+            let bin_group = bin_group(gpu, &bin_params, planes, s);
+            let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
+                (&gpu.bin[0], &bin_group, tile_grid),
+                (&gpu.bin[1], &bin_group, (1, 1)),
+                (&gpu.bin[2], &bin_group, tile_grid),
+                (&pipelines[0], &gather_group, grid(batch.items.max(1))),
+                (&pipelines[1], &gather_group, (tiles_x, tiles_y)),
+            ];
+            for (k, (pipeline, group, (x, y))) in steps.into_iter().enumerate() {
+                let timestamp_writes =
+                    queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: (k == 0).then_some(2 * b as u32),
+                        end_of_pass_write_index: (k == 4).then_some(2 * b as u32 + 1),
+                    });
+                let mut pass =
+                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| b + 1 == batches) {
+                encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
+                encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
+            }
+        }
+        into.pending.extend(rays.take_pending());
+        into.pending.push(encoder.finish());
+        into.pending_rays += (rays.len * std::mem::size_of::<CameraRay>()) as u64;
+        into.bytes_up += (std::mem::size_of_val(&gather_params) + std::mem::size_of_val(rotations.as_slice())) as u64
+            + (self.batches.len() * std::mem::size_of::<BinParams>()) as u64;
+        if !rays.made_on_gpu || into.pending_rays > PENDING_RAY_BYTES {
+            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = into.submit();
+        }
+        match queries {
+            Some((_, _, readback)) => into.timestamps.push(readback),
+            None => into.untimed = true,
+        }
+        Ok(())
+    }
+}
+
+/// The gather's bindings (`gather.wgsl`), the same for every batch of a gathering.
+fn gather_group(
+    gpu: &Gpu,
+    params: &wgpu::Buffer,
+    planes: &PlaneBuffers,
+    rays: &GpuRays,
+    rotations: &wgpu::Buffer,
+    s: &ScratchBuffers,
+    image: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("gather"),
+        layout: &gpu.gather_layout,
+        entries: &[
+            entry(0, params),
+            entry(1, &planes.planes),
+            entry(2, &planes.occluders),
+            entry(3, &rays.buffer),
+            entry(4, rotations),
+            entry(5, &s.list),
+            entry(6, &s.item_offsets),
+            entry(7, &s.items),
+            entry(8, &s.partial),
+            entry(9, image),
+            entry(10, &s.boxes),
+        ],
+    })
+}
+
+/// The binning's bindings (`bin.wgsl`) for one batch's parameters.
+fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &ScratchBuffers) -> wgpu::BindGroup {
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("bin"),
+        layout: &gpu.bin_layout,
+        entries: &[
+            entry(0, params),
+            entry(1, &planes.reach),
+            entry(2, &s.tile_counts),
+            entry(3, &s.offsets),
+            entry(4, &s.item_offsets),
+            entry(5, &s.list),
+            entry(6, &s.items),
+            entry(7, &planes.spans),
+            entry(8, &s.boxes),
+        ],
+    })
+}
+
+/// A timestamp pair per batch (its first pass's start, its last pass's end), where the
+/// adapter has them, read when the sums are; else (or for a gathering of more batches
+/// than a query set takes here) the sums are timed by the wall time from their first
+/// submission to their reading back.
+fn timestamp_queries(gpu: &Gpu, batches: usize) -> Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)> {
+    (gpu.has_timestamps() && batches <= 2048).then(|| {
+        let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("gather time"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2 * batches as u32,
+        });
+        let copy_src = wgpu::BufferUsages::COPY_SRC;
+        let resolve = gpu.scratch("timestamps", 16 * batches as u64, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
+        let readback = gpu.scratch(
+            "timestamps read back",
+            16 * batches as u64,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        (set, resolve, readback)
+    })
+}

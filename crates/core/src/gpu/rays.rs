@@ -1,0 +1,226 @@
+//! Camera rays on the GPU ([`GpuRays`]): uploaded from the CPU, written by the CPU's threads
+//! straight into a mapped buffer, or made on the GPU by `rays.wgsl`; kept there for every piece
+//! gathered along them.
+
+use super::device::{Gpu, entry};
+use crate::camera::{CameraRay, RayRowFn};
+use crate::error::{Error, Result};
+use crate::pixel::{PanelRecord, RaySetRecord};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Camera rays on the GPU, one per pixel, row-major: [`CameraRay`]s (20 bytes, `gather.wgsl`'s
+/// `RAY_FLOATS`), made there by `rays.wgsl` ([`GpuRays::on_gpu`]) or uploaded
+/// ([`GpuRays::new`]), for every piece gathered along them.
+pub struct GpuRays {
+    pub(super) buffer: wgpu::Buffer,
+    pub(super) len: usize,
+    gpu: Arc<Gpu>,
+    /// The pass that makes them, submitted with the first gathering along them (or when they
+    /// are read back).
+    pending: Mutex<Option<wgpu::CommandBuffer>>,
+    upload_ns: u64,
+    /// Bytes that crossed to the GPU to make them.
+    bytes_up: u64,
+    /// Made by the GPU: the work along them is kept to be submitted with the sums' reading
+    /// (rays made on the CPU are gathered along at once, so that the CPU makes the next set
+    /// while the GPU gathers).
+    pub(super) made_on_gpu: bool,
+    /// The last submission that gathers along them.
+    pub(super) last_use: Mutex<Option<wgpu::SubmissionIndex>>,
+}
+
+impl GpuRays {
+    /// Refused in one line where the rays of `len` pixels exceed one binding.
+    fn check(gpu: &Gpu, len: usize) -> Result<u64> {
+        let bytes = (len * std::mem::size_of::<CameraRay>()) as u64;
+        // The shaders index their floats with u32.
+        let most = gpu.max_binding().min(4 * u32::MAX as u64);
+        if bytes > most {
+            return Err(Error::Device(format!(
+                "the rays of an image of {len} pixels take {bytes} bytes, more than the GPU binds at once ({most} bytes): render a smaller image on it, or on the CPU",
+            )));
+        }
+        Ok(bytes)
+    }
+
+    /// `rays` uploaded to `gpu`; refused in one line where they exceed one binding.
+    pub fn new(gpu: &Arc<Gpu>, rays: &[CameraRay]) -> Result<Self> {
+        let bytes = Self::check(gpu, rays.len())?;
+        let t = Instant::now();
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let buffer = gpu.checked(|| gpu.upload("rays", bytemuck::cast_slice(rays), usage))?;
+        Ok(GpuRays {
+            buffer,
+            len: rays.len(),
+            gpu: gpu.clone(),
+            pending: Mutex::new(None),
+            upload_ns: t.elapsed().as_nanos() as u64,
+            bytes_up: bytes,
+            made_on_gpu: false,
+            last_use: Mutex::new(None),
+        })
+    }
+
+    /// The ray set `set` (with its light panels `panels`) made on `gpu` by `rays.wgsl`, a
+    /// thread a pixel: only the record and the panels cross. The pass is submitted with the
+    /// first gathering along the rays. Refused in one line where they exceed one binding.
+    pub fn on_gpu(gpu: &Arc<Gpu>, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<Self> {
+        let (w, h) = (set.width, set.height);
+        let bytes = Self::check(gpu, w as usize * h as usize)?;
+        let groups = (w.div_ceil(super::TILE), h.div_ceil(super::TILE));
+        if groups.0 > 65_535 || groups.1 > 65_535 {
+            return Err(Error::Device(format!(
+                "a {w}x{h} image has more than 65,535 x 16 pixels on a side, more than the GPU makes rays for: render a smaller image on it, or on the CPU"
+            )));
+        }
+        let t = Instant::now();
+        let (buffer, commands) = gpu.checked(|| {
+            let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+            let buffer = gpu.scratch("rays", bytes, usage);
+            let record = gpu.upload("ray set", bytemuck::bytes_of(set), wgpu::BufferUsages::UNIFORM);
+            let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
+            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("rays"),
+                layout: &gpu.rays_layout,
+                entries: &[entry(0, &record), entry(1, &panels), entry(2, &buffer)],
+            });
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&gpu.rays);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(groups.0, groups.1, 1);
+            }
+            (buffer, encoder.finish())
+        })?;
+        Ok(GpuRays {
+            buffer,
+            len: w as usize * h as usize,
+            gpu: gpu.clone(),
+            pending: Mutex::new(Some(commands)),
+            upload_ns: t.elapsed().as_nanos() as u64,
+            bytes_up: (std::mem::size_of_val(set) + std::mem::size_of_val(panels)) as u64,
+            made_on_gpu: true,
+            last_use: Mutex::new(None),
+        })
+    }
+
+    /// `height` rows of `width` rays on `gpu`, row `j` made by `row(j, out)` and written
+    /// straight into the buffer that uploads them (mapped at its creation), the rows in
+    /// parallel: no copy of the set on the CPU. Refused in one line where they exceed one
+    /// binding.
+    pub fn made(gpu: &Arc<Gpu>, width: usize, height: usize, row: RayRowFn) -> Result<Self> {
+        use rayon::prelude::*;
+        let len = width * height;
+        let bytes = Self::check(gpu, len)?;
+        let t = Instant::now();
+        let buffer = gpu.checked(|| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("rays"),
+                // A binding may not be empty; 20 bytes a ray keep the size a multiple of 4.
+                size: bytes.max(32),
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: true,
+            })
+        })?;
+        let filling = Instant::now();
+        {
+            let mut view = buffer
+                .slice(..)
+                .get_mapped_range_mut()
+                .map_err(|e| Error::Device(format!("writing rays to the GPU: {e}")))?;
+            // Mapped memory may be write-combining, only to be written: each row is made in a
+            // buffer of the thread's and copied in whole.
+            let mut rest = view.slice(..bytes as usize);
+            let mut rows = Vec::with_capacity(height);
+            for _ in 0..height {
+                let (first, tail) = rest.split_at(width * std::mem::size_of::<CameraRay>());
+                rows.push(RowBytes(first));
+                rest = tail;
+            }
+            rows.into_par_iter().enumerate().for_each_init(
+                || vec![CameraRay::default(); width],
+                |made, (j, out)| {
+                    row(j, made);
+                    let RowBytes(mut out) = out;
+                    out.copy_from_slice(bytemuck::cast_slice(made));
+                },
+            );
+        }
+        let filled = filling.elapsed();
+        gpu.checked(|| buffer.unmap())?;
+        let upload_ns = t.elapsed().saturating_sub(filled).as_nanos() as u64;
+        Ok(GpuRays {
+            buffer,
+            len,
+            gpu: gpu.clone(),
+            pending: Mutex::new(None),
+            upload_ns,
+            bytes_up: bytes,
+            made_on_gpu: false,
+            last_use: Mutex::new(None),
+        })
+    }
+
+    /// Waits until the GPU has done the work submitted along these rays (so that the caller
+    /// bounds the ray sets in flight: the CPU may otherwise run a chunk's pieces ahead).
+    pub fn wait(&self) -> Result<()> {
+        let last = self.last_use.lock().unwrap_or_else(|p| p.into_inner()).take();
+        if let Some(index) = last {
+            let polled = self.gpu.device.poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None });
+            self.gpu.work_errors()?;
+            polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        }
+        Ok(())
+    }
+
+    /// The pass that makes them, if it is not submitted yet: to submit before the work that
+    /// reads them.
+    pub(super) fn take_pending(&self) -> Option<wgpu::CommandBuffer> {
+        self.pending.lock().unwrap_or_else(|p| p.into_inner()).take()
+    }
+
+    /// Nanoseconds spent making their buffer and handing it to the GPU.
+    pub fn upload_ns(&self) -> u64 {
+        self.upload_ns
+    }
+
+    /// Bytes that crossed to the GPU for them: the rays themselves where they were uploaded, a
+    /// record and the panels where the GPU made them.
+    pub fn bytes_up(&self) -> u64 {
+        self.bytes_up
+    }
+
+    /// The rays, read back from the GPU (for holding the GPU's rays to the CPU's).
+    pub fn read(&self) -> Result<Vec<CameraRay>> {
+        let gpu = &*self.gpu;
+        let bytes = (self.len * std::mem::size_of::<CameraRay>()) as u64;
+        let readback = gpu.checked(|| {
+            let readback =
+                gpu.scratch("rays read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.buffer, 0, &readback, 0, bytes);
+            gpu.queue.submit(self.take_pending().into_iter().chain([encoder.finish()]));
+            readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            readback
+        })?;
+        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        gpu.work_errors()?;
+        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        let view = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| Error::Device(format!("reading the GPU's rays back: {e}")))?;
+        Ok(bytemuck::cast_slice(&view[..bytes as usize]).to_vec())
+    }
+}
+
+/// A row's bytes of a mapped buffer, written by one thread.
+struct RowBytes<'a>(wgpu::WriteOnly<'a, [u8]>);
+
+// SAFETY: a `WriteOnly<[u8]>` is an exclusive, write-only reference to bytes, as `&mut [u8]` is,
+// which may be sent to another thread; wgpu-types implements `Send` for `WriteOnly<T>` with
+// `T: Send` (implicitly sized), which leaves slices out, not for a reason of theirs. Each row is
+// a disjoint part of the mapping (`split_at`), which outlives the parallel loop that writes it.
+unsafe impl Send for RowBytes<'_> {}

@@ -1,0 +1,135 @@
+//! The data that crosses to the GPU, defined once: the shaders' source, the records of the
+//! binning's and the gather's parameters, and the bytes of a work item's partial sums. The
+//! planes', occluders', rays' and panels' records are defined beside the CPU's; the test at the
+//! end holds every record that crosses, those and these, to its WGSL twin.
+
+use super::TILE;
+
+pub(super) const GATHER_WGSL: &str = include_str!("gather.wgsl");
+pub(super) const BIN_WGSL: &str = include_str!("bin.wgsl");
+pub(super) const RAYS_WGSL: &str = include_str!("rays.wgsl");
+
+/// Bytes of one work item's partial sums: 256 pixels of (r, g, b, hits) in f32.
+pub(super) const ITEM_BYTES: u64 = (TILE * TILE) as u64 * 16;
+
+/// `gather.wgsl`'s `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(super) struct GatherParams {
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) tiles_x: u32,
+    pub(super) tiles: u32,
+    pub(super) sigma_t: [f32; 3],
+    pub(super) grey: u32,
+    pub(super) orientations: u32,
+    pub(super) inv_orientations: f32,
+    /// gather.rs `Phase`: `abs(g)`, `(1 - abs(g))^2`, `1 / (1 - g^2)`, and whether g != 0.
+    pub(super) phase_h: f32,
+    pub(super) phase_floor: f32,
+    pub(super) phase_inv_numerator: f32,
+    pub(super) phase_hg: u32,
+    pub(super) pad: [u32; 2],
+}
+
+/// `bin.wgsl`'s `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(super) struct BinParams {
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) tiles_x: u32,
+    pub(super) tiles: u32,
+    pub(super) count: u32,
+    pub(super) first: u32,
+    pub(super) item_planes: u32,
+    pub(super) pad: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::CameraRay;
+    use crate::gather::PlaneRecord;
+    use crate::occlusion::Occluder;
+    use crate::pixel::{PanelRecord, RaySetRecord};
+    use std::mem::{offset_of, size_of};
+    use wgpu::naga;
+
+    /// The size and members (name, byte offset) of WGSL struct `name` in `source`, laid out by
+    /// the WGSL front end that wgpu compiles the shaders with.
+    fn wgsl_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
+        let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+        for (_, ty) in module.types.iter() {
+            if let (Some(n), naga::TypeInner::Struct { members, span }) = (&ty.name, &ty.inner)
+                && n == name
+            {
+                let members = members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize));
+                return (*span as usize, members.collect());
+            }
+        }
+        panic!("no struct {name} in the shader")
+    }
+
+    /// Every record that crosses to the GPU is laid out as its WGSL twin: the same size, and
+    /// each Rust field at the offset of the WGSL member of its name (padding named `pad...` on
+    /// both sides). The two definitions are one by this test: a field added, moved or retyped
+    /// on one side only fails here, not as wrong pixels.
+    #[test]
+    fn records_are_laid_out_as_the_shaders_read_them() {
+        macro_rules! fields {
+            ($t:ty: $($f:ident),*) => {
+                (stringify!($t), size_of::<$t>(), vec![$((stringify!($f), offset_of!($t, $f))),*])
+            };
+        }
+        let pairs = [
+            (
+                GATHER_WGSL,
+                "Plane",
+                fields!(PlaneRecord: normal, t_det, a_axis, width, r_axis, occluders_start, normal_perp,
+                    occluders_end, scale, scale_max, cos_a, sin_a, p0, q0, light_w, light_h, perp_inv_abs_cos,
+                    perp_inv_sin, perp_cos_positive, unit, inv_unit, light, toward, pad),
+            ),
+            (GATHER_WGSL, "Occluder", fields!(Occluder: t0, t_a, p0, p_a, q0, q_a, width, height)),
+            (
+                GATHER_WGSL,
+                "Params",
+                fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
+                    phase_h, phase_floor, phase_inv_numerator, phase_hg, pad),
+            ),
+            (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
+            (
+                RAYS_WGSL,
+                "RaySet",
+                fields!(RaySetRecord: forward, tan_x, right, tan_y, up, width, lo, height, hi, outside, scramble,
+                    sobol, pixel_center, panels, pad),
+            ),
+            (RAYS_WGSL, "Panel", fields!(PanelRecord: corner, to_plane, n, width, u, height, v, pad, footprint)),
+        ];
+        // A camera ray is `RAY_FLOATS` f32 where it is made and where it is read, its fields in
+        // the shaders' order.
+        for source in [GATHER_WGSL, RAYS_WGSL] {
+            let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+            let ray_floats = module
+                .constants
+                .iter()
+                .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
+                .map(|(_, c)| &module.global_expressions[c.init]);
+            let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
+                panic!("the shader's RAY_FLOATS is a u32 literal")
+            };
+            assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+        }
+        let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
+        assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
+        for (source, name, (rust, size, fields)) in pairs {
+            let (span, members) = wgsl_layout(source, name);
+            assert_eq!(span, size, "{rust} is {size} bytes, the shader's {name} {span}");
+            for (field, offset) in fields {
+                let member = members.iter().find(|(_, o)| *o == offset).map(|(m, _)| m.as_str());
+                let same = member == Some(field) || (field == "pad" && member.is_some_and(|m| m.starts_with("pad")));
+                assert!(same, "{rust}.{field} at byte {offset}: the shader's {name} has {member:?} there");
+            }
+        }
+    }
+}

@@ -1,0 +1,64 @@
+//! The gatherings' scratch buffers: the binning's and the work items', kept on the device from
+//! gathering to gathering, and how any buffer the GPU fills is made (here, below the [`Gpu`]
+//! that holds them, so that the two do not import each other).
+//!
+//! [`Gpu`]: super::Gpu
+
+use super::records::ITEM_BYTES;
+
+/// A buffer of `size` bytes that the GPU fills (not written on creation), bindable: never
+/// empty, a whole number of words.
+pub(super) fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(32).next_multiple_of(4),
+        usage,
+        mapped_at_creation: false,
+    })
+}
+
+/// The scratch buffers of the binning and the work items, kept from gathering to gathering
+/// (grown when one needs more): made a few times a process, not once a piece.
+#[derive(Default)]
+pub(super) struct Scratch {
+    buffers: Option<ScratchBuffers>,
+}
+
+pub(super) struct ScratchBuffers {
+    /// Tiles, (tile, plane) pairs and work items they hold.
+    capacity: (u64, u64, u64),
+    pub(super) tile_counts: wgpu::Buffer,
+    pub(super) offsets: wgpu::Buffer,
+    pub(super) item_offsets: wgpu::Buffer,
+    pub(super) list: wgpu::Buffer,
+    /// Per list entry, the plane's box of pixels in the tile (`bin.wgsl`'s `boxes`).
+    pub(super) boxes: wgpu::Buffer,
+    pub(super) items: wgpu::Buffer,
+    pub(super) partial: wgpu::Buffer,
+}
+
+impl Scratch {
+    /// Buffers for `tiles` tiles, `pairs` pairs and `items` work items: those held if they are
+    /// large enough, else new ones of the larger of each.
+    pub(super) fn at_least(&mut self, device: &wgpu::Device, tiles: u64, pairs: u64, items: u64) -> &ScratchBuffers {
+        let held = self.buffers.as_ref().map_or((0, 0, 0), |b| b.capacity);
+        if held.0 < tiles || held.1 < pairs || held.2 < items {
+            let (tiles, pairs, items) = (held.0.max(tiles), held.1.max(pairs), held.2.max(items));
+            let storage = wgpu::BufferUsages::STORAGE;
+            let tile_words = (tiles + 1) * 4;
+            // The old buffers are let go first (wgpu frees them once the work using them is done).
+            self.buffers = None;
+            self.buffers = Some(ScratchBuffers {
+                capacity: (tiles, pairs, items),
+                tile_counts: buffer(device, "tile counts", tile_words, storage),
+                offsets: buffer(device, "offsets", tile_words, storage),
+                item_offsets: buffer(device, "item offsets", tile_words, storage),
+                list: buffer(device, "list", pairs * 4, storage),
+                boxes: buffer(device, "boxes", pairs * 4, storage),
+                items: buffer(device, "items", items * 16, storage),
+                partial: buffer(device, "partial", items * ITEM_BYTES, storage),
+            });
+        }
+        self.buffers.as_ref().expect("made above")
+    }
+}

@@ -1,0 +1,146 @@
+//! An image's sums on the GPU ([`GpuSums`]): what every gathering into it adds to, the work
+//! not submitted yet, and their one reading back.
+
+use super::device::Gpu;
+use crate::error::{Error, Result};
+use crate::gather::GatherStats;
+use glam::Vec3;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// An image's f32 sums on the GPU: per pixel the bits of (r, g, b) and its hit count
+/// (`gather.wgsl`'s `image`, 16 bytes), zero when made (wgpu zeroes a new buffer). Every
+/// gathering into it ([`super::GpuPlanes::gather_into`]) adds there, in order, and it crosses
+/// back once ([`GpuSums::read_into`]): a chunk's pieces cost one image read back, not one each.
+pub struct GpuSums {
+    gpu: Arc<Gpu>,
+    pub(super) image: wgpu::Buffer,
+    pub(super) pixels: usize,
+    /// The gatherings' timestamps, resolved on the GPU, to read with the sums.
+    pub(super) timestamps: Vec<wgpu::Buffer>,
+    /// When the first gathering into these sums was submitted (the GPU's time where the adapter
+    /// has no timestamps).
+    first_submission: Option<Instant>,
+    /// A gathering into them without timestamps: they are timed by the wall time.
+    pub(super) untimed: bool,
+    /// The gatherings' command buffers (and their rays' passes) not submitted yet: submitted
+    /// together when the sums are read ([`GpuSums::read_into`]), so that a chunk's pieces are one
+    /// submission, not one each.
+    pub(super) pending: Vec<wgpu::CommandBuffer>,
+    /// Bytes of the ray sets the pending work holds on the GPU ([`PENDING_RAY_BYTES`]).
+    pub(super) pending_rays: u64,
+    /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
+    /// the last read.
+    pub(super) bytes_up: u64,
+    submissions: u64,
+}
+
+/// The most bytes of ray sets that work not yet submitted holds: past it, the work is submitted
+/// at once (a large image's ray sets are then let go as their gatherings end).
+pub(super) const PENDING_RAY_BYTES: u64 = 256 << 20;
+
+impl GpuSums {
+    /// Zero sums for a `width x height` image on `gpu`.
+    pub fn new(gpu: Arc<Gpu>, width: u32, height: u32) -> Result<Self> {
+        let pixels = width as usize * height as usize;
+        let bytes = pixels as u64 * 16;
+        if bytes > gpu.max_binding() {
+            return Err(Error::Device(format!(
+                "the sums of a {width}x{height} image take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
+                gpu.max_binding()
+            )));
+        }
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let image = gpu.checked(|| gpu.scratch("image", bytes, usage))?;
+        Ok(GpuSums {
+            gpu,
+            image,
+            pixels,
+            timestamps: Vec::new(),
+            first_submission: None,
+            untimed: false,
+            pending: Vec::new(),
+            pending_rays: 0,
+            bytes_up: 0,
+            submissions: 0,
+        })
+    }
+
+    /// Submits the work not submitted yet, with `then` after it, in one submission.
+    fn submit_with(&mut self, then: Option<wgpu::CommandBuffer>) -> Option<wgpu::SubmissionIndex> {
+        let work: Vec<wgpu::CommandBuffer> = self.pending.drain(..).chain(then).collect();
+        if work.is_empty() {
+            return None;
+        }
+        self.first_submission.get_or_insert_with(Instant::now);
+        self.submissions += 1;
+        self.pending_rays = 0;
+        Some(self.gpu.queue.submit(work))
+    }
+
+    /// Submits the work not submitted yet.
+    pub(super) fn submit(&mut self) -> Option<wgpu::SubmissionIndex> {
+        self.submit_with(None)
+    }
+
+    /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
+    /// returns the hits they counted and the GPU's time of the gatherings since the last read.
+    pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
+        assert_eq!(sums.len(), self.pixels, "one sum per pixel");
+        let held = self.gpu.clone();
+        let gpu = &*held;
+        let bytes = self.pixels as u64 * 16;
+        let timestamps = std::mem::take(&mut self.timestamps);
+        let readback = gpu.checked(|| {
+            let readback =
+                gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
+            let _ = self.submit_with(Some(encoder.finish()));
+            for b in timestamps.iter().chain([&readback]) {
+                b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+            }
+            readback
+        })?;
+        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
+        let untimed = std::mem::take(&mut self.untimed);
+        gpu.work_errors()?;
+        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        let mapped = |b: &wgpu::Buffer| {
+            b.slice(..).get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))
+        };
+        let timestamp_bytes: u64 = timestamps.iter().map(|b| b.size()).sum();
+        let mut stats = GatherStats {
+            device_ns: waited,
+            bytes_crossed: std::mem::take(&mut self.bytes_up) + bytes + timestamp_bytes,
+            submissions: std::mem::take(&mut self.submissions),
+            ..GatherStats::default()
+        };
+        if !untimed && !timestamps.is_empty() {
+            let period = gpu.queue.get_timestamp_period() as f64;
+            stats.device_ns = 0;
+            for b in &timestamps {
+                let view = mapped(b)?;
+                let ts: &[u64] = bytemuck::cast_slice(&view);
+                // A driver's timestamps out of order count 0, not 2^64 ticks.
+                stats.device_ns +=
+                    ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum::<u64>();
+            }
+        }
+        let view = mapped(&readback)?;
+        let back: &[[u32; 4]] = bytemuck::cast_slice(&view[..bytes as usize]);
+        // Added pixel by pixel in parallel (the same bits: each pixel's one addition).
+        use rayon::prelude::*;
+        stats.hits = sums
+            .par_iter_mut()
+            .zip(back)
+            .with_min_len(4096)
+            .map(|(sum, v)| {
+                *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+                v[3] as u64
+            })
+            .sum();
+        Ok(stats)
+    }
+}
