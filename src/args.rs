@@ -276,6 +276,12 @@ pub(crate) struct RenderArgs {
     pub(crate) common: CommonArgs,
     #[command(flatten)]
     pub(crate) device: DeviceArgs,
+    /// With --device gpu: make the ray sets on the CPU and upload them, the CPU's rays bit for
+    /// bit, so that the image agrees with the CPU's at every pixel within f32 rounding (by
+    /// default the GPU makes them where it gathers them: within f32 rounding of the CPU's, which
+    /// can move a hit that grazes a plane's edge, and nothing but a record crosses).
+    #[arg(long, requires = "device")]
+    pub(crate) rays_on_cpu: bool,
 }
 
 #[derive(Args)]
@@ -518,6 +524,7 @@ impl From<&RenderArgs> for Overrides {
             accelerator: a.accelerator,
             kernel: a.kernel,
             device: a.device.device,
+            rays_on_cpu: a.rays_on_cpu,
             time_budget: a.time_budget,
             target_error: a.target_error,
             stderr: a.stderr_image.is_some(),

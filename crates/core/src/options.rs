@@ -37,6 +37,10 @@ pub struct RenderOptions {
     /// found). Not in the render's fingerprint: the devices agree within f32 rounding
     /// (docs/gpu.md), and their parts may be merged (the merge says so).
     pub(crate) device: Device,
+    /// On the GPU, whether the ray sets are made on the CPU and uploaded (the CPU's rays bit
+    /// for bit) rather than made where they are gathered (`gpu/rays.wgsl`, the default: within
+    /// f32 rounding of the CPU's, docs/gpu.md). Not in the fingerprint, as the device.
+    pub(crate) rays_on_cpu: bool,
     /// Whether the render estimates its error image ([`crate::spread`]); never with fewer than
     /// two ray sets.
     pub(crate) stderr: bool,
@@ -73,6 +77,10 @@ impl RenderOptions {
     /// The processor that gathers: resolved, never [`Device::Auto`].
     pub fn device(&self) -> Device {
         self.device
+    }
+    /// On the GPU, whether its ray sets are made on the CPU and uploaded (see the field).
+    pub fn rays_on_cpu(&self) -> bool {
+        self.rays_on_cpu
     }
     /// The structure the planes are gathered through: the GPU's on [`Device::Gpu`], else the
     /// accelerator's.

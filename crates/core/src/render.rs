@@ -158,9 +158,9 @@ impl GatherSide<'_> {
                         .iter()
                         .map(|&(target, p)| GpuPiece { planes: &p.planes, set: p.spec.0, target })
                         .collect();
-                    // Each set made straight into the GPU's upload buffer, not kept here; or,
-                    // where asked (`gpu::rays_on_gpu`), on the GPU from its record.
-                    let (rays, scene, on) = (&mut *self.rays, self.scene, crate::gpu::rays_on_gpu());
+                    // Each set made on the GPU from its record; or, where asked
+                    // (`rays_on_cpu`), made here straight into the GPU's upload buffer.
+                    let (rays, scene, on) = (&mut *self.rays, self.scene, !self.opts.rays_on_cpu());
                     let mut make = |k: u32, g: &crate::gpu::GpuPlanes| {
                         if on {
                             let (record, panels) = rays.gpu_record(scene, k);

@@ -204,6 +204,9 @@ pub struct Overrides {
     pub kernel: Option<Kernel>,
     /// The processor that gathers (`None`: the CPU).
     pub device: Option<Device>,
+    /// On the GPU, make the ray sets on the CPU and upload them (the CPU's rays bit for bit)
+    /// instead of on the GPU; nothing to do on the CPU.
+    pub rays_on_cpu: bool,
     /// Render in plane passes for this many seconds instead of a plane count.
     pub time_budget: Option<f64>,
     /// Render in plane passes until the estimated relative RMS error of the image falls below
@@ -318,6 +321,7 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
         accelerator: given.accelerator.unwrap_or_default(),
         kernel,
         device: Device::Cpu,
+        rays_on_cpu: given.rays_on_cpu,
         stderr,
     };
     let render = ResolvedRender {
@@ -516,6 +520,7 @@ impl ResolvedTable {
             accelerator: Accelerator::default(),
             kernel: Kernel::widest(),
             device: self.device,
+            rays_on_cpu: false,
             stderr: false,
         }
     }
@@ -568,6 +573,7 @@ impl ResolvedScaling {
             accelerator: Accelerator::default(),
             kernel: Kernel::widest(),
             device: self.device,
+            rays_on_cpu: false,
             stderr: false,
         }
     }
@@ -644,6 +650,7 @@ mod tests {
             accelerator: Accelerator::Raster,
             kernel: Kernel::Auto.resolve().unwrap(),
             device: Device::Cpu,
+            rays_on_cpu: false,
             stderr: false,
         };
         assert_eq!(r.options, expected);
@@ -661,6 +668,7 @@ mod tests {
             accelerator: Some(Accelerator::Bvh),
             kernel: Some(Kernel::PerHit),
             device: None,
+            rays_on_cpu: true,
             time_budget: None,
             target_error: None,
             stderr: false,
@@ -679,6 +687,7 @@ mod tests {
             accelerator: Accelerator::Bvh,
             kernel: Kernel::PerHit,
             device: Device::Cpu,
+            rays_on_cpu: true,
             stderr: false,
         };
         assert_eq!(r.options, expected);

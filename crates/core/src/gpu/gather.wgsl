@@ -90,9 +90,10 @@ struct Params {
 @group(0) @binding(7) var<storage, read> items: array<vec4<u32>>;
 // Each work item's 256 pixel sums: (rgb, hits).
 @group(0) @binding(8) var<storage, read_write> partial: array<vec4<f32>>;
-// The image (sums.rs `GpuSums`): each pixel's sum (rgb, the bits of f32) and its hits, added to
-// by every batch of every gathering into it, and read back once.
-@group(0) @binding(9) var<storage, read_write> image: array<vec4<u32>>;
+// The image (sums.rs `GpuSums`): each pixel's sum (rgb, the bits of f32, three words a pixel),
+// then each tile's hits (a u64 as two words, low first), added to by every batch of every
+// gathering into it, and read back once.
+@group(0) @binding(9) var<storage, read_write> image: array<u32>;
 // Per list entry, the plane's box of pixels within the tile (bin.wgsl).
 @group(0) @binding(10) var<storage, read> boxes: array<u32>;
 
@@ -508,24 +509,44 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     partial[index * THREADS + li] = vec4<f32>(sum, f32(hits));
 }
 
-// Adds each pixel's work items in order (deterministic) to the image.
+var<workgroup> tile_hits: atomic<u32>;
+
+// Adds each pixel's work items in order (deterministic) to the image, and the tile's hits (an
+// integer sum: the same in any order) to its count.
 @compute @workgroup_size(16, 16, 1)
 fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
           @builtin(local_invocation_index) li: u32) {
+    if (li == 0u) {
+        atomicStore(&tile_hits, 0u);
+    }
+    workgroupBarrier();
     let px = wid.x * TILE + lid.x;
     let py = wid.y * TILE + lid.y;
-    if (px >= params.width || py >= params.height) {
-        return;
-    }
     let tile = wid.y * params.tiles_x + wid.x;
-    var sum = vec3<f32>(0.0);
-    var hits = 0u;
-    for (var k = item_offsets[tile]; k < item_offsets[tile + 1u]; k++) {
-        let v = partial[k * THREADS + li];
-        sum += v.xyz;
-        hits += u32(v.w);
+    // No early return: every invocation reaches the barrier below.
+    if (px < params.width && py < params.height) {
+        var sum = vec3<f32>(0.0);
+        var hits = 0u;
+        for (var k = item_offsets[tile]; k < item_offsets[tile + 1u]; k++) {
+            let v = partial[k * THREADS + li];
+            sum += v.xyz;
+            hits += u32(v.w);
+        }
+        let at = 3u * (py * params.width + px);
+        let held = vec3<f32>(bitcast<f32>(image[at]), bitcast<f32>(image[at + 1u]), bitcast<f32>(image[at + 2u]));
+        let added = bitcast<vec3<u32>>(held + sum);
+        image[at] = added.x;
+        image[at + 1u] = added.y;
+        image[at + 2u] = added.z;
+        atomicAdd(&tile_hits, hits);
     }
-    let pix = py * params.width + px;
-    let held = image[pix];
-    image[pix] = vec4<u32>(bitcast<vec3<u32>>(bitcast<vec3<f32>>(held.xyz) + sum), held.w + hits);
+    workgroupBarrier();
+    if (li == 0u) {
+        // A batch adds at most 256 pixels x 16,384 planes hits to a tile: within a u32, and the
+        // tile's total carried into its high word.
+        let at = 3u * params.width * params.height + 2u * tile;
+        let low = image[at] + atomicLoad(&tile_hits);
+        image[at + 1u] += select(0u, 1u, low < image[at]);
+        image[at] = low;
+    }
 }

@@ -143,15 +143,6 @@ pub fn item_planes(cpu_adapter: bool) -> u32 {
     if cpu_adapter { 256 } else { 512 }
 }
 
-/// Whether a render's ray sets are made on the GPU (`rays.wgsl`: only a record crosses, and a
-/// chunk's work is one submission) rather than on the CPU (uploaded, each piece submitted at
-/// once so that the CPU makes the next set meanwhile): asked by `FOGPLANES_GPU_RAYS=1`, for
-/// measuring on a device. Not the default: the GPU's directions are within f32 rounding of the
-/// CPU's, not the same bits, which moves grazing hits (`docs/gpu.md`).
-pub fn rays_on_gpu() -> bool {
-    std::env::var("FOGPLANES_GPU_RAYS").is_ok_and(|v| v == "1")
-}
-
 /// The estimator as `gather.wgsl`'s `ESTIMATOR` names it.
 pub fn estimator_id(w: Weighting) -> u32 {
     match (w.estimator, w.orientations) {

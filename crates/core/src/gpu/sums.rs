@@ -8,14 +8,18 @@ use glam::Vec3;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// An image's f32 sums on the GPU: per pixel the bits of (r, g, b) and its hit count
-/// (`gather.wgsl`'s `image`, 16 bytes), zero when made (wgpu zeroes a new buffer). Every
+/// An image's f32 sums on the GPU: per pixel the bits of (r, g, b) (`gather.wgsl`'s `image`,
+/// 12 bytes), then per tile of 16 x 16 pixels its hits (a u64 as two u32 words, low first: a
+/// total is all the render reports of them, and a pixel's count took a quarter of the bytes read
+/// back), zero when made (wgpu zeroes a new buffer). Every
 /// gathering into it ([`super::GpuPlanes::gather_into`]) adds there, in order, and it crosses
 /// back once ([`GpuSums::read_into`]): a chunk's pieces cost one image read back, not one each.
 pub struct GpuSums {
     gpu: Arc<Gpu>,
     pub(super) image: wgpu::Buffer,
     pub(super) pixels: usize,
+    /// The bytes of `image`: the pixels' sums and the tiles' hits ([`sums_bytes`]).
+    bytes: u64,
     /// The gatherings' timestamps, resolved on the GPU, to read with the sums.
     pub(super) timestamps: Vec<wgpu::Buffer>,
     /// When the first gathering into these sums was submitted (the GPU's time where the adapter
@@ -39,11 +43,17 @@ pub struct GpuSums {
 /// at once (a large image's ray sets are then let go as their gatherings end).
 pub(super) const PENDING_RAY_BYTES: u64 = 256 << 20;
 
+/// Bytes of a `width x height` image's sums on the GPU: 12 a pixel, 8 a tile ([`GpuSums`]).
+pub(super) fn sums_bytes(width: u32, height: u32) -> u64 {
+    let tiles = width.div_ceil(super::TILE) as u64 * height.div_ceil(super::TILE) as u64;
+    width as u64 * height as u64 * 12 + tiles * 8
+}
+
 impl GpuSums {
     /// Zero sums for a `width x height` image on `gpu`.
     pub fn new(gpu: Arc<Gpu>, width: u32, height: u32) -> Result<Self> {
         let pixels = width as usize * height as usize;
-        let bytes = pixels as u64 * 16;
+        let bytes = sums_bytes(width, height);
         if bytes > gpu.max_binding() {
             return Err(Error::Device(format!(
                 "the sums of a {width}x{height} image take {bytes} bytes, more than the GPU binds at once ({} bytes): render a smaller image on it, or on the CPU",
@@ -56,6 +66,7 @@ impl GpuSums {
             gpu,
             image,
             pixels,
+            bytes,
             timestamps: Vec::new(),
             first_submission: None,
             untimed: false,
@@ -89,7 +100,7 @@ impl GpuSums {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
         let held = self.gpu.clone();
         let gpu = &*held;
-        let bytes = self.pixels as u64 * 16;
+        let bytes = self.bytes;
         let timestamps = std::mem::take(&mut self.timestamps);
         let readback = gpu.checked(|| {
             let readback =
@@ -129,18 +140,15 @@ impl GpuSums {
             }
         }
         let view = mapped(&readback)?;
-        let back: &[[u32; 4]] = bytemuck::cast_slice(&view[..bytes as usize]);
+        let (back, hits) = view[..bytes as usize].split_at(self.pixels * 12);
+        let back: &[[u32; 3]] = bytemuck::cast_slice(back);
         // Added pixel by pixel in parallel (the same bits: each pixel's one addition).
         use rayon::prelude::*;
-        stats.hits = sums
-            .par_iter_mut()
-            .zip(back)
-            .with_min_len(4096)
-            .map(|(sum, v)| {
-                *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
-                v[3] as u64
-            })
-            .sum();
+        sums.par_iter_mut().zip(back).with_min_len(4096).for_each(|(sum, v)| {
+            *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+        });
+        let hits: &[[u32; 2]] = bytemuck::cast_slice(hits);
+        stats.hits = hits.iter().map(|&[lo, hi]| lo as u64 | (hi as u64) << 32).sum();
         Ok(stats)
     }
 }
