@@ -64,12 +64,15 @@ fn check_export(scene: &str, resolution: &str) {
             env!("CARGO_BIN_EXE_fogplanes"),
             "--resolution",
             resolution,
+            // Half the samples of the first checks (2048 and 4096): half the time, the blocks'
+            // z-scores as well calibrated (RMS 0.88 on forward_fog.toml), and a wrong sign of g
+            // still about 190 standard errors off.
             "--spp",
-            "2048",
+            "1024",
             "--passes",
             "8",
             "--ref-spp",
-            "4096",
+            "2048",
             "--seed",
             "1",
         ])

@@ -96,8 +96,10 @@ fn run_in(scene: &Scene, sampler: Sampler, weightings: &[Weighting], batches: u6
 /// Over independent scramble seeds (randomised quasi-Monte Carlo) and over independent planes.
 #[test]
 fn every_estimator_matches_quadrature() {
+    // 250 batches: the largest standard error, unweighted's on the generic ray, 0.65% (0.51% at
+    // 400), within this file's bound of 1%.
     for sampler in Sampler::ALL {
-        run(sampler, &Weighting::all(&[]), 400, 10_000);
+        run(sampler, &Weighting::all(&[]), 250, 10_000);
     }
 }
 
@@ -105,18 +107,20 @@ fn every_estimator_matches_quadrature() {
 fn k_orientations_match_quadrature() {
     let extra: Vec<Weighting> = Weighting::all(&[3, 4, 8]).into_iter().filter(|w| w.orientations != 2).collect();
     assert_eq!(extra.len(), 6);
-    run(Sampler::default(), &extra, 400, 10_000);
+    // 120 batches: the largest standard error 0.44% (0.24% at 400), within the bound of 1%.
+    run(Sampler::default(), &extra, 120, 10_000);
 }
 
 /// The same at g = 0.8 (forward) and g = -0.5 (backward), every estimator: the phase value is a
 /// factor of each hit's contribution (section 1.1), so the weights stay those of g = 0 and every
 /// estimator stays unbiased. The cases include rays looking into the lights (the forward peak)
 /// and away from them. One sampler, the default: the phase function does not touch the planes.
-/// At g = 0.8 twice the batches: the forward peak raises unweighted's standard error on the
-/// nearly parallel ray to 1.3% at 400 (z = +0.6), above this file's bound of 1%.
+/// At g = 0.8, 800 batches: the forward peak raises unweighted's standard error on the nearly
+/// parallel ray to 1.3% at 400 (z = +0.6), above this file's bound of 1% (0.74% at 800); at
+/// g = -0.5, 200: its largest, 0.40% at 400, is then 0.57%.
 #[test]
 fn every_estimator_matches_quadrature_with_a_henyey_greenstein_medium() {
-    for (g, batches) in [(0.8, 800), (-0.5, 400)] {
+    for (g, batches) in [(0.8, 800), (-0.5, 200)] {
         run_in(&two_lights(g), Sampler::default(), &Weighting::all(&[4]), batches, 10_000);
     }
 }
