@@ -551,8 +551,11 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
     assert merged["devices"] == ["cpu", stats["device"]]
     cpu = fogplanes.render(SIX_LIGHTS, **kwargs)
     fog = cpu.max(axis=2) < 1  # the pixels that see no light directly
-    rel_mse = float(np.mean((gpu[fog] - cpu[fog]) ** 2) / np.mean(cpu[fog] ** 2))
-    assert rel_mse <= 1e-8, rel_mse
+    # Within f32 rounding but at grazing hits: the GPU makes its own rays, within f32 rounding
+    # of the CPU's, and a hit on a plane's edge to rounding may fall on the other side there
+    # (docs/gpu.md; tests/gpu.rs counts them). Such a pixel moves by a hit's share of it.
+    moved = np.linalg.norm(gpu[fog] - cpu[fog], axis=1) > 1e-4 * np.linalg.norm(cpu[fog], axis=1)
+    assert moved.sum() <= 2, f"{moved.sum()} of {moved.size} pixels beyond f32 rounding"
     exe = ROOT / "target" / "release" / "fogplanes"
     if not exe.exists():
         pytest.skip(f"SKIPPED: {exe} is not built (cargo build --release)")

@@ -411,6 +411,10 @@ impl<D: Denominator> PlaneJob<'_, D> {
         ray: &RayBlock<V>,
         sums: [&mut [f32; L]; 3],
     ) -> u32 {
+        if !CONTRIBUTE {
+            // Counting hits needs neither the channels nor the phase function.
+            return self.gather_block::<L, V, true, false, false>(ray, sums);
+        }
         match (self.extinction.grey, self.phase.is_isotropic()) {
             (true, true) => self.gather_block::<L, V, true, false, CONTRIBUTE>(ray, sums),
             (false, true) => self.gather_block::<L, V, false, false, CONTRIBUTE>(ray, sums),

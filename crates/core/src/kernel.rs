@@ -276,15 +276,20 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     spans: &[Span],
     band: &mut Band,
 ) -> u64 {
-    // Counting hits needs no phase function: one copy fewer of each kernel.
-    let hg = CONTRIBUTE && !job.phase.is_isotropic();
+    // Counting hits needs neither the channels nor the phase function: one copy of the kernel
+    // counts (a branch on the constant `CONTRIBUTE`, whose dead side is never compiled).
+    let hg = !job.phase.is_isotropic();
     macro_rules! run {
         ($f:ident) => {
-            match (job.extinction.grey, hg) {
-                (true, false) => $f::<D, true, false, CONTRIBUTE>(job, spans, band),
-                (false, false) => $f::<D, false, false, CONTRIBUTE>(job, spans, band),
-                (true, true) => $f::<D, true, true, CONTRIBUTE>(job, spans, band),
-                (false, true) => $f::<D, false, true, CONTRIBUTE>(job, spans, band),
+            if !CONTRIBUTE {
+                $f::<D, true, false, false>(job, spans, band)
+            } else {
+                match (job.extinction.grey, hg) {
+                    (true, false) => $f::<D, true, false, true>(job, spans, band),
+                    (false, false) => $f::<D, false, false, true>(job, spans, band),
+                    (true, true) => $f::<D, true, true, true>(job, spans, band),
+                    (false, true) => $f::<D, false, true, true>(job, spans, band),
+                }
             }
         };
     }
