@@ -34,12 +34,16 @@ struct Params {
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> items: array<vec4<u32>>;
 // Per plane and row of tiles: its first and last column of tiles (inclusive; empty when first >
-// last), and its box of pixels in the row: first and last column, first and last row, each
-// pair packed `first | last << 16`.
-@group(0) @binding(7) var<storage, read> spans: array<vec4<u32>>;
-// Per list entry, the plane's box of pixels within the tile (gather.wgsl tests only those):
-// first and last column, first and last row, relative to the tile, 4 bits each.
-@group(0) @binding(8) var<storage, read_write> boxes: array<u32>;
+// last), packed `first | last << 16`.
+@group(0) @binding(7) var<storage, read> spans: array<u32>;
+// Per list entry, the plane's pixel columns within the tile for each group of 4 pixel rows
+// (gather.wgsl tests only those): group k's first and last column relative to the tile, 4 bits
+// each, in bits 8 k .. 8 k + 7; first 15 and last 0 where it has none.
+@group(0) @binding(8) var<storage, read_write> ranges: array<u32>;
+// Per plane and row of tiles (as `spans`): for each group of 4 pixel rows in it, its first and
+// last pixel column, packed `first | last << 16`, first > last where none (gpu/mod.rs
+// `TileReach::groups`).
+@group(0) @binding(9) var<storage, read> groups: array<vec4<u32>>;
 
 const THREADS: u32 = 256u;
 const TILE: u32 = 16u;
@@ -57,20 +61,25 @@ fn covers(plane: u32, tile: u32) -> bool {
     }
     let span = spans[r.z + row - r.x];
     let col = tile % params.tiles_x;
-    return span.x <= col && col <= span.y;
+    return (span & 0xffffu) <= col && col <= (span >> 16u);
 }
 
-// The box of pixels of plane `plane` within tile `tile` (which it reaches), packed for `boxes`.
-fn box_in(plane: u32, tile: u32) -> u32 {
+// The pixel columns of plane `plane` within tile `tile` (which it reaches) per group of pixel
+// rows, packed for `ranges`: each group's columns kept in the tile's, 15 and 0 (no column)
+// where they miss it.
+fn ranges_in(plane: u32, tile: u32) -> u32 {
     let r = reach[plane];
     let row = tile / params.tiles_x;
-    let span = spans[r.z + row - r.x];
-    let x = vec2<u32>(span.z & 0xffffu, span.z >> 16u);
-    let y = vec2<u32>(span.w & 0xffffu, span.w >> 16u);
-    let corner = vec2<u32>((tile % params.tiles_x) * TILE, row * TILE);
-    let bx = min(max(x, vec2<u32>(corner.x)), vec2<u32>(corner.x + TILE - 1u)) - corner.x;
-    let by = min(max(y, vec2<u32>(corner.y)), vec2<u32>(corner.y + TILE - 1u)) - corner.y;
-    return bx.x | (bx.y << 4u) | (by.x << 8u) | (by.y << 12u);
+    let g = groups[r.z + row - r.x];
+    let first = g & vec4<u32>(0xffffu);
+    let last = g >> vec4<u32>(16u);
+    let x = (tile % params.tiles_x) * TILE;
+    let meets = (first <= last) & (first < vec4<u32>(x + TILE)) & (last >= vec4<u32>(x));
+    // Where it misses, these wrap (unsigned) and are not taken.
+    let a = max(first, vec4<u32>(x)) - x;
+    let b = min(last, vec4<u32>(x + TILE - 1u)) - x;
+    let v = select(vec4<u32>(15u), a | (b << vec4<u32>(4u)), meets);
+    return v.x | (v.y << 8u) | (v.z << 16u) | (v.w << 24u);
 }
 
 // Inclusive prefix sum of scratch over the workgroup (Hillis and Steele), in uniform control flow.
@@ -169,7 +178,7 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         if (hit) {
             let at = base + written + scratch[li] - 1u;
             list[at] = params.first + i;
-            boxes[at] = box_in(params.first + i, tile);
+            ranges[at] = ranges_in(params.first + i, tile);
         }
         written += scratch[THREADS - 1u];
     }

@@ -120,6 +120,7 @@ impl Gpu {
                 storage_entry(6, false),
                 storage_entry(7, true),
                 storage_entry(8, false),
+                storage_entry(9, true),
             ],
         });
         let mut gather_entries = vec![uniform_entry()];

@@ -94,10 +94,12 @@ struct Params {
 // then each tile's hits (a u64 as two words, low first), added to by every batch of every
 // gathering into it, and read back once.
 @group(0) @binding(9) var<storage, read_write> image: array<u32>;
-// Per list entry, the plane's box of pixels within the tile (bin.wgsl).
-@group(0) @binding(10) var<storage, read> boxes: array<u32>;
+// Per list entry, the plane's pixel columns within the tile per group of pixel rows (bin.wgsl).
+@group(0) @binding(10) var<storage, read> ranges: array<u32>;
 
 const TILE: u32 = 16u;
+// Pixel rows per group of `ranges` (gpu/mod.rs `GROUP_ROWS`): 4 groups a tile, a byte each.
+const GROUP_ROWS: u32 = 4u;
 const THREADS: u32 = 256u;
 // Planes loaded into workgroup memory at a time: 64 x 144 bytes = 9 KiB.
 const BATCH: u32 = 64u;
@@ -439,7 +441,7 @@ fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
 // The gather over work items, and the reduction of a tile's items.
 
 var<workgroup> batch: array<Plane, BATCH>;
-var<workgroup> batch_box: array<u32, BATCH>;
+var<workgroup> batch_ranges: array<u32, BATCH>;
 var<workgroup> wg_item: vec4<u32>;
 var<workgroup> wg_total: u32;
 
@@ -463,8 +465,12 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     let at = (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
     let dir = vec3<f32>(rays[at], rays[at + 1u], rays[at + 2u]);
     let t0 = rays[at + 3u];
-    // A pixel outside the image has an empty segment.
+    // A pixel outside the image has an empty segment, and is tested at no plane: column 16 is
+    // in no range (the CPU's count of tests leaves it out).
     let t1 = select(-1.0, rays[at + 4u], valid);
+    let col = select(TILE, lid.x, valid);
+    // Where this pixel's group's byte is in a list entry's ranges.
+    let shift = lid.y / GROUP_ROWS * 8u;
     var sum = vec3<f32>(0.0);
     var hits = 0u;
     for (var b = item.y; b < item.z; b += BATCH) {
@@ -472,14 +478,14 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         workgroupBarrier();
         if (li < n) {
             batch[li] = planes[list[b + li]];
-            batch_box[li] = boxes[b + li];
+            batch_ranges[li] = ranges[b + li];
         }
         workgroupBarrier();
         for (var j = 0u; j < n; j++) {
-            // Only the pixels of the plane's box in the tile (bin.wgsl's `boxes`): the others
-            // are more than a pixel from its screen polygon.
-            let bx = batch_box[j];
-            if (lid.x < (bx & 15u) || lid.x > ((bx >> 4u) & 15u) || lid.y < ((bx >> 8u) & 15u) || lid.y > (bx >> 12u)) {
+            // Only the pixels in the plane's columns for their group of rows (bin.wgsl's
+            // `ranges`): the others are more than a pixel from its screen polygon.
+            let g = batch_ranges[j] >> shift;
+            if (col < (g & 15u) || col > ((g >> 4u) & 15u)) {
                 continue;
             }
             let pl = batch[j];

@@ -7,7 +7,7 @@ use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams, ITEM_BYTES};
 use super::scratch::ScratchBuffers;
 use super::sums::{GpuSums, PENDING_RAY_BYTES};
-use super::{BATCH_PLANES, TILE, TileReach, estimator_id, item_planes};
+use super::{BATCH_PLANES, GROUPS, TILE, TileReach, estimator_id, item_planes};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -46,14 +46,16 @@ pub struct GpuPlanes {
 }
 
 /// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and per plane its
-/// reach (first row of tiles, rows, first span, 0) and the spans (`bin.wgsl`'s `reach` and
-/// `spans`).
+/// reach (first row of tiles, rows, first span, 0), the spans and the groups' ranges
+/// (`bin.wgsl`'s `reach`, `spans` and `groups`).
 struct PlaneData {
     planes: Vec<PlaneRecord>,
     occluders: Vec<crate::occlusion::Occluder>,
     reach: Vec<[u32; 4]>,
-    /// Per row of tiles: its span of tiles and its box of pixels ([`TileReach`]).
-    spans: Vec<[u32; 4]>,
+    /// Per row of tiles: its span of tiles, packed `first | last << 16` ([`TileReach`]).
+    spans: Vec<u32>,
+    /// Per row of tiles: its groups' pixel columns ([`TileReach`]).
+    groups: Vec<[u32; GROUPS]>,
 }
 
 /// [`PlaneData`] on the GPU.
@@ -62,6 +64,7 @@ struct PlaneBuffers {
     occluders: wgpu::Buffer,
     reach: wgpu::Buffer,
     spans: wgpu::Buffer,
+    groups: wgpu::Buffer,
 }
 
 impl GpuPlanes {
@@ -70,10 +73,12 @@ impl GpuPlanes {
     pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
         assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
         let mut records = Vec::with_capacity(reach.len());
-        let mut spans: Vec<[u32; 4]> = Vec::new();
+        let (mut spans, mut groups) = (Vec::new(), Vec::new());
         for r in reach {
             records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
-            spans.extend(r.spans.iter().zip(&r.pixels).map(|(&[a, b], &[x, y])| [a, b, x, y]));
+            // A row's tiles fit 16 bits: an image's side is at most 2^15 pixels.
+            spans.extend(r.spans.iter().map(|&[a, b]| a | b << 16));
+            groups.extend_from_slice(&r.groups);
         }
         // Every whole buffer within one binding: the image's rays (the largest per pixel), the
         // planes and their occluders; refused here in one line, not by the driver's validation.
@@ -82,7 +87,7 @@ impl GpuPlanes {
             ("the rays of a", pixels * std::mem::size_of::<CameraRay>() as u64),
             ("the planes of a chunk for a", (ctx.views.len() * std::mem::size_of::<PlaneRecord>()) as u64),
             ("the occluders of a chunk's planes for a", std::mem::size_of_val(ctx.occluders.as_slice()) as u64),
-            ("the rows of tiles a chunk's planes reach in a", std::mem::size_of_val(spans.as_slice()) as u64),
+            ("the rows of tiles a chunk's planes reach in a", std::mem::size_of_val(groups.as_slice()) as u64),
         ];
         if let Some((what, bytes)) = whole.into_iter().find(|&(_, bytes)| bytes > gpu.max_binding()) {
             return Err(Error::Device(format!(
@@ -127,7 +132,7 @@ impl GpuPlanes {
         // Not uploaded here: the render prepares planes beside its gathering, and an upload
         // waits for the device while a submission is under way (on a CPU adapter, which runs a
         // submission before it returns, for the other side's whole gathering).
-        let host = PlaneData { planes, occluders: ctx.occluders.clone(), reach: records, spans };
+        let host = PlaneData { planes, occluders: ctx.occluders.clone(), reach: records, spans, groups };
         Ok(GpuPlanes {
             gpu,
             width,
@@ -135,7 +140,7 @@ impl GpuPlanes {
             host: Mutex::new(Some(host)),
             buffers: OnceLock::new(),
             batches,
-            tests: reach.iter().map(TileReach::tests).sum(),
+            tests: reach.iter().map(|r| r.tests(height)).sum(),
             sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
             phase: ctx.phase,
@@ -157,8 +162,10 @@ impl GpuPlanes {
             occluders: gpu.upload("occluders", bytemuck::cast_slice(&host.occluders), usage),
             reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), usage),
             spans: gpu.upload("spans", bytemuck::cast_slice(&host.spans), usage),
+            groups: gpu.upload("groups", bytemuck::cast_slice(&host.groups), usage),
         })?;
-        let bytes = [made.planes.size(), made.occluders.size(), made.reach.size(), made.spans.size()].iter().sum();
+        let bytes =
+            [&made.planes, &made.occluders, &made.reach, &made.spans, &made.groups].map(|b| b.size()).iter().sum();
         Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64, bytes))
     }
 
@@ -365,7 +372,7 @@ fn gather_group(
             entry(7, &s.items),
             entry(8, &s.partial),
             entry(9, image),
-            entry(10, &s.boxes),
+            entry(10, &s.ranges),
         ],
     })
 }
@@ -384,7 +391,8 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
             entry(5, &s.list),
             entry(6, &s.items),
             entry(7, &planes.spans),
-            entry(8, &s.boxes),
+            entry(8, &s.ranges),
+            entry(9, &planes.groups),
         ],
     })
 }

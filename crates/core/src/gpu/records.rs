@@ -51,6 +51,7 @@ mod tests {
     use super::*;
     use crate::camera::CameraRay;
     use crate::gather::PlaneRecord;
+    use crate::gpu::{GROUP_ROWS, GROUPS};
     use crate::occlusion::Occluder;
     use crate::pixel::{PanelRecord, RaySetRecord};
     use std::mem::{offset_of, size_of};
@@ -69,6 +70,20 @@ mod tests {
             }
         }
         panic!("no struct {name} in the shader")
+    }
+
+    /// The value of WGSL constant `name` in `source`, a u32 literal.
+    fn wgsl_u32(source: &str, name: &str) -> u32 {
+        let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+        let value = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some(name))
+            .map(|(_, c)| &module.global_expressions[c.init]);
+        let Some(naga::Expression::Literal(naga::Literal::U32(value))) = value else {
+            panic!("the shader's {name} is a u32 literal")
+        };
+        *value
     }
 
     /// Every record that crosses to the GPU is laid out as its WGSL twin: the same size, and
@@ -109,17 +124,13 @@ mod tests {
         // A camera ray is `RAY_FLOATS` f32 where it is made and where it is read, its fields in
         // the shaders' order.
         for source in [GATHER_WGSL, RAYS_WGSL] {
-            let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
-            let ray_floats = module
-                .constants
-                .iter()
-                .find(|(_, c)| c.name.as_deref() == Some("RAY_FLOATS"))
-                .map(|(_, c)| &module.global_expressions[c.init]);
-            let Some(naga::Expression::Literal(naga::Literal::U32(ray_floats))) = ray_floats else {
-                panic!("the shader's RAY_FLOATS is a u32 literal")
-            };
-            assert_eq!(size_of::<CameraRay>(), 4 * *ray_floats as usize, "a ray is RAY_FLOATS f32");
+            let ray_floats = wgsl_u32(source, "RAY_FLOATS");
+            assert_eq!(size_of::<CameraRay>(), 4 * ray_floats as usize, "a ray is RAY_FLOATS f32");
         }
+        // The groups of pixel rows whose columns `TileReach` holds are those the gather reads,
+        // a byte each of a list entry's u32 (`bin.wgsl`'s `ranges`, from a vec4 of `groups`).
+        assert_eq!(wgsl_u32(GATHER_WGSL, "GROUP_ROWS"), GROUP_ROWS, "pixel rows a group");
+        assert_eq!(GROUPS, 4, "4 groups a row of tiles: a vec4 of `groups`, a byte each of `ranges`");
         let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
         assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
         for (source, name, (rust, size, fields)) in pairs {

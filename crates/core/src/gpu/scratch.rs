@@ -31,8 +31,9 @@ pub(super) struct ScratchBuffers {
     pub(super) offsets: wgpu::Buffer,
     pub(super) item_offsets: wgpu::Buffer,
     pub(super) list: wgpu::Buffer,
-    /// Per list entry, the plane's box of pixels in the tile (`bin.wgsl`'s `boxes`).
-    pub(super) boxes: wgpu::Buffer,
+    /// Per list entry, the plane's pixel columns in the tile per group of pixel rows
+    /// (`bin.wgsl`'s `ranges`).
+    pub(super) ranges: wgpu::Buffer,
     pub(super) items: wgpu::Buffer,
     pub(super) partial: wgpu::Buffer,
 }
@@ -54,7 +55,7 @@ impl Scratch {
                 offsets: buffer(device, "offsets", tile_words, storage),
                 item_offsets: buffer(device, "item offsets", tile_words, storage),
                 list: buffer(device, "list", pairs * 4, storage),
-                boxes: buffer(device, "boxes", pairs * 4, storage),
+                ranges: buffer(device, "ranges", pairs * 4, storage),
                 items: buffer(device, "items", items * 16, storage),
                 partial: buffer(device, "partial", items * ITEM_BYTES, storage),
             });
