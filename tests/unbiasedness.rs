@@ -8,6 +8,7 @@
 
 use fogplanes::camera::CameraRay;
 use fogplanes::gather::GatherContext;
+use fogplanes::occlusion::possible_occluders;
 use fogplanes::photon_plane::sample_planes;
 use fogplanes::quadrature::single_scattering;
 use fogplanes::sampling::Sampler;
@@ -46,30 +47,57 @@ fn two_lights(g: f64) -> Scene {
     scene
 }
 
-fn run(sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usize) {
-    run_in(&two_lights(0.0), sampler, weightings, batches, batch_size)
+/// The rays of [`cases`] in `scene`, each with its quadrature: the ground truth, computed once
+/// and shared by every sampler and estimator that is held to it.
+struct Truths<'a> {
+    scene: &'a Scene,
+    rays: Vec<(Case, CameraRay, DVec3)>,
 }
 
-fn run_in(scene: &Scene, sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usize) {
-    let g = scene.medium.g;
-    let mut failures = Vec::new();
-    for case in cases() {
-        let we = case.dir.normalize();
-        let (t0, t1) = scene.camera_segment(case.origin, we).0.expect("the ray crosses the medium");
-        let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
-        let truth = single_scattering(scene, case.origin, we, 1e-7);
-        // Batches in parallel (the test's tail then uses every core), tallied in batch order.
-        let estimates: Vec<Vec<_>> = (0..batches)
+impl<'a> Truths<'a> {
+    fn of(scene: &'a Scene) -> Self {
+        // The cases in parallel: quadrature is the test's one serial part otherwise.
+        let rays = cases()
             .into_par_iter()
-            .map(|batch| {
-                let planes = sample_planes(scene, sampler, batch_size, 1000 + batch);
-                let ctx = GatherContext::new(scene, &planes, case.origin);
-                weightings.iter().map(|w| w.dispatch(BruteForce { ctx: &ctx, ray: &ray })).collect()
+            .map(|case| {
+                let we = case.dir.normalize();
+                let (t0, t1) = scene.camera_segment(case.origin, we).0.expect("the ray crosses the medium");
+                let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
+                let truth = single_scattering(scene, case.origin, we, 1e-7);
+                (case, ray, truth)
             })
             .collect();
+        Truths { scene, rays }
+    }
+}
+
+fn run(truths: &Truths, sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usize) {
+    let scene = truths.scene;
+    let g = scene.medium.g;
+    // Batches in parallel (the test's tail then uses every core), each a plane set sampled once
+    // (with the lights that may shadow each plane) and gathered along every case's ray; tallied
+    // in batch order.
+    let estimates: Vec<Vec<Vec<_>>> = (0..batches)
+        .into_par_iter()
+        .map(|batch| {
+            let planes = sample_planes(scene, sampler, batch_size, 1000 + batch);
+            let masks: Vec<u64> = planes.iter().map(|plane| possible_occluders(scene, plane)).collect();
+            truths
+                .rays
+                .iter()
+                .map(|(case, ray, _)| {
+                    let mut ctx = GatherContext::empty(scene, case.origin);
+                    ctx.push_planes_with_occluders(scene, &planes, &masks, planes.len());
+                    weightings.iter().map(|w| w.dispatch(BruteForce { ctx: &ctx, ray })).collect()
+                })
+                .collect()
+        })
+        .collect();
+    let mut failures = Vec::new();
+    for (i, (case, _, truth)) in truths.rays.iter().enumerate() {
         let mut tallies = vec![MeanRgb::default(); weightings.len()];
-        for batch in estimates {
-            for (tally, estimate) in tallies.iter_mut().zip(batch) {
+        for batch in &estimates {
+            for (tally, &estimate) in tallies.iter_mut().zip(&batch[i]) {
                 tally.add(estimate);
             }
         }
@@ -98,8 +126,10 @@ fn run_in(scene: &Scene, sampler: Sampler, weightings: &[Weighting], batches: u6
 fn every_estimator_matches_quadrature() {
     // 250 batches: the largest standard error, unweighted's on the generic ray, 0.65% (0.51% at
     // 400), within this file's bound of 1%.
+    let scene = two_lights(0.0);
+    let truths = Truths::of(&scene);
     for sampler in Sampler::ALL {
-        run(sampler, &Weighting::all(&[]), 250, 10_000);
+        run(&truths, sampler, &Weighting::all(&[]), 250, 10_000);
     }
 }
 
@@ -108,7 +138,7 @@ fn k_orientations_match_quadrature() {
     let extra: Vec<Weighting> = Weighting::all(&[3, 4, 8]).into_iter().filter(|w| w.orientations != 2).collect();
     assert_eq!(extra.len(), 6);
     // 120 batches: the largest standard error 0.44% (0.24% at 400), within the bound of 1%.
-    run(Sampler::default(), &extra, 120, 10_000);
+    run(&Truths::of(&two_lights(0.0)), Sampler::default(), &extra, 120, 10_000);
 }
 
 /// The same at g = 0.8 (forward) and g = -0.5 (backward), every estimator: the phase value is a
@@ -121,6 +151,6 @@ fn k_orientations_match_quadrature() {
 #[test]
 fn every_estimator_matches_quadrature_with_a_henyey_greenstein_medium() {
     for (g, batches) in [(0.8, 800), (-0.5, 200)] {
-        run_in(&two_lights(g), Sampler::default(), &Weighting::all(&[4]), batches, 10_000);
+        run(&Truths::of(&two_lights(g)), Sampler::default(), &Weighting::all(&[4]), batches, 10_000);
     }
 }
