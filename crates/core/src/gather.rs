@@ -252,23 +252,19 @@ impl PlaneView {
     /// and such a hit adds nothing rather than an infinity. In a grey medium the three channels
     /// are one value.
     ///
-    /// `HG`: the medium is not isotropic, and `phase` is `4 pi rho` divided into D as
-    /// `D' = D / (4 pi rho)` ([`Phase::inverse_lanes`]; section 1.1: one more division avoided).
-    /// Without it the isotropic arithmetic is what it always was, bit for bit.
+    /// In a medium that is not isotropic, `d` is `D' = D / (4 pi rho)`, the phase value divided
+    /// into D ([`Phase::divide`]; section 1.1: one more division avoided), positive and finite
+    /// wherever D is.
     #[inline(always)]
-    pub fn contribution<const L: usize, V: Lanes<L>, const GREY: bool, const HG: bool>(
+    pub fn contribution<const L: usize, V: Lanes<L>, const GREY: bool>(
         &self,
         sigma_t: Vec3,
         length: V,
         d: V,
-        inverse_phase: V,
         lit: V::Mask,
     ) -> [V; 3] {
         let (s, scale, zero) = (V::splat, self.scale, V::splat(0.0));
         let lit = lit & d.gt(zero);
-        // D' = D / (4 pi rho): positive and finite wherever D is (4 pi rho lies in
-        // [(1 - |g|) / (1 + |g|)^2, (1 + |g|) / (1 - |g|)^2], section 1.1).
-        let d = if HG { d * inverse_phase } else { d };
         if GREY {
             // One check serves the three channels: the scales are finite and non-negative, so
             // every scale * q is finite exactly when the largest is (rounding is monotone).
@@ -325,6 +321,15 @@ impl Phase {
         self.g == 0.0
     }
 
+    /// `D' = D / (4 pi rho)` for each ray of the block against a plane whose
+    /// [`PlaneView::toward`] is `toward` (section 1.1), or `d` itself, untouched, in an isotropic
+    /// medium. D' is positive and finite wherever D is (4 pi rho lies in
+    /// `[(1 - |g|) / (1 + |g|)^2, (1 + |g|) / (1 - |g|)^2]`).
+    #[inline(always)]
+    pub fn divide<const L: usize, V: Lanes<L>>(&self, d: V, ray: &RayBlock<V>, toward: Vec3) -> V {
+        if self.is_isotropic() { d } else { d * self.inverse_lanes::<L, V>(ray, toward) }
+    }
+
     /// `1 / (4 pi rho)` for each ray of the block against a plane whose
     /// [`PlaneView::toward`] is `toward`: `bracket^(3/2) / (1 - g^2)` with
     /// `bracket = (1 - |g|)^2 + |g| |we + toward|^2`, in `[(1 - |g|)^2, (1 + |g|)^2]` (to
@@ -370,10 +375,11 @@ impl<D: Denominator> PlaneJob<'_, D> {
     /// Every plane of a light has the same `scale`, so the caller sums a light's planes and
     /// multiplies once ([the sums light by light](self#sums-light-by-light)).
     ///
-    /// `HG`: the medium scatters anisotropically (`!phase.is_isotropic()`, checked by the
-    /// caller), and each hit's contribution carries its phase value ([`Phase`]).
+    /// In a medium that scatters anisotropically, each hit's contribution carries its phase
+    /// value ([`Phase`]): a branch per block, not a copy of the kernel, whose isotropic side is
+    /// the arithmetic it always was, bit for bit.
     #[inline(always)]
-    pub fn gather_block<const L: usize, V: Lanes<L>, const GREY: bool, const HG: bool, const CONTRIBUTE: bool>(
+    pub fn gather_block<const L: usize, V: Lanes<L>, const GREY: bool, const CONTRIBUTE: bool>(
         &self,
         ray: &RayBlock<V>,
         sums: [&mut [f32; L]; 3],
@@ -393,8 +399,8 @@ impl<D: Denominator> PlaneJob<'_, D> {
         let length = (c.t - ray.t0) + c.r;
         // The hit's path (y', x, the eye) is the same for every orientation that makes it, so
         // its phase value is a factor of C and no weight changes (section 1.1).
-        let inverse_phase = if HG { self.phase.inverse_lanes::<L, V>(ray, view.toward) } else { V::splat(1.0) };
-        let contribution = view.contribution::<L, V, GREY, HG>(self.extinction.sigma_t, length, d, inverse_phase, lit);
+        let d = self.phase.divide::<L, V>(d, ray, view.toward);
+        let contribution = view.contribution::<L, V, GREY>(self.extinction.sigma_t, length, d, lit);
         let channels = if GREY { 1 } else { 3 };
         for (sum, value) in sums.into_iter().zip(contribution).take(channels) {
             (V::load(sum) + value).store(sum);
@@ -402,9 +408,8 @@ impl<D: Denominator> PlaneJob<'_, D> {
         c.hit.count()
     }
 
-    /// [`PlaneJob::gather_block`] with the grey or RGB case of the medium's extinction, and the
-    /// isotropic or Henyey-Greenstein phase function, chosen at run time (the vector kernels
-    /// choose them once per plane instead).
+    /// [`PlaneJob::gather_block`] with the grey or RGB case of the medium's extinction chosen at
+    /// run time (the vector kernels choose it once per plane instead).
     #[inline(always)]
     pub fn gather_block_in<const L: usize, V: Lanes<L>, const CONTRIBUTE: bool>(
         &self,
@@ -413,13 +418,12 @@ impl<D: Denominator> PlaneJob<'_, D> {
     ) -> u32 {
         if !CONTRIBUTE {
             // Counting hits needs neither the channels nor the phase function.
-            return self.gather_block::<L, V, true, false, false>(ray, sums);
+            return self.gather_block::<L, V, true, false>(ray, sums);
         }
-        match (self.extinction.grey, self.phase.is_isotropic()) {
-            (true, true) => self.gather_block::<L, V, true, false, CONTRIBUTE>(ray, sums),
-            (false, true) => self.gather_block::<L, V, false, false, CONTRIBUTE>(ray, sums),
-            (true, false) => self.gather_block::<L, V, true, true, CONTRIBUTE>(ray, sums),
-            (false, false) => self.gather_block::<L, V, false, true, CONTRIBUTE>(ray, sums),
+        if self.extinction.grey {
+            self.gather_block::<L, V, true, CONTRIBUTE>(ray, sums)
+        } else {
+            self.gather_block::<L, V, false, CONTRIBUTE>(ray, sums)
         }
     }
 }

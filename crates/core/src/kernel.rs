@@ -277,19 +277,16 @@ pub fn gather_plane<D: Denominator, const CONTRIBUTE: bool>(
     band: &mut Band,
 ) -> u64 {
     // Counting hits needs neither the channels nor the phase function: one copy of the kernel
-    // counts (a branch on the constant `CONTRIBUTE`, whose dead side is never compiled).
-    let hg = !job.phase.is_isotropic();
+    // counts (a branch on the constant `CONTRIBUTE`, whose dead side is never compiled). The
+    // phase function is a branch per block ([`PlaneJob::gather_block`]), not a copy.
     macro_rules! run {
         ($f:ident) => {
             if !CONTRIBUTE {
-                $f::<D, true, false, false>(job, spans, band)
+                $f::<D, true, false>(job, spans, band)
+            } else if job.extinction.grey {
+                $f::<D, true, true>(job, spans, band)
             } else {
-                match (job.extinction.grey, hg) {
-                    (true, false) => $f::<D, true, false, true>(job, spans, band),
-                    (false, false) => $f::<D, false, false, true>(job, spans, band),
-                    (true, true) => $f::<D, true, true, true>(job, spans, band),
-                    (false, true) => $f::<D, false, true, true>(job, spans, band),
-                }
+                $f::<D, false, true>(job, spans, band)
             }
         };
     }
@@ -387,12 +384,12 @@ macro_rules! plane_kernel {
     ($(#[$attr:meta])* $name:ident, $lanes:ty, $half:ty) => {
         $(#[$attr])*
         #[inline(never)]
-        fn $name<D: Denominator, const GREY: bool, const HG: bool, const CONTRIBUTE: bool>(
+        fn $name<D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
             job: &PlaneJob<D>,
             spans: &[Span],
             band: &mut Band,
         ) -> u64 {
-            plane_body::<$lanes, $half, D, GREY, HG, CONTRIBUTE>(job, spans, band)
+            plane_body::<$lanes, $half, D, GREY, CONTRIBUTE>(job, spans, band)
         }
     };
 }
@@ -429,7 +426,6 @@ fn plane_body<
     H: Lanes<HALF_LANES>,
     D: Denominator,
     const GREY: bool,
-    const HG: bool,
     const CONTRIBUTE: bool,
 >(
     job: &PlaneJob<D>,
@@ -449,11 +445,11 @@ fn plane_body<
         let whole = start + (end - start) / LANES * LANES;
         for i in (start..whole).step_by(LANES) {
             // SAFETY: i + LANES <= whole <= end <= len, checked above.
-            hits += unsafe { block::<LANES, V, D, GREY, HG, CONTRIBUTE>(job, band, i) } as u64;
+            hits += unsafe { block::<LANES, V, D, GREY, CONTRIBUTE>(job, band, i) } as u64;
         }
         if whole < end {
             // SAFETY: whole + HALF_LANES = end <= len (whole half blocks, checked above).
-            hits += unsafe { block::<HALF_LANES, H, D, GREY, HG, CONTRIBUTE>(job, band, whole) } as u64;
+            hits += unsafe { block::<HALF_LANES, H, D, GREY, CONTRIBUTE>(job, band, whole) } as u64;
         }
     }
     hits
@@ -471,7 +467,6 @@ unsafe fn block<
     V: Lanes<L>,
     D: Denominator,
     const GREY: bool,
-    const HG: bool,
     const CONTRIBUTE: bool,
 >(
     job: &PlaneJob<D>,
@@ -503,7 +498,7 @@ unsafe fn block<
     };
     // SAFETY: as above (three distinct arrays).
     let block_sums: [&mut [f32; L]; 3] = unsafe { [lanes_mut(sums.r, i), lanes_mut(sums.g, i), lanes_mut(sums.b, i)] };
-    job.gather_block::<L, V, GREY, HG, CONTRIBUTE>(&block, block_sums)
+    job.gather_block::<L, V, GREY, CONTRIBUTE>(&block, block_sums)
 }
 
 #[cfg(test)]
