@@ -421,13 +421,7 @@ plane_kernel!(
 /// on `V` (a span's last half block, if any, on `H`), the band's arrays loaded and stored in
 /// place.
 #[inline(always)]
-fn plane_body<
-    V: Lanes<LANES>,
-    H: Lanes<HALF_LANES>,
-    D: Denominator,
-    const GREY: bool,
-    const CONTRIBUTE: bool,
->(
+fn plane_body<V: Lanes<LANES>, H: Lanes<HALF_LANES>, D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     job: &PlaneJob<D>,
     spans: &[Span],
     band: &mut Band,
@@ -462,13 +456,7 @@ fn plane_body<
 /// `i + L <= band.pixels()`. (Checked per span by the caller: eight bounds checks per block were
 /// about 1% of the benchmark's CPU time.)
 #[inline(always)]
-unsafe fn block<
-    const L: usize,
-    V: Lanes<L>,
-    D: Denominator,
-    const GREY: bool,
-    const CONTRIBUTE: bool,
->(
+unsafe fn block<const L: usize, V: Lanes<L>, D: Denominator, const GREY: bool, const CONTRIBUTE: bool>(
     job: &PlaneJob<D>,
     band: &mut Band,
     i: usize,
