@@ -61,8 +61,30 @@ impl PlaneBvh {
         Ok(PlaneBvh { nodes: builder.nodes, order: builder.order })
     }
 
-    /// One ray's estimate, testing only planes whose boxes the ray's segment crosses.
+    /// One ray's estimate, testing only planes whose boxes the ray's segment crosses. Compiled
+    /// with FMA where the CPU has it, as [`GatherContext::gather_brute_force`] is (the same bits).
     pub fn gather_ray<D: Denominator>(&self, ctx: &GatherContext, weights: &D, ray: &CameraRay) -> (Vec3, GatherStats) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU has FMA, checked above.
+            return unsafe { self.gather_ray_fma(ctx, weights, ray) };
+        }
+        self.gather_ray_body(ctx, weights, ray)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "fma")]
+    fn gather_ray_fma<D: Denominator>(&self, ctx: &GatherContext, weights: &D, ray: &CameraRay) -> (Vec3, GatherStats) {
+        self.gather_ray_body(ctx, weights, ray)
+    }
+
+    #[inline(always)]
+    fn gather_ray_body<D: Denominator>(
+        &self,
+        ctx: &GatherContext,
+        weights: &D,
+        ray: &CameraRay,
+    ) -> (Vec3, GatherStats) {
         let (mut sum, mut stats) = (Vec3::ZERO, GatherStats::default());
         if self.order.is_empty() || !(ray.t0 <= ray.t1) {
             return (sum, stats);
