@@ -212,50 +212,20 @@ impl TileReach {
     }
 }
 
-/// Per row of tiles `first + k` of `lo.len()`, the x-range of the polygon of `points` within
-/// its strip `[16 (first + k) - 1, 16 (first + k + 1) + 1]` (infinite, lo > hi, where it has
-/// none): the x-ranges of its edges' parts inside the strip (a convex polygon's part in a strip
-/// is bounded by its edges' parts there). The operations of the spans before the groups, whose
-/// bits they keep: the tiles' lists, and so the work items and the image, are that build's.
-fn tile_row_ranges(points: &[DVec2], first: u32, lo: &mut [f64], hi: &mut [f64]) {
+/// Per strip `first + k` of `lo.len()`, strips of `rows` pixel rows (a row of tiles, or a group
+/// of pixel rows), the x-range of the polygon of `points` within the strip grown by a pixel,
+/// `[rows (first + k) - 1, rows (first + k + 1) + 1]` (infinite, lo > hi, where it has none):
+/// the x-ranges of its edges' parts inside the strip (a convex polygon's part in a strip is
+/// bounded by its edges' parts there). An edge's x at a height from its slope, one division an
+/// edge (the rounding is far below the pixel of margin); minima and maxima by comparisons (no
+/// NaN arises from finite points).
+fn strip_ranges(points: &[DVec2], rows: u32, first: u32, lo: &mut [f64], hi: &mut [f64]) {
     const M: f64 = 1.0;
-    let (t, n) = (TILE as f64, lo.len());
+    let (s, n) = (rows as f64, lo.len());
     for (&p, &q) in points.iter().zip(points.iter().cycle().skip(1)) {
         let (ymin, ymax) = (p.y.min(q.y), p.y.max(q.y));
         let (xlo, xhi) = (p.x.min(q.x), p.x.max(q.x));
         // The strips the edge can meet (each checked below).
-        let j0 = (((ymin - t - M) / t).ceil() - first as f64).clamp(0.0, n as f64) as usize;
-        let j1 = (((ymax + M) / t).floor() - first as f64 + 1.0).clamp(0.0, n as f64) as usize;
-        for j in j0..j1 {
-            let top = (first as usize + j) as f64 * t - M;
-            let bottom = top + t + 2.0 * M;
-            if ymax < top || ymin > bottom {
-                continue;
-            }
-            // The edge's x at the ends of its part inside the strip, kept on the edge; a
-            // horizontal edge's two ends.
-            let (xa, xb) = if q.y == p.y {
-                (xlo, xhi)
-            } else {
-                let at = |y: f64| (p.x + (y - p.y) * (q.x - p.x) / (q.y - p.y)).clamp(xlo, xhi);
-                (at(ymin.max(top)), at(ymax.min(bottom)))
-            };
-            lo[j] = lo[j].min(xa.min(xb));
-            hi[j] = hi[j].max(xa.max(xb));
-        }
-    }
-}
-
-/// [`tile_row_ranges`] for the groups of pixel rows `first + k` of `lo.len()`, each group `g`
-/// in its strip `[4 g - 1, 4 g + 5]`, faster for four times the strips: an edge's x at a height
-/// from its slope, one division an edge (the rounding is far below the pixel of margin), and
-/// minima and maxima by comparisons (no NaN arises from finite points).
-fn group_ranges(points: &[DVec2], first: u32, lo: &mut [f64], hi: &mut [f64]) {
-    const M: f64 = 1.0;
-    let (s, n) = (GROUP_ROWS as f64, lo.len());
-    for (&p, &q) in points.iter().zip(points.iter().cycle().skip(1)) {
-        let (ymin, ymax) = (p.y.min(q.y), p.y.max(q.y));
-        let (xlo, xhi) = (p.x.min(q.x), p.x.max(q.x));
         let j0 = (((ymin - s - M) / s).ceil() - first as f64).clamp(0.0, n as f64) as usize;
         let j1 = (((ymax + M) / s).floor() - first as f64 + 1.0).clamp(0.0, n as f64) as usize;
         let slope = (q.x - p.x) / (q.y - p.y);
@@ -274,6 +244,8 @@ fn group_ranges(points: &[DVec2], first: u32, lo: &mut [f64], hi: &mut [f64]) {
         for (lo, hi) in lo[j0..j1].iter_mut().zip(&mut hi[j0..j1]) {
             let bottom = top + s + 2.0 * M;
             if !(ymax < top || ymin > bottom) {
+                // The edge's x at the ends of its part inside the strip; a horizontal edge's
+                // two ends.
                 let (xa, xb) = if q.y == p.y { (xlo, xhi) } else { (at(ymin.max(top)), at(ymax.min(bottom))) };
                 let (xa, xb) = if xa < xb { (xa, xb) } else { (xb, xa) };
                 if xa < *lo {
@@ -328,14 +300,14 @@ pub fn tile_reach(poly: &Polygon<DVec2>, width: u32, height: u32) -> TileReach {
     let mut hi = vec![f64::NEG_INFINITY; n * (1 + GROUPS)];
     let (tile_lo, group_lo) = lo.split_at_mut(n);
     let (tile_hi, group_hi) = hi.split_at_mut(n);
-    tile_row_ranges(poly.points(), first, tile_lo, tile_hi);
+    strip_ranges(poly.points(), TILE, first, tile_lo, tile_hi);
     // Only the groups with a row within [row_lo, row_hi]: the others' rows are all too far.
     // (A polygon just below the image can have a row of tiles and no row: then no groups.)
     if row_lo <= row_hi {
         let at = |row: u32| (row / GROUP_ROWS - first * GROUPS as u32) as usize;
         let groups = at(row_lo)..at(row_hi) + 1;
         let (lo, hi) = (&mut group_lo[groups.clone()], &mut group_hi[groups]);
-        group_ranges(poly.points(), row_lo / GROUP_ROWS, lo, hi);
+        strip_ranges(poly.points(), GROUP_ROWS, row_lo / GROUP_ROWS, lo, hi);
     }
     let (mut spans, mut packed) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for j in 0..n {
