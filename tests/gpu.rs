@@ -4,7 +4,8 @@
 //! - every estimator (K = 2 and K = 4 where it applies), whole pixels and pixel centres, a grey
 //!   medium with panels that shadow planes and an RGB one: the fog's relative MSE against the
 //!   CPU's at most 1e-8 (f32 rounding apart from grazing hits) and the hit counts within 1e-6;
-//! - the ray sets the GPU makes (`gpu/rays.wgsl`) are the CPU's within f32 rounding, ray by ray;
+//! - the ray sets the GPU makes (`gpu/rays.wgsl`) are the CPU's within f32 rounding, ray by ray,
+//!   and the tiles and pixels it finds each plane near (`gpu/reach.wgsl`) hold the CPU's;
 //! - no plane lost in long tile lists with the heaviest per-hit loops (llvmpipe silently ends
 //!   an invocation's loops after about 65,000 iterations): hits against the CPU's;
 //! - the same bits from run to run;
@@ -314,6 +315,89 @@ fn gpu_rays_are_the_cpus_within_f32_rounding() {
     }
     println!("{rays} rays, {same} the same bits, {grazing} grazing a face or an edge to rounding");
     assert!(grazing * 1000 <= rays, "{grazing} of {rays} rays differ by more than rounding");
+}
+
+/// The reach the GPU finds from each plane's screen polygon (`gpu/reach.wgsl`, in f32) holds the
+/// specification's (`gpu::tile_reach`, in f64 on the CPU): every pixel column of every group of
+/// pixel rows there, in a tile of the row's span; within its bound of pairs; and only a little
+/// more (its slack: a thirty-second of a pixel). On the benchmark's planes at 640x360, random
+/// convex polygons (thin, tilted, past the image's edges) at 200x120, and large ones in an image
+/// of 30,000 x 20,000 pixels, where f32 rounds at a few thousandths of a pixel.
+#[test]
+fn gpu_reach_holds_the_cpus() {
+    use fogplanes::gpu::{TileReach, screen_reach, tile_reach};
+    use fogplanes::photon_plane::{Polygon, sample_planes};
+    use glam::DVec2;
+    if !have_gpu("gpu_reach_holds_the_cpus") {
+        return;
+    }
+    let gpu = fogplanes::gpu::adapter().unwrap();
+    let s = scene("media_scenes/six_lights.toml", 640, 360);
+    let planes = sample_planes(&s, Default::default(), 4096, 3);
+    let benchmark: Vec<Polygon<DVec2>> =
+        planes.iter().map(|p| fogplanes::raster::screen_polygon(&s.camera, p, &s.medium)).collect();
+    let mut seed = 11u64;
+    let mut next = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut random = |n: usize, (w, h): (f64, f64)| -> Vec<Polygon<DVec2>> {
+        (0..n)
+            .map(|case| {
+                let (cx, cy) = (next() * w * 1.3 - 0.15 * w, next() * h * 1.5 - 0.25 * h);
+                let a = next() * 0.75 * w + 0.5;
+                let b = if case % 3 == 0 { next() * 2.0 + 0.01 } else { next() * 0.5 * h + 0.5 };
+                let (tilt, k) = (next() * std::f64::consts::PI, 3 + case % 8);
+                let points: Vec<DVec2> = (0..k)
+                    .map(|i| {
+                        let u = i as f64 / k as f64 * std::f64::consts::TAU;
+                        let (x, y) = (a * u.cos(), b * u.sin());
+                        DVec2::new(cx + x * tilt.cos() - y * tilt.sin(), cy + x * tilt.sin() + y * tilt.cos())
+                    })
+                    .collect();
+                Polygon::from_slice(&points)
+            })
+            .collect()
+    };
+    let cases = [
+        (benchmark, (640, 360)),
+        (random(3000, (200.0, 120.0)), (200, 120)),
+        (random(40, (3e4, 2e4)), (30_000, 20_000)),
+    ];
+    for (polygons, (w, h)) in cases {
+        let spec: Vec<TileReach> = polygons.iter().map(|p| tile_reach(p, w, h)).collect();
+        let screen: Vec<_> = polygons.iter().map(|p| screen_reach(p, w, h)).collect();
+        let found = fogplanes::gpu::reach_on_gpu(&gpu, &screen, w, h).unwrap();
+        let (mut tests, mut spec_tests) = (0u64, 0u64);
+        for (i, ((want, got), bound)) in spec.iter().zip(&found).zip(&screen).enumerate() {
+            let at = format!("{w}x{h} polygon {i} {:?}", &polygons[i].points());
+            assert!(got.tiles() <= bound.pairs, "{at}: {} pairs, bound {}", got.tiles(), bound.pairs);
+            (tests, spec_tests) = (tests + got.tests(h), spec_tests + want.tests(h));
+            for (j, groups) in want.groups.iter().enumerate() {
+                let row = want.first_row + j as u32;
+                for (k, &g) in groups.iter().enumerate() {
+                    let (first, last) = (g & 0xffff, g >> 16);
+                    if first > last {
+                        continue;
+                    }
+                    let r = row.checked_sub(got.first_row).map(|r| r as usize).filter(|&r| r < got.spans.len());
+                    let r = r.unwrap_or_else(|| panic!("{at}: row of tiles {row} not found: {got:?}"));
+                    let [a, b] = got.spans[r];
+                    let (f, l) = (got.groups[r][k] & 0xffff, got.groups[r][k] >> 16);
+                    assert!(
+                        a <= first / 16 && last / 16 <= b && f <= first && last <= l,
+                        "{at}: row {row} group {k}: the CPU's columns {first}..={last}, the GPU's {f}..={l} in tiles {a}..={b}"
+                    );
+                }
+            }
+        }
+        let more = tests as f64 / spec_tests.max(1) as f64;
+        println!(
+            "{w}x{h}: {} polygons, the GPU's reach tests {tests} pixels, the CPU's {spec_tests} ({more:.4} times)",
+            polygons.len()
+        );
+        assert!(more <= 1.01, "{w}x{h}: the GPU's reach tests {more} times the CPU's pixels");
+    }
 }
 
 /// Long tile lists (40,000 planes over a 48x32 image: a few thousand planes per tile, cut into

@@ -157,7 +157,8 @@ impl PreparedPlanes {
         let origin = scene.camera.position;
         let mut context = GatherContext::empty(scene, origin);
         let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty_in(&scene.camera, tiling));
-        // The tiles each plane reaches on the GPU (`gpu::tile_reach`).
+        // Each plane's screen polygon, from which the GPU finds the tiles it reaches
+        // (`gpu::screen_reach`).
         let mut reach = Vec::new();
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
@@ -179,7 +180,7 @@ impl PreparedPlanes {
                 use rayon::prelude::*;
                 let (cam, medium) = (&scene.camera, &scene.medium);
                 reach.par_extend(
-                    piece.par_iter().map(|p| gpu::tile_reach(&screen_polygon(cam, p, medium), cam.width, cam.height)),
+                    piece.par_iter().map(|p| gpu::screen_reach(&screen_polygon(cam, p, medium), cam.width, cam.height)),
                 );
             }
             seconds_build += t.elapsed().as_secs_f64();
@@ -266,14 +267,14 @@ pub struct OnGpu {
     rays: Option<(u32, GpuRays)>,
     /// The set before, whose work may still be under way.
     before: Option<GpuRays>,
-    /// Each target's hits told by earlier reads.
-    told: Vec<u64>,
+    /// Each target's hits and tests told by earlier reads.
+    told: Vec<[u64; 2]>,
 }
 
 impl OnGpu {
     /// Nothing on the GPU yet, for `targets` sums.
     pub fn new(targets: usize) -> Self {
-        OnGpu { sums: (0..targets).map(|_| None).collect(), rays: None, before: None, told: vec![0; targets] }
+        OnGpu { sums: (0..targets).map(|_| None).collect(), rays: None, before: None, told: vec![[0; 2]; targets] }
     }
 
     /// Waits for target `target`'s gatherings, adds its sums on the GPU to `sums` (untouched
@@ -284,7 +285,9 @@ impl OnGpu {
             return Ok(GatherStats::default());
         };
         let mut stats = held.read_into(sums)?;
-        stats.hits -= std::mem::replace(&mut self.told[target], stats.hits);
+        let told = std::mem::replace(&mut self.told[target], [stats.hits, stats.tests]);
+        stats.hits -= told[0];
+        stats.tests -= told[1];
         Ok(stats)
     }
 }

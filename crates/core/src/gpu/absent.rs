@@ -49,7 +49,7 @@ pub fn adapters() -> std::result::Result<Vec<AdapterInfo>, String> {
 pub enum GpuPlanes {}
 
 impl GpuPlanes {
-    pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[super::TileReach], _: u32, _: u32) -> Result<Self> {
+    pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[super::ScreenReach], _: u32, _: u32) -> Result<Self> {
         match *gpu {}
     }
     pub fn new_sums(&self) -> Result<GpuSums> {

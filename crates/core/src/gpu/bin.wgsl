@@ -1,11 +1,12 @@
 // Binning a batch of planes to 16 x 16 pixel tiles on the GPU (docs/gpu.md): count, prefix sum,
 // scatter, as tiled splatting rasterizers do, without atomics and without a sort.
 //
-// Each plane comes with the tiles its screen polygon can touch, row of tiles by row (gpu/mod.rs
-// `tile_reach`, from raster.rs `screen_polygon`, made on the CPU with the plane's other
-// constants). `count`: a workgroup per tile counts the planes that reach the tile. `scan`:
+// Each plane comes with the tiles its screen polygon can touch, row of tiles by row (found from
+// the polygon by reach.wgsl before a chunk's first binning; gpu/reach.rs `tile_reach` is its
+// specification). `count`: a workgroup per tile counts the planes that reach the tile. `scan`:
 // one workgroup turns the counts into each tile's first list entry and first work item (a tile
-// of n planes is cut into ceil(n / item_planes) work items). `scatter`: a workgroup per tile
+// of n planes is cut into ceil(n / item_planes) work items), and writes the gather's grid of
+// work items, which it is dispatched from. `scatter`: a workgroup per tile
 // writes its list in plane order (a prefix sum of the flags of 256 planes at a time) and its
 // work items. Plane order within a tile is what makes the gather's sums the same bits from run
 // to run; a scatter by atomic cursors would not keep it.
@@ -26,10 +27,12 @@ struct Params {
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
-// Per plane (gpu/mod.rs `TileReach`): its first row of tiles, its rows, and where its spans start.
+// Per plane (gpu/polygons.rs `Polygons`): its first row of tiles, its rows, where its rows start
+// in `spans` and `groups`, and its first vertex (read by reach.wgsl only).
 @group(0) @binding(1) var<storage, read> reach: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read_write> tile_counts: array<u32>;
 @group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
+// Per tile its first work item, then their total, then the gather's grid (x, y, 1) of them.
 @group(0) @binding(4) var<storage, read_write> item_offsets: array<u32>;
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> items: array<vec4<u32>>;
@@ -41,7 +44,7 @@ struct Params {
 // each, in bits 8 k .. 8 k + 7; first 15 and last 0 where it has none.
 @group(0) @binding(8) var<storage, read_write> ranges: array<u32>;
 // Per plane and row of tiles (as `spans`): for each group of 4 pixel rows in it, its first and
-// last pixel column, packed `first | last << 16`, first > last where none (gpu/mod.rs
+// last pixel column, packed `first | last << 16`, first > last where none (gpu/reach.rs
 // `TileReach::groups`).
 @group(0) @binding(9) var<storage, read> groups: array<vec4<u32>>;
 
@@ -149,6 +152,11 @@ fn scan(@builtin(local_invocation_index) li: u32) {
     if (li == 0u) {
         offsets[tiles] = total;
         item_offsets[tiles] = total_items;
+        // A workgroup per item, as gpu/device.rs `grid` lays them out (none where there are none).
+        let x = min(total_items, 65535u);
+        item_offsets[tiles + 1u] = x;
+        item_offsets[tiles + 2u] = select(1u, (total_items + x - 1u) / max(x, 1u), x > 0u);
+        item_offsets[tiles + 3u] = 1u;
     }
 }
 

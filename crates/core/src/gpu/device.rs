@@ -4,7 +4,7 @@
 //! and their gathering ([`super::planes`]), the rays ([`super::rays`]), the sums
 //! ([`super::sums`]).
 
-use super::records::{BIN_WGSL, GATHER_WGSL, RAYS_WGSL};
+use super::records::{BIN_WGSL, GATHER_WGSL, RAYS_WGSL, REACH_WGSL};
 use super::scratch::{self, Scratch};
 use crate::error::{Error, Result};
 use std::collections::HashMap;
@@ -26,6 +26,8 @@ pub struct Gpu {
     pub(super) bin: [wgpu::ComputePipeline; 3],
     pub(super) rays_layout: wgpu::BindGroupLayout,
     pub(super) rays: wgpu::ComputePipeline,
+    pub(super) reach_layout: wgpu::BindGroupLayout,
+    pub(super) reach: wgpu::ComputePipeline,
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
     /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
@@ -169,6 +171,28 @@ impl Gpu {
             compilation_options: Default::default(),
             cache: None,
         });
+        let reach_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("reach"),
+            entries: &[
+                uniform_entry(),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, false),
+                storage_entry(4, false),
+            ],
+        });
+        let reach_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("reach.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(REACH_WGSL.into()),
+        });
+        let reach = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("reach"),
+            layout: Some(&pipeline_layout(&reach_layout)),
+            module: &reach_module,
+            entry_point: Some("reach_rows"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
         let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("gather.wgsl"),
             source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
@@ -187,6 +211,8 @@ impl Gpu {
             bin,
             rays_layout,
             rays,
+            reach_layout,
+            reach,
             gather_module,
             gather: Mutex::new(HashMap::new()),
             errors,

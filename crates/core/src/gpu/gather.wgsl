@@ -59,7 +59,7 @@ struct Occluder {
 // without a copy): unit direction (x, y, z) and segment [t0, t1], empty when t0 > t1.
 const RAY_FLOATS: u32 = 5u;
 
-// gpu/mod.rs `GatherParams`.
+// gpu/records.rs `GatherParams`.
 struct Params {
     width: u32,
     height: u32,
@@ -88,17 +88,17 @@ struct Params {
 @group(0) @binding(6) var<storage, read> item_offsets: array<u32>;
 // Work items: (tile, first list entry, end, 0).
 @group(0) @binding(7) var<storage, read> items: array<vec4<u32>>;
-// Each work item's 256 pixel sums: (rgb, hits).
+// Each work item's 256 pixel sums: (rgb, hits + 1024 tests).
 @group(0) @binding(8) var<storage, read_write> partial: array<vec4<f32>>;
 // The image (sums.rs `GpuSums`): each pixel's sum (rgb, the bits of f32, three words a pixel),
-// then each tile's hits (a u64 as two words, low first), added to by every batch of every
+// then each tile's hits and tests (two u64, each two words, low first), added to by every batch of every
 // gathering into it, and read back once.
 @group(0) @binding(9) var<storage, read_write> image: array<u32>;
 // Per list entry, the plane's pixel columns within the tile per group of pixel rows (bin.wgsl).
 @group(0) @binding(10) var<storage, read> ranges: array<u32>;
 
 const TILE: u32 = 16u;
-// Pixel rows per group of `ranges` (gpu/mod.rs `GROUP_ROWS`): 4 groups a tile, a byte each.
+// Pixel rows per group of `ranges` (gpu/reach.rs `GROUP_ROWS`): 4 groups a tile, a byte each.
 const GROUP_ROWS: u32 = 4u;
 const THREADS: u32 = 256u;
 // Planes loaded into workgroup memory at a time: 64 x 144 bytes = 9 KiB.
@@ -472,6 +472,8 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     // Where this pixel's group's byte is in a list entry's ranges.
     let shift = lid.y / GROUP_ROWS * 8u;
     var sum = vec3<f32>(0.0);
+    // The planes tested at this pixel and those hit (each at most the item's planes, 512).
+    var tests = 0u;
     var hits = 0u;
     for (var b = item.y; b < item.z; b += BATCH) {
         let n = min(BATCH, item.z - b);
@@ -488,6 +490,7 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
             if (col < (g & 15u) || col > ((g >> 4u) & 15u)) {
                 continue;
             }
+            tests += 1u;
             let pl = batch[j];
             // Section 2.3: Cramer's rule with det = we . n_P; a hit needs det != 0 (tested as
             // |det| > 1e-30, so that 1/det is finite), t in [t0, t1], a on the chord, r > 0.
@@ -512,18 +515,21 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
             }
         }
     }
-    partial[index * THREADS + li] = vec4<f32>(sum, f32(hits));
+    // Both counts in one float, exactly: hits + 1024 tests < 2^24.
+    partial[index * THREADS + li] = vec4<f32>(sum, f32(hits | (tests << 10u)));
 }
 
 var<workgroup> tile_hits: atomic<u32>;
+var<workgroup> tile_tests: atomic<u32>;
 
-// Adds each pixel's work items in order (deterministic) to the image, and the tile's hits (an
-// integer sum: the same in any order) to its count.
+// Adds each pixel's work items in order (deterministic) to the image, and the tile's hits and
+// tests (integer sums: the same in any order) to its counts.
 @compute @workgroup_size(16, 16, 1)
 fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
           @builtin(local_invocation_index) li: u32) {
     if (li == 0u) {
         atomicStore(&tile_hits, 0u);
+        atomicStore(&tile_tests, 0u);
     }
     workgroupBarrier();
     let px = wid.x * TILE + lid.x;
@@ -533,10 +539,13 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
     if (px < params.width && py < params.height) {
         var sum = vec3<f32>(0.0);
         var hits = 0u;
+        var tests = 0u;
         for (var k = item_offsets[tile]; k < item_offsets[tile + 1u]; k++) {
             let v = partial[k * THREADS + li];
             sum += v.xyz;
-            hits += u32(v.w);
+            let counts = u32(v.w);
+            hits += counts & 1023u;
+            tests += counts >> 10u;
         }
         let at = 3u * (py * params.width + px);
         let held = vec3<f32>(bitcast<f32>(image[at]), bitcast<f32>(image[at + 1u]), bitcast<f32>(image[at + 2u]));
@@ -545,14 +554,18 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
         image[at + 1u] = added.y;
         image[at + 2u] = added.z;
         atomicAdd(&tile_hits, hits);
+        atomicAdd(&tile_tests, tests);
     }
     workgroupBarrier();
     if (li == 0u) {
-        // A batch adds at most 256 pixels x 16,384 planes hits to a tile: within a u32, and the
-        // tile's total carried into its high word.
-        let at = 3u * params.width * params.height + 2u * tile;
-        let low = image[at] + atomicLoad(&tile_hits);
-        image[at + 1u] += select(0u, 1u, low < image[at]);
-        image[at] = low;
+        // A batch adds at most 256 pixels x 16,384 planes hits (and tests) to a tile: within a
+        // u32, and the tile's totals carried into their high words.
+        let at = 3u * params.width * params.height + 4u * tile;
+        let added = vec2<u32>(atomicLoad(&tile_hits), atomicLoad(&tile_tests));
+        for (var c = 0u; c < 2u; c++) {
+            let low = image[at + 2u * c] + added[c];
+            image[at + 2u * c + 1u] += select(0u, 1u, low < image[at + 2u * c]);
+            image[at + 2u * c] = low;
+        }
     }
 }

@@ -1,13 +1,15 @@
 //! A structure's planes on the GPU ([`GpuPlanes`]): cut into batches on the CPU, uploaded by
-//! their first gathering, and each gathering's passes (per batch: the binning's three, the
-//! gather and its reduction) encoded into one command buffer kept with the sums.
+//! their first gathering, and each gathering's passes (the planes' reach until it has been
+//! submitted; per batch, the binning's three, the gather and its reduction) encoded into one
+//! command buffer kept with the sums.
 
 use super::device::{Gpu, entry, grid};
+use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams, ITEM_BYTES};
-use super::scratch::ScratchBuffers;
+use super::scratch::{ScratchBuffers, indirect_offset};
 use super::sums::{GpuSums, PENDING_RAY_BYTES};
-use super::{BATCH_PLANES, GROUPS, TILE, TileReach, estimator_id, item_planes};
+use super::{BATCH_PLANES, ScreenReach, TILE, estimator_id, item_planes};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -15,6 +17,7 @@ use crate::gather::{GatherContext, GatherStats, Phase, PlaneRecord};
 use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
@@ -22,7 +25,7 @@ use std::time::Instant;
 struct Batch {
     first: u32,
     count: u32,
-    /// (tile, plane) pairs: the tiles' lists' total length.
+    /// A bound on its (tile, plane) pairs, the tiles' lists' total length ([`ScreenReach`]).
     pairs: u64,
     /// A bound on its work items.
     items: u64,
@@ -37,49 +40,36 @@ pub struct GpuPlanes {
     /// What crosses, until it has.
     host: Mutex<Option<PlaneData>>,
     buffers: OnceLock<PlaneBuffers>,
+    /// Whether a submission has run the pass that finds the planes' reach (`reach.wgsl`); until
+    /// one has, each gathering records it before its binning (set by [`GpuSums`] as it submits).
+    reach_found: Arc<AtomicBool>,
     batches: Vec<Batch>,
-    /// The pixels a gathering tests the planes at ([`TileReach::tests`]).
-    tests: u64,
     sigma_t: Vec3,
     grey: bool,
     phase: Phase,
 }
 
-/// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and per plane its
-/// reach (first row of tiles, rows, first span, 0), the spans and the groups' ranges
-/// (`bin.wgsl`'s `reach`, `spans` and `groups`).
+/// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and their screen
+/// polygons.
 struct PlaneData {
     planes: Vec<PlaneRecord>,
     occluders: Vec<crate::occlusion::Occluder>,
-    reach: Vec<[u32; 4]>,
-    /// Per row of tiles: its span of tiles, packed `first | last << 16` ([`TileReach`]).
-    spans: Vec<u32>,
-    /// Per row of tiles: its groups' pixel columns ([`TileReach`]).
-    groups: Vec<[u32; GROUPS]>,
+    polygons: Polygons,
 }
 
 /// [`PlaneData`] on the GPU.
 struct PlaneBuffers {
     planes: wgpu::Buffer,
     occluders: wgpu::Buffer,
-    reach: wgpu::Buffer,
-    spans: wgpu::Buffer,
-    groups: wgpu::Buffer,
+    polygons: PolygonBuffers,
 }
 
 impl GpuPlanes {
-    /// The planes of `ctx` for `gpu`, with the tiles each reaches (`reach`, from
-    /// [`super::tile_reach`]) in a `width x height` image.
-    pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[TileReach], width: u32, height: u32) -> Result<Self> {
+    /// The planes of `ctx` for `gpu`, with their screen polygons (`reach`, from
+    /// [`super::screen_reach`]) in a `width x height` image.
+    pub fn new(gpu: Arc<Gpu>, ctx: &GatherContext, reach: &[ScreenReach], width: u32, height: u32) -> Result<Self> {
         assert_eq!(ctx.views.len(), reach.len(), "a reach per plane");
-        let mut records = Vec::with_capacity(reach.len());
-        let (mut spans, mut groups) = (Vec::new(), Vec::new());
-        for r in reach {
-            records.push([r.first_row, r.spans.len() as u32, spans.len() as u32, 0]);
-            // A row's tiles fit 16 bits: an image's side is at most 2^15 pixels.
-            spans.extend(r.spans.iter().map(|&[a, b]| a | b << 16));
-            groups.extend_from_slice(&r.groups);
-        }
+        let polygons = Polygons::new(reach);
         // Every whole buffer within one binding: the image's rays (the largest per pixel), the
         // planes and their occluders; refused here in one line, not by the driver's validation.
         let pixels = width as u64 * height as u64;
@@ -87,7 +77,7 @@ impl GpuPlanes {
             ("the rays of a", pixels * std::mem::size_of::<CameraRay>() as u64),
             ("the planes of a chunk for a", (ctx.views.len() * std::mem::size_of::<PlaneRecord>()) as u64),
             ("the occluders of a chunk's planes for a", std::mem::size_of_val(ctx.occluders.as_slice()) as u64),
-            ("the rows of tiles a chunk's planes reach in a", std::mem::size_of_val(groups.as_slice()) as u64),
+            ("the rows of tiles a chunk's planes reach in a", polygons.row_bytes()),
         ];
         if let Some((what, bytes)) = whole.into_iter().find(|&(_, bytes)| bytes > gpu.max_binding()) {
             return Err(Error::Device(format!(
@@ -101,7 +91,7 @@ impl GpuPlanes {
         let max_items = gpu.max_binding() / ITEM_BYTES;
         let mut batches: Vec<Batch> = Vec::new();
         for (i, r) in reach.iter().enumerate() {
-            let pairs = r.tiles();
+            let pairs = r.pairs;
             let fits = |batch: &Batch| {
                 let p = batch.pairs + pairs;
                 (batch.count as usize) < BATCH_PLANES
@@ -132,15 +122,15 @@ impl GpuPlanes {
         // Not uploaded here: the render prepares planes beside its gathering, and an upload
         // waits for the device while a submission is under way (on a CPU adapter, which runs a
         // submission before it returns, for the other side's whole gathering).
-        let host = PlaneData { planes, occluders: ctx.occluders.clone(), reach: records, spans, groups };
+        let host = PlaneData { planes, occluders: ctx.occluders.clone(), polygons };
         Ok(GpuPlanes {
             gpu,
             width,
             height,
             host: Mutex::new(Some(host)),
             buffers: OnceLock::new(),
+            reach_found: Arc::new(AtomicBool::new(false)),
             batches,
-            tests: reach.iter().map(|r| r.tests(height)).sum(),
             sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
             phase: ctx.phase,
@@ -160,12 +150,9 @@ impl GpuPlanes {
         let made = gpu.checked(|| PlaneBuffers {
             planes: gpu.upload("planes", bytemuck::cast_slice(&host.planes), usage),
             occluders: gpu.upload("occluders", bytemuck::cast_slice(&host.occluders), usage),
-            reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), usage),
-            spans: gpu.upload("spans", bytemuck::cast_slice(&host.spans), usage),
-            groups: gpu.upload("groups", bytemuck::cast_slice(&host.groups), usage),
+            polygons: PolygonBuffers::upload(gpu, &host.polygons, self.width, self.height),
         })?;
-        let bytes =
-            [&made.planes, &made.occluders, &made.reach, &made.spans, &made.groups].map(|b| b.size()).iter().sum();
+        let bytes = made.planes.size() + made.occluders.size() + made.polygons.bytes_up();
         Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64, bytes))
     }
 
@@ -218,8 +205,8 @@ impl GpuPlanes {
     /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
     /// or sooner where the work held passes [`PENDING_RAY_BYTES`] of ray sets. Checks `control`
     /// before each batch (a cancel drops the work not submitted); reports one unit of progress.
-    /// The result holds the tests and the planes' upload; the hits and the GPU's time are
-    /// counted when `into` is read back.
+    /// The result holds the planes' upload; the tests, the hits and the GPU's time are counted
+    /// on the GPU, and when `into` is read back.
     pub fn gather_into(
         &self,
         weighting: Weighting,
@@ -240,7 +227,7 @@ impl GpuPlanes {
         let (planes, upload_ns, bytes_crossed) = self.buffers()?;
         gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
         control.progress();
-        Ok(GatherStats { tests: self.tests, upload_ns, bytes_crossed, ..GatherStats::default() })
+        Ok(GatherStats { upload_ns, bytes_crossed, ..GatherStats::default() })
     }
 
     /// [`GpuPlanes::gather_into`]'s work, its batches one after another in one command buffer,
@@ -293,6 +280,13 @@ impl GpuPlanes {
         // Every batch in one command buffer (the passes run in order, the scratch buffers
         // reused from batch to batch), kept with the sums to submit with their reading.
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        // The planes' reach, until a submission has found it (once for `into`'s work).
+        if !self.reach_found.load(Ordering::Acquire)
+            && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, &self.reach_found))
+        {
+            planes.polygons.encode(gpu, &mut encoder);
+            into.on_submit.push(self.reach_found.clone());
+        }
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
             let bin_params = BinParams {
@@ -307,14 +301,15 @@ impl GpuPlanes {
             };
             let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
             let bin_group = bin_group(gpu, &bin_params, planes, s);
-            let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, (u32, u32)); 5] = [
-                (&gpu.bin[0], &bin_group, tile_grid),
-                (&gpu.bin[1], &bin_group, (1, 1)),
-                (&gpu.bin[2], &bin_group, tile_grid),
-                (&pipelines[0], &gather_group, grid(batch.items.max(1))),
-                (&pipelines[1], &gather_group, (tiles_x, tiles_y)),
+            // The gather's work items as many as `scan` counts (`bin.wgsl` writes the grid).
+            let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, Option<(u32, u32)>); 5] = [
+                (&gpu.bin[0], &bin_group, Some(tile_grid)),
+                (&gpu.bin[1], &bin_group, Some((1, 1))),
+                (&gpu.bin[2], &bin_group, Some(tile_grid)),
+                (&pipelines[0], &gather_group, None),
+                (&pipelines[1], &gather_group, Some((tiles_x, tiles_y))),
             ];
-            for (k, (pipeline, group, (x, y))) in steps.into_iter().enumerate() {
+            for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
                 let timestamp_writes =
                     queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
                         query_set: set,
@@ -325,7 +320,10 @@ impl GpuPlanes {
                     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, group, &[]);
-                pass.dispatch_workgroups(x, y, 1);
+                match size {
+                    Some((x, y)) => pass.dispatch_workgroups(x, y, 1),
+                    None => pass.dispatch_workgroups_indirect(&s.item_offsets, indirect_offset(tiles)),
+                }
             }
             if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| b + 1 == batches) {
                 encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
@@ -384,15 +382,15 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
         layout: &gpu.bin_layout,
         entries: &[
             entry(0, params),
-            entry(1, &planes.reach),
+            entry(1, &planes.polygons.reach),
             entry(2, &s.tile_counts),
             entry(3, &s.offsets),
             entry(4, &s.item_offsets),
             entry(5, &s.list),
             entry(6, &s.items),
-            entry(7, &planes.spans),
+            entry(7, &planes.polygons.spans),
             entry(8, &s.ranges),
-            entry(9, &planes.groups),
+            entry(9, &planes.polygons.groups),
         ],
     })
 }

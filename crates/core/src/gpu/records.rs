@@ -8,6 +8,7 @@ use super::TILE;
 pub(super) const GATHER_WGSL: &str = include_str!("gather.wgsl");
 pub(super) const BIN_WGSL: &str = include_str!("bin.wgsl");
 pub(super) const RAYS_WGSL: &str = include_str!("rays.wgsl");
+pub(super) const REACH_WGSL: &str = include_str!("reach.wgsl");
 
 /// Bytes of one work item's partial sums: 256 pixels of (r, g, b, hits) in f32.
 pub(super) const ITEM_BYTES: u64 = (TILE * TILE) as u64 * 16;
@@ -44,6 +45,16 @@ pub(super) struct BinParams {
     pub(super) first: u32,
     pub(super) item_planes: u32,
     pub(super) pad: u32,
+}
+
+/// `reach.wgsl`'s `Params`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(super) struct ReachParams {
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) planes: u32,
+    pub(super) rows: u32,
 }
 
 #[cfg(test)]
@@ -86,6 +97,20 @@ mod tests {
         *value
     }
 
+    /// The value of WGSL constant `name` in `source`, an f32 literal.
+    fn wgsl_f32(source: &str, name: &str) -> f32 {
+        let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
+        let value = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some(name))
+            .map(|(_, c)| &module.global_expressions[c.init]);
+        let Some(naga::Expression::Literal(naga::Literal::F32(value))) = value else {
+            panic!("the shader's {name} is an f32 literal")
+        };
+        *value
+    }
+
     /// Every record that crosses to the GPU is laid out as its WGSL twin: the same size, and
     /// each Rust field at the offset of the WGSL member of its name (padding named `pad...` on
     /// both sides). The two definitions are one by this test: a field added, moved or retyped
@@ -113,6 +138,7 @@ mod tests {
                     phase_h, phase_floor, phase_inv_numerator, phase_hg, pad),
             ),
             (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
+            (REACH_WGSL, "Params", fields!(ReachParams: width, height, planes, rows)),
             (
                 RAYS_WGSL,
                 "RaySet",
@@ -131,6 +157,10 @@ mod tests {
         // a byte each of a list entry's u32 (`bin.wgsl`'s `ranges`, from a vec4 of `groups`).
         assert_eq!(wgsl_u32(GATHER_WGSL, "GROUP_ROWS"), GROUP_ROWS, "pixel rows a group");
         assert_eq!(GROUPS, 4, "4 groups a row of tiles: a vec4 of `groups`, a byte each of `ranges`");
+        // Where the GPU finds the reach, with the specification's tiles and groups, and slack.
+        assert_eq!(wgsl_u32(REACH_WGSL, "GROUP_ROWS"), GROUP_ROWS, "pixel rows a group");
+        assert_eq!(wgsl_u32(REACH_WGSL, "TILE"), TILE, "pixels a tile's side");
+        assert_eq!(wgsl_f32(REACH_WGSL, "SLACK") as f64, crate::gpu::SLACK, "the GPU's slack");
         let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
         assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
         for (source, name, (rust, size, fields)) in pairs {

@@ -24,11 +24,18 @@ pub(super) struct Scratch {
     buffers: Option<ScratchBuffers>,
 }
 
+/// Where in `item_offsets` the gather's grid of work items is (`bin.wgsl`'s `scan` writes it
+/// after the tiles' first items and their total), in bytes: the gather is dispatched from it.
+pub(super) fn indirect_offset(tiles: u32) -> u64 {
+    (tiles as u64 + 1) * 4
+}
+
 pub(super) struct ScratchBuffers {
     /// Tiles, (tile, plane) pairs and work items they hold.
     capacity: (u64, u64, u64),
     pub(super) tile_counts: wgpu::Buffer,
     pub(super) offsets: wgpu::Buffer,
+    /// Per tile its first work item, then the total, then the gather's grid (x, y, 1).
     pub(super) item_offsets: wgpu::Buffer,
     pub(super) list: wgpu::Buffer,
     /// Per list entry, the plane's pixel columns in the tile per group of pixel rows
@@ -53,7 +60,7 @@ impl Scratch {
                 capacity: (tiles, pairs, items),
                 tile_counts: buffer(device, "tile counts", tile_words, storage),
                 offsets: buffer(device, "offsets", tile_words, storage),
-                item_offsets: buffer(device, "item offsets", tile_words, storage),
+                item_offsets: buffer(device, "item offsets", tile_words + 12, storage | wgpu::BufferUsages::INDIRECT),
                 list: buffer(device, "list", pairs * 4, storage),
                 ranges: buffer(device, "ranges", pairs * 4, storage),
                 items: buffer(device, "items", items * 16, storage),

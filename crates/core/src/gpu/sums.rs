@@ -6,12 +6,13 @@ use crate::error::{Error, Result};
 use crate::gather::GatherStats;
 use glam::Vec3;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// An image's f32 sums on the GPU: per pixel the bits of (r, g, b) (`gather.wgsl`'s `image`,
-/// 12 bytes), then per tile of 16 x 16 pixels its hits (a u64 as two u32 words, low first: a
-/// total is all the render reports of them, and a pixel's count took a quarter of the bytes read
-/// back), zero when made (wgpu zeroes a new buffer). Every
+/// 12 bytes), then per tile of 16 x 16 pixels its hits and its tests (two u64, each two u32
+/// words, low first: a total is all the render reports of them, and a pixel's count took a
+/// quarter of the bytes read back), zero when made (wgpu zeroes a new buffer). Every
 /// gathering into it ([`super::GpuPlanes::gather_into`]) adds there, in order, and it crosses
 /// back once ([`GpuSums::read_into`]): a chunk's pieces cost one image read back, not one each.
 pub struct GpuSums {
@@ -31,6 +32,9 @@ pub struct GpuSums {
     /// together when the sums are read ([`GpuSums::read_into`]), so that a chunk's pieces are one
     /// submission, not one each.
     pub(super) pending: Vec<wgpu::CommandBuffer>,
+    /// Set once the pending work is submitted: whether a structure's reach has been found
+    /// ([`super::GpuPlanes`] records the pass into the first gatherings until then).
+    pub(super) on_submit: Vec<Arc<AtomicBool>>,
     /// Bytes of the ray sets the pending work holds on the GPU ([`PENDING_RAY_BYTES`]).
     pub(super) pending_rays: u64,
     /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
@@ -43,10 +47,10 @@ pub struct GpuSums {
 /// at once (a large image's ray sets are then let go as their gatherings end).
 pub(super) const PENDING_RAY_BYTES: u64 = 256 << 20;
 
-/// Bytes of a `width x height` image's sums on the GPU: 12 a pixel, 8 a tile ([`GpuSums`]).
+/// Bytes of a `width x height` image's sums on the GPU: 12 a pixel, 16 a tile ([`GpuSums`]).
 pub(super) fn sums_bytes(width: u32, height: u32) -> u64 {
     let tiles = width.div_ceil(super::TILE) as u64 * height.div_ceil(super::TILE) as u64;
-    width as u64 * height as u64 * 12 + tiles * 8
+    width as u64 * height as u64 * 12 + tiles * 16
 }
 
 impl GpuSums {
@@ -71,6 +75,7 @@ impl GpuSums {
             first_submission: None,
             untimed: false,
             pending: Vec::new(),
+            on_submit: Vec::new(),
             pending_rays: 0,
             bytes_up: 0,
             submissions: 0,
@@ -86,7 +91,11 @@ impl GpuSums {
         self.first_submission.get_or_insert_with(Instant::now);
         self.submissions += 1;
         self.pending_rays = 0;
-        Some(self.gpu.queue.submit(work))
+        let index = self.gpu.queue.submit(work);
+        for found in self.on_submit.drain(..) {
+            found.store(true, Ordering::Release);
+        }
+        Some(index)
     }
 
     /// Submits the work not submitted yet.
@@ -95,7 +104,8 @@ impl GpuSums {
     }
 
     /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
-    /// returns the hits they counted and the GPU's time of the gatherings since the last read.
+    /// returns the tests and hits they counted (in all) and the GPU's time of the gatherings
+    /// since the last read.
     pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
         assert_eq!(sums.len(), self.pixels, "one sum per pixel");
         let held = self.gpu.clone();
@@ -140,15 +150,17 @@ impl GpuSums {
             }
         }
         let view = mapped(&readback)?;
-        let (back, hits) = view[..bytes as usize].split_at(self.pixels * 12);
+        let (back, counts) = view[..bytes as usize].split_at(self.pixels * 12);
         let back: &[[u32; 3]] = bytemuck::cast_slice(back);
         // Added pixel by pixel in parallel (the same bits: each pixel's one addition).
         use rayon::prelude::*;
         sums.par_iter_mut().zip(back).with_min_len(4096).for_each(|(sum, v)| {
             *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
         });
-        let hits: &[[u32; 2]] = bytemuck::cast_slice(hits);
-        stats.hits = hits.iter().map(|&[lo, hi]| lo as u64 | (hi as u64) << 32).sum();
+        let counts: &[[u32; 4]] = bytemuck::cast_slice(counts);
+        let word = |lo: u32, hi: u32| lo as u64 | (hi as u64) << 32;
+        stats.hits = counts.iter().map(|c| word(c[0], c[1])).sum();
+        stats.tests = counts.iter().map(|c| word(c[2], c[3])).sum();
         Ok(stats)
     }
 }
