@@ -39,7 +39,8 @@ pub struct GpuPlanes {
     height: u32,
     /// What crosses, until it has.
     host: Mutex<Option<PlaneData>>,
-    buffers: OnceLock<PlaneBuffers>,
+    /// Boxed: a structure is held in an enum beside the CPU's, and these are many handles.
+    buffers: OnceLock<Box<PlaneBuffers>>,
     /// Whether a submission has run the pass that finds the planes' reach (`reach.wgsl`); until
     /// one has, each gathering records it before its binning (set by [`GpuSums`] as it submits).
     reach_found: Arc<AtomicBool>,
@@ -153,7 +154,7 @@ impl GpuPlanes {
             polygons: PolygonBuffers::upload(gpu, &host.polygons, self.width, self.height),
         })?;
         let bytes = made.planes.size() + made.occluders.size() + made.polygons.bytes_up();
-        Ok((self.buffers.get_or_init(|| made), t.elapsed().as_nanos() as u64, bytes))
+        Ok((self.buffers.get_or_init(|| Box::new(made)), t.elapsed().as_nanos() as u64, bytes))
     }
 
     /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
@@ -302,7 +303,7 @@ impl GpuPlanes {
             let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
             let bin_group = bin_group(gpu, &bin_params, planes, s);
             // The gather's work items as many as `scan` counts (`bin.wgsl` writes the grid).
-            let steps: [(&wgpu::ComputePipeline, &wgpu::BindGroup, Option<(u32, u32)>); 5] = [
+            let steps: [Step; 5] = [
                 (&gpu.bin[0], &bin_group, Some(tile_grid)),
                 (&gpu.bin[1], &bin_group, Some((1, 1))),
                 (&gpu.bin[2], &bin_group, Some(tile_grid)),
@@ -345,6 +346,10 @@ impl GpuPlanes {
         Ok(())
     }
 }
+
+/// A pass of a batch: its pipeline, its bindings, and its grid of workgroups (`None`: the
+/// gather's, as `bin.wgsl`'s `scan` counted its work items).
+type Step<'a> = (&'a wgpu::ComputePipeline, &'a wgpu::BindGroup, Option<(u32, u32)>);
 
 /// The gather's bindings (`gather.wgsl`), the same for every batch of a gathering.
 fn gather_group(
