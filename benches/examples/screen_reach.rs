@@ -44,7 +44,9 @@ fn main() -> Result<(), String> {
     let bound: u64 = crossing.iter().map(|c| c.pairs).sum();
     let vertices: usize = crossing.iter().filter(|c| c.rows > 0).map(|c| c.polygon.len).sum();
     println!("{path} at {}x{}, {n} planes (one thread):", cam.width, cam.height);
-    println!("  screen polygon {polygon_us:.3} us a plane, reach on the CPU {reach_us:.3} us, what crosses for the GPU's {crossing_us:.3} us");
+    println!(
+        "  screen polygon {polygon_us:.3} us a plane, reach on the CPU {reach_us:.3} us, what crosses for the GPU's {crossing_us:.3} us"
+    );
     println!(
         "  {rows} rows of tiles ({:.1} a plane), {pairs} pairs, bound {bound} ({:.2} times), {tests} pixels tested",
         rows as f64 / n.max(1) as f64,
