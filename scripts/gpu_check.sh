@@ -2,8 +2,8 @@
 # The GPU check of issue 37, in one command on a machine with a GPU (a few minutes on an H100):
 # per estimator, the GPU gather's G hits/s (its timestamps) and the render's end-to-end time at
 # 640x360 with 40,960 and 655,360 planes (the benchmark scene, whole pixels), the agreement with
-# the CPU's image (relative MSE, `fogplanes compare`), then the CPU renderer's wall time on 1, 2,
-# 4, 8 and all threads, and the machine's threads per core.
+# the CPU's image (relative MSE, `fogplanes compare`), the GPU time by the work items' size, then
+# the CPU renderer's wall time on 1, 2, 4, 8 and all threads, and the machine's threads per core.
 #
 #   scripts/gpu_check.sh --fetch   # here, once, with a network: the Vulkan loader and libglvnd
 #                                  # as Debian packages into .gl/ (the device machine has none)
@@ -77,6 +77,15 @@ for planes in $P; do
             timeout 60 "$B" compare "$work/cpurays_$name.exr" "$work/cpu_$name.exr" | tr '\n' ' ' | tr -s ' '
             echo
         fi
+    done
+done
+# The work items' size (docs/gpu.md: a batch's items aim at several waves; the first planes
+# count's size is the default's own), smis-exact and cmis-exact with the first planes count, a
+# second process each: the GPU time by the item's planes decides the default.
+first=${P%% *}
+for item in 16 32 64 128 256 512; do
+    for e in smis-exact cmis-exact; do
+        FOGPLANES_GPU_ITEM_PLANES=$item render --planes "$first" -e $e --device gpu -o "$work/item.exr" | sed "s/^/gpu item $item $first: /"
     done
 done
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).

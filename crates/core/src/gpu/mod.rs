@@ -141,12 +141,44 @@ pub const TILE: u32 = 16;
 /// times per invocation.
 pub const BATCH_PLANES: usize = 16_384;
 
-/// The most planes of one work item: 512 on a GPU (the prototype's best on an H100); 256 on a
-/// CPU adapter, whose llvmpipe silently ends an invocation's loops after about 65,000
-/// iterations: a work item with 64 orientations and 63 panels' occluders per hit stays at
-/// 256 x 127 (tested by the hit counts against the CPU's).
-pub fn item_planes(cpu_adapter: bool) -> u32 {
-    if cpu_adapter { 256 } else { 512 }
+/// The work items a batch's item size aims at ([`item_planes`]): several waves of the gather's
+/// workgroups on a large GPU (an H100 holds about a thousand at once). A render's piece of
+/// planes (a chunk's share of a ray set: about 2,300 planes on the benchmark) lists a mean of
+/// about 140 planes a tile and the longest tiles about 7 times that: in items of 512 planes, a
+/// piece is one wave of about as many items as tiles, as long as its longest item, with most
+/// of the GPU idle before it ends.
+pub const ITEMS_AIMED: u64 = 8192;
+
+/// The variable that fixes the planes of a work item, for measuring the item size on a device
+/// (`scripts/gpu_check.sh`): a number from 1 to 512 (at most 256 on a CPU adapter).
+pub const ITEM_VARIABLE: &str = "FOGPLANES_GPU_ITEM_PLANES";
+
+/// The most planes of one work item of a batch of at most `pairs` (tile, plane) pairs: a power
+/// of two near `pairs / ITEMS_AIMED`, from 32 planes to 512 on a GPU (the prototype's best on
+/// an H100 with 40,960 planes in one batch, a mean of about 2,400 planes a tile) and to 256 on
+/// a CPU adapter, whose llvmpipe silently ends an invocation's loops after about 65,000
+/// iterations (a work item with 64 orientations and 63 panels' occluders per hit stays at
+/// 256 x 127: tested by the hit counts against the CPU's); `fixed` instead where given
+/// ([`ITEM_VARIABLE`]), within the same most. A batch's items are then at most its tiles and
+/// `2 ITEMS_AIMED` more, or its pairs over 512 where they are many.
+pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
+    let most = if cpu_adapter { 256 } else { 512 };
+    match fixed {
+        Some(n) => n.clamp(1, most),
+        None => (pairs / ITEMS_AIMED).clamp(32, most as u64).next_power_of_two() as u32,
+    }
+}
+
+/// The planes of a work item that [`ITEM_VARIABLE`] fixes, if it is set: refused in one line
+/// where it is not a number from 1 to 512.
+pub fn fixed_item_planes() -> std::result::Result<Option<u32>, String> {
+    let Ok(value) = std::env::var(ITEM_VARIABLE) else {
+        return Ok(None);
+    };
+    match value.trim().parse::<u32>() {
+        Ok(n) if (1..=512).contains(&n) => Ok(Some(n)),
+        _ => Err(format!("{ITEM_VARIABLE}={value:?}: expected the planes of a GPU work item, a number from 1 to 512")),
+    }
 }
 
 /// The estimator as `gather.wgsl`'s `ESTIMATOR` names it.
@@ -165,6 +197,23 @@ pub fn estimator_id(w: Weighting) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A work item's planes grow with the batch's pairs, as powers of two within their bounds,
+    /// so that a batch's items stay near the aim; a fixed size is kept within the most.
+    #[test]
+    fn work_items_are_sized_by_the_batch() {
+        let items = |pairs: u64, cpu: bool| pairs / item_planes(cpu, pairs, None) as u64;
+        assert_eq!(item_planes(false, 0, None), 32);
+        assert_eq!(item_planes(false, 300_000, None), 64, "a piece of the benchmark: its bound");
+        assert_eq!(item_planes(false, 2_120_000, None), 512, "a batch of 16,384 planes at 640x360: its bound");
+        assert_eq!(item_planes(true, 2_120_000, None), 256);
+        for pairs in [40_000u64, 300_000, 1 << 20, 4 << 20] {
+            assert!(item_planes(false, pairs, None).is_power_of_two());
+            assert!(items(pairs, false) <= 2 * ITEMS_AIMED, "{pairs} pairs: {} items", items(pairs, false));
+        }
+        assert_eq!(item_planes(false, 0, Some(48)), 48);
+        assert_eq!(item_planes(true, 0, Some(512)), 256);
+    }
 
     #[test]
     fn every_estimator_has_a_shader_id_and_device_names_round_trip() {

@@ -27,6 +27,8 @@ struct Batch {
     count: u32,
     /// A bound on its (tile, plane) pairs, the tiles' lists' total length ([`ScreenReach`]).
     pairs: u64,
+    /// The most planes of one of its work items ([`item_planes`]).
+    item: u32,
     /// A bound on its work items.
     items: u64,
 }
@@ -87,7 +89,10 @@ impl GpuPlanes {
             )));
         }
         let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
-        let item = item_planes(gpu.is_cpu_adapter()) as u64;
+        let fixed = super::fixed_item_planes().map_err(Error::Device)?;
+        let cpu = gpu.is_cpu_adapter();
+        // A bound on the work items of a batch of `pairs` pairs (at most, each tile's one more).
+        let items = |pairs: u64| pairs.min(tiles) + pairs / item_planes(cpu, pairs, fixed) as u64;
         // Batches of consecutive planes whose work items' partial sums fit one binding.
         let max_items = gpu.max_binding() / ITEM_BYTES;
         let mut batches: Vec<Batch> = Vec::new();
@@ -96,7 +101,7 @@ impl GpuPlanes {
             let fits = |batch: &Batch| {
                 let p = batch.pairs + pairs;
                 (batch.count as usize) < BATCH_PLANES
-                    && p.min(tiles) + p / item <= max_items
+                    && items(p) <= max_items
                     && p * 4 <= gpu.max_binding()
             };
             match batches.last_mut() {
@@ -104,11 +109,11 @@ impl GpuPlanes {
                     batch.count += 1;
                     batch.pairs += pairs;
                 }
-                _ => batches.push(Batch { first: i as u32, count: 1, pairs, items: 0 }),
+                _ => batches.push(Batch { first: i as u32, count: 1, pairs, item: 0, items: 0 }),
             }
         }
         for b in &mut batches {
-            b.items = b.pairs.min(tiles) + b.pairs / item;
+            (b.item, b.items) = (item_planes(cpu, b.pairs, fixed), items(b.pairs));
             if b.items > max_items || b.pairs * 4 > gpu.max_binding() {
                 return Err(Error::Device(format!(
                     "a plane covers more of this {width}x{height} image than the GPU's buffers hold ({} bytes a binding): render smaller images on it",
@@ -246,7 +251,6 @@ impl GpuPlanes {
         let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let tiles = tiles_x * tiles_y;
-        let item = item_planes(gpu.is_cpu_adapter());
         let k = weighting.orientations.max(1);
         let rotations: Vec<[f32; 2]> = (1..k)
             .map(|i| i as f64 * std::f64::consts::PI / k as f64)
@@ -297,7 +301,7 @@ impl GpuPlanes {
                 tiles,
                 count: batch.count,
                 first: batch.first,
-                item_planes: item,
+                item_planes: batch.item,
                 pad: 0,
             };
             let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
