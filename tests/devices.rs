@@ -216,7 +216,8 @@ fn info_tells_a_whole_exr_from_a_truncated_one() {
 /// `fogplanes devices` lists every adapter with its index, back end, kind and largest binding,
 /// one marked default; `--device gpu:N` gathers on adapter N (the default's image is
 /// `--device gpu`'s, bit for bit); an index out of range, or a `FOGPLANES_GPU` one, is one line
-/// naming the count, exit 2; a bad index is refused when parsed.
+/// naming the count, exit 2; a bad index is refused when parsed, and a work item's size that
+/// `FOGPLANES_GPU_ITEM_PLANES` cannot give in one line, exit 2.
 #[test]
 fn devices_lists_the_adapters_and_gpu_n_picks_one() {
     if !have_gpu("devices_lists_the_adapters_and_gpu_n_picks_one") {
@@ -258,6 +259,11 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
             "FOGPLANES_GPU=\"one\": not an adapter's index".to_string(),
         ),
         ("gpu:x".to_string(), vec![], "gpu:N takes an adapter's index".to_string()),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU_ITEM_PLANES", "0")],
+            "--device: FOGPLANES_GPU_ITEM_PLANES=\"0\": expected the planes of a GPU work item".to_string(),
+        ),
     ] {
         let o = render(&device, &d.join("no.exr"), &env);
         let (_, err) = text(&o);

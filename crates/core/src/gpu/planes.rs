@@ -100,9 +100,7 @@ impl GpuPlanes {
             let pairs = r.pairs;
             let fits = |batch: &Batch| {
                 let p = batch.pairs + pairs;
-                (batch.count as usize) < BATCH_PLANES
-                    && items(p) <= max_items
-                    && p * 4 <= gpu.max_binding()
+                (batch.count as usize) < BATCH_PLANES && items(p) <= max_items && p * 4 <= gpu.max_binding()
             };
             match batches.last_mut() {
                 Some(batch) if fits(batch) => {
