@@ -103,6 +103,7 @@ fn measure(settings: &ResolvedTable, planes: usize, seed: u64) -> Result<Vec<Mea
                 hits: after.hits - before.hits,
                 device_ns: ((after.seconds_device - before.seconds_device) * 1e9) as u64,
                 upload_ns: ((after.seconds_upload - before.seconds_upload) * 1e9) as u64,
+                wait_ns: ((after.seconds_waited - before.seconds_waited) * 1e9) as u64,
                 bytes_crossed: after.bytes_crossed - before.bytes_crossed,
                 submissions: after.submissions - before.submissions,
             };

@@ -444,6 +444,8 @@ fn gpu_images_are_the_same_bits_from_run_to_run() {
     assert_eq!(sa.hits, sb.hits);
     assert!(sa.device.starts_with("gpu") && sa.seconds_device > 0.0, "{} {}", sa.device, sa.seconds_device);
     assert!(sa.seconds_upload > 0.0 && sa.summary().contains("the uploads' own"), "{}", sa.summary());
+    // The CPU waited for the GPU's work at least while its sums were read back.
+    assert!(sa.seconds_waited > 0.0 && sa.summary().contains("it waited for the GPU"), "{}", sa.summary());
 }
 
 /// Unbiased on the GPU: images against the independent reference renderer (whole pixels in the

@@ -531,6 +531,7 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
             raise AssertionError(f"FOGPLANES_REQUIRE_GPU=1 but there is no GPU adapter: {e}") from e
         pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
     assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0 and stats["seconds_upload"] > 0
+    assert stats["seconds_waited"] > 0
     assert stats["devices"] == [stats["device"]]
     # Every adapter listed; `gpu:N` picks one by its index: the default's is "gpu"'s image.
     adapters = fogplanes.devices()

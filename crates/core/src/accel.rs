@@ -320,7 +320,7 @@ pub fn gather_pieces_on_gpu(
             // the one before last is waited for and let go before a new set is made. (The work
             // along rays made on the GPU is submitted when the sums are read: no wait here.)
             if let Some(done) = on_gpu.before.take() {
-                done.wait()?;
+                found[p.target].wait_ns += done.wait()?;
             }
             on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
             let rays = make_rays(p.set, g)?;

@@ -454,6 +454,9 @@ pub struct GatherStats {
     /// Nanoseconds of wall time spent uploading to the GPU (planes, ray sets' records or rays);
     /// 0 on the CPU.
     pub upload_ns: u64,
+    /// Nanoseconds of wall time the CPU waited for the GPU's work to end (a chunk's sums read
+    /// back, a ray set's gatherings before another is made); 0 on the CPU.
+    pub wait_ns: u64,
     /// Bytes that crossed between the CPU and the GPU (planes and parameters up, sums and
     /// timestamps back), and the GPU's queue submissions; 0 on the CPU.
     pub bytes_crossed: u64,
@@ -466,6 +469,7 @@ impl std::ops::AddAssign for GatherStats {
         self.hits += o.hits;
         self.device_ns += o.device_ns;
         self.upload_ns += o.upload_ns;
+        self.wait_ns += o.wait_ns;
         self.bytes_crossed += o.bytes_crossed;
         self.submissions += o.submissions;
     }

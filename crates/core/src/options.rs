@@ -244,6 +244,9 @@ pub struct RenderStats {
     /// Seconds of wall time spent uploading to the GPU (the planes, and each ray set's rays, or
     /// its record where the GPU makes them), their rays' writing aside; 0 on the CPU.
     pub seconds_upload: f64,
+    /// Seconds of wall time the CPU waited for the GPU's work to end (each chunk's sums read
+    /// back, a ray set's gatherings before another is made); 0 on the CPU.
+    pub seconds_waited: f64,
     /// Bytes that crossed between the CPU and the GPU (planes up, sums back), and the GPU's
     /// queue submissions; 0 on the CPU.
     pub bytes_crossed: u64,
@@ -302,6 +305,7 @@ impl RenderStats {
         self.seconds_gather += seconds;
         self.seconds_device += s.device_ns as f64 * 1e-9;
         self.seconds_upload += s.upload_ns as f64 * 1e-9;
+        self.seconds_waited += s.wait_ns as f64 * 1e-9;
         self.bytes_crossed += s.bytes_crossed;
         self.submissions += s.submissions;
         self.hits += s.hits;
@@ -362,7 +366,7 @@ impl RenderStats {
         // end-to-end time goes.
         let gathered_by = if self.seconds_device > 0.0 {
             format!(
-                "{}; GPU time {:.4} s, {:.4} G hits/s, {:.1} MB crossed in {} submissions; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s",
+                "{}; GPU time {:.4} s, {:.4} G hits/s, {:.1} MB crossed in {} submissions; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s; it waited for the GPU {:.4} s",
                 self.device,
                 self.seconds_device,
                 self.device_hits_per_second() * 1e-9,
@@ -371,7 +375,8 @@ impl RenderStats {
                 self.seconds_sampling,
                 self.seconds_build,
                 self.seconds_rays,
-                self.seconds_upload
+                self.seconds_upload,
+                self.seconds_waited
             )
         } else {
             format!("{} kernel", self.kernel)

@@ -62,6 +62,7 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     d.set_item("devices", s.devices.names().to_vec())?;
     d.set_item("seconds_device", s.seconds_device)?;
     d.set_item("seconds_upload", s.seconds_upload)?;
+    d.set_item("seconds_waited", s.seconds_waited)?;
     d.set_item("bytes_crossed", s.bytes_crossed)?;
     d.set_item("submissions", s.submissions)?;
     d.set_item("planes", s.planes)?;

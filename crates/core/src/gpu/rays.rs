@@ -164,15 +164,17 @@ impl GpuRays {
     }
 
     /// Waits until the GPU has done the work submitted along these rays (so that the caller
-    /// bounds the ray sets in flight: the CPU may otherwise run a chunk's pieces ahead).
-    pub fn wait(&self) -> Result<()> {
+    /// bounds the ray sets in flight: the CPU may otherwise run a chunk's pieces ahead);
+    /// returns the nanoseconds it waited.
+    pub fn wait(&self) -> Result<u64> {
         let last = self.last_use.lock().unwrap_or_else(|p| p.into_inner()).take();
+        let t = Instant::now();
         if let Some(index) = last {
             let polled = self.gpu.device.poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None });
             self.gpu.work_errors()?;
             polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
         }
-        Ok(())
+        Ok(t.elapsed().as_nanos() as u64)
     }
 
     /// The pass that makes them, if it is not submitted yet: to submit before the work that

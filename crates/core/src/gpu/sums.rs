@@ -123,7 +123,9 @@ impl GpuSums {
             }
             readback
         })?;
+        let t = Instant::now();
         let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        let wait_ns = t.elapsed().as_nanos() as u64;
         let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
         let untimed = std::mem::take(&mut self.untimed);
         gpu.work_errors()?;
@@ -134,6 +136,7 @@ impl GpuSums {
         let timestamp_bytes: u64 = timestamps.iter().map(|b| b.size()).sum();
         let mut stats = GatherStats {
             device_ns: waited,
+            wait_ns,
             bytes_crossed: std::mem::take(&mut self.bytes_up) + bytes + timestamp_bytes,
             submissions: std::mem::take(&mut self.submissions),
             ..GatherStats::default()

@@ -158,6 +158,9 @@ class RenderStats(TypedDict):
     #: Seconds of wall time uploading to the GPU (the planes, each ray set's rays: their
     #: writing, straight into the upload buffers, is in seconds_rays); 0 on the CPU.
     seconds_upload: float
+    #: Seconds of wall time waiting for the GPU's work to end (each chunk's sums read back);
+    #: 0 on the CPU.
+    seconds_waited: float
     #: Bytes that crossed between the CPU and the GPU (planes up, sums back); 0 on the CPU.
     bytes_crossed: int
     #: The GPU's queue submissions; 0 on the CPU.
