@@ -237,7 +237,7 @@ pub struct RenderStats {
     /// The devices whose gathering the result holds: this render's device, and those of the
     /// planes it resumed from (a checkpoint begun on another device).
     pub devices: Devices,
-    /// Seconds the GPU spent in its gather (binning included), by its timestamps where it has
+    /// Seconds the GPU spent in its gather (the reach and the binning included), by its timestamps where it has
     /// them, else the wall time from each chunk's first submission to its sums read back (an
     /// upper bound); 0 on the CPU.
     pub seconds_device: f64,

@@ -283,11 +283,17 @@ impl GpuPlanes {
         // Every batch in one command buffer (the passes run in order, the scratch buffers
         // reused from batch to batch), kept with the sums to submit with their reading.
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        // The planes' reach, until a submission has found it (once for `into`'s work).
-        if !self.reach_found.load(Ordering::Acquire)
-            && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, &self.reach_found))
-        {
-            planes.polygons.encode(gpu, &mut encoder);
+        // The planes' reach, until a submission has found it (once for `into`'s work), timed
+        // with the first batch.
+        let reach_first = !self.reach_found.load(Ordering::Acquire)
+            && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, &self.reach_found));
+        if reach_first {
+            let timestamp_writes = queries.as_ref().map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: None,
+            });
+            planes.polygons.encode(gpu, &mut encoder, timestamp_writes);
             into.on_submit.push(self.reach_found.clone());
         }
         for (b, batch) in self.batches.iter().enumerate() {
@@ -313,10 +319,13 @@ impl GpuPlanes {
                 (&pipelines[1], &gather_group, Some((tiles_x, tiles_y))),
             ];
             for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
+                // Batch b's passes timed from its first (batch 0's from the reach before it, if
+                // any) to its last.
+                let starts = k == 0 && !(b == 0 && reach_first);
                 let timestamp_writes =
-                    queries.as_ref().filter(|_| k == 0 || k == 4).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                    queries.as_ref().filter(|_| starts || k == 4).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
                         query_set: set,
-                        beginning_of_pass_write_index: (k == 0).then_some(2 * b as u32),
+                        beginning_of_pass_write_index: starts.then_some(2 * b as u32),
                         end_of_pass_write_index: (k == 4).then_some(2 * b as u32 + 1),
                     });
                 let mut pass =

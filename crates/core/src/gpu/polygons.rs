@@ -76,8 +76,13 @@ impl PolygonBuffers {
         [&self.reach, &self.vertices, &self.params].map(|b| b.size()).iter().sum()
     }
 
-    /// Records the pass that fills the rows: a thread per row of tiles.
-    pub(super) fn encode(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) {
+    /// Records the pass that fills the rows: a thread per row of tiles (with `timestamp_writes`).
+    pub(super) fn encode(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites>,
+    ) {
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("reach"),
             layout: &gpu.reach_layout,
@@ -90,7 +95,7 @@ impl PolygonBuffers {
             ],
         });
         let (x, y) = grid(self.rows.div_ceil(256));
-        let mut pass = encoder.begin_compute_pass(&Default::default());
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
         pass.set_pipeline(&gpu.reach);
         pass.set_bind_group(0, &group, &[]);
         pass.dispatch_workgroups(x, y, 1);
@@ -107,7 +112,7 @@ pub fn reach_on_gpu(gpu: &Arc<Gpu>, planes: &[ScreenReach], width: u32, height: 
         let (spans, groups) =
             (readback("spans read back", buffers.spans.size()), readback("groups read back", buffers.groups.size()));
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        buffers.encode(gpu, &mut encoder);
+        buffers.encode(gpu, &mut encoder, None);
         encoder.copy_buffer_to_buffer(&buffers.spans, 0, &spans, 0, spans.size());
         encoder.copy_buffer_to_buffer(&buffers.groups, 0, &groups, 0, groups.size());
         gpu.queue.submit([encoder.finish()]);
