@@ -328,7 +328,7 @@ fn gpu_rays_are_the_cpus_within_f32_rounding() {
 /// of 30,000 x 20,000 pixels, where f32 rounds at a few thousandths of a pixel.
 #[test]
 fn gpu_reach_holds_the_cpus() {
-    use fogplanes::gpu::{TileReach, screen_reach, tile_reach};
+    use fogplanes::gpu::{TileReach, screen_reach, test_polygons, tile_reach};
     use fogplanes::photon_plane::{Polygon, sample_planes};
     use glam::DVec2;
     if !have_gpu("gpu_reach_holds_the_cpus") {
@@ -339,33 +339,10 @@ fn gpu_reach_holds_the_cpus() {
     let planes = sample_planes(&s, Default::default(), 4096, 3);
     let benchmark: Vec<Polygon<DVec2>> =
         planes.iter().map(|p| fogplanes::raster::screen_polygon(&s.camera, p, &s.medium)).collect();
-    let mut seed = 11u64;
-    let mut next = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut random = |n: usize, (w, h): (f64, f64)| -> Vec<Polygon<DVec2>> {
-        (0..n)
-            .map(|case| {
-                let (cx, cy) = (next() * w * 1.3 - 0.15 * w, next() * h * 1.5 - 0.25 * h);
-                let a = next() * 0.75 * w + 0.5;
-                let b = if case % 3 == 0 { next() * 2.0 + 0.01 } else { next() * 0.5 * h + 0.5 };
-                let (tilt, k) = (next() * std::f64::consts::PI, 3 + case % 8);
-                let points: Vec<DVec2> = (0..k)
-                    .map(|i| {
-                        let u = i as f64 / k as f64 * std::f64::consts::TAU;
-                        let (x, y) = (a * u.cos(), b * u.sin());
-                        DVec2::new(cx + x * tilt.cos() - y * tilt.sin(), cy + x * tilt.sin() + y * tilt.cos())
-                    })
-                    .collect();
-                Polygon::from_slice(&points)
-            })
-            .collect()
-    };
     let cases = [
         (benchmark, (640, 360)),
-        (random(3000, (200.0, 120.0)), (200, 120)),
-        (random(40, (3e4, 2e4)), (30_000, 20_000)),
+        (test_polygons(11, 3000, 200.0, 120.0), (200, 120)),
+        (test_polygons(12, 40, 3e4, 2e4), (30_000, 20_000)),
     ];
     for (polygons, (w, h)) in cases {
         let spec: Vec<TileReach> = polygons.iter().map(|p| tile_reach(p, w, h)).collect();

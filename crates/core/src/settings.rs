@@ -139,11 +139,10 @@ fn find_device(wanted: Device) -> Result<Device> {
             Ok((i, g)) if !g.is_cpu_adapter() => Ok(Device::Gpu(Some(i))),
             _ => Ok(Device::Cpu),
         },
-        // The measuring knob of the work items' size, refused here like the adapter's variable.
-        Device::Gpu(_) if let Err(why) = crate::gpu::fixed_item_planes() => Err(Error::option(Setting::Device, why)),
         Device::Gpu(index) => match crate::gpu::adapter_at(index) {
             Ok((i, _)) => Ok(Device::Gpu(Some(i))),
-            // An index out of range names itself (or FOGPLANES_GPU) and the count.
+            // An index out of range names itself (or FOGPLANES_GPU) and the count; a work items'
+            // size that FOGPLANES_GPU_ITEM_PLANES cannot give names the variable.
             Err(why) if why.starts_with("gpu:") || why.starts_with(crate::gpu::GPU_VARIABLE) => {
                 Err(Error::option(Setting::Device, why))
             }

@@ -12,7 +12,7 @@
 //! surface, and the layer has nothing to look up.
 
 use super::device::{Gpu, block_on, kind_name};
-use super::{AdapterInfo, GPU_VARIABLE};
+use super::{AdapterInfo, GPU_VARIABLE, fixed_item_planes};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// The instance of this process, made once; `Err` says why there is none (no Vulkan loader
@@ -131,12 +131,14 @@ type Made = Result<Arc<Gpu>, String>;
 
 /// The adapter `index` of [`adapters`] (`None`: the one `--device gpu` takes, adapter
 /// [`GPU_VARIABLE`] where it is set, else a real GPU first), its device made on first use and
-/// kept for the process, with its index; `Err` says in one line why there is none (an index
-/// out of range names the count).
+/// kept for the process (with the work items' size [`super::ITEM_VARIABLE`] fixes then), with its
+/// index; `Err` says in one line why there is none (an index out of range names the count, a
+/// variable that is not a number it takes names itself).
 pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
     static GPUS: Mutex<Vec<(usize, Made)>> = Mutex::new(Vec::new());
     let all = found()?;
     let set = std::env::var(GPU_VARIABLE).ok().filter(|v| !v.is_empty());
+    let fixed_item_planes = fixed_item_planes()?;
     let (index, named) = match (index, set) {
         (None, Some(v)) => {
             let i = v.trim().parse::<usize>().map_err(|_| {
@@ -164,7 +166,7 @@ pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
     if let Some((_, g)) = gpus.iter().find(|(k, _)| *k == i) {
         return g.clone().map(|g| (i, g));
     }
-    let made = Gpu::new(all[i].clone()).map(Arc::new);
+    let made = Gpu::new(all[i].clone(), fixed_item_planes).map(Arc::new);
     gpus.push((i, made.clone()));
     made.map(|g| (i, g))
 }

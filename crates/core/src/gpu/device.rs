@@ -19,6 +19,9 @@ pub struct Gpu {
     name: String,
     /// A CPU adapter (lavapipe): smaller work items ([`super::item_planes`]).
     cpu_adapter: bool,
+    /// The work items' size fixed for measuring ([`super::ITEM_VARIABLE`], checked by
+    /// [`super::adapter_at`] before the device was made), else `None`.
+    fixed_item_planes: Option<u32>,
     timestamps: bool,
     max_binding: u64,
     pub(super) bin_layout: wgpu::BindGroupLayout,
@@ -79,6 +82,24 @@ fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+/// The compute pipeline of `entry` in `module`.
+fn compute_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    compilation_options: wgpu::PipelineCompilationOptions,
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(entry),
+        layout: Some(layout),
+        module,
+        entry_point: Some(entry),
+        compilation_options,
+        cache: None,
+    })
+}
+
 fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding: 0,
@@ -94,7 +115,7 @@ fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
 
 impl Gpu {
     /// The device on `adapter`, with its pipelines ([`super::adapter`] finds the adapter).
-    pub(super) fn new(adapter: wgpu::Adapter) -> std::result::Result<Self, String> {
+    pub(super) fn new(adapter: wgpu::Adapter, fixed_item_planes: Option<u32>) -> std::result::Result<Self, String> {
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let limits = adapter.limits();
@@ -110,29 +131,12 @@ impl Gpu {
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
             sink.lock().unwrap_or_else(|p| p.into_inner()).push(crate::error::one_line(&e.to_string()))
         }));
-        let bin_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("bin"),
-            entries: &[
-                uniform_entry(),
-                storage_entry(1, true),
-                storage_entry(2, false),
-                storage_entry(3, false),
-                storage_entry(4, false),
-                storage_entry(5, false),
-                storage_entry(6, false),
-                storage_entry(7, true),
-                storage_entry(8, false),
-                storage_entry(9, true),
-            ],
-        });
-        let mut gather_entries = vec![uniform_entry()];
-        gather_entries.extend((1..=7).map(|b| storage_entry(b, true)));
-        gather_entries.extend((8..=9).map(|b| storage_entry(b, false)));
-        gather_entries.push(storage_entry(10, true));
-        let gather_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gather"),
-            entries: &gather_entries,
-        });
+        // A bind group layout of a uniform at binding 0, then storage buffers, read-only or not.
+        let layout = |label: &str, read_only: &[bool]| {
+            let mut entries = vec![uniform_entry()];
+            entries.extend(read_only.iter().enumerate().map(|(i, &r)| storage_entry(i as u32 + 1, r)));
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+        };
         let pipeline_layout = |layout: &wgpu::BindGroupLayout| {
             device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: None,
@@ -140,67 +144,30 @@ impl Gpu {
                 immediate_size: 0,
             })
         };
-        let bin_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("bin.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(BIN_WGSL.into()),
-        });
-        let bin_pipeline_layout = pipeline_layout(&bin_layout);
-        let bin = ["count", "scan", "scatter"].map(|entry| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&bin_pipeline_layout),
-                module: &bin_module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
+        let shader = |label: &str, source: &str| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
             })
-        });
-        let rays_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("rays"),
-            entries: &[uniform_entry(), storage_entry(1, true), storage_entry(2, false)],
-        });
-        let rays_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("rays.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(RAYS_WGSL.into()),
-        });
-        let rays = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("rays"),
-            layout: Some(&pipeline_layout(&rays_layout)),
-            module: &rays_module,
-            entry_point: Some("rays_main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let reach_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("reach"),
-            entries: &[
-                uniform_entry(),
-                storage_entry(1, true),
-                storage_entry(2, true),
-                storage_entry(3, false),
-                storage_entry(4, false),
-            ],
-        });
-        let reach_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("reach.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(REACH_WGSL.into()),
-        });
-        let reach = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("reach"),
-            layout: Some(&pipeline_layout(&reach_layout)),
-            module: &reach_module,
-            entry_point: Some("reach_rows"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let gather_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("gather.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(GATHER_WGSL.into()),
-        });
+        };
+        let pipeline = |layout: &wgpu::PipelineLayout, module: &wgpu::ShaderModule, entry: &str| {
+            compute_pipeline(&device, layout, module, entry, Default::default())
+        };
+        let (r, w) = (true, false);
+        let bin_layout = layout("bin", &[r, w, w, w, w, w, r, w, r]);
+        let gather_layout = layout("gather", &[r, r, r, r, r, r, r, w, w, r]);
+        let rays_layout = layout("rays", &[r, w]);
+        let reach_layout = layout("reach", &[r, r, w, w]);
+        let (bin_module, bin_pipeline_layout) = (shader("bin.wgsl", BIN_WGSL), pipeline_layout(&bin_layout));
+        let bin = ["count", "scan", "scatter"].map(|entry| pipeline(&bin_pipeline_layout, &bin_module, entry));
+        let rays = pipeline(&pipeline_layout(&rays_layout), &shader("rays.wgsl", RAYS_WGSL), "rays_main");
+        let reach = pipeline(&pipeline_layout(&reach_layout), &shader("reach.wgsl", REACH_WGSL), "reach_rows");
+        let gather_module = shader("gather.wgsl", GATHER_WGSL);
         let kind = kind_name(info.device_type);
         let gpu = Gpu {
             name: format!("{} ({:?}, {kind})", info.name, info.backend),
             cpu_adapter: info.device_type == wgpu::DeviceType::Cpu,
+            fixed_item_planes,
             timestamps,
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             gather_pipeline_layout: pipeline_layout(&gather_layout),
@@ -230,6 +197,11 @@ impl Gpu {
     /// Whether the adapter runs on the CPU (lavapipe).
     pub fn is_cpu_adapter(&self) -> bool {
         self.cpu_adapter
+    }
+
+    /// The work items' size fixed for measuring, if it is ([`super::ITEM_VARIABLE`]).
+    pub fn fixed_item_planes(&self) -> Option<u32> {
+        self.fixed_item_planes
     }
 
     /// The most bytes one buffer binding holds on this device.
@@ -283,18 +255,16 @@ impl Gpu {
             .entry(id)
             .or_insert_with(|| {
                 let constants = [("ESTIMATOR", id as f64)];
+                let options =
+                    wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };
                 Arc::new(["gather", "reduce"].map(|entry| {
-                    self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some(entry),
-                        layout: Some(&self.gather_pipeline_layout),
-                        module: &self.gather_module,
-                        entry_point: Some(entry),
-                        compilation_options: wgpu::PipelineCompilationOptions {
-                            constants: &constants,
-                            zero_initialize_workgroup_memory: false,
-                        },
-                        cache: None,
-                    })
+                    compute_pipeline(
+                        &self.device,
+                        &self.gather_pipeline_layout,
+                        &self.gather_module,
+                        entry,
+                        options.clone(),
+                    )
                 }))
             })
             .clone()

@@ -18,7 +18,7 @@
 use crate::weights::{Estimator, Weighting};
 
 mod reach;
-pub use reach::{GROUP_ROWS, GROUPS, SLACK, ScreenReach, TileReach, screen_reach, tile_reach};
+pub use reach::{GROUP_ROWS, GROUPS, SLACK, ScreenReach, TileReach, screen_reach, test_polygons, tile_reach};
 
 #[cfg(feature = "gpu")]
 mod adapter;
@@ -170,7 +170,8 @@ pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
 }
 
 /// The planes of a work item that [`ITEM_VARIABLE`] fixes, if it is set: refused in one line
-/// where it is not a number from 1 to 512.
+/// where it is not a number from 1 to 512. Read where an adapter is resolved
+/// ([`adapter_at`]), which every front end's settings do once.
 pub fn fixed_item_planes() -> std::result::Result<Option<u32>, String> {
     let Ok(value) = std::env::var(ITEM_VARIABLE) else {
         return Ok(None);

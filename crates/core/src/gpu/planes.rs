@@ -89,7 +89,7 @@ impl GpuPlanes {
             )));
         }
         let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
-        let fixed = super::fixed_item_planes().map_err(Error::Device)?;
+        let fixed = gpu.fixed_item_planes();
         let cpu = gpu.is_cpu_adapter();
         // A bound on the work items of a batch of `pairs` pairs (at most, each tile's one more).
         let items = |pairs: u64| pairs.min(tiles) + pairs / item_planes(cpu, pairs, fixed) as u64;

@@ -190,6 +190,35 @@ pub fn tile_reach(poly: &Polygon<DVec2>, width: u32, height: u32) -> TileReach {
 /// it, and so hold the GPU's.
 pub const SLACK: f64 = 1.0 / 32.0;
 
+/// `n` convex polygons for testing a reach in a `width x height` image (from `seed`, the same
+/// ones every time): points on ellipses, up to three quarters of the width long, a third of
+/// them thin (up to 2 pixels across), tilted every way, 3 to 10 vertices, some past the image's
+/// edges or outside it.
+#[doc(hidden)]
+pub fn test_polygons(seed: u64, n: usize, width: f64, height: f64) -> Vec<Polygon<DVec2>> {
+    let mut state = seed;
+    let mut next = || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..n)
+        .map(|case| {
+            let (cx, cy) = (next() * width * 1.3 - 0.15 * width, next() * height * 1.5 - 0.25 * height);
+            let a = next() * 0.75 * width + 0.5;
+            let b = if case % 3 == 0 { next() * 2.0 + 0.01 } else { next() * 0.5 * height + 0.5 };
+            let (tilt, k) = (next() * std::f64::consts::PI, 3 + case % 8);
+            let points: Vec<DVec2> = (0..k)
+                .map(|i| {
+                    let u = i as f64 / k as f64 * std::f64::consts::TAU;
+                    let (x, y) = (a * u.cos(), b * u.sin());
+                    DVec2::new(cx + x * tilt.cos() - y * tilt.sin(), cy + x * tilt.sin() + y * tilt.cos())
+                })
+                .collect();
+            Polygon::from_slice(&points)
+        })
+        .collect()
+}
+
 /// A plane's screen polygon as it crosses for the GPU to find its reach (`reach.wgsl`): the
 /// polygon in f32, the rows of tiles the GPU fills for it (those [`tile_reach`] finds, grown by
 /// twice [`SLACK`], and none where no pixel row comes near), and a bound on its (tile, plane)
@@ -252,24 +281,8 @@ mod tests {
     #[test]
     fn a_reach_holds_every_tile_the_polygon_comes_near() {
         let (w, h) = (200u32, 120u32);
-        let mut seed = 7u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
-        for case in 0..300 {
-            // A convex polygon: points on an ellipse, some thin and tilted, some past the edges.
-            let (cx, cy) = (next() * 260.0 - 30.0, next() * 180.0 - 30.0);
-            let (a, b) = (next() * 150.0 + 0.5, if case % 3 == 0 { next() * 2.0 + 0.01 } else { next() * 60.0 + 0.5 });
-            let (tilt, k) = (next() * std::f64::consts::PI, 3 + case % 6);
-            let points: Vec<DVec2> = (0..k)
-                .map(|i| {
-                    let u = i as f64 / k as f64 * std::f64::consts::TAU;
-                    let (x, y) = (a * u.cos(), b * u.sin());
-                    DVec2::new(cx + x * tilt.cos() - y * tilt.sin(), cy + x * tilt.sin() + y * tilt.cos())
-                })
-                .collect();
-            let poly = Polygon::from_slice(&points);
+        for (case, poly) in test_polygons(7, 300, w as f64, h as f64).into_iter().enumerate() {
+            let (points, k) = (poly.points().to_vec(), poly.len);
             let reach = tile_reach(&poly, w, h);
             assert_eq!(reach.spans.len(), reach.groups.len(), "case {case}: a group's ranges per row of tiles");
             // Whether the gather tests pixel (px, py): its tile binned (`covers`) and its
@@ -293,7 +306,8 @@ mod tests {
                 let (p, q) = (points[i], points[(i + 1) % k]);
                 for s in 0..=40 {
                     let on = p + (q - p) * (s as f64 / 40.0);
-                    near.extend([on, on + (points[(i + 2) % k] - on) * next()]);
+                    // And a point inside, between it and another vertex.
+                    near.extend([on, on + (points[(i + 2) % k] - on) * ((s * 7 % 40) as f64 / 40.0)]);
                 }
                 let (ya, yb) = (p.y.min(q.y), p.y.max(q.y));
                 if ya == yb {

@@ -83,32 +83,26 @@ mod tests {
         panic!("no struct {name} in the shader")
     }
 
-    /// The value of WGSL constant `name` in `source`, a u32 literal.
-    fn wgsl_u32(source: &str, name: &str) -> u32 {
+    /// The value of WGSL constant `name` in `source`, a literal.
+    fn wgsl_constant(source: &str, name: &str) -> naga::Literal {
         let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
         let value = module
             .constants
             .iter()
             .find(|(_, c)| c.name.as_deref() == Some(name))
             .map(|(_, c)| &module.global_expressions[c.init]);
-        let Some(naga::Expression::Literal(naga::Literal::U32(value))) = value else {
-            panic!("the shader's {name} is a u32 literal")
-        };
+        let Some(naga::Expression::Literal(value)) = value else { panic!("the shader's {name} is a literal") };
         *value
     }
 
-    /// The value of WGSL constant `name` in `source`, an f32 literal.
+    fn wgsl_u32(source: &str, name: &str) -> u32 {
+        let naga::Literal::U32(value) = wgsl_constant(source, name) else { panic!("the shader's {name} is a u32") };
+        value
+    }
+
     fn wgsl_f32(source: &str, name: &str) -> f32 {
-        let module = naga::front::wgsl::parse_str(source).expect("the shader parses");
-        let value = module
-            .constants
-            .iter()
-            .find(|(_, c)| c.name.as_deref() == Some(name))
-            .map(|(_, c)| &module.global_expressions[c.init]);
-        let Some(naga::Expression::Literal(naga::Literal::F32(value))) = value else {
-            panic!("the shader's {name} is an f32 literal")
-        };
-        *value
+        let naga::Literal::F32(value) = wgsl_constant(source, name) else { panic!("the shader's {name} is an f32") };
+        value
     }
 
     /// Every record that crosses to the GPU is laid out as its WGSL twin: the same size, and
