@@ -18,6 +18,8 @@ use std::io::Write;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    // The zero of the timeline `FOGPLANES_TRACE=1` prints (fogplanes::trace).
+    drop(fogplanes::trace::span("process started"));
     STARTED.get_or_init(std::time::Instant::now);
     let cli = Cli::parse();
     // Ctrl-C, SIGTERM or SIGHUP: remove any half-written output before leaving, so no truncated

@@ -49,6 +49,16 @@ impl Accelerator {
         }
     }
 
+    /// Makes ready now what a gathering with `weighting` compiles on first use: the GPU's
+    /// pipelines ([`gpu::Gpu::compile_gather`]), so that a render compiles them beside its
+    /// first planes' preparation; nothing on the CPU.
+    pub fn compile(self, weighting: Weighting) -> Result<()> {
+        match self {
+            Accelerator::Gpu(index) => gpu::adapter_at(Some(index)).map_err(Error::Device)?.1.compile_gather(weighting),
+            _ => Ok(()),
+        }
+    }
+
     /// Progress units of one gathering over the image (for sizing a progress bar): a tile on
     /// the raster (sized for the current thread pool: call it in the pool that renders), a
     /// chunk of rays on the per-ray structures, the whole image on the GPU.
@@ -167,10 +177,13 @@ impl PreparedPlanes {
             control.check()?;
             let t = Instant::now();
             let piece = start..(start + SAMPLING_PIECE).min(range.end);
+            let _s = crate::trace::span("planes sampled");
             let piece = control.map_units("sample", piece.len(), PLANE_UNIT, |j| {
                 sample_plane(scene, &lights, set.sampler.plane_numbers(set.seed, (piece.start + j) as u64))
             });
             seconds_sampling += t.elapsed().as_secs_f64();
+            drop(_s);
+            let _s = crate::trace::span("planes prepared");
             let t = Instant::now();
             context.push_planes_in(scene, &piece, 1, control);
             if let Some(r) = &mut raster {
@@ -198,6 +211,7 @@ impl PreparedPlanes {
             (Accelerator::Gpu(index), _) => {
                 let (_, gpu) = gpu::adapter_at(Some(index)).map_err(Error::Device)?;
                 let (w, h) = (scene.camera.width, scene.camera.height);
+                let _s = crate::trace::span("planes for the GPU");
                 Structure::Gpu(GpuPlanes::new(gpu, &context, &reach, w, h)?)
             }
             _ => Structure::Cpu(CpuStructure::BruteForce(BruteForce)),
@@ -277,6 +291,12 @@ impl OnGpu {
         OnGpu { sums: (0..targets).map(|_| None).collect(), rays: None, before: None, told: vec![[0; 2]; targets] }
     }
 
+    /// Submits every target's gatherings not submitted yet (before a window's sums are read
+    /// one after another: [`GpuSums::submit_pending`]).
+    pub fn submit_all(&mut self) -> Result<()> {
+        self.sums.iter_mut().flatten().try_for_each(GpuSums::submit_pending)
+    }
+
     /// Waits for target `target`'s gatherings, adds its sums on the GPU to `sums` (untouched
     /// where none of its pieces was gathered yet) and returns the hits and the GPU's time of
     /// its gatherings since the last read (so that the reads of a target add up).
@@ -323,6 +343,7 @@ pub fn gather_pieces_on_gpu(
                 found[p.target].wait_ns += done.wait()?;
             }
             on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
+            let _s = crate::trace::span("ray set recorded");
             let rays = make_rays(p.set, g)?;
             found[p.target].upload_ns += rays.upload_ns();
             found[p.target].bytes_crossed += rays.bytes_up();
@@ -333,6 +354,7 @@ pub fn gather_pieces_on_gpu(
             Some(s) => s,
             empty => empty.insert(g.new_sums()?),
         };
+        let _s = crate::trace::span("piece recorded");
         found[p.target] += g.gather_into(weighting, rays, sums, control)?;
     }
     Ok(found)

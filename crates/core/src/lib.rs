@@ -101,6 +101,7 @@ pub mod schedule;
 pub mod settings;
 pub mod simd;
 pub mod spread;
+pub mod trace;
 pub mod weights;
 
 pub use error::{Error, Result};

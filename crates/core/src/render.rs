@@ -79,27 +79,49 @@ impl<'g> Preparer<'g> {
     }
 
     /// Each piece's planes taken from `prepared` if they are there, else sampled and prepared
-    /// now.
+    /// now, the pieces side by side.
     fn pieces(&mut self, specs: impl IntoIterator<Item = PieceSpec>, control: Control) -> Result<Vec<Piece>> {
-        let mut out = Vec::new();
-        for spec in specs {
-            let planes = match self.prepared.iter().find(|(r, _)| *r == spec.1) {
-                Some((_, p)) => p.clone(),
-                None => {
-                    let set = self.opts.plane_set();
-                    let (w, h, workers) = (self.scene.camera.width, self.scene.camera.height, schedule::workers());
-                    let tiling =
-                        if self.windowed { Tiling::for_window(w, h, workers) } else { Tiling::new(w, h, workers) };
-                    let structure = self.opts.structure();
-                    let p = PreparedPlanes::in_tiles(self.scene, set, spec.1.clone(), structure, tiling, control)?;
-                    self.seconds_sampling += p.seconds_sampling;
-                    self.seconds_build += p.seconds_build;
-                    Arc::new(p)
-                }
-            };
-            out.push(Piece { spec, planes });
+        let specs: Vec<PieceSpec> = specs.into_iter().collect();
+        let (ready, (sampling, build)) = self.side_by_side(&specs, control);
+        self.seconds_sampling += sampling;
+        self.seconds_build += build;
+        ready
+    }
+
+    /// The pieces of `specs`, two halves at a time (the two sides of a join: a chunk's pieces
+    /// are small, about 2,300 planes on the benchmark, and each one's parallel loops leave most
+    /// of a many-core machine idle between them), with the seconds spent sampling and building.
+    fn side_by_side(&self, specs: &[PieceSpec], control: Control) -> (Result<Vec<Piece>>, (f64, f64)) {
+        match specs {
+            [] => (Ok(Vec::new()), (0.0, 0.0)),
+            [spec] => match self.piece(spec, control) {
+                Ok((piece, seconds)) => (Ok(vec![piece]), seconds),
+                Err(e) => (Err(e), (0.0, 0.0)),
+            },
+            _ => {
+                let (left, right) = specs.split_at(specs.len() / 2);
+                let ((a, sa), (b, sb)) = control.join(|c| self.side_by_side(left, c), |c| self.side_by_side(right, c));
+                let ready = a.and_then(|mut a| {
+                    a.extend(b?);
+                    Ok(a)
+                });
+                (ready, (sa.0 + sb.0, sa.1 + sb.1))
+            }
         }
-        Ok(out)
+    }
+
+    /// One piece, with the seconds spent sampling and building its planes (none where they
+    /// were prepared before).
+    fn piece(&self, spec: &PieceSpec, control: Control) -> Result<(Piece, (f64, f64))> {
+        if let Some((_, p)) = self.prepared.iter().find(|(r, _)| *r == spec.1) {
+            return Ok((Piece { spec: spec.clone(), planes: p.clone() }, (0.0, 0.0)));
+        }
+        let set = self.opts.plane_set();
+        let (w, h, workers) = (self.scene.camera.width, self.scene.camera.height, schedule::workers());
+        let tiling = if self.windowed { Tiling::for_window(w, h, workers) } else { Tiling::new(w, h, workers) };
+        let p = PreparedPlanes::in_tiles(self.scene, set, spec.1.clone(), self.opts.structure(), tiling, control)?;
+        let seconds = (p.seconds_sampling, p.seconds_build);
+        Ok((Piece { spec: spec.clone(), planes: Arc::new(p) }, seconds))
     }
 }
 
@@ -201,6 +223,10 @@ impl GatherSide<'_> {
             }
         }
         if let Some(mut on_gpu) = on_gpu.filter(|_| self.spread.is_none()) {
+            // Every chunk's work goes to the GPU before the first is read back.
+            if sums.len() > 1 {
+                on_gpu.submit_all()?;
+            }
             for (c, sums) in sums.iter_mut().enumerate() {
                 read[c] += on_gpu.read_into(c, sums)?;
             }
@@ -238,16 +264,32 @@ fn gatherings<'p, 'q>(pieces: &'q [(usize, &'p Piece)], apart: bool) -> Vec<&'q 
     out
 }
 
-/// Chunks a render gathers at once, in one parallel loop, each into its own sums
-/// ([`crate::raster::chunks_at_once`]: several on many workers and a small image); one where
-/// the structure is not the raster.
-fn chunks_at_once(scene: &Scene, opts: &RenderOptions) -> usize {
-    if opts.structure() != Accelerator::Raster {
-        return 1;
-    }
+/// Chunks a render of `chunks` chunks gathers at once, each into its own sums: on the raster,
+/// in one parallel loop ([`crate::raster::chunks_at_once`]: several on many workers and a small
+/// image); on the GPU, enough for about [`GPU_WINDOWS`] windows, from one to
+/// [`GPU_CHUNKS_AT_ONCE`]; one on the other structures.
+fn chunks_at_once(scene: &Scene, opts: &RenderOptions, chunks: usize) -> usize {
     let cam = &scene.camera;
-    crate::raster::chunks_at_once(crate::schedule::workers(), cam.width, cam.height)
+    match opts.structure() {
+        Accelerator::Raster => crate::raster::chunks_at_once(crate::schedule::workers(), cam.width, cam.height),
+        Accelerator::Gpu(_) => {
+            let most = crate::limits::MAX_WINDOW_PIXELS / (cam.width as usize * cam.height as usize).max(1);
+            (chunks / GPU_WINDOWS).clamp(1, GPU_CHUNKS_AT_ONCE.min(most).max(1))
+        }
+        _ => 1,
+    }
 }
+
+/// The chunks of a window on the GPU, where a render has many. Each window costs about a
+/// millisecond that nothing hides (its sums widened and added into the canonical tree, the
+/// join of its gathering and the next window's preparation): 40 of them in a render of 655,360
+/// planes on an H200 (docs/measurements/2026-11-28-h200-trace.log). The first window's
+/// preparation is hidden by nothing either: a render of few chunks keeps windows of one.
+const GPU_CHUNKS_AT_ONCE: usize = 4;
+
+/// The windows a render on the GPU aims at: a render of fewer than twice as many chunks
+/// gathers one chunk at a time.
+const GPU_WINDOWS: usize = 8;
 
 /// `buf` as `f(i)` for `i` in `0..n`, written in parallel ([`Control::map_units`]): in place
 /// where it has that length (an earlier chunk's buffer, whose pages are already faulted in),
@@ -432,15 +474,17 @@ impl<'a> ChunkRenderer<'a> {
         // chunk into its own sums: the same bits) while the next window is prepared (its planes
         // sampled, projected and binned, its chunks side by side): the two sides of a join, so
         // that the workers a window's last tiles leave idle prepare the next.
-        let at_once = chunks_at_once(scene, opts);
+        let at_once = chunks_at_once(scene, opts, root.end - done);
         let windows: Vec<Range<usize>> =
             (done..root.end).step_by(at_once).map(|c| c..(c + at_once).min(root.end)).collect();
         let specs: Vec<Vec<Vec<PieceSpec>>> =
             windows.iter().map(|w| w.clone().map(|c| self.chunk_pieces(self.chunk_range(c))).collect()).collect();
+        let first = crate::trace::span("first window prepared");
         let mut next = match specs.first() {
             Some(first) => Some(self.prepare(first, control)?),
             None => None,
         };
+        drop(first);
         // The buffers of the chunks' f32 and f64 sums, reused from window to window.
         let mut spare: (Vec<Vec<Vec3>>, Vec<Vec<DVec3>>) = (Vec::new(), Vec::new());
         for (w, window) in windows.iter().enumerate() {
@@ -458,7 +502,10 @@ impl<'a> ChunkRenderer<'a> {
                         filled(s, pixels, width * 16, control, |_| Vec3::ZERO);
                     }
                     let mut targets: Vec<&mut [Vec3]> = sums.iter_mut().map(|s| s.as_mut_slice()).collect();
+                    let gathering = crate::trace::span("window gathered");
                     let found = side.gather(&work, &mut targets, control)?;
+                    drop(gathering);
+                    let _s = crate::trace::span("window's sums widened");
                     // The window's planes freed and its sums widened to f64 here, beside the
                     // next window's preparation, not between the windows.
                     drop(work);
@@ -467,7 +514,10 @@ impl<'a> ChunkRenderer<'a> {
                     }
                     Ok::<_, Error>(found)
                 },
-                |control| following.map(|specs| prepare_window(scene, opts, prepared, specs, control)),
+                |control| {
+                    let _s = crate::trace::span("next window prepared");
+                    following.map(|specs| prepare_window(scene, opts, prepared, specs, control))
+                },
             );
             let (stats, seconds) = gathered?;
             spare.0 = sums;
@@ -597,20 +647,46 @@ pub fn render_from(
             }
         }
     }
-    let partial = chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)?;
+    // The direct emission (its own parallel loop over the pixels), after the chunks; on the
+    // GPU beside them, in the CPU's waits for the GPU, with the gather's pipelines compiled
+    // beside the first planes' preparation.
+    let emission = || {
+        let t = Instant::now();
+        let _s = crate::trace::span("direct emission");
+        let e = direct_emission_and_variance_in(scene, opts.seed, opts.spp, opts.pixel_center, control);
+        (e, t.elapsed().as_secs_f64())
+    };
+    let (mut emitted, mut compiled) = (None, Ok(()));
+    let chunks_rendered = crate::trace::span("chunks rendered");
+    let partial = if matches!(opts.structure(), Accelerator::Gpu(_)) {
+        rayon::in_place_scope(|s| {
+            s.spawn(|_| emitted = Some(emission()));
+            s.spawn(|_| compiled = opts.structure().compile(opts.weighting));
+            chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)
+        })
+    } else {
+        chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)
+    };
+    drop(chunks_rendered);
+    let partial = partial?;
+    compiled?;
+    let ((emission, emission_variance), seconds_emission) = emitted.unwrap_or_else(emission);
     let (mut stats, spread) = (chunks.gatherer.stats, chunks.gatherer.spread);
     stats.planes = opts.planes - resumed;
     stats.devices = partial.devices.clone();
+    stats.seconds_rays += seconds_emission;
     let t = Instant::now();
-    let (emission, emission_variance) =
-        direct_emission_and_variance_in(scene, opts.seed, opts.spp, opts.pixel_center, control);
-    let film = crate::partial::finish_with(scene, opts, &partial, &emission)?;
+    let film = {
+        let _s = crate::trace::span("image finished");
+        crate::partial::finish_with(scene, opts, &partial, &emission)?
+    };
     if let Some(mut spread) = spread {
         spread.close();
         stats.add_error_image(&film, spread.variance(&emission_variance), &emission_variance)?;
     }
     stats.seconds_rays += t.elapsed().as_secs_f64();
     stats.seconds_total = start.elapsed().as_secs_f64();
+    crate::trace::print();
     Ok((film, stats))
 }
 

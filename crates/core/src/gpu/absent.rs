@@ -23,6 +23,9 @@ impl Gpu {
     pub fn has_timestamps(&self) -> bool {
         match *self {}
     }
+    pub fn compile_gather(&self, _: Weighting) -> Result<()> {
+        match *self {}
+    }
     pub fn max_binding(&self) -> u64 {
         match *self {}
     }
@@ -82,7 +85,7 @@ impl GpuRays {
     pub fn on_gpu(gpu: &Arc<Gpu>, _: &RaySetRecord, _: &[PanelRecord]) -> Result<Self> {
         match **gpu {}
     }
-    pub fn wait(&self) -> Result<()> {
+    pub fn wait(&self) -> Result<u64> {
         match *self {}
     }
     pub fn read(&self) -> Result<Vec<CameraRay>> {
@@ -100,6 +103,9 @@ impl GpuRays {
 pub enum GpuSums {}
 
 impl GpuSums {
+    pub fn submit_pending(&mut self) -> Result<()> {
+        match *self {}
+    }
     pub fn read_into(&mut self, _: &mut [Vec3]) -> Result<GatherStats> {
         match *self {}
     }

@@ -76,6 +76,7 @@ fn found() -> Result<&'static [wgpu::Adapter], String> {
     static FOUND: OnceLock<Result<Vec<wgpu::Adapter>, String>> = OnceLock::new();
     FOUND
         .get_or_init(|| {
+            let _s = crate::trace::span("adapters found");
             let all = block_on(instance()?.enumerate_adapters(wgpu::Backends::PRIMARY));
             if all.is_empty() {
                 return Err(no_adapter(&"no adapter found"));
@@ -166,6 +167,7 @@ pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
     if let Some((_, g)) = gpus.iter().find(|(k, _)| *k == i) {
         return g.clone().map(|g| (i, g));
     }
+    let _s = crate::trace::span("device made");
     let made = Gpu::new(all[i].clone(), fixed_item_planes).map(Arc::new);
     gpus.push((i, made.clone()));
     made.map(|g| (i, g))

@@ -119,13 +119,20 @@ impl Gpu {
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let limits = adapter.limits();
+        let _s = crate::trace::span("device asked for");
         let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("fogplanes"),
             required_features: if timestamps { wgpu::Features::TIMESTAMP_QUERY } else { wgpu::Features::empty() },
             required_limits: limits.clone(),
+            // Small blocks of memory (4 MB on the host, 8 MB on the device, growing), not
+            // wgpu's default of 64 and 128 MB: a render's first read-back buffer then costs no
+            // 64 MB block of pinned host memory (about 20 ms on an H200's driver, in the first
+            // gathering of every process, docs/gpu.md), and fogplanes' buffers are few and large.
+            memory_hints: wgpu::MemoryHints::MemoryUsage,
             ..Default::default()
         }))
         .map_err(|e| format!("the GPU adapter {} gave no device: {e}", info.name))?;
+        drop(_s);
         let errors = Arc::new(Mutex::new(Vec::new()));
         let sink = errors.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
@@ -159,10 +166,12 @@ impl Gpu {
         let rays_layout = layout("rays", &[r, w]);
         let reach_layout = layout("reach", &[r, r, w, w]);
         let (bin_module, bin_pipeline_layout) = (shader("bin.wgsl", BIN_WGSL), pipeline_layout(&bin_layout));
+        let _s = crate::trace::span("pipelines made: bin, rays, reach");
         let bin = ["count", "scan", "scatter"].map(|entry| pipeline(&bin_pipeline_layout, &bin_module, entry));
         let rays = pipeline(&pipeline_layout(&rays_layout), &shader("rays.wgsl", RAYS_WGSL), "rays_main");
         let reach = pipeline(&pipeline_layout(&reach_layout), &shader("reach.wgsl", REACH_WGSL), "reach_rows");
         let gather_module = shader("gather.wgsl", GATHER_WGSL);
+        drop(_s);
         let kind = kind_name(info.device_type);
         let gpu = Gpu {
             name: format!("{} ({:?}, {kind})", info.name, info.backend),
@@ -248,6 +257,16 @@ impl Gpu {
         if errors.is_empty() { Ok(out) } else { Err(Error::Device(errors.join("; "))) }
     }
 
+    /// Makes the gather's pipelines for `weighting` now if they are not made yet: a render
+    /// does it beside the preparation of its first planes, which its first gathering waits
+    /// for otherwise (the WGSL translated and the driver's cache looked up: about 3 ms on an
+    /// H200, 100 to 200 ms where the driver's cache does not hold them yet).
+    pub fn compile_gather(&self, weighting: crate::weights::Weighting) -> Result<()> {
+        self.checked(|| {
+            self.gather_pipelines(super::estimator_id(weighting));
+        })
+    }
+
     /// The gather and reduce pipelines of estimator `id`, made on first use.
     pub(super) fn gather_pipelines(&self, id: u32) -> Arc<[wgpu::ComputePipeline; 2]> {
         let mut cache = self.gather.lock().unwrap_or_else(|p| p.into_inner());
@@ -258,6 +277,7 @@ impl Gpu {
                 let options =
                     wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };
                 Arc::new(["gather", "reduce"].map(|entry| {
+                    let _s = crate::trace::span("pipeline made: gather or reduce");
                     compute_pipeline(
                         &self.device,
                         &self.gather_pipeline_layout,

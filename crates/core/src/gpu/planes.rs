@@ -228,7 +228,11 @@ impl GpuPlanes {
         }
         // Compiled on first use, before the scratch buffers are held.
         let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
-        let (planes, upload_ns, bytes_crossed) = self.buffers()?;
+        let (planes, upload_ns, bytes_crossed) = {
+            let _s = crate::trace::span("planes uploaded");
+            self.buffers()?
+        };
+        let _s = crate::trace::span("batches encoded");
         gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
         control.progress();
         Ok(GatherStats { upload_ns, bytes_crossed, ..GatherStats::default() })

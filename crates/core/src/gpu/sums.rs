@@ -41,6 +41,15 @@ pub struct GpuSums {
     /// the last read.
     pub(super) bytes_up: u64,
     submissions: u64,
+    /// The reading back asked for ([`GpuSums::submit_pending`]), not yet done.
+    reading: Option<Reading>,
+}
+
+/// A reading back under way: the buffer the sums are copied to, and the gatherings'
+/// timestamps, both asked to be mapped.
+struct Reading {
+    readback: wgpu::Buffer,
+    timestamps: Vec<wgpu::Buffer>,
 }
 
 /// The most bytes of ray sets that work not yet submitted holds: past it, the work is submitted
@@ -79,6 +88,7 @@ impl GpuSums {
             pending_rays: 0,
             bytes_up: 0,
             submissions: 0,
+            reading: None,
         })
     }
 
@@ -103,16 +113,25 @@ impl GpuSums {
         self.submit_with(None)
     }
 
-    /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
-    /// returns the tests and hits they counted (in all) and the GPU's time of the gatherings
-    /// since the last read.
-    pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
-        assert_eq!(sums.len(), self.pixels, "one sum per pixel");
-        let held = self.gpu.clone();
-        let gpu = &*held;
-        let bytes = self.bytes;
+    /// Submits the gatherings not submitted yet with the copy of the sums for reading back
+    /// ([`GpuSums::read_into`] then waits for them), so that the GPU runs them while the CPU
+    /// reads other sums back: a window of several chunks submits each chunk's work before the
+    /// first reading, not after the reading before it, still one submission a chunk.
+    pub fn submit_pending(&mut self) -> Result<()> {
+        if self.reading.is_none() {
+            self.reading = Some(self.start_reading()?);
+        }
+        Ok(())
+    }
+
+    /// Submits the work not submitted yet and the sums' copy to a buffer the CPU maps, which is
+    /// asked for (with the gatherings' timestamps).
+    fn start_reading(&mut self) -> Result<Reading> {
+        let _s = crate::trace::span("work submitted");
+        let gpu = self.gpu.clone();
         let timestamps = std::mem::take(&mut self.timestamps);
-        let readback = gpu.checked(|| {
+        let bytes = self.bytes;
+        gpu.checked(|| {
             let readback =
                 gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
@@ -121,8 +140,23 @@ impl GpuSums {
             for b in timestamps.iter().chain([&readback]) {
                 b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             }
-            readback
-        })?;
+            Reading { readback, timestamps }
+        })
+    }
+
+    /// Waits for the gatherings into these sums, adds the sums to `sums` (one per pixel) and
+    /// returns the tests and hits they counted (in all) and the GPU's time of the gatherings
+    /// since the last read.
+    pub fn read_into(&mut self, sums: &mut [Vec3]) -> Result<GatherStats> {
+        assert_eq!(sums.len(), self.pixels, "one sum per pixel");
+        let held = self.gpu.clone();
+        let gpu = &*held;
+        let bytes = self.bytes;
+        let Reading { readback, timestamps } = match self.reading.take() {
+            Some(r) => r,
+            None => self.start_reading()?,
+        };
+        let waiting = crate::trace::span("waited for the GPU");
         let t = Instant::now();
         let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
         let wait_ns = t.elapsed().as_nanos() as u64;
@@ -152,6 +186,8 @@ impl GpuSums {
                     ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum::<u64>();
             }
         }
+        drop(waiting);
+        let _s = crate::trace::span("sums read back");
         let view = mapped(&readback)?;
         let (back, counts) = view[..bytes as usize].split_at(self.pixels * 12);
         let back: &[[u32; 3]] = bytemuck::cast_slice(back);
