@@ -3,7 +3,9 @@
 # per estimator, the GPU gather's G hits/s (its timestamps) and the render's end-to-end time at
 # 640x360 with 40,960 and 655,360 planes (the benchmark scene, whole pixels), the agreement with
 # the CPU's image (relative MSE, `fogplanes compare`), the GPU time by the work items' size, then
-# the CPU renderer's wall time on 1, 2, 4, 8 and all threads, and the machine's threads per core.
+# the CPU renderer's wall time on 1, 2, 4, 8 and all threads, and the machine's threads per core;
+# then the timeline of smis-exact's renders (`FOGPLANES_TRACE=1`: each step's start, end and
+# thread, crates/core/src/trace.rs) into a log of its own, gpu_timeline.log.
 #
 #   scripts/gpu_check.sh --fetch   # here, once, with a network: the Vulkan loader and libglvnd
 #                                  # as Debian packages into .gl/ (the device machine has none)
@@ -29,9 +31,13 @@ S=media_scenes/six_lights.toml
 # A dry run elsewhere (lavapipe) takes smaller ones: GPU_CHECK_RESOLUTION=64x36 GPU_CHECK_PLANES=2048.
 R=${GPU_CHECK_RESOLUTION:-640x360}
 P=${GPU_CHECK_PLANES:-40960 655360}
+first=${P%% *} last=${P##* }
 work=$(mktemp -d)
 log=${OUT:+$OUT/gpu_check.log}
 log=${log:-/dev/null}
+# One render: its summary line (gather, GPU time and G hits/s, total: from the scene loaded to
+# the image finished in memory, without process start and file writing).
+render() { timeout 150 "$B" render "$S" --resolution "$R" -q "$@" 2>&1 | grep -v XDG_RUNTIME_DIR | grep -v '^wrote'; }
 {
 date -u
 nvidia-smi -L 2>/dev/null
@@ -50,9 +56,6 @@ if [ -z "${VK_DRIVER_FILES:-}" ] && [ -f "$nv" ]; then
     echo "VK_DRIVER_FILES=$nv"
 fi
 echo "threads per core: $(lscpu 2>/dev/null | awk -F: '/Thread\(s\) per core/ {gsub(/ /, "", $2); print $2}'), logical CPUs: $(nproc)"
-# One render: its summary line (gather, GPU time and G hits/s, total: from the scene loaded to
-# the image finished in memory, without process start and file writing).
-render() { timeout 150 "$B" render "$S" --resolution "$R" -q "$@" 2>&1 | grep -v XDG_RUNTIME_DIR | grep -v '^wrote'; }
 for planes in $P; do
     for e in unweighted cmis-cosine smis-cosine smis-exact "smis-exact --orientations 8" cmis-exact; do
         name=${e// /_}
@@ -82,7 +85,6 @@ done
 # The work items' size (docs/gpu.md: a batch's items aim at several waves; the first planes
 # count's size is the default's own), smis-exact and cmis-exact with the first planes count, a
 # second process each: the GPU time by the item's planes decides the default.
-first=${P%% *}
 for item in 16 32 64 128 256 512; do
     for e in smis-exact cmis-exact; do
         FOGPLANES_GPU_ITEM_PLANES=$item render --planes "$first" -e $e --device gpu -o "$work/item.exr" | sed "s/^/gpu item $item $first: /"
@@ -96,6 +98,15 @@ for t in 1 2 4 8 all; do
     TIMEFORMAT="cpu threads $t: wall %R s, user %U s, sys %S s"
     { time "$B" render "$S" --resolution "$R" --planes 40960 -q "${threads[@]}" -o "$work/t.exr" 2>&1 | grep -v '^wrote' | sed "s/^/  /"; } 2>&1
 done
+# The timeline: where each end to end goes, step by step (a second process each, the first
+# planes count and the last), into a log of its own (here, in the Vulkan set-up above).
+{
+date -u
+for planes in "$first" "$last"; do
+    echo "== smis-exact, $planes planes, --device gpu, FOGPLANES_TRACE=1"
+    FOGPLANES_TRACE=1 render --planes "$planes" -e smis-exact --device gpu -o "$work/trace.exr"
+done
+} >"${OUT:-$work}/gpu_timeline.log" 2>&1
 date -u
 } 2>&1 | tee "$log"
 rm -rf "$work"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The timeline run of 2026-11-28 (second call): the build of 8af1bf7 with timeline probes
 # (a span printed on stderr per step when FOGPLANES_TRACE=1; crates/core/src/trace.rs came
-# after, with the probes renamed), carried as target/release/fogplanes with .gl/.
+# after, with the probes renamed), carried as target/release/fogplanes with .gl/; it ran as
+# .gl/trace_run.sh (hence the `cd` to the folder above its own).
 cd "$(dirname "$0")/.."
 for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
 export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
