@@ -44,6 +44,42 @@ fn render_writes_exr_and_png_and_prints_a_summary() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `FOGPLANES_TRACE=1`: the render's timeline on stderr, a line a step (start, end and length in
+/// milliseconds since the process started, the thread, the step), the steps of the render in
+/// it; without it, nothing.
+#[test]
+fn a_traced_render_prints_its_timeline() {
+    let dir = scratch("trace");
+    let out = dir.join("out.exr");
+    let args = ["render", "media_scenes/six_lights.toml", "--resolution", "32x18", "--planes", "2000", "-q", "-o"];
+    let run = |trace: &str| {
+        Command::new(env!("CARGO_BIN_EXE_fogplanes"))
+            .args(args)
+            .arg(&out)
+            .env("FOGPLANES_TRACE", trace)
+            .output()
+            .unwrap()
+    };
+    let o = run("1");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let mut steps = Vec::new();
+    for line in err.lines() {
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        assert!(fields.len() >= 5, "not a step: {line:?}");
+        let [start, end, length] = [0, 1, 2].map(|i| fields[i].parse::<f64>().unwrap());
+        assert!(0.0 <= start && start <= end && (end - start - length).abs() < 2e-3, "{line:?}");
+        assert!(fields[3].starts_with("ThreadId("), "{line:?}");
+        steps.push(fields[4..].join(" "));
+    }
+    for step in ["process started", "planes sampled", "first window prepared", "chunks rendered", "image finished"] {
+        assert!(steps.iter().any(|s| s == step), "no {step:?} in\n{err}");
+    }
+    let o = run("");
+    assert!(o.status.success() && o.stderr.is_empty(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn a_missing_output_directory_is_reported_before_rendering() {
     let o = fogplanes(&["render", "media_scenes/six_lights.toml", "--quiet", "-o", "/no/such/dir/x.exr"]);

@@ -264,32 +264,42 @@ fn gatherings<'p, 'q>(pieces: &'q [(usize, &'p Piece)], apart: bool) -> Vec<&'q 
     out
 }
 
-/// Chunks a render of `chunks` chunks gathers at once, each into its own sums: on the raster,
-/// in one parallel loop ([`crate::raster::chunks_at_once`]: several on many workers and a small
-/// image); on the GPU, enough for about [`GPU_WINDOWS`] windows, from one to
-/// [`GPU_CHUNKS_AT_ONCE`]; one on the other structures.
-fn chunks_at_once(scene: &Scene, opts: &RenderOptions, chunks: usize) -> usize {
+/// The windows of a render's chunks `chunks`, each gathered at once, every chunk into its own
+/// sums. On the raster, [`crate::raster::chunks_at_once`] chunks a window, in one parallel
+/// loop (several on many workers and a small image). On the GPU, one chunk, then each window
+/// twice the one before, up to [`GPU_CHUNKS_AT_ONCE`] ([`gpu_windows`]). One chunk a window on
+/// the other structures.
+fn windows(scene: &Scene, opts: &RenderOptions, chunks: Range<usize>) -> Vec<Range<usize>> {
     let cam = &scene.camera;
-    match opts.structure() {
+    let at_once = match opts.structure() {
         Accelerator::Raster => crate::raster::chunks_at_once(crate::schedule::workers(), cam.width, cam.height),
         Accelerator::Gpu(_) => {
             let most = crate::limits::MAX_WINDOW_PIXELS / (cam.width as usize * cam.height as usize).max(1);
-            (chunks / GPU_WINDOWS).clamp(1, GPU_CHUNKS_AT_ONCE.min(most).max(1))
+            return gpu_windows(chunks, GPU_CHUNKS_AT_ONCE.min(most));
         }
         _ => 1,
-    }
+    };
+    chunks.clone().step_by(at_once).map(|c| c..(c + at_once).min(chunks.end)).collect()
 }
 
-/// The chunks of a window on the GPU, where a render has many. Each window costs about a
-/// millisecond that nothing hides (its sums widened and added into the canonical tree, the
-/// join of its gathering and the next window's preparation): 40 of them in a render of 655,360
-/// planes on an H200 (docs/measurements/2026-11-28-h200-trace.log). The first window's
-/// preparation is hidden by nothing either: a render of few chunks keeps windows of one.
+/// The most chunks of a window on the GPU. Each window costs about a millisecond that nothing
+/// hides (its sums widened and added into the canonical tree, the join of its gathering and
+/// the next window's preparation): 40 windows of one chunk in a render of 655,360 planes on an
+/// H200 (docs/measurements/2026-11-28-h200-trace.log).
 const GPU_CHUNKS_AT_ONCE: usize = 4;
 
-/// The windows a render on the GPU aims at: a render of fewer than twice as many chunks
-/// gathers one chunk at a time.
-const GPU_WINDOWS: usize = 8;
+/// The GPU's windows of `chunks`: one chunk (its preparation is hidden by nothing: the render
+/// starts gathering soon), then each window twice the one before (its preparation hidden by
+/// the gathering of the window before, of half its chunks), up to `most` chunks.
+fn gpu_windows(chunks: Range<usize>, most: usize) -> Vec<Range<usize>> {
+    let (mut out, mut size, mut start) = (Vec::new(), 1, chunks.start);
+    while start < chunks.end {
+        let end = (start + size).min(chunks.end);
+        out.push(start..end);
+        (start, size) = (end, (2 * size).min(most.max(1)));
+    }
+    out
+}
 
 /// `buf` as `f(i)` for `i` in `0..n`, written in parallel ([`Control::map_units`]): in place
 /// where it has that length (an earlier chunk's buffer, whose pages are already faulted in),
@@ -470,13 +480,11 @@ impl<'a> ChunkRenderer<'a> {
         let done = self.resumed_chunks(&root, &held)?;
         let (scene, opts) = (self.gatherer.scene, self.gatherer.opts);
         let pixels = scene.camera.width as usize * scene.camera.height as usize;
-        // The chunks go in windows of `at_once`, each gathered in one parallel loop (every
-        // chunk into its own sums: the same bits) while the next window is prepared (its planes
-        // sampled, projected and binned, its chunks side by side): the two sides of a join, so
-        // that the workers a window's last tiles leave idle prepare the next.
-        let at_once = chunks_at_once(scene, opts, root.end - done);
-        let windows: Vec<Range<usize>> =
-            (done..root.end).step_by(at_once).map(|c| c..(c + at_once).min(root.end)).collect();
+        // The chunks go in windows ([`windows`]), each gathered at once (every chunk into its
+        // own sums: the same bits) while the next window is prepared (its planes sampled,
+        // projected and binned, its chunks side by side): the two sides of a join, so that the
+        // workers a window's last tiles leave idle prepare the next.
+        let windows = windows(scene, opts, done..root.end);
         let specs: Vec<Vec<Vec<PieceSpec>>> =
             windows.iter().map(|w| w.clone().map(|c| self.chunk_pieces(self.chunk_range(c))).collect()).collect();
         let first = crate::trace::span("first window prepared");
@@ -947,6 +955,23 @@ mod tests {
 
     fn small_scene() -> Scene {
         Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(128, 96).unwrap()
+    }
+
+    /// The GPU's windows start with one chunk and double up to the most, covering the chunks
+    /// once, in order.
+    #[test]
+    fn gpu_windows_double_from_one_chunk() {
+        assert_eq!(gpu_windows(0..3, 4), [0..1, 1..3]);
+        assert_eq!(gpu_windows(5..6, 4), vec![Range { start: 5, end: 6 }]);
+        assert_eq!(gpu_windows(2..2, 4), []);
+        assert_eq!(gpu_windows(0..4, 0), [0..1, 1..2, 2..3, 3..4], "a large image: one chunk at a time");
+        for (chunks, most) in [(0..40, 4), (3..100, 4), (0..7, 2)] {
+            let w = gpu_windows(chunks.clone(), most);
+            assert_eq!(w.first().unwrap().len(), 1);
+            assert!(w.windows(2).all(|p| p[0].end == p[1].start && p[1].len() <= (2 * p[0].len()).min(most)));
+            assert_eq!((w[0].start, w.last().unwrap().end), (chunks.start, chunks.end));
+        }
+        assert_eq!(gpu_windows(0..40, 4).len(), 12, "655,360 planes: 12 windows, not 40");
     }
 
     #[test]

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# A device session's one prepared call (issue 45: measure first): scripts/gpu_check.sh with this
+# build, then with a base build where one is carried, scripts/cores_check.sh, and the GPU tests
+# on the device's driver where their binary is carried; every log under $OUT.
+#
+# Here, before the call:
+#   cargo build --release && cargo test --release --no-run
+#   strip -o .gl/all target/release/deps/all-<hash>        # the test binary (`--no-run` names it)
+#   git worktree add /tmp/base <commit> && (cd /tmp/base && CARGO_TARGET_DIR=/tmp/base-target \
+#       cargo build --release) && strip -o .gl/base/fogplanes /tmp/base-target/release/fogplanes
+# The call (device tool): `bash scripts/device_check.sh`, carrying target/release/fogplanes and
+# .gl (the Vulkan loader's packages, `scripts/gpu_check.sh --fetch`), 64 MiB in all (stripped,
+# each binary is about 12 MB). About 5 minutes on an H100 or H200: give it a timeout of 480 s.
+# Its logs: gpu_check.log and gpu_timeline.log (this build), base/gpu_check.log and
+# base/gpu_timeline.log, cores_check.log, gpu_tests.log, devices.log. Commit them under
+# docs/measurements/ with the date, the device, the commits and this command.
+cd "$(dirname "$0")/.."
+B=target/release/fogplanes
+out=${OUT:?set OUT to the folder for the logs}
+for f in .gl/*.deb; do dpkg -x "$f" /; done
+ldconfig
+nv=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+if [ -z "${VK_DRIVER_FILES:-}" ] && [ -f "$nv" ]; then
+    export VK_DRIVER_FILES=$nv __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+fi
+{ date -u; nvidia-smi -L 2>/dev/null; "$B" devices; } >"$out/devices.log" 2>&1
+timeout 170 bash scripts/gpu_check.sh >/dev/null 2>&1
+echo "gpu_check rc $?" >>"$out/gpu_check.log"
+if [ -x .gl/base/fogplanes ]; then
+    mkdir -p "$out/base"
+    OUT="$out/base" FOGPLANES=.gl/base/fogplanes timeout 170 bash scripts/gpu_check.sh >/dev/null 2>&1
+    echo "gpu_check (base) rc $?" >>"$out/base/gpu_check.log"
+fi
+timeout 240 bash scripts/cores_check.sh "$B" >"$out/cores_check.log" 2>&1
+echo "cores_check rc $?" >>"$out/cores_check.log"
+if [ -x .gl/all ]; then
+    # The test binary finds the repo at the path it was built in.
+    [ -e /work/main ] || { mkdir -p /work && ln -s "$PWD" /work/main; }
+    { date -u; FOGPLANES_REQUIRE_GPU=1 timeout 100 .gl/all --test-threads 4 gpu:: devices::; echo "gpu tests rc $?"; } \
+        >"$out/gpu_tests.log" 2>&1
+fi
+# What the reply shows: each build's benchmark lines.
+grep -h "smis-exact: 40960 planes\|smis-exact: 655360 planes" "$out/gpu_check.log" "$out"/base/gpu_check.log 2>/dev/null |
+    sed 's/(0[^;]*GPU time/GPU time/' | cut -c1-220
+tail -2 "$out/cores_check.log" "$out/gpu_tests.log" 2>/dev/null
