@@ -13,11 +13,13 @@ use crate::gpu::{self, GpuPlanes, GpuRays, GpuSums};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::limits::PLANE_UNIT;
 use crate::photon_plane::{PlaneSet, sample_plane};
+use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::raster::{RasterPiece, ScreenRaster, Tiling, screen_polygon};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
 use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// How camera rays find the planes they hit.
@@ -225,6 +227,15 @@ impl PreparedPlanes {
         &self.context
     }
 
+    /// The GPU's structure: a render's pieces all have one structure, and this is called
+    /// where it is the GPU's.
+    fn gpu(&self) -> &GpuPlanes {
+        match &self.structure {
+            Structure::Gpu(g) => g,
+            _ => unreachable!("a render's pieces all have one structure, here the GPU's"),
+        }
+    }
+
     /// The raster, if that is the structure (for measuring the traversal alone).
     pub fn raster(&self) -> Option<&ScreenRaster> {
         match &self.structure {
@@ -278,9 +289,9 @@ pub struct GpuPiece<'a> {
 /// pieces along it.
 pub struct OnGpu {
     sums: Vec<Option<GpuSums>>,
-    rays: Option<(u32, GpuRays)>,
+    rays: Option<(u32, Arc<GpuRays>)>,
     /// The set before, whose work may still be under way.
-    before: Option<GpuRays>,
+    before: Option<Arc<GpuRays>>,
     /// Each target's hits and tests told by earlier reads.
     told: Vec<[u64; 2]>,
 }
@@ -312,52 +323,131 @@ impl OnGpu {
     }
 }
 
-/// Makes ray set `k` for the GPU structure given: on the CPU, written into the buffer that
-/// uploads it ([`GpuPlanes::make_rays`]), or on the GPU from its record
-/// ([`GpuPlanes::rays_on_gpu`]).
-pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &GpuPlanes) -> Result<GpuRays>;
+/// A ray set for the GPU: made on the CPU, written into the buffer that uploads it
+/// ([`GpuPlanes::make_rays`]), or its record, for the GPU to make it from
+/// ([`GpuPlanes::rays_on_gpu`], side by side with the other sets of a gathering).
+pub enum RaySet {
+    Made(GpuRays),
+    Record(RaySetRecord, Vec<PanelRecord>),
+}
 
-/// [`gather_pieces`] of pieces on the GPU, into sums held there ([`OnGpu`]): piece after piece,
-/// a piece's ray set made on the GPU from `make_rays`'s record where it is not the set made
-/// last. Nothing is submitted before the sums are read (a target's gatherings go in one
-/// submission with its reading). The hits and the GPU's time are counted when the sums are
-/// read back.
-pub fn gather_pieces_on_gpu(
-    pieces: &[GpuPiece],
+/// Makes ray set `k` for the GPU structure given ([`RaySet`]).
+pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &GpuPlanes) -> Result<RaySet>;
+
+/// A piece's rays: a set made, or the set of a gathering's records to make.
+#[derive(Clone)]
+enum Along {
+    Made(Arc<GpuRays>),
+    Record(usize),
+}
+
+/// A gathering's ray sets to make from their records (each with its set, its structure and the
+/// target its upload counts to) and pieces to record, not yet done.
+#[derive(Default)]
+struct Waiting<'p> {
+    sets: Vec<(u32, RaySetRecord, Vec<PanelRecord>, &'p GpuPlanes, usize)>,
+    pieces: Vec<(&'p GpuPiece<'p>, Along)>,
+}
+
+/// [`gather_pieces`] of pieces on the GPU, into sums held there ([`OnGpu`]), a piece's ray set
+/// made where it is not the set made last. Along rays made on the GPU, the gathering's sets are
+/// made and its pieces recorded side by side (a set's or a piece's recording, buffers and
+/// passes, takes a few tenths of a millisecond of the CPU, which the GPU waits for), then
+/// added to their sums' work in order; nothing is submitted before the sums are read (a
+/// target's gatherings go in one submission with its reading). Along rays made on the CPU,
+/// piece after piece, each submitted at once. The hits and the GPU's time are counted when the
+/// sums are read back.
+pub fn gather_pieces_on_gpu<'p>(
+    pieces: &'p [GpuPiece<'p>],
     weighting: Weighting,
     on_gpu: &mut OnGpu,
     make_rays: RaySetMaker,
     control: Control,
 ) -> Result<Vec<GatherStats>> {
     let mut found = vec![GatherStats::default(); on_gpu.sums.len()];
+    let mut waiting = Waiting::default();
+    let mut current = on_gpu.rays.as_ref().map(|(set, r)| (*set, Along::Made(r.clone())));
     for p in pieces {
-        let Structure::Gpu(g) = &p.planes.structure else {
-            unreachable!("a render's pieces all have one structure, here the GPU's")
-        };
-        if on_gpu.rays.as_ref().is_none_or(|(set, _)| *set != p.set) {
-            // The submissions along rays made on the CPU are not waited for, so that the CPU
-            // makes the next set while the GPU gathers; but at most two sets' work is under way:
-            // the one before last is waited for and let go before a new set is made. (The work
-            // along rays made on the GPU is submitted when the sums are read: no wait here.)
-            if let Some(done) = on_gpu.before.take() {
-                found[p.target].wait_ns += done.wait()?;
+        let g = p.planes.gpu();
+        if current.as_ref().is_none_or(|(set, _)| *set != p.set) {
+            match make_rays(p.set, g)? {
+                RaySet::Record(record, panels) => {
+                    // At most PENDING_RAY_BYTES of sets made at once (a large image's).
+                    let sets = waiting.sets.len() as u64 + 1;
+                    if sets > 1 && sets * g.ray_set_bytes() > gpu::PENDING_RAY_BYTES {
+                        record_side_by_side(&mut waiting, weighting, on_gpu, &mut found, control)?;
+                    }
+                    waiting.sets.push((p.set, record, panels, g, p.target));
+                    current = Some((p.set, Along::Record(waiting.sets.len() - 1)));
+                }
+                RaySet::Made(rays) => {
+                    record_side_by_side(&mut waiting, weighting, on_gpu, &mut found, control)?;
+                    // The submissions along rays made on the CPU are not waited for, so that the
+                    // CPU makes the next set while the GPU gathers; but at most two sets' work is
+                    // under way: the one before last is waited for and let go.
+                    if let Some(done) = on_gpu.before.take() {
+                        found[p.target].wait_ns += done.wait()?;
+                    }
+                    found[p.target].upload_ns += rays.upload_ns();
+                    found[p.target].bytes_crossed += rays.bytes_up();
+                    let rays = Arc::new(rays);
+                    on_gpu.before = on_gpu.rays.replace((p.set, rays.clone())).map(|(_, r)| r);
+                    current = Some((p.set, Along::Made(rays)));
+                }
             }
-            on_gpu.before = on_gpu.rays.take().map(|(_, r)| r);
-            let _s = crate::trace::span("ray set recorded");
-            let rays = make_rays(p.set, g)?;
-            found[p.target].upload_ns += rays.upload_ns();
-            found[p.target].bytes_crossed += rays.bytes_up();
-            on_gpu.rays = Some((p.set, rays));
         }
-        let rays = &on_gpu.rays.as_ref().expect("uploaded above").1;
-        let sums = match &mut on_gpu.sums[p.target] {
-            Some(s) => s,
-            empty => empty.insert(g.new_sums()?),
-        };
-        let _s = crate::trace::span("piece recorded");
-        found[p.target] += g.gather_into(weighting, rays, sums, control)?;
+        if on_gpu.sums[p.target].is_none() {
+            on_gpu.sums[p.target] = Some(g.new_sums()?);
+        }
+        let along = current.as_ref().expect("made above").1.clone();
+        match along {
+            Along::Made(rays) if !rays.made_on_gpu() => {
+                let sums = on_gpu.sums[p.target].as_mut().expect("made above");
+                found[p.target] += g.gather_into(weighting, &rays, sums, control)?;
+            }
+            along => waiting.pieces.push((p, along)),
+        }
     }
+    record_side_by_side(&mut waiting, weighting, on_gpu, &mut found, control)?;
     Ok(found)
+}
+
+/// The ray sets and pieces `waiting` made and recorded side by side, then the pieces added to
+/// their sums' work in their order (each after its rays' pass, the first time), what they
+/// found added to `found`; the last set made is kept as the set made last.
+fn record_side_by_side(
+    waiting: &mut Waiting,
+    weighting: Weighting,
+    on_gpu: &mut OnGpu,
+    found: &mut [GatherStats],
+    control: Control,
+) -> Result<()> {
+    let made = control.map_units("ray sets", waiting.sets.len(), 1, |i| {
+        let (_, record, panels, g, _) = &waiting.sets[i];
+        let _s = crate::trace::span("ray set recorded");
+        g.rays_on_gpu(record, panels).map(Arc::new)
+    });
+    let made: Vec<Arc<GpuRays>> = made.into_iter().collect::<Result<_>>()?;
+    for ((set, _, _, _, target), rays) in waiting.sets.drain(..).zip(&made) {
+        found[target].upload_ns += rays.upload_ns();
+        found[target].bytes_crossed += rays.bytes_up();
+        on_gpu.rays = Some((set, rays.clone()));
+    }
+    let rays_of = |along: &Along| match along {
+        Along::Made(rays) => rays.clone(),
+        Along::Record(i) => made[*i].clone(),
+    };
+    let sums = &on_gpu.sums;
+    let recorded = control.map_units("record", waiting.pieces.len(), 1, |i| {
+        let (p, along) = &waiting.pieces[i];
+        let into = sums[p.target].as_ref().expect("made before the piece waits");
+        p.planes.gpu().record(weighting, &rays_of(along), into, control)
+    });
+    for ((p, along), recorded) in waiting.pieces.drain(..).zip(recorded) {
+        let into = on_gpu.sums[p.target].as_mut().expect("made before the piece waits");
+        found[p.target] += into.add(recorded?, &rays_of(&along));
+    }
+    Ok(())
 }
 
 /// Gathers several pieces of planes, each along its own ray set, adding each ray's estimate of

@@ -9,7 +9,9 @@
 //! direct emission, [`crate::emission`]). The options come resolved and checked from
 //! [`crate::settings`]: nothing here checks them again.
 
-use crate::accel::{Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, gather_pieces, gather_pieces_on_gpu};
+use crate::accel::{
+    Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, RaySet, gather_pieces, gather_pieces_on_gpu,
+};
 use crate::camera::CameraRay;
 use crate::control::Control;
 use crate::emission::direct_emission_and_variance_in;
@@ -55,7 +57,7 @@ struct Piece {
     planes: Arc<PreparedPlanes>,
 }
 
-/// The most ray sets one gathering holds (its pieces' sets, each tile taking the pieces in
+/// The most ray sets one gathering on the CPU holds (its pieces' sets, each tile taking the pieces in
 /// turn): so that a chunk of many small pieces (small renders, many ray sets) holds two sets at
 /// a time, not all of its own.
 const RAY_SETS_PER_GATHERING: usize = 2;
@@ -164,7 +166,11 @@ impl GatherSide<'_> {
         };
         // Each chunk's hits and GPU time, counted when its sums are read back.
         let mut read = vec![GatherStats::default(); chunks.len()];
-        for group in gatherings(&all, self.spread.is_some()) {
+        // On the GPU a gathering holds every ray set of its pieces: they are made there from
+        // their records and kept until the sums are read (up to a bound,
+        // `gpu::PENDING_RAY_BYTES`), and the pieces of one gathering record side by side.
+        let sets_at_once = if on_gpu.is_some() { usize::MAX } else { RAY_SETS_PER_GATHERING };
+        for group in gatherings(&all, sets_at_once, self.spread.is_some()) {
             // With an error image, each piece is its chunk's only one in the gathering: its sums
             // are its chunk's after less before, told to the spread in piece order.
             if self.spread.is_some() {
@@ -186,11 +192,11 @@ impl GatherSide<'_> {
                     let mut make = |k: u32, g: &crate::gpu::GpuPlanes| {
                         if on {
                             let (record, panels) = rays.gpu_record(scene, k);
-                            return g.rays_on_gpu(&record, &panels);
+                            return Ok(RaySet::Record(record, panels));
                         }
                         let mut made = None;
                         rays.make_rows(scene, k, control, |row| made = Some(g.make_rays(row)));
-                        made.expect("the maker gives the set's rows")
+                        made.expect("the maker gives the set's rows").map(RaySet::Made)
                     };
                     let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, &mut make, control)?;
                     if self.spread.is_some() {
@@ -239,15 +245,19 @@ impl GatherSide<'_> {
 }
 
 /// The gatherings of `pieces` (chunk, piece), in order: runs of consecutive pieces that hold at
-/// most [`RAY_SETS_PER_GATHERING`] ray sets; with an error image (`apart`), at most one piece of
-/// each chunk, so that each piece's sums are told apart (its chunk's sums before and after).
-fn gatherings<'p, 'q>(pieces: &'q [(usize, &'p Piece)], apart: bool) -> Vec<&'q [(usize, &'p Piece)]> {
+/// most `sets` ray sets; with an error image (`apart`), at most one piece of each chunk, so
+/// that each piece's sums are told apart (its chunk's sums before and after).
+fn gatherings<'p, 'q>(
+    pieces: &'q [(usize, &'p Piece)],
+    sets_at_once: usize,
+    apart: bool,
+) -> Vec<&'q [(usize, &'p Piece)]> {
     let mut out = Vec::new();
     let mut start = 0;
     let (mut sets, mut chunks) = (Vec::new(), Vec::new());
     for (i, &(c, p)) in pieces.iter().enumerate() {
         let new_set = !sets.contains(&p.spec.0);
-        if (new_set && sets.len() == RAY_SETS_PER_GATHERING) || (apart && chunks.contains(&c)) {
+        if (new_set && sets.len() == sets_at_once) || (apart && chunks.contains(&c)) {
             out.push(&pieces[start..i]);
             start = i;
             sets.clear();

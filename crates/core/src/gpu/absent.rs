@@ -55,6 +55,9 @@ impl GpuPlanes {
     pub fn new(gpu: Arc<Gpu>, _: &GatherContext, _: &[super::ScreenReach], _: u32, _: u32) -> Result<Self> {
         match *gpu {}
     }
+    pub fn ray_set_bytes(&self) -> u64 {
+        match *self {}
+    }
     pub fn new_sums(&self) -> Result<GpuSums> {
         match *self {}
     }
@@ -73,6 +76,9 @@ impl GpuPlanes {
     pub fn gather_into(&self, _: Weighting, _: &GpuRays, _: &mut GpuSums, _: Control) -> Result<GatherStats> {
         match *self {}
     }
+    pub fn record(&self, _: Weighting, _: &GpuRays, _: &GpuSums, _: Control) -> Result<Recorded> {
+        match *self {}
+    }
 }
 
 /// Never made: there is no [`Gpu`] to make them on.
@@ -84,6 +90,9 @@ impl GpuRays {
     }
     pub fn on_gpu(gpu: &Arc<Gpu>, _: &RaySetRecord, _: &[PanelRecord]) -> Result<Self> {
         match **gpu {}
+    }
+    pub fn made_on_gpu(&self) -> bool {
+        match *self {}
     }
     pub fn wait(&self) -> Result<u64> {
         match *self {}
@@ -102,7 +111,13 @@ impl GpuRays {
 /// Never made: there is no [`Gpu`] to make them on.
 pub enum GpuSums {}
 
+/// Never made: there is no [`GpuPlanes`] to record it.
+pub enum Recorded {}
+
 impl GpuSums {
+    pub fn add(&mut self, recorded: Recorded, _: &GpuRays) -> GatherStats {
+        match recorded {}
+    }
     pub fn submit_pending(&mut self) -> Result<()> {
         match *self {}
     }

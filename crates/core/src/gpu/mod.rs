@@ -41,7 +41,7 @@ pub use adapter::{adapter, adapter_at, adapters};
 #[cfg(feature = "gpu")]
 pub use device::Gpu;
 #[cfg(feature = "gpu")]
-pub use planes::GpuPlanes;
+pub use planes::{GpuPlanes, Recorded};
 #[cfg(feature = "gpu")]
 pub use polygons::reach_on_gpu;
 #[cfg(feature = "gpu")]
@@ -52,7 +52,7 @@ pub use sums::GpuSums;
 #[cfg(not(feature = "gpu"))]
 mod absent;
 #[cfg(not(feature = "gpu"))]
-pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, adapter, adapter_at, adapters};
+pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, Recorded, adapter, adapter_at, adapters};
 
 /// An adapter as `fogplanes devices` lists it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -148,6 +148,11 @@ pub const BATCH_PLANES: usize = 16_384;
 /// piece is one wave of about as many items as tiles, as long as its longest item, with most
 /// of the GPU idle before it ends.
 pub const ITEMS_AIMED: u64 = 8192;
+
+/// The most bytes of ray sets that work not yet submitted holds: past it, the work is submitted
+/// at once (a large image's ray sets are then let go as their gatherings end), and a gathering
+/// makes its sets side by side up to it at a time.
+pub const PENDING_RAY_BYTES: u64 = 256 << 20;
 
 /// The variable that fixes the planes of a work item, for measuring the item size on a device
 /// (`scripts/gpu_check.sh`): a number from 1 to 512 (at most 256 on a CPU adapter).

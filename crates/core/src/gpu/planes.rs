@@ -8,7 +8,7 @@ use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams, ITEM_BYTES};
 use super::scratch::{ScratchBuffers, indirect_offset};
-use super::sums::{GpuSums, PENDING_RAY_BYTES};
+use super::sums::GpuSums;
 use super::{BATCH_PLANES, ScreenReach, TILE, estimator_id, item_planes};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
@@ -160,6 +160,11 @@ impl GpuPlanes {
         Ok((self.buffers.get_or_init(|| Box::new(made)), t.elapsed().as_nanos() as u64, bytes))
     }
 
+    /// Bytes of a ray set of this structure's image on the GPU.
+    pub fn ray_set_bytes(&self) -> u64 {
+        self.width as u64 * self.height as u64 * std::mem::size_of::<CameraRay>() as u64
+    }
+
     /// Zero sums on the GPU for this structure's image ([`GpuPlanes::gather_into`]).
     pub fn new_sums(&self) -> Result<GpuSums> {
         GpuSums::new(self.gpu.clone(), self.width, self.height)
@@ -207,10 +212,10 @@ impl GpuPlanes {
     /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
     /// the planes in batches, each binned and gathered in turn, the work kept with `into` and
     /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
-    /// or sooner where the work held passes [`PENDING_RAY_BYTES`] of ray sets. Checks `control`
+    /// or sooner where the work held passes [`super::PENDING_RAY_BYTES`] of ray sets. Checks `control`
     /// before each batch (a cancel drops the work not submitted); reports one unit of progress.
     /// The result holds the planes' upload; the tests, the hits and the GPU's time are counted
-    /// on the GPU, and when `into` is read back.
+    /// on the GPU, and when `into` is read back. [`GpuPlanes::record`] then [`GpuSums::add`].
     pub fn gather_into(
         &self,
         weighting: Weighting,
@@ -218,13 +223,22 @@ impl GpuPlanes {
         into: &mut GpuSums,
         control: Control,
     ) -> Result<GatherStats> {
+        let recorded = self.record(weighting, rays, into, control)?;
+        Ok(into.add(recorded, rays))
+    }
+
+    /// [`GpuPlanes::gather_into`]'s work recorded (the planes uploaded by their first
+    /// gathering, every batch in one command buffer), not yet added to `into`'s: the pieces of
+    /// a gathering record side by side, and [`GpuSums::add`] adds each in order.
+    pub fn record(&self, weighting: Weighting, rays: &GpuRays, into: &GpuSums, control: Control) -> Result<Recorded> {
         let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let pixels = w as usize * h as usize;
         assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
         control.check()?;
+        let _s = crate::trace::span("piece recorded");
         if self.batches.is_empty() {
             control.progress();
-            return Ok(GatherStats::default());
+            return Ok(Recorded::default());
         }
         // Compiled on first use, before the scratch buffers are held.
         let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
@@ -232,24 +246,23 @@ impl GpuPlanes {
             let _s = crate::trace::span("planes uploaded");
             self.buffers()?
         };
-        let _s = crate::trace::span("batches encoded");
-        gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
+        let mut recorded = gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
+        recorded.stats = GatherStats { upload_ns, bytes_crossed, ..GatherStats::default() };
         control.progress();
-        Ok(GatherStats { upload_ns, bytes_crossed, ..GatherStats::default() })
+        Ok(recorded)
     }
 
-    /// [`GpuPlanes::gather_into`]'s work, its batches one after another in one command buffer,
-    /// kept with `into` (submitted with its reading, or sooner where it holds many ray sets).
+    /// [`GpuPlanes::record`]'s work: its batches one after another in one command buffer.
     fn encode(
         &self,
         weighting: Weighting,
         pipelines: &[wgpu::ComputePipeline; 2],
         planes: &PlaneBuffers,
         rays: &GpuRays,
-        into: &mut GpuSums,
+        into: &GpuSums,
         control: Control,
-    ) -> Result<()> {
-        let mut scratch = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner());
+    ) -> Result<Recorded> {
+        let _s = crate::trace::span("batches encoded");
         let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
         let tiles = tiles_x * tiles_y;
@@ -279,13 +292,21 @@ impl GpuPlanes {
         let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
         let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
         let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
-        let s = scratch.at_least(&gpu.device, tiles as u64, max_pairs, max_items);
-        let gather_group = gather_group(gpu, &params, planes, rays, &rotations_buf, s, &into.image);
+        // The scratch buffers held only while they are found (grown if need be), so that the
+        // pieces of a gathering record side by side: each piece's passes run after the piece's
+        // before it on the queue, whichever buffers each one holds.
+        let s = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(
+            &gpu.device,
+            tiles as u64,
+            max_pairs,
+            max_items,
+        );
+        let gather_group = gather_group(gpu, &params, planes, rays, &rotations_buf, &s, &into.image);
         let batches = self.batches.len();
         let queries = timestamp_queries(gpu, batches);
         let tile_grid = grid(tiles as u64);
         // Every batch in one command buffer (the passes run in order, the scratch buffers
-        // reused from batch to batch), kept with the sums to submit with their reading.
+        // reused from batch to batch).
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
         // The planes' reach, until a submission has found it (once for `into`'s work), timed
         // with the first batch.
@@ -298,7 +319,6 @@ impl GpuPlanes {
                 end_of_pass_write_index: None,
             });
             planes.polygons.encode(gpu, &mut encoder, timestamp_writes);
-            into.on_submit.push(self.reach_found.clone());
         }
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
@@ -313,7 +333,7 @@ impl GpuPlanes {
                 pad: 0,
             };
             let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
-            let bin_group = bin_group(gpu, &bin_params, planes, s);
+            let bin_group = bin_group(gpu, &bin_params, planes, &s);
             // The gather's work items as many as `scan` counts (`bin.wgsl` writes the grid).
             let steps: [Step; 5] = [
                 (&gpu.bin[0], &bin_group, Some(tile_grid)),
@@ -346,20 +366,30 @@ impl GpuPlanes {
                 encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
             }
         }
-        into.pending.extend(rays.take_pending());
-        into.pending.push(encoder.finish());
-        into.pending_rays += (rays.len * std::mem::size_of::<CameraRay>()) as u64;
-        into.bytes_up += (std::mem::size_of_val(&gather_params) + std::mem::size_of_val(rotations.as_slice())) as u64
-            + (self.batches.len() * std::mem::size_of::<BinParams>()) as u64;
-        if !rays.made_on_gpu || into.pending_rays > PENDING_RAY_BYTES {
-            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = into.submit();
-        }
-        match queries {
-            Some((_, _, readback)) => into.timestamps.push(readback),
-            None => into.untimed = true,
-        }
-        Ok(())
+        Ok(Recorded {
+            commands: Some(encoder.finish()),
+            timestamps: queries.map(|(_, _, readback)| readback),
+            reach: reach_first.then(|| self.reach_found.clone()),
+            bytes_up: (std::mem::size_of_val(&gather_params) + std::mem::size_of_val(rotations.as_slice())) as u64
+                + (self.batches.len() * std::mem::size_of::<BinParams>()) as u64,
+            stats: GatherStats::default(),
+        })
     }
+}
+
+/// A piece's gathering recorded ([`GpuPlanes::record`]), to add to its sums' work in order
+/// ([`GpuSums::add`]): nothing where the piece has no planes.
+#[derive(Default)]
+pub struct Recorded {
+    pub(super) commands: Option<wgpu::CommandBuffer>,
+    /// Its timestamps' read-back, where the adapter has them.
+    pub(super) timestamps: Option<wgpu::Buffer>,
+    /// The flag its reach pass sets once submitted, where it records one.
+    pub(super) reach: Option<Arc<AtomicBool>>,
+    /// Bytes of its parameters, uploaded.
+    pub(super) bytes_up: u64,
+    /// Its planes' upload (time and bytes).
+    pub(super) stats: GatherStats,
 }
 
 /// A pass of a batch: its pipeline, its bindings, and its grid of workgroups (`None`: the

@@ -183,6 +183,12 @@ impl GpuRays {
         self.pending.lock().unwrap_or_else(|p| p.into_inner()).take()
     }
 
+    /// Whether the GPU makes them (the work along them is then kept to be submitted with the
+    /// sums' reading).
+    pub fn made_on_gpu(&self) -> bool {
+        self.made_on_gpu
+    }
+
     /// Nanoseconds spent making their buffer and handing it to the GPU.
     pub fn upload_ns(&self) -> u64 {
         self.upload_ns

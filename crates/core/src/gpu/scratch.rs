@@ -30,6 +30,7 @@ pub(super) fn indirect_offset(tiles: u32) -> u64 {
     (tiles as u64 + 1) * 4
 }
 
+#[derive(Clone)]
 pub(super) struct ScratchBuffers {
     /// Tiles, (tile, plane) pairs and work items they hold.
     capacity: (u64, u64, u64),
@@ -46,9 +47,9 @@ pub(super) struct ScratchBuffers {
 }
 
 impl Scratch {
-    /// Buffers for `tiles` tiles, `pairs` pairs and `items` work items: those held if they are
-    /// large enough, else new ones of the larger of each.
-    pub(super) fn at_least(&mut self, device: &wgpu::Device, tiles: u64, pairs: u64, items: u64) -> &ScratchBuffers {
+    /// Buffers for `tiles` tiles, `pairs` pairs and `items` work items (handles to them): those
+    /// held if they are large enough, else new ones of the larger of each.
+    pub(super) fn at_least(&mut self, device: &wgpu::Device, tiles: u64, pairs: u64, items: u64) -> ScratchBuffers {
         let held = self.buffers.as_ref().map_or((0, 0, 0), |b| b.capacity);
         if held.0 < tiles || held.1 < pairs || held.2 < items {
             let (tiles, pairs, items) = (held.0.max(tiles), held.1.max(pairs), held.2.max(items));
@@ -67,6 +68,6 @@ impl Scratch {
                 partial: buffer(device, "partial", items * ITEM_BYTES, storage),
             });
         }
-        self.buffers.as_ref().expect("made above")
+        self.buffers.clone().expect("made above")
     }
 }

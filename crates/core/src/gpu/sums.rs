@@ -35,7 +35,7 @@ pub struct GpuSums {
     /// Set once the pending work is submitted: whether a structure's reach has been found
     /// ([`super::GpuPlanes`] records the pass into the first gatherings until then).
     pub(super) on_submit: Vec<Arc<AtomicBool>>,
-    /// Bytes of the ray sets the pending work holds on the GPU ([`PENDING_RAY_BYTES`]).
+    /// Bytes of the ray sets the pending work holds on the GPU ([`super::PENDING_RAY_BYTES`]).
     pub(super) pending_rays: u64,
     /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
     /// the last read.
@@ -51,10 +51,6 @@ struct Reading {
     readback: wgpu::Buffer,
     timestamps: Vec<wgpu::Buffer>,
 }
-
-/// The most bytes of ray sets that work not yet submitted holds: past it, the work is submitted
-/// at once (a large image's ray sets are then let go as their gatherings end).
-pub(super) const PENDING_RAY_BYTES: u64 = 256 << 20;
 
 /// Bytes of a `width x height` image's sums on the GPU: 12 a pixel, 16 a tile ([`GpuSums`]).
 pub(super) fn sums_bytes(width: u32, height: u32) -> u64 {
@@ -111,6 +107,30 @@ impl GpuSums {
     /// Submits the work not submitted yet.
     pub(super) fn submit(&mut self) -> Option<wgpu::SubmissionIndex> {
         self.submit_with(None)
+    }
+
+    /// Adds a gathering recorded along `rays` ([`super::GpuPlanes::record`]) to the work on
+    /// these sums, after the pass that makes the rays if it is not added yet: submitted when
+    /// the sums are read, or now where the rays were made on the CPU (so that the CPU makes the
+    /// next set while the GPU gathers) or the work held passes [`super::PENDING_RAY_BYTES`] of ray
+    /// sets. Returns what the recording found (the planes' upload).
+    pub fn add(&mut self, recorded: super::Recorded, rays: &super::GpuRays) -> GatherStats {
+        let Some(commands) = recorded.commands else {
+            return recorded.stats;
+        };
+        self.pending.extend(rays.take_pending());
+        self.pending.push(commands);
+        self.on_submit.extend(recorded.reach);
+        self.pending_rays += (rays.len * std::mem::size_of::<crate::camera::CameraRay>()) as u64;
+        self.bytes_up += recorded.bytes_up;
+        if !rays.made_on_gpu || self.pending_rays > super::PENDING_RAY_BYTES {
+            *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = self.submit();
+        }
+        match recorded.timestamps {
+            Some(readback) => self.timestamps.push(readback),
+            None => self.untimed = true,
+        }
+        recorded.stats
     }
 
     /// Submits the gatherings not submitted yet with the copy of the sums for reading back
