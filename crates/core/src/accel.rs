@@ -12,9 +12,10 @@ use crate::gather::{GatherContext, GatherStats};
 use crate::gpu::{self, GpuPlanes, GpuRays, GpuSums};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::limits::PLANE_UNIT;
+use crate::occlusion::occluders_of_polygon;
 use crate::photon_plane::{PlaneSet, sample_plane};
 use crate::pixel::{PanelRecord, RaySetRecord};
-use crate::raster::{RasterPiece, ScreenRaster, Tiling, screen_polygon};
+use crate::raster::{RasterPiece, ScreenRaster, Tiling, box_polygon, screen_polygon_of};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
 use glam::Vec3;
@@ -187,16 +188,24 @@ impl PreparedPlanes {
             drop(_s);
             let _s = crate::trace::span("planes prepared");
             let t = Instant::now();
-            context.push_planes_in(scene, &piece, 1, control);
-            if let Some(r) = &mut raster {
-                r.push_planes_in(&scene.camera, &piece, &scene.medium, control);
-            }
-            if matches!(accelerator, Accelerator::Gpu(_)) {
-                use rayon::prelude::*;
+            if matches!(accelerator, Accelerator::Raster | Accelerator::Gpu(_)) {
+                // Each plane's box polygon made once, for its occluders and its screen polygon.
                 let (cam, medium) = (&scene.camera, &scene.medium);
-                reach.par_extend(
-                    piece.par_iter().map(|p| gpu::screen_reach(&screen_polygon(cam, p, medium), cam.width, cam.height)),
-                );
+                let footprints = control.map_units("footprints", piece.len(), PLANE_UNIT, |i| {
+                    let world = box_polygon(&piece[i], medium);
+                    (occluders_of_polygon(scene, &piece[i], &world), screen_polygon_of(cam, &world, medium))
+                });
+                let masks: Vec<u64> = footprints.iter().map(|f| f.0).collect();
+                context.push_planes_with_occluders_in(scene, &piece, &masks, 1, control);
+                match &mut raster {
+                    Some(r) => r.push_projected_in(&piece, |i| footprints[i].1, control),
+                    None => {
+                        use rayon::prelude::*;
+                        reach.par_extend(footprints.par_iter().map(|f| gpu::screen_reach(&f.1, cam.width, cam.height)));
+                    }
+                }
+            } else {
+                context.push_planes_in(scene, &piece, 1, control);
             }
             seconds_build += t.elapsed().as_secs_f64();
             if accelerator == Accelerator::Bvh {

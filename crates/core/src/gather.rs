@@ -523,7 +523,7 @@ impl GatherContext {
     /// ([`crate::schedule`]), in units of [`PLANE_UNIT`] planes.
     pub fn push_planes_in(&mut self, scene: &Scene, planes: &[PhotonPlane], planes_total: usize, control: Control) {
         let masks = control.map_units("occluders", planes.len(), PLANE_UNIT, |i| possible_occluders(scene, &planes[i]));
-        self.push_views(scene, planes, &masks, planes_total, control);
+        self.push_planes_with_occluders_in(scene, planes, &masks, planes_total, control);
     }
 
     /// [`GatherContext::push_planes`] with the lights that may shadow each plane given (a bit
@@ -535,10 +535,12 @@ impl GatherContext {
         masks: &[u64],
         planes_total: usize,
     ) {
-        self.push_views(scene, planes, masks, planes_total, Control::none());
+        self.push_planes_with_occluders_in(scene, planes, masks, planes_total, Control::none());
     }
 
-    fn push_views(
+    /// [`GatherContext::push_planes_with_occluders`] with its parallel loops recorded on
+    /// `control`'s strand.
+    pub fn push_planes_with_occluders_in(
         &mut self,
         scene: &Scene,
         planes: &[PhotonPlane],
@@ -546,6 +548,7 @@ impl GatherContext {
         planes_total: usize,
         control: Control,
     ) {
+        assert_eq!(planes.len(), masks.len(), "a mask per plane");
         let total = *self.planes_total.get_or_insert(planes_total);
         assert_eq!(total, planes_total, "the planes of a context belong to one set (one N)");
         // Each block of planes' panels made in parallel, then added in plane order.

@@ -3,7 +3,7 @@
 //! (docs/mathematics.md section 2.3).
 
 use crate::light::RectLight;
-use crate::photon_plane::{PhotonPlane, clip_segment};
+use crate::photon_plane::{PhotonPlane, Polygon, clip_segment};
 use crate::scene::Scene;
 use crate::simd::Lanes;
 use glam::{DVec2, DVec3};
@@ -84,7 +84,16 @@ impl Occluder {
 /// in a segment (if it straddles it at all); the light can block only if that segment crosses
 /// the rectangle, which is tested by clipping it to the rectangle grown by a small margin.
 pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
-    let poly = plane.polygon_in_box(&scene.medium, 0.0);
+    occluders_of_polygon(scene, plane, &plane.polygon_in_box(&scene.medium, 0.0))
+}
+
+/// [`possible_occluders`] of the plane's polygon `poly` in the medium box; the raster and the
+/// GPU give the box polygon they project ([`crate::raster::box_polygon`], the box grown by a
+/// millionth of its diagonal), made once for both. A light whose plane passes within that
+/// margin of the polygon but not through it may then be added: its per-hit test costs a little
+/// and blocks no hit, whose path to its light lies inside the box (on every scene of
+/// media_scenes, 200,000 planes each, no mask differed).
+pub fn occluders_of_polygon(scene: &Scene, plane: &PhotonPlane, poly: &Polygon<DVec3>) -> u64 {
     if poly.len < 3 {
         return 0;
     }

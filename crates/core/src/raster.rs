@@ -180,8 +180,19 @@ const PLANE_WORK: u64 = 32;
 /// The plane's polygon as seen from the camera, clipped to the image grown by one pixel, in
 /// pixel coordinates; empty if the camera cannot see it.
 pub fn screen_polygon(camera: &Camera, plane: &PhotonPlane, medium: &Medium) -> Polygon<DVec2> {
-    let margin = 1e-6 * medium.diagonal();
-    let world = plane.polygon_in_box(medium, margin);
+    screen_polygon_of(camera, &box_polygon(plane, medium), medium)
+}
+
+/// The plane's polygon in the medium box grown by a millionth of its diagonal, which
+/// [`screen_polygon`] projects (so that a ray along the box's faces still finds the planes it
+/// hits) and the plane's possible occluders are found from
+/// ([`crate::occlusion::occluders_of_polygon`]).
+pub fn box_polygon(plane: &PhotonPlane, medium: &Medium) -> Polygon<DVec3> {
+    plane.polygon_in_box(medium, 1e-6 * medium.diagonal())
+}
+
+/// [`screen_polygon`] of the plane's box polygon `world` ([`box_polygon`]).
+pub fn screen_polygon_of(camera: &Camera, world: &Polygon<DVec3>, medium: &Medium) -> Polygon<DVec2> {
     let mut cam = Polygon::<DVec3>::empty();
     for &v in world.points() {
         cam.vertices[cam.len] = camera.to_camera(v);
@@ -250,13 +261,24 @@ impl ScreenRaster {
     /// [`ScreenRaster::push_planes`] with its parallel loops recorded on `control`'s strand
     /// ([`crate::schedule`]).
     pub fn push_planes_in(&mut self, camera: &Camera, planes: &[PhotonPlane], medium: &Medium, control: Control) {
+        self.push_projected_in(planes, |i| screen_polygon(camera, &planes[i], medium), control);
+    }
+
+    /// [`ScreenRaster::push_planes_in`] with plane `i`'s screen polygon `polygon(i)`
+    /// ([`screen_polygon`], made where the plane's box polygon serves its occluders too).
+    pub fn push_projected_in(
+        &mut self,
+        planes: &[PhotonPlane],
+        polygon: impl Fn(usize) -> Polygon<DVec2> + Sync + Send,
+        control: Control,
+    ) {
         let tiling = self.tiling;
         let (down, across) = (tiling.down(), tiling.across());
         // Each new plane's polygon, the bands of rows it may cover (none: invisible) and its
         // bounding box (for estimating the tiles' work).
         let polygons: Vec<(Polygon<DVec2>, Range<u32>, [f32; 4])> =
             control.map_units("polygons", planes.len(), PLANE_UNIT, |i| {
-                let poly = screen_polygon(camera, &planes[i], medium);
+                let poly = polygon(i);
                 if poly.len < 3 {
                     return (poly, 0..0, [0.0; 4]);
                 }
