@@ -468,7 +468,7 @@ impl<'a> ChunkRenderer<'a> {
     /// [`ChunkRenderer::render`] with another weighting than the options' (the same planes,
     /// the same rays: the table).
     pub fn render_with(&mut self, weighting: Weighting, range: Range<usize>) -> Result<Partial> {
-        self.render_from(weighting, range, Vec::new(), &mut |_, _| Ok(()))
+        self.render_from(weighting, range, Vec::new(), &mut |_, _| Ok(()), None)
     }
 
     /// [`ChunkRenderer::render_with`] resumed from `held`, the nodes an earlier render of the
@@ -476,13 +476,15 @@ impl<'a> ChunkRenderer<'a> {
     /// start afresh), telling `observer` the nodes held after each further chunk. The chunks
     /// go in order and each node is added as soon as its right child is (the canonical tree's
     /// post-order, [`frontier`]), so wherever the render was resumed the result is the bits
-    /// of one uninterrupted render.
+    /// of one uninterrupted render. `beside_last` runs beside the last window's gathering, on
+    /// the side that has no next window to prepare (not at all where no window is left).
     fn render_from(
         &mut self,
         weighting: Weighting,
         range: Range<usize>,
         mut held: Vec<Partial>,
         observer: ChunkObserver,
+        mut beside_last: Beside,
     ) -> Result<Partial> {
         let root = chunk_indices(self.gatherer.opts.planes, &range)?;
         let control = self.gatherer.control;
@@ -509,6 +511,7 @@ impl<'a> ChunkRenderer<'a> {
             let start = Instant::now();
             let (work, (sampling, build)) = next.take().expect("the window's pieces, prepared before");
             let following = specs.get(w + 1);
+            let beside = if w + 1 == windows.len() { beside_last.take() } else { None };
             let prepared = &self.prepared;
             let mut side = self.gatherer.gather_side(weighting);
             let width = scene.camera.width as usize;
@@ -533,8 +536,14 @@ impl<'a> ChunkRenderer<'a> {
                     Ok::<_, Error>(found)
                 },
                 |control| {
-                    let _s = crate::trace::span("next window prepared");
-                    following.map(|specs| prepare_window(scene, opts, prepared, specs, control))
+                    let next = {
+                        let _s = crate::trace::span("next window prepared");
+                        following.map(|specs| prepare_window(scene, opts, prepared, specs, control))
+                    };
+                    if let Some(beside) = beside {
+                        beside(control);
+                    }
+                    next
                 },
             );
             let (stats, seconds) = gathered?;
@@ -617,6 +626,10 @@ impl<'a> ChunkRenderer<'a> {
     }
 }
 
+/// What runs beside a render's last window's gathering, with the control of its side
+/// ([`ChunkRenderer::render_from`]).
+type Beside<'b> = Option<&'b mut (dyn FnMut(Control) + Send)>;
+
 /// What a render tells its caller after each finished chunk: the nodes it holds then
 /// ([`frontier`]: consecutive partials from its first plane), for a checkpoint to save or a
 /// running image to add up ([`crate::partial::RunningImage`]), and the spread of its plane
@@ -666,9 +679,10 @@ pub fn render_from(
         }
     }
     // The direct emission (its own parallel loop over the pixels), after the chunks; on the
-    // GPU beside them, in the CPU's waits for the GPU, with the gather's pipelines compiled
-    // beside the first planes' preparation.
-    let emission = || {
+    // GPU beside the last window's gathering, in the CPU's wait for the GPU, and the gather's
+    // pipelines made beside the first window's preparation (one task: the preparation keeps
+    // the other workers).
+    let emission = |control: Control| {
         let t = Instant::now();
         let _s = crate::trace::span("direct emission");
         let e = direct_emission_and_variance_in(scene, opts.seed, opts.spp, opts.pixel_center, control);
@@ -677,18 +691,18 @@ pub fn render_from(
     let (mut emitted, mut compiled) = (None, Ok(()));
     let chunks_rendered = crate::trace::span("chunks rendered");
     let partial = if matches!(opts.structure(), Accelerator::Gpu(_)) {
+        let mut emit = |control: Control| emitted = Some(emission(control));
         rayon::in_place_scope(|s| {
-            s.spawn(|_| emitted = Some(emission()));
             s.spawn(|_| compiled = opts.structure().compile(opts.weighting));
-            chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)
+            chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer, Some(&mut emit))
         })
     } else {
-        chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer)
+        chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer, None)
     };
     drop(chunks_rendered);
     let partial = partial?;
     compiled?;
-    let ((emission, emission_variance), seconds_emission) = emitted.unwrap_or_else(emission);
+    let ((emission, emission_variance), seconds_emission) = emitted.unwrap_or_else(|| emission(control));
     let (mut stats, spread) = (chunks.gatherer.stats, chunks.gatherer.spread);
     stats.planes = opts.planes - resumed;
     stats.devices = partial.devices.clone();
