@@ -11,6 +11,8 @@
 # The call (device tool): `bash scripts/device_check.sh`, carrying target/release/fogplanes and
 # .gl (the Vulkan loader's packages, `scripts/gpu_check.sh --fetch`), 64 MiB in all (stripped,
 # each binary is about 12 MB). About 5 minutes on an H100 or H200: give it a timeout of 480 s.
+# Dry run on lavapipe (2026-11-28, cores_check left out): `OUT=/tmp/dc GPU_CHECK_RESOLUTION=64x36
+# GPU_CHECK_PLANES="2048 4096" scripts/device_check.sh`, every log whole, 81 s.
 # Its logs: gpu_check.log and gpu_timeline.log (this build), base/gpu_check.log and
 # base/gpu_timeline.log, cores_check.log, gpu_tests.log, devices.log. Commit them under
 # docs/measurements/ with the date, the device, the commits and this command.
@@ -39,7 +41,7 @@ if [ -x .gl/all ]; then
     { date -u; FOGPLANES_REQUIRE_GPU=1 timeout 100 .gl/all --test-threads 4 gpu:: devices::; echo "gpu tests rc $?"; } \
         >"$out/gpu_tests.log" 2>&1
 fi
-# What the reply shows: each build's benchmark lines.
-grep -h "smis-exact: 40960 planes\|smis-exact: 655360 planes" "$out/gpu_check.log" "$out"/base/gpu_check.log 2>/dev/null |
-    sed 's/(0[^;]*GPU time/GPU time/' | cut -c1-220
+# What the reply shows: each build's smis-exact lines on the GPU (second processes).
+grep -h "^gpu [0-9]* again: smis-exact:" "$out/gpu_check.log" "$out"/base/gpu_check.log 2>/dev/null |
+    sed 's/gather .*; GPU time/GPU time/' | cut -c1-220
 tail -2 "$out/cores_check.log" "$out/gpu_tests.log" 2>/dev/null
