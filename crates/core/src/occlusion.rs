@@ -89,10 +89,10 @@ pub fn possible_occluders(scene: &Scene, plane: &PhotonPlane) -> u64 {
 
 /// [`possible_occluders`] of the plane's polygon `poly` in the medium box; the raster and the
 /// GPU give the box polygon they project ([`crate::raster::box_polygon`], the box grown by a
-/// millionth of its diagonal), made once for both. A light whose plane passes within that
-/// margin of the polygon but not through it may then be added: its per-hit test costs a little
-/// and blocks no hit, whose path to its light lies inside the box (on every scene of
-/// media_scenes, 200,000 planes each, no mask differed).
+/// millionth of its diagonal), made once for both. The grown polygon holds the exact one, so
+/// its mask holds every light the exact polygon's names (tested), and perhaps one whose plane
+/// passes within the margin: a light tested per hit for nothing, never one left out (on every
+/// scene of media_scenes, 200,000 planes each, no mask differed at all).
 pub fn occluders_of_polygon(scene: &Scene, plane: &PhotonPlane, poly: &Polygon<DVec3>) -> u64 {
     if poly.len < 3 {
         return 0;

@@ -833,6 +833,36 @@ impl PaddedSums {
 mod tests {
     use super::*;
 
+    /// The occluders found from the box polygon the raster projects (grown by its margin) hold
+    /// those of the exact polygon in the box, plane by plane: a light left out would be a
+    /// shadow missed. Scenes where lights lie on the box's faces, face each other closely, are
+    /// seen edge-on or block each other, and the benchmark.
+    #[test]
+    fn occluders_from_the_box_polygon_hold_the_exact_ones() {
+        use crate::occlusion::{occluders_of_polygon, possible_occluders};
+        use crate::photon_plane::sample_planes;
+        let scenes = [
+            ("six_lights", include_str!("../../../media_scenes/six_lights.toml")),
+            ("light_on_box_face", include_str!("../../../media_scenes/hard/light_on_box_face.toml")),
+            ("facing_lights_close", include_str!("../../../media_scenes/hard/facing_lights_close.toml")),
+            ("edge_on_light", include_str!("../../../media_scenes/hard/edge_on_light.toml")),
+            ("two_lights_one_blocker", include_str!("../../../media_scenes/two_lights_one_blocker.toml")),
+        ];
+        for (name, text) in scenes {
+            let scene = crate::scene::Scene::parse(text, name, name).unwrap();
+            let (mut shadowing, mut extra) = (0, 0);
+            for p in sample_planes(&scene, Default::default(), 20_000, 11) {
+                let exact = possible_occluders(&scene, &p);
+                let grown = occluders_of_polygon(&scene, &p, &box_polygon(&p, &scene.medium));
+                assert_eq!(grown & exact, exact, "{name}: a light left out");
+                shadowing += (exact != 0) as usize;
+                extra += (grown != exact) as usize;
+            }
+            println!("{name}: {shadowing} of 20,000 planes may be shadowed, {extra} masks grown");
+            assert!(shadowing > 0, "{name}: no plane to test");
+        }
+    }
+
     /// Every pixel lies in exactly one tile, whatever the image and the workers; the benchmark's
     /// image is tiled as the docs say, one chunk at a time and in windows.
     #[test]

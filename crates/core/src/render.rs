@@ -745,6 +745,7 @@ pub fn render_chunk(
     stats.planes = partial.end - partial.start;
     stats.devices = partial.devices.clone();
     stats.seconds_total = start.elapsed().as_secs_f64();
+    crate::trace::print();
     Ok((partial, stats))
 }
 
@@ -967,6 +968,7 @@ pub fn render_in_passes(
     }
     stats.seconds_rays += seconds_emission;
     stats.seconds_total = start.elapsed().as_secs_f64();
+    crate::trace::print();
     Ok((film, stats))
 }
 

@@ -50,6 +50,9 @@ pub struct GpuSums {
 struct Reading {
     readback: wgpu::Buffer,
     timestamps: Vec<wgpu::Buffer>,
+    /// The submission that copies the sums: the reading waits for it alone, so that the GPU
+    /// goes on with a window's later chunks while the CPU reads one back.
+    index: Option<wgpu::SubmissionIndex>,
 }
 
 /// Bytes of a `width x height` image's sums on the GPU: 12 a pixel, 16 a tile ([`GpuSums`]).
@@ -115,6 +118,7 @@ impl GpuSums {
     /// next set while the GPU gathers) or the work held passes [`super::PENDING_RAY_BYTES`] of ray
     /// sets. Returns what the recording found (the planes' upload).
     pub fn add(&mut self, recorded: super::Recorded, rays: &super::GpuRays) -> GatherStats {
+        assert!(self.reading.is_none(), "a gathering added to sums whose reading is under way");
         let Some(commands) = recorded.commands else {
             return recorded.stats;
         };
@@ -156,11 +160,11 @@ impl GpuSums {
                 gpu.scratch("image read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
-            let _ = self.submit_with(Some(encoder.finish()));
+            let index = self.submit_with(Some(encoder.finish()));
             for b in timestamps.iter().chain([&readback]) {
                 b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             }
-            Reading { readback, timestamps }
+            Reading { readback, timestamps, index }
         })
     }
 
@@ -172,13 +176,13 @@ impl GpuSums {
         let held = self.gpu.clone();
         let gpu = &*held;
         let bytes = self.bytes;
-        let Reading { readback, timestamps } = match self.reading.take() {
+        let Reading { readback, timestamps, index } = match self.reading.take() {
             Some(r) => r,
             None => self.start_reading()?,
         };
         let waiting = crate::trace::span("waited for the GPU");
         let t = Instant::now();
-        let polled = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        let polled = gpu.device.poll(wgpu::PollType::Wait { submission_index: index, timeout: None });
         let wait_ns = t.elapsed().as_nanos() as u64;
         let waited = self.first_submission.take().map_or(0, |t| t.elapsed().as_nanos() as u64);
         let untimed = std::mem::take(&mut self.untimed);
