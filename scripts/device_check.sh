@@ -30,7 +30,7 @@ timeout 170 bash scripts/gpu_check.sh >/dev/null 2>&1
 echo "gpu_check rc $?" >>"$out/gpu_check.log"
 if [ -x .gl/base/fogplanes ]; then
     mkdir -p "$out/base"
-    OUT="$out/base" FOGPLANES=.gl/base/fogplanes timeout 170 bash scripts/gpu_check.sh >/dev/null 2>&1
+    OUT="$out/base" FOGPLANES=.gl/base/fogplanes GPU_CHECK_TUNED=no timeout 170 bash scripts/gpu_check.sh >/dev/null 2>&1
     echo "gpu_check (base) rc $?" >>"$out/base/gpu_check.log"
 fi
 timeout 240 bash scripts/cores_check.sh "$B" >"$out/cores_check.log" 2>&1
@@ -44,4 +44,6 @@ fi
 # What the reply shows: each build's smis-exact lines on the GPU (second processes).
 grep -h "^gpu [0-9]* again: smis-exact:" "$out/gpu_check.log" "$out"/base/gpu_check.log 2>/dev/null |
     sed 's/gather .*; GPU time/GPU time/' | cut -c1-220
+# And this build's GPU time by setting (gpu/mod.rs `Tuning`), the second round's.
+grep -h "^gpu tuned .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).*/ \1: \2/' | sed 's/^gpu tuned //'
 tail -2 "$out/cores_check.log" "$out/gpu_tests.log" 2>/dev/null

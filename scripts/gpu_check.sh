@@ -2,7 +2,8 @@
 # The GPU check of issue 37, in one command on a machine with a GPU (a few minutes on an H100):
 # per estimator, the GPU gather's G hits/s (its timestamps) and the render's end-to-end time at
 # 640x360 with 40,960 and 655,360 planes (the benchmark scene, whole pixels), the agreement with
-# the CPU's image (relative MSE, `fogplanes compare`), the GPU time by the work items' size, then
+# the CPU's image (relative MSE, `fogplanes compare`), the GPU time by the work items' size and
+# with the driver's transcendental functions and without wgpu's shader runtime checks, then
 # the CPU renderer's wall time on 1, 2, 4, 8 and all threads, and the machine's threads per core;
 # then the timeline of smis-exact's renders (`FOGPLANES_TRACE=1`: each step's start, end and
 # thread, crates/core/src/trace.rs) into a log of its own, gpu_timeline.log.
@@ -88,6 +89,29 @@ done
 for item in 16 32 64 128 256 512; do
     for e in smis-exact cmis-exact; do
         FOGPLANES_GPU_ITEM_PLANES=$item render --planes "$first" -e $e --device gpu -o "$work/item.exr" | sed "s/^/gpu item $item $first: /"
+    done
+done
+# What else only a device can decide (issue 45; gpu/mod.rs `Tuning`): the driver's exp, log
+# and atan instead of the CPU's polynomials (FOGPLANES_GPU_MATH=native), wgpu's shader runtime
+# checks off (FOGPLANES_GPU_CHECKS=off), and both, against the defaults, for smis-exact and
+# cmis-exact at each planes count: two rounds, the settings alternated within each (the first
+# round's process compiles each setting's shaders; read the second's GPU time), then how far
+# the driver's functions move the image from the polynomials' (relative MSE). Left out with
+# GPU_CHECK_TUNED=no (a base build that knows no such variables).
+[ "${GPU_CHECK_TUNED:-yes}" = no ] && P_TUNED= || P_TUNED=$P
+for planes in $P_TUNED; do
+    for e in smis-exact cmis-exact; do
+        for round in 1 2; do
+            for tuned in FOGPLANES_GPU_MATH=polynomials FOGPLANES_GPU_MATH=native FOGPLANES_GPU_CHECKS=off "FOGPLANES_GPU_MATH=native FOGPLANES_GPU_CHECKS=off"; do
+                name=${tuned// /+}
+                # shellcheck disable=SC2086
+                env $tuned timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$planes" -e $e --device gpu -o "$work/tuned_$name.exr" 2>&1 |
+                    grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/gpu tuned $name round $round $planes: /"
+            done
+        done
+        printf 'agreement tuned native against polynomials %s %s: ' "$planes" "$e"
+        timeout 60 "$B" compare "$work/tuned_FOGPLANES_GPU_MATH=native.exr" "$work/tuned_FOGPLANES_GPU_MATH=polynomials.exr" | tr '\n' ' ' | tr -s ' '
+        echo
     done
 done
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).

@@ -217,7 +217,8 @@ fn info_tells_a_whole_exr_from_a_truncated_one() {
 /// one marked default; `--device gpu:N` gathers on adapter N (the default's image is
 /// `--device gpu`'s, bit for bit); an index out of range, or a `FOGPLANES_GPU` one, is one line
 /// naming the count, exit 2; a bad index is refused when parsed, and a work item's size that
-/// `FOGPLANES_GPU_ITEM_PLANES` cannot give in one line, exit 2.
+/// `FOGPLANES_GPU_ITEM_PLANES` cannot give, or a `FOGPLANES_GPU_MATH` or `FOGPLANES_GPU_CHECKS`
+/// that names no choice, in one line, exit 2.
 #[test]
 fn devices_lists_the_adapters_and_gpu_n_picks_one() {
     if !have_gpu("devices_lists_the_adapters_and_gpu_n_picks_one") {
@@ -264,6 +265,16 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
             vec![("FOGPLANES_GPU_ITEM_PLANES", "0")],
             "--device: FOGPLANES_GPU_ITEM_PLANES=\"0\": expected the planes of a GPU work item".to_string(),
         ),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU_MATH", "fast")],
+            "--device: FOGPLANES_GPU_MATH=\"fast\": expected polynomials (the default) or native".to_string(),
+        ),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU_CHECKS", "no")],
+            "--device: FOGPLANES_GPU_CHECKS=\"no\": expected on (the default) or off".to_string(),
+        ),
     ] {
         let o = render(&device, &d.join("no.exr"), &env);
         let (_, err) = text(&o);
@@ -271,5 +282,59 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
         assert!(err.contains(&says), "{device} {env:?}: {err}");
         assert!(err.trim_end().lines().count() == 1 || device == "gpu:x", "{err}");
     }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The choices fixed for measuring on a device (gpu/mod.rs `Tuning`): wgpu's shader runtime
+/// checks off (`FOGPLANES_GPU_CHECKS=off`) gives the same pixels, bit for bit (no index leaves
+/// its array, no loop is cut); the driver's exp, log and atan (`FOGPLANES_GPU_MATH=native`)
+/// an image within 1e-8 relative MSE of the polynomials' (cmis-exact, which calls all four
+/// functions; the bound that holds the GPU to the CPU elsewhere); and each image names its
+/// setting after the adapter, the default none.
+#[test]
+fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
+    if !have_gpu("tuned_gpu_renders_keep_the_image_and_say_how_they_were_made") {
+        return;
+    }
+    let d = dir("tuned");
+    let render = |name: &str, env: &[(&str, &str)]| {
+        let out = d.join(format!("{name}.exr"));
+        let args = [
+            "render",
+            SCENE,
+            "--resolution",
+            "32x18",
+            "--planes",
+            "2048",
+            "-e",
+            "cmis-exact",
+            "-q",
+            "--device",
+            "gpu",
+            "-o",
+            path(&out),
+        ];
+        // The other settings' variables as their defaults, whatever this process was given.
+        let tuning = ["FOGPLANES_GPU_MATH", "FOGPLANES_GPU_CHECKS", "FOGPLANES_GPU_ITEM_PLANES"];
+        let unset: Vec<&str> = tuning.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
+        let o = run_with(&args, env, &unset);
+        assert!(o.status.success(), "{name}: {}", text(&o).1);
+        let pixels = fogplanes::film::Film::load_exr(&out).unwrap().pixels;
+        (pixels, devices_of(&out))
+    };
+    let (base, base_devices) = render("default", &[]);
+    assert!(!base_devices.contains("tuned"), "{base_devices}");
+    let (unchecked, devices) = render("unchecked", &[("FOGPLANES_GPU_CHECKS", "off")]);
+    assert!(devices.ends_with("tuned: no shader runtime checks)"), "{devices}");
+    assert!(unchecked == base, "the shaders without runtime checks changed the image");
+    let (native, devices) = render("native", &[("FOGPLANES_GPU_MATH", "native")]);
+    assert!(devices.ends_with("tuned: the driver's exp, log and atan)"), "{devices}");
+    let (mut num, mut den) = (0.0, 0.0);
+    for (n, b) in native.iter().zip(&base) {
+        (num, den) = (num + (n.as_dvec3() - b.as_dvec3()).length_squared(), den + b.as_dvec3().length_squared());
+    }
+    let rel = num / den;
+    println!("the driver's exp, log and atan against the polynomials: relative MSE {rel:.2e}");
+    assert!(den > 0.0 && rel <= 1e-8, "{rel}");
     let _ = std::fs::remove_dir_all(&d);
 }

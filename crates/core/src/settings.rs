@@ -141,8 +141,9 @@ fn find_device(wanted: Device) -> Result<Device> {
         },
         Device::Gpu(index) => match crate::gpu::adapter_at(index) {
             Ok((i, _)) => Ok(Device::Gpu(Some(i))),
-            // An index out of range names itself (or FOGPLANES_GPU) and the count; a work items'
-            // size that FOGPLANES_GPU_ITEM_PLANES cannot give names the variable.
+            // An index out of range names itself (or FOGPLANES_GPU) and the count; a setting that
+            // a variable of gpu::Tuning cannot give (FOGPLANES_GPU_ITEM_PLANES, _MATH, _CHECKS)
+            // names the variable.
             Err(why) if why.starts_with("gpu:") || why.starts_with(crate::gpu::GPU_VARIABLE) => {
                 Err(Error::option(Setting::Device, why))
             }

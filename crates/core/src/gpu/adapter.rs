@@ -12,7 +12,7 @@
 //! surface, and the layer has nothing to look up.
 
 use super::device::{Gpu, block_on, kind_name};
-use super::{AdapterInfo, GPU_VARIABLE, fixed_item_planes};
+use super::{AdapterInfo, GPU_VARIABLE, Tuning};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// The instance of this process, made once; `Err` says why there is none (no Vulkan loader
@@ -132,14 +132,14 @@ type Made = Result<Arc<Gpu>, String>;
 
 /// The adapter `index` of [`adapters`] (`None`: the one `--device gpu` takes, adapter
 /// [`GPU_VARIABLE`] where it is set, else a real GPU first), its device made on first use and
-/// kept for the process (with the work items' size [`super::ITEM_VARIABLE`] fixes then), with its
+/// kept for the process (with the [`Tuning`] its variables give then), with its
 /// index; `Err` says in one line why there is none (an index out of range names the count, a
 /// variable that is not a number it takes names itself).
 pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
     static GPUS: Mutex<Vec<(usize, Made)>> = Mutex::new(Vec::new());
     let all = found()?;
     let set = std::env::var(GPU_VARIABLE).ok().filter(|v| !v.is_empty());
-    let fixed_item_planes = fixed_item_planes()?;
+    let tuning = Tuning::from_env()?;
     let (index, named) = match (index, set) {
         (None, Some(v)) => {
             let i = v.trim().parse::<usize>().map_err(|_| {
@@ -168,7 +168,7 @@ pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
         return g.clone().map(|g| (i, g));
     }
     let _s = crate::trace::span("device made");
-    let made = Gpu::new(all[i].clone(), fixed_item_planes).map(Arc::new);
+    let made = Gpu::new(all[i].clone(), tuning).map(Arc::new);
     gpus.push((i, made.clone()));
     made.map(|g| (i, g))
 }

@@ -19,9 +19,9 @@ pub struct Gpu {
     name: String,
     /// A CPU adapter (lavapipe): smaller work items ([`super::item_planes`]).
     cpu_adapter: bool,
-    /// The work items' size fixed for measuring ([`super::ITEM_VARIABLE`], checked by
-    /// [`super::adapter_at`] before the device was made), else `None`.
-    fixed_item_planes: Option<u32>,
+    /// The choices fixed for measuring them ([`super::Tuning`], read by [`super::adapter_at`]
+    /// before the device was made).
+    tuning: super::Tuning,
     timestamps: bool,
     max_binding: u64,
     pub(super) bin_layout: wgpu::BindGroupLayout,
@@ -115,7 +115,7 @@ fn uniform_entry() -> wgpu::BindGroupLayoutEntry {
 
 impl Gpu {
     /// The device on `adapter`, with its pipelines ([`super::adapter`] finds the adapter).
-    pub(super) fn new(adapter: wgpu::Adapter, fixed_item_planes: Option<u32>) -> std::result::Result<Self, String> {
+    pub(super) fn new(adapter: wgpu::Adapter, tuning: super::Tuning) -> std::result::Result<Self, String> {
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let limits = adapter.limits();
@@ -152,10 +152,19 @@ impl Gpu {
             })
         };
         let shader = |label: &str, source: &str| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            })
+            let desc =
+                wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) };
+            if tuning.unchecked {
+                // SAFETY: wgpu asks that no index of the shaders leave its buffer or array and
+                // that every loop end. Each index is clamped into its array (a pixel's ray, a
+                // work item) or comes from the binning's own counts and offsets over buffers
+                // sized for them (bin.wgsl, gpu/scratch.rs), and every loop counts up to a
+                // bound read once (a batch's planes, a plane's occluders, the orientations).
+                // Only for measuring (scripts/gpu_check.sh), never by default.
+                unsafe { device.create_shader_module_trusted(desc, wgpu::ShaderRuntimeChecks::unchecked()) }
+            } else {
+                device.create_shader_module(desc)
+            }
         };
         let pipeline = |layout: &wgpu::PipelineLayout, module: &wgpu::ShaderModule, entry: &str| {
             compute_pipeline(&device, layout, module, entry, Default::default())
@@ -174,9 +183,12 @@ impl Gpu {
         drop(_s);
         let kind = kind_name(info.device_type);
         let gpu = Gpu {
-            name: format!("{} ({:?}, {kind})", info.name, info.backend),
+            name: match tuning.label() {
+                None => format!("{} ({:?}, {kind})", info.name, info.backend),
+                Some(tuned) => format!("{} ({:?}, {kind}, tuned: {tuned})", info.name, info.backend),
+            },
             cpu_adapter: info.device_type == wgpu::DeviceType::Cpu,
-            fixed_item_planes,
+            tuning,
             timestamps,
             max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
             gather_pipeline_layout: pipeline_layout(&gather_layout),
@@ -210,7 +222,7 @@ impl Gpu {
 
     /// The work items' size fixed for measuring, if it is ([`super::ITEM_VARIABLE`]).
     pub fn fixed_item_planes(&self) -> Option<u32> {
-        self.fixed_item_planes
+        self.tuning.item_planes
     }
 
     /// The most bytes one buffer binding holds on this device.
@@ -273,7 +285,8 @@ impl Gpu {
         cache
             .entry(id)
             .or_insert_with(|| {
-                let constants = [("ESTIMATOR", id as f64)];
+                let native = if self.tuning.native_math { 1.0 } else { 0.0 };
+                let constants = [("ESTIMATOR", id as f64), ("NATIVE_MATH", native)];
                 let options =
                     wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };
                 Arc::new(["gather", "reduce"].map(|entry| {

@@ -14,6 +14,11 @@
 // 0 unweighted, 1 cmis-cosine, 2 smis-cosine (pair), 3 smis-exact (pair), 4 cmis-exact,
 // 5 smis-cosine with K orientations, 6 smis-exact with K orientations (gpu/mod.rs `estimator_id`).
 override ESTIMATOR: u32 = 0u;
+// The driver's exp, log, atan and atan2 instead of the CPU's polynomials below (gpu/mod.rs
+// `Tuning::native_math`, for measuring them on a device): not the CPU's bits. Each is given
+// an argument where WGSL defines it (log of at least the least normal f32, atan2 of (0, 0)
+// as 0, as the polynomials give), so that what the polynomials keep finite stays finite.
+override NATIVE_MATH: bool = false;
 
 // gather.rs `PlaneRecord`, 144 bytes (nine rows of 16).
 struct Plane {
@@ -131,6 +136,9 @@ fn max_sel(a: f32, b: f32) -> f32 {
 // into the exponent bits; 0 below -87. k is rounded by `round` (to nearest, ties to even, as the
 // CPU's 1.5 * 2^23 trick): llvmpipe folds (x c + R) - R into x c, which loses the rounding.
 fn exp_f(x: f32) -> f32 {
+    if (NATIVE_MATH) {
+        return select(exp(x), 0.0, x < -87.0);
+    }
     let LN2_HI = 0.69314575;
     let LN2_LO = 1.4286068e-6;
     let k = round(x * 1.44269504088896);
@@ -147,6 +155,9 @@ fn exp_f(x: f32) -> f32 {
 
 // numeric.rs `atan_unit_lanes`: atan(t) for t in [0, 1].
 fn atan_unit(t: f32) -> f32 {
+    if (NATIVE_MATH) {
+        return atan(t);
+    }
     let t2 = t * t;
     let t4 = t2 * t2;
     let t8 = (t2 * t2) * (t2 * t2);
@@ -165,6 +176,9 @@ fn ratio_or_zero(small: f32, large: f32) -> f32 {
 
 // numeric.rs `atan2_lanes`.
 fn atan2_f(y: f32, x: f32) -> f32 {
+    if (NATIVE_MATH) {
+        return select(atan2(y, x), 0.0, x == 0.0 && y == 0.0);
+    }
     let ax = abs(x);
     let ay = abs(y);
     let steep = ay > ax;
@@ -178,6 +192,9 @@ fn atan2_f(y: f32, x: f32) -> f32 {
 
 // numeric.rs `ln_lanes`: x = m 2^e from the bits, m in [sqrt(1/2), sqrt(2)), a degree-6 fit.
 fn ln_f(x: f32) -> f32 {
+    if (NATIVE_MATH) {
+        return log(max(x, 1.17549435e-38));
+    }
     let LN2_HI = 0.69314575;
     let LN2_LO = 1.4286068e-6;
     let bits = bitcast<u32>(x);

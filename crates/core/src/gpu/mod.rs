@@ -154,10 +154,6 @@ pub const ITEMS_AIMED: u64 = 8192;
 /// makes its sets side by side up to it at a time.
 pub const PENDING_RAY_BYTES: u64 = 256 << 20;
 
-/// The variable that fixes the planes of a work item, for measuring the item size on a device
-/// (`scripts/gpu_check.sh`): a number from 1 to 512 (at most 256 on a CPU adapter).
-pub const ITEM_VARIABLE: &str = "FOGPLANES_GPU_ITEM_PLANES";
-
 /// The most planes of one work item of a batch of at most `pairs` (tile, plane) pairs: a power
 /// of two near `pairs / ITEMS_AIMED`, from 32 planes to 512 on a GPU (the prototype's best on
 /// an H100 with 40,960 planes in one batch, a mean of about 2,400 planes a tile) and to 256 on
@@ -174,16 +170,82 @@ pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
     }
 }
 
-/// The planes of a work item that [`ITEM_VARIABLE`] fixes, if it is set: refused in one line
-/// where it is not a number from 1 to 512. Read where an adapter is resolved
-/// ([`adapter_at`]), which every front end's settings do once.
-pub fn fixed_item_planes() -> std::result::Result<Option<u32>, String> {
-    let Ok(value) = std::env::var(ITEM_VARIABLE) else {
-        return Ok(None);
-    };
-    match value.trim().parse::<u32>() {
-        Ok(n) if (1..=512).contains(&n) => Ok(Some(n)),
-        _ => Err(format!("{ITEM_VARIABLE}={value:?}: expected the planes of a GPU work item, a number from 1 to 512")),
+/// The variable that fixes the planes of a work item, for measuring the item size on a device
+/// (`scripts/gpu_check.sh`): a number from 1 to 512 (at most 256 on a CPU adapter).
+pub const ITEM_VARIABLE: &str = "FOGPLANES_GPU_ITEM_PLANES";
+/// The variable that gives the gather the GPU's own `exp`, `log`, `atan` and `atan2`
+/// (`native`) instead of the CPU's polynomials (`polynomials`, the default), for measuring them.
+pub const MATH_VARIABLE: &str = "FOGPLANES_GPU_MATH";
+/// The variable that turns wgpu's shader runtime checks off (`off`; `on`, the default), for
+/// measuring them.
+pub const CHECKS_VARIABLE: &str = "FOGPLANES_GPU_CHECKS";
+
+/// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
+/// transcendental functions, wgpu's runtime checks in the shaders), fixed by variables so that
+/// `scripts/gpu_check.sh` can time each against the defaults in one process per setting. Read
+/// once where an adapter is resolved ([`adapter_at`]), which every front end's settings do once;
+/// a device is made with them and kept for the process. Any setting but the defaults is named
+/// after the adapter in the summary and in every record of the render ([`Tuning::label`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tuning {
+    /// The planes of every work item ([`ITEM_VARIABLE`]), else sized by the batch
+    /// ([`item_planes`]).
+    pub item_planes: Option<u32>,
+    /// `exp`, `log`, `atan` and `atan2` of the GPU's driver ([`MATH_VARIABLE`]` = native`) in
+    /// `gather.wgsl`, not the CPU's polynomials: the image is then not within the CPU's f32
+    /// rounding but within the driver's accuracy for them. WGSL allows `exp` 3 + 2|x| ULP,
+    /// `atan` and `atan2` 4096 ULP, and `log` 3 ULP but only an absolute 2^-21 on [0.5, 2],
+    /// where the closed form of cmis-exact takes ln(1 + x) of small x (docs/mathematics.md
+    /// section 3): a device's log2 may lose the small logarithms that the polynomial keeps.
+    pub native_math: bool,
+    /// wgpu's runtime checks off ([`CHECKS_VARIABLE`]` = off`): no bounds checks added to the
+    /// shaders' indexing and no bound forced on their loops. Every index of the shaders is in
+    /// range by construction (clamped, or from the binning's own counts) and every loop counts
+    /// to a bound, so the image is the same bits (tested on lavapipe); what it saves is for a
+    /// device to say.
+    pub unchecked: bool,
+}
+
+impl Tuning {
+    /// The settings the variables give, or the one line that says which variable holds what.
+    pub fn from_env() -> std::result::Result<Self, String> {
+        let read = |name: &str| std::env::var(name).ok().filter(|v| !v.trim().is_empty());
+        let item_planes = match read(ITEM_VARIABLE) {
+            None => None,
+            Some(v) => match v.trim().parse::<u32>() {
+                Ok(n) if (1..=512).contains(&n) => Some(n),
+                _ => {
+                    return Err(format!(
+                        "{ITEM_VARIABLE}={v:?}: expected the planes of a GPU work item, a number from 1 to 512"
+                    ));
+                }
+            },
+        };
+        let choice = |name: &str, default: &str, other: &str| match read(name) {
+            None => Ok(false),
+            Some(v) if v.trim() == default => Ok(false),
+            Some(v) if v.trim() == other => Ok(true),
+            Some(v) => Err(format!("{name}={v:?}: expected {default} (the default) or {other}")),
+        };
+        let native_math = choice(MATH_VARIABLE, "polynomials", "native")?;
+        let unchecked = choice(CHECKS_VARIABLE, "on", "off")?;
+        Ok(Tuning { item_planes, native_math, unchecked })
+    }
+
+    /// What a device made with these settings adds to its adapter's name, `None` for the
+    /// defaults: a render's summary and records say how the image was made.
+    pub fn label(&self) -> Option<String> {
+        let mut parts = Vec::new();
+        if let Some(n) = self.item_planes {
+            parts.push(format!("work items of {n} planes"));
+        }
+        if self.native_math {
+            parts.push("the driver's exp, log and atan".to_string());
+        }
+        if self.unchecked {
+            parts.push("no shader runtime checks".to_string());
+        }
+        (!parts.is_empty()).then(|| parts.join(", "))
     }
 }
 
@@ -219,6 +281,18 @@ mod tests {
         }
         assert_eq!(item_planes(false, 0, Some(48)), 48);
         assert_eq!(item_planes(true, 0, Some(512)), 256);
+    }
+
+    /// The defaults add nothing to an adapter's name; any other setting is named, in words a
+    /// device's name may hold (no "; ", which joins the devices of a merge).
+    #[test]
+    fn a_tuning_is_named_unless_it_is_the_defaults() {
+        assert_eq!(Tuning::default().label(), None);
+        let all = Tuning { item_planes: Some(64), native_math: true, unchecked: true };
+        let label = all.label().unwrap();
+        assert_eq!(label, "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks");
+        let name = format!("gpu: {} (Vulkan, discrete GPU, tuned: {label})", "x".repeat(100));
+        assert!(crate::options::Devices::from_names(vec![name]).is_ok());
     }
 
     #[test]
