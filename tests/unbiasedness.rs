@@ -71,6 +71,14 @@ impl<'a> Truths<'a> {
     }
 }
 
+/// The truths of the scene without a phase function (g = 0), computed once for the tests that
+/// share them (quadrature to 1e-7 is a few CPU seconds of each).
+fn isotropic_truths() -> &'static Truths<'static> {
+    static SCENE: std::sync::OnceLock<Scene> = std::sync::OnceLock::new();
+    static TRUTHS: std::sync::OnceLock<Truths<'static>> = std::sync::OnceLock::new();
+    TRUTHS.get_or_init(|| Truths::of(SCENE.get_or_init(|| two_lights(0.0))))
+}
+
 fn run(truths: &Truths, sampler: Sampler, weightings: &[Weighting], batches: u64, batch_size: usize) {
     let scene = truths.scene;
     let g = scene.medium.g;
@@ -126,10 +134,9 @@ fn run(truths: &Truths, sampler: Sampler, weightings: &[Weighting], batches: u64
 fn every_estimator_matches_quadrature() {
     // 250 batches: the largest standard error, unweighted's on the generic ray, 0.65% (0.51% at
     // 400), within this file's bound of 1%.
-    let scene = two_lights(0.0);
-    let truths = Truths::of(&scene);
+    let truths = isotropic_truths();
     for sampler in Sampler::ALL {
-        run(&truths, sampler, &Weighting::all(&[]), 250, 10_000);
+        run(truths, sampler, &Weighting::all(&[]), 250, 10_000);
     }
 }
 
@@ -138,7 +145,7 @@ fn k_orientations_match_quadrature() {
     let extra: Vec<Weighting> = Weighting::all(&[3, 4, 8]).into_iter().filter(|w| w.orientations != 2).collect();
     assert_eq!(extra.len(), 6);
     // 120 batches: the largest standard error 0.44% (0.24% at 400), within the bound of 1%.
-    run(&Truths::of(&two_lights(0.0)), Sampler::default(), &extra, 120, 10_000);
+    run(isotropic_truths(), Sampler::default(), &extra, 120, 10_000);
 }
 
 /// The same at g = 0.8 (forward) and g = -0.5 (backward), every estimator: the phase value is a
