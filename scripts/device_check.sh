@@ -13,6 +13,8 @@
 # each binary is about 12 MB). About 5 minutes on an H100 or H200: give it a timeout of 480 s.
 # Dry run on lavapipe (2026-11-28, cores_check left out): `OUT=/tmp/dc GPU_CHECK_RESOLUTION=64x36
 # GPU_CHECK_PLANES="2048 4096" scripts/device_check.sh`, every log whole, 81 s.
+# The base build's gpu_check leaves out the settings only this build knows (GPU_CHECK_TUNED=no);
+# the reply ends with this build's GPU time by setting (`gpu tuned`, gpu/mod.rs `Tuning`).
 # Its logs: gpu_check.log and gpu_timeline.log (this build), base/gpu_check.log and
 # base/gpu_timeline.log, cores_check.log, gpu_tests.log, devices.log. Commit them under
 # docs/measurements/ with the date, the device, the commits and this command.
