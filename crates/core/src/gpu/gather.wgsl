@@ -83,7 +83,10 @@ struct Params {
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> planes: array<Plane>;
+// The planes as rows of four words, PLANE_ROWS a plane (each a `Plane` as it is laid out), so
+// that a workgroup's threads stage a batch of planes row by row, neighbours reading neighbouring
+// rows (`plane_at` reads a staged plane back as a `Plane`).
+@group(0) @binding(1) var<storage, read> plane_rows: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> occluders: array<Occluder>;
 @group(0) @binding(3) var<storage, read> rays: array<f32>;
 // (cos, sin) of k pi / K for k = 1 .. K - 1 (weights/denominators.rs `StratifiedK`).
@@ -103,10 +106,13 @@ struct Params {
 @group(0) @binding(10) var<storage, read> ranges: array<u32>;
 
 const TILE: u32 = 16u;
+// The rows of 16 bytes of a `Plane` (144 bytes).
+const PLANE_ROWS: u32 = 9u;
 // Pixel rows per group of `ranges` (gpu/reach.rs `GROUP_ROWS`): 4 groups a tile, a byte each.
 const GROUP_ROWS: u32 = 4u;
 const THREADS: u32 = 256u;
-// Planes loaded into workgroup memory at a time: 64 x 144 bytes = 9 KiB.
+// Planes loaded into workgroup memory at a time: 64 x 144 bytes = 9 KiB (`batch_rows`, 64 x
+// PLANE_ROWS rows).
 const BATCH: u32 = 64u;
 const F32_MAX: f32 = 3.4028234e38;
 // Stands in for an infinite chord length (a line along an axis is not bounded by that axis).
@@ -457,8 +463,27 @@ fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
 // ---------------------------------------------------------------------------------------------
 // The gather over work items, and the reduction of a tile's items.
 
-var<workgroup> batch: array<Plane, BATCH>;
+var<workgroup> batch_rows: array<vec4<f32>, BATCH * PLANE_ROWS>;
 var<workgroup> batch_ranges: array<u32, BATCH>;
+
+// The staged plane whose first row is `base`, as the record's layout reads (gather.rs
+// `PlaneRecord`: the u32 fields are the bits of their words).
+fn plane_at(base: u32) -> Plane {
+    let r0 = batch_rows[base];
+    let r1 = batch_rows[base + 1u];
+    let r2 = batch_rows[base + 2u];
+    let r3 = batch_rows[base + 3u];
+    let r4 = batch_rows[base + 4u];
+    let r5 = batch_rows[base + 5u];
+    let r6 = batch_rows[base + 6u];
+    let r7 = batch_rows[base + 7u];
+    let r8 = batch_rows[base + 8u];
+    return Plane(
+        r0.xyz, r0.w, r1.xyz, r1.w, r2.xyz, bitcast<u32>(r2.w), r3.xyz, bitcast<u32>(r3.w),
+        r4.xyz, r4.w, r5.x, r5.y, r5.z, r5.w, r6.x, r6.y, r6.z, r6.w,
+        bitcast<u32>(r7.x), r7.y, r7.z, bitcast<u32>(r7.w), r8.xyz, bitcast<u32>(r8.w),
+    );
+}
 var<workgroup> wg_item: vec4<u32>;
 var<workgroup> wg_total: u32;
 
@@ -495,8 +520,13 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     for (var b = item.y; b < item.z; b += BATCH) {
         let n = min(BATCH, item.z - b);
         workgroupBarrier();
+        // Every thread stages rows: thread i the rows i, i + 256, ... of the batch's planes, so
+        // that a plane's nine rows are read by nine neighbouring threads at once.
+        for (var k = li; k < n * PLANE_ROWS; k += THREADS) {
+            let p = k / PLANE_ROWS;
+            batch_rows[k] = plane_rows[list[b + p] * PLANE_ROWS + (k - p * PLANE_ROWS)];
+        }
         if (li < n) {
-            batch[li] = planes[list[b + li]];
             batch_ranges[li] = ranges[b + li];
         }
         workgroupBarrier();
@@ -508,17 +538,21 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
                 continue;
             }
             tests += 1u;
-            let pl = batch[j];
             // Section 2.3: Cramer's rule with det = we . n_P; a hit needs det != 0 (tested as
             // |det| > 1e-30, so that 1/det is finite), t in [t0, t1], a on the chord, r > 0.
-            let det = dot3(dir, pl.normal);
+            // The test reads the plane's first three rows only, the hit the whole plane.
+            let base = j * PLANE_ROWS;
+            let n_t = batch_rows[base];
+            let a_w = batch_rows[base + 1u];
+            let det = dot3(dir, n_t.xyz);
             let crosses = abs(det) > 1e-30;
             let inv = 1.0 / select(1.0, det, crosses);
-            let t = pl.t_det * inv;
-            let a = dot3(dir, pl.a_axis) * inv;
-            let r = dot3(dir, pl.r_axis) * inv;
-            if (crosses && t >= t0 && t <= t1 && a >= 0.0 && a <= pl.width && r > 0.0) {
+            let t = n_t.w * inv;
+            let a = dot3(dir, a_w.xyz) * inv;
+            let r = dot3(dir, batch_rows[base + 2u].xyz) * inv;
+            if (crosses && t >= t0 && t <= t1 && a >= 0.0 && a <= a_w.w && r > 0.0) {
                 hits += 1u;
+                let pl = plane_at(base);
                 if (!blocked(pl, a, r)) {
                     let det_perp = dot3(dir, pl.normal_perp);
                     var d = denominator(pl, det, det_perp, a);
