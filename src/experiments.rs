@@ -102,6 +102,7 @@ fn measure(settings: &ResolvedTable, planes: usize, seed: u64) -> Result<Vec<Mea
                 tests: after.tests - before.tests,
                 hits: after.hits - before.hits,
                 device_ns: ((after.seconds_device - before.seconds_device) * 1e9) as u64,
+                device_gather_ns: ((after.seconds_device_gather - before.seconds_device_gather) * 1e9) as u64,
                 upload_ns: ((after.seconds_upload - before.seconds_upload) * 1e9) as u64,
                 wait_ns: ((after.seconds_waited - before.seconds_waited) * 1e9) as u64,
                 bytes_crossed: after.bytes_crossed - before.bytes_crossed,

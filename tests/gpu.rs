@@ -426,6 +426,12 @@ fn gpu_images_are_the_same_bits_from_run_to_run() {
     assert!(sa.seconds_upload > 0.0 && sa.summary().contains("the uploads' own"), "{}", sa.summary());
     // The CPU waited for the GPU's work at least while its sums were read back.
     assert!(sa.seconds_waited > 0.0 && sa.summary().contains("it waited for the GPU"), "{}", sa.summary());
+    // Where the GPU has timestamps, its time is split: the gather's share is a part of it, and
+    // the summary names both parts.
+    if fogplanes::gpu::adapter().unwrap().has_timestamps() {
+        assert!(0.0 < sa.seconds_device_gather && sa.seconds_device_gather < sa.seconds_device, "{}", sa.summary());
+        assert!(sa.summary().contains("(the reach and the binning "), "{}", sa.summary());
+    }
 }
 
 /// Unbiased on the GPU: images against the independent reference renderer (whole pixels in the

@@ -451,6 +451,9 @@ pub struct GatherStats {
     /// wall time from a chunk's first submission to its sums read back where it has none); 0 on
     /// the CPU.
     pub device_ns: u64,
+    /// Of `device_ns`, the gather's and its reduction's (the rest: the planes' reach and their
+    /// binning), where the GPU has timestamps; else 0.
+    pub device_gather_ns: u64,
     /// Nanoseconds of wall time spent uploading to the GPU (planes, ray sets' records or rays);
     /// 0 on the CPU.
     pub upload_ns: u64,
@@ -468,6 +471,7 @@ impl std::ops::AddAssign for GatherStats {
         self.tests += o.tests;
         self.hits += o.hits;
         self.device_ns += o.device_ns;
+        self.device_gather_ns += o.device_gather_ns;
         self.upload_ns += o.upload_ns;
         self.wait_ns += o.wait_ns;
         self.bytes_crossed += o.bytes_crossed;

@@ -241,6 +241,9 @@ pub struct RenderStats {
     /// them, else the wall time from each chunk's first submission to its sums read back (an
     /// upper bound); 0 on the CPU.
     pub seconds_device: f64,
+    /// Of `seconds_device`, the gather's and its reduction's (the rest: the planes' reach and
+    /// their binning), where the GPU has timestamps; else 0.
+    pub seconds_device_gather: f64,
     /// Seconds of wall time spent uploading to the GPU (the planes, and each ray set's rays, or
     /// its record where the GPU makes them), their rays' writing aside; 0 on the CPU.
     pub seconds_upload: f64,
@@ -304,6 +307,7 @@ impl RenderStats {
     pub fn add_gather(&mut self, s: GatherStats, seconds: f64) {
         self.seconds_gather += seconds;
         self.seconds_device += s.device_ns as f64 * 1e-9;
+        self.seconds_device_gather += s.device_gather_ns as f64 * 1e-9;
         self.seconds_upload += s.upload_ns as f64 * 1e-9;
         self.seconds_waited += s.wait_ns as f64 * 1e-9;
         self.bytes_crossed += s.bytes_crossed;
@@ -365,8 +369,18 @@ impl RenderStats {
         // On the GPU, also the CPU's share of the work (partly beside the GPU's): where an
         // end-to-end time goes.
         let gathered_by = if self.seconds_device > 0.0 {
+            // The GPU's time split where its timestamps split it.
+            let split = if self.seconds_device_gather > 0.0 {
+                format!(
+                    " (the reach and the binning {:.4} s, the gather {:.4} s)",
+                    self.seconds_device - self.seconds_device_gather,
+                    self.seconds_device_gather
+                )
+            } else {
+                String::new()
+            };
             format!(
-                "{}; GPU time {:.4} s, {:.4} G hits/s, {:.1} MB crossed in {} submissions; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s; it waited for the GPU {:.4} s",
+                "{}; GPU time {:.4} s{split}, {:.4} G hits/s, {:.1} MB crossed in {} submissions; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s; it waited for the GPU {:.4} s",
                 self.device,
                 self.seconds_device,
                 self.device_hits_per_second() * 1e-9,

@@ -61,6 +61,7 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     d.set_item("device", &s.device)?;
     d.set_item("devices", s.devices.names().to_vec())?;
     d.set_item("seconds_device", s.seconds_device)?;
+    d.set_item("seconds_device_gather", s.seconds_device_gather)?;
     d.set_item("seconds_upload", s.seconds_upload)?;
     d.set_item("seconds_waited", s.seconds_waited)?;
     d.set_item("bytes_crossed", s.bytes_crossed)?;

@@ -344,13 +344,18 @@ impl GpuPlanes {
             ];
             for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
                 // Batch b's passes timed from its first (batch 0's from the reach before it, if
-                // any) to its last.
+                // any) to its last, and its gather from its start: where the GPU's time goes,
+                // the reach and the binning or the gather and its reduction.
                 let starts = k == 0 && !(b == 0 && reach_first);
+                let begins = (starts || k == 3).then_some(TIMESTAMPS * b as u32 + if k == 3 { 1 } else { 0 });
+                let ends = (k == 4).then_some(TIMESTAMPS * b as u32 + 2);
                 let timestamp_writes =
-                    queries.as_ref().filter(|_| starts || k == 4).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: starts.then_some(2 * b as u32),
-                        end_of_pass_write_index: (k == 4).then_some(2 * b as u32 + 1),
+                    queries.as_ref().filter(|_| begins.is_some() || ends.is_some()).map(|(set, _, _)| {
+                        wgpu::ComputePassTimestampWrites {
+                            query_set: set,
+                            beginning_of_pass_write_index: begins,
+                            end_of_pass_write_index: ends,
+                        }
                     });
                 let mut pass =
                     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
@@ -362,8 +367,9 @@ impl GpuPlanes {
                 }
             }
             if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| b + 1 == batches) {
-                encoder.resolve_query_set(set, 0..2 * batches as u32, resolve, 0);
-                encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 16 * batches as u64);
+                let queries = TIMESTAMPS * batches as u32;
+                encoder.resolve_query_set(set, 0..queries, resolve, 0);
+                encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 8 * queries as u64);
             }
         }
         Ok(Recorded {
@@ -445,24 +451,26 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
     })
 }
 
-/// A timestamp pair per batch (its first pass's start, its last pass's end), where the
-/// adapter has them, read when the sums are; else (or for a gathering of more batches
-/// than a query set takes here) the sums are timed by the wall time from their first
-/// submission to their reading back.
+/// The timestamps of a batch ([`timestamp_queries`]): its first pass's start, its gather's
+/// start, its last pass's end (`GpuSums` reads them in threes).
+pub(super) const TIMESTAMPS: u32 = 3;
+
+/// [`TIMESTAMPS`] a batch, where the adapter has them, read when the sums are; else (or for a
+/// gathering of more batches than a query set of wgpu's 4,096 queries takes) the sums are timed
+/// by the wall time from their first submission to their reading back.
 fn timestamp_queries(gpu: &Gpu, batches: usize) -> Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)> {
-    (gpu.has_timestamps() && batches <= 2048).then(|| {
+    let count = TIMESTAMPS as usize * batches;
+    (gpu.has_timestamps() && count <= 4096).then(|| {
         let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
             label: Some("gather time"),
             ty: wgpu::QueryType::Timestamp,
-            count: 2 * batches as u32,
+            count: count as u32,
         });
+        let bytes = 8 * count as u64;
         let copy_src = wgpu::BufferUsages::COPY_SRC;
-        let resolve = gpu.scratch("timestamps", 16 * batches as u64, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
-        let readback = gpu.scratch(
-            "timestamps read back",
-            16 * batches as u64,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
+        let resolve = gpu.scratch("timestamps", bytes, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
+        let readback =
+            gpu.scratch("timestamps read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
         (set, resolve, readback)
     })
 }

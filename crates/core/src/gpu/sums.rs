@@ -202,12 +202,16 @@ impl GpuSums {
         if !untimed && !timestamps.is_empty() {
             let period = gpu.queue.get_timestamp_period() as f64;
             stats.device_ns = 0;
+            // A driver's timestamps out of order count 0, not 2^64 ticks.
+            let ns = |from: u64, to: u64| (to.saturating_sub(from) as f64 * period) as u64;
             for b in &timestamps {
                 let view = mapped(b)?;
                 let ts: &[u64] = bytemuck::cast_slice(&view);
-                // A driver's timestamps out of order count 0, not 2^64 ticks.
-                stats.device_ns +=
-                    ts.chunks(2).map(|p| (p[1].saturating_sub(p[0]) as f64 * period) as u64).sum::<u64>();
+                for batch in ts.chunks_exact(super::planes::TIMESTAMPS as usize) {
+                    let [start, gather, end] = [batch[0], batch[1], batch[2]];
+                    stats.device_ns += ns(start, end);
+                    stats.device_gather_ns += ns(gather, end);
+                }
             }
         }
         drop(waiting);

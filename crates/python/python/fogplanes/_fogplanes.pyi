@@ -155,6 +155,9 @@ class RenderStats(TypedDict):
     devices: list[str]
     #: Seconds of the GPU's own gather (its timestamps, else the wall time of its work); 0 on the CPU.
     seconds_device: float
+    #: Of seconds_device, the gather's and its reduction's (the rest: the planes' reach and
+    #: their binning), where the GPU has timestamps; else 0.
+    seconds_device_gather: float
     #: Seconds of wall time uploading to the GPU (the planes, each ray set's rays: their
     #: writing, straight into the upload buffers, is in seconds_rays); 0 on the CPU.
     seconds_upload: float
