@@ -532,6 +532,8 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
         pytest.skip(f"SKIPPED LOUDLY: no GPU adapter here ({e}); install mesa-vulkan-drivers")
     assert stats["device"].startswith("gpu") and stats["seconds_device"] > 0 and stats["seconds_upload"] > 0
     assert stats["seconds_waited"] > 0
+    # The gather's share of the GPU's time, where its timestamps split it (else 0).
+    assert 0 <= stats["seconds_device_gather"] < stats["seconds_device"]
     assert stats["devices"] == [stats["device"]]
     # Every adapter listed; `gpu:N` picks one by its index: the default's is "gpu"'s image.
     adapters = fogplanes.devices()
