@@ -170,6 +170,11 @@ pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
     }
 }
 
+/// The timestamps of a batch of a gathering, where the adapter has them: its first pass's
+/// start, its gather's start, its last pass's end (written by `planes.rs`, read in threes by
+/// `sums.rs`).
+pub const TIMESTAMPS: u32 = 3;
+
 /// The variable that fixes the planes of a work item, for measuring the item size on a device
 /// (`scripts/gpu_check.sh`): a number from 1 to 512 (at most 256 on a CPU adapter).
 pub const ITEM_VARIABLE: &str = "FOGPLANES_GPU_ITEM_PLANES";

@@ -9,7 +9,7 @@ use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams, ITEM_BYTES};
 use super::scratch::{ScratchBuffers, indirect_offset};
 use super::sums::GpuSums;
-use super::{BATCH_PLANES, ScreenReach, TILE, estimator_id, item_planes};
+use super::{BATCH_PLANES, ScreenReach, TILE, TIMESTAMPS, estimator_id, item_planes};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -450,10 +450,6 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
         ],
     })
 }
-
-/// The timestamps of a batch ([`timestamp_queries`]): its first pass's start, its gather's
-/// start, its last pass's end (`GpuSums` reads them in threes).
-pub(super) const TIMESTAMPS: u32 = 3;
 
 /// [`TIMESTAMPS`] a batch, where the adapter has them, read when the sums are; else (or for a
 /// gathering of more batches than a query set of wgpu's 4,096 queries takes) the sums are timed

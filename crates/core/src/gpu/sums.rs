@@ -207,7 +207,7 @@ impl GpuSums {
             for b in &timestamps {
                 let view = mapped(b)?;
                 let ts: &[u64] = bytemuck::cast_slice(&view);
-                for batch in ts.chunks_exact(super::planes::TIMESTAMPS as usize) {
+                for batch in ts.chunks_exact(super::TIMESTAMPS as usize) {
                     let [start, gather, end] = [batch[0], batch[1], batch[2]];
                     stats.device_ns += ns(start, end);
                     stats.device_gather_ns += ns(gather, end);
