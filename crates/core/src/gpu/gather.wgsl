@@ -338,6 +338,16 @@ fn zero_correction(zx: f32, zy: f32, z2: f32, dists: vec4<f32>, values: vec4<f32
     return select(0.0, correction, d > 0.0);
 }
 
+// A sector's dF_e (section 3): the edge at distance `dist`, z in its frame (z_t, z_n), its turn,
+// |r_start|^2 - |r_end|^2 as `delta` and both squared distances; 0 on an edge through the vertex.
+fn sector(dist: f32, z_t: f32, z_n: f32, turn: f32, delta: f32, start: f32, end: f32) -> f32 {
+    // The end corner is the vertex only on an edge through it (d_e = 0, masked below).
+    let inv = select(0.0, 1.0 / select(1.0, end, end > 0.0), end > 0.0);
+    let ell = 0.5 * ln_ratio(delta * inv, start * inv);
+    let value = dist * fma(z_t, turn, z_n * ell);
+    return select(0.0, value, dist > 0.0);
+}
+
 // (1/pi) integral_0^pi g(beta) d beta for the vertex (p, q) of a w x h light (section 3).
 fn cmis_exact_mean(w: f32, h: f32, p: f32, q: f32, a_u: f32, a_v: f32) -> f32 {
     let zx = -a_v;
@@ -350,28 +360,22 @@ fn cmis_exact_mean(w: f32, h: f32, p: f32, q: f32, a_u: f32, a_v: f32) -> f32 {
     let c1 = corner_angles(x1, y0);
     let c2 = corner_angles(x1, y1);
     let c3 = corner_angles(x0, y1);
-    let turns = array<f32, 4>(c0.x + c1.x, c1.y + c2.y, c2.x + c3.x, c3.y + c0.y);
-    let cx = array<f32, 4>(-p, x1, x1, -p);
-    let cy = array<f32, 4>(-q, -q, y1, y1);
-    var r2: array<f32, 4>;
-    for (var k = 0u; k < 4u; k++) {
-        r2[k] = fma(cx[k], cx[k], cy[k] * cy[k]);
-    }
-    let deltas = array<f32, 4>(-w * (cx[0] + cx[1]), -h * (cy[1] + cy[2]), w * (cx[2] + cx[3]), h * (cy[3] + cy[0]));
-    let dist = array<f32, 4>(y0, x1, y1, x0);
-    let z_ns = array<f32, 4>(-zy, zx, zy, -zx);
-    let z_ts = array<f32, 4>(zx, zy, -zx, -zy);
-    var values = vec4<f32>(0.0);
-    var total = 0.0;
-    for (var e = 0u; e < 4u; e++) {
-        let end = r2[(e + 1u) % 4u];
-        // The end corner is the vertex only on an edge through it (d_e = 0, masked below).
-        let inv = select(0.0, 1.0 / select(1.0, end, end > 0.0), end > 0.0);
-        let ell = 0.5 * ln_ratio(deltas[e] * inv, r2[e] * inv);
-        let value = dist[e] * fma(z_ts[e], turns[e], z_ns[e] * ell);
-        values[e] = select(0.0, value, dist[e] > 0.0);
-        total = total + abs(values[e]);
-    }
+    // Corners counter-clockwise from (0, 0), relative to the vertex, and their squared
+    // distances; edge e runs from corner e to corner e + 1. The four sectors written out (no
+    // array indexed in a loop, which a compiler may keep in memory rather than registers).
+    let cx0 = -p;
+    let cy0 = -q;
+    let r2_0 = fma(cx0, cx0, cy0 * cy0);
+    let r2_1 = fma(x1, x1, cy0 * cy0);
+    let r2_2 = fma(x1, x1, y1 * y1);
+    let r2_3 = fma(cx0, cx0, y1 * y1);
+    let values = vec4<f32>(
+        sector(y0, zx, -zy, c0.x + c1.x, -w * (cx0 + x1), r2_0, r2_1),
+        sector(x1, zy, zx, c1.y + c2.y, -h * (cy0 + y1), r2_1, r2_2),
+        sector(y1, -zx, zy, c2.x + c3.x, w * (x1 + cx0), r2_2, r2_3),
+        sector(x0, -zy, -zx, c3.y + c0.y, h * (y1 + cy0), r2_3, r2_0),
+    );
+    let total = ((abs(values.x) + abs(values.y)) + abs(values.z)) + abs(values.w);
     let z2 = fma(zx, zx, zy * zy);
     let dists = vec4<f32>(x0, x1, y0, y1);
     let plus = zero_correction(zx, zy, z2, dists, values);
