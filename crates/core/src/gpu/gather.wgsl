@@ -85,8 +85,9 @@ struct Params {
 @group(0) @binding(0) var<uniform> params: Params;
 // The planes as rows of four words, PLANE_ROWS a plane (each a `Plane` as it is laid out), so
 // that a workgroup's threads stage a batch of planes row by row, neighbours reading neighbouring
-// rows (`plane_at` reads a staged plane back as a `Plane`).
-@group(0) @binding(1) var<storage, read> plane_rows: array<vec4<f32>>;
+// rows (`plane_at` reads a staged plane back as a `Plane`). Words, not floats: the u32 fields
+// never pass through an f32, whose small values a back end may flush to zero.
+@group(0) @binding(1) var<storage, read> plane_rows: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read> occluders: array<Occluder>;
 @group(0) @binding(3) var<storage, read> rays: array<f32>;
 // (cos, sin) of k pi / K for k = 1 .. K - 1 (weights/denominators.rs `StratifiedK`).
@@ -467,25 +468,30 @@ fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
 // ---------------------------------------------------------------------------------------------
 // The gather over work items, and the reduction of a tile's items.
 
-var<workgroup> batch_rows: array<vec4<f32>, BATCH * PLANE_ROWS>;
+var<workgroup> batch_rows: array<vec4<u32>, BATCH * PLANE_ROWS>;
 var<workgroup> batch_ranges: array<u32, BATCH>;
 
+// Row `k` of the staged planes as floats.
+fn row(k: u32) -> vec4<f32> {
+    return bitcast<vec4<f32>>(batch_rows[k]);
+}
+
 // The staged plane whose first row is `base`, as the record's layout reads (gather.rs
-// `PlaneRecord`: the u32 fields are the bits of their words).
+// `PlaneRecord`: the f32 fields are the bits of their words).
 fn plane_at(base: u32) -> Plane {
-    let r0 = batch_rows[base];
-    let r1 = batch_rows[base + 1u];
+    let r0 = row(base);
+    let r1 = row(base + 1u);
     let r2 = batch_rows[base + 2u];
     let r3 = batch_rows[base + 3u];
-    let r4 = batch_rows[base + 4u];
-    let r5 = batch_rows[base + 5u];
-    let r6 = batch_rows[base + 6u];
+    let r4 = row(base + 4u);
+    let r5 = row(base + 5u);
+    let r6 = row(base + 6u);
     let r7 = batch_rows[base + 7u];
     let r8 = batch_rows[base + 8u];
     return Plane(
-        r0.xyz, r0.w, r1.xyz, r1.w, r2.xyz, bitcast<u32>(r2.w), r3.xyz, bitcast<u32>(r3.w),
+        r0.xyz, r0.w, r1.xyz, r1.w, bitcast<vec3<f32>>(r2.xyz), r2.w, bitcast<vec3<f32>>(r3.xyz), r3.w,
         r4.xyz, r4.w, r5.x, r5.y, r5.z, r5.w, r6.x, r6.y, r6.z, r6.w,
-        bitcast<u32>(r7.x), r7.y, r7.z, bitcast<u32>(r7.w), r8.xyz, bitcast<u32>(r8.w),
+        r7.x, bitcast<f32>(r7.y), bitcast<f32>(r7.z), r7.w, bitcast<vec3<f32>>(r8.xyz), r8.w,
     );
 }
 var<workgroup> wg_item: vec4<u32>;
@@ -546,14 +552,14 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
             // |det| > 1e-30, so that 1/det is finite), t in [t0, t1], a on the chord, r > 0.
             // The test reads the plane's first three rows only, the hit the whole plane.
             let base = j * PLANE_ROWS;
-            let n_t = batch_rows[base];
-            let a_w = batch_rows[base + 1u];
+            let n_t = row(base);
+            let a_w = row(base + 1u);
             let det = dot3(dir, n_t.xyz);
             let crosses = abs(det) > 1e-30;
             let inv = 1.0 / select(1.0, det, crosses);
             let t = n_t.w * inv;
             let a = dot3(dir, a_w.xyz) * inv;
-            let r = dot3(dir, batch_rows[base + 2u].xyz) * inv;
+            let r = dot3(dir, row(base + 2u).xyz) * inv;
             if (crosses && t >= t0 && t <= t1 && a >= 0.0 && a <= a_w.w && r > 0.0) {
                 hits += 1u;
                 let pl = plane_at(base);

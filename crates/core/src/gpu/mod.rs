@@ -203,18 +203,22 @@ pub struct Tuning {
     /// where the closed form of cmis-exact takes ln(1 + x) of small x (docs/mathematics.md
     /// section 3): a device's log2 may lose the small logarithms that the polynomial keeps.
     pub native_math: bool,
-    /// wgpu's runtime checks off ([`CHECKS_VARIABLE`]` = off`): no bounds checks added to the
-    /// shaders' indexing and no bound forced on their loops. Every index of the shaders is in
-    /// range by construction (clamped, or from the binning's own counts) and every loop counts
-    /// to a bound, so the image is the same bits (tested on lavapipe); what it saves is for a
-    /// device to say.
+    /// wgpu's runtime checks off ([`CHECKS_VARIABLE`]` = off`, `ShaderRuntimeChecks::unchecked`):
+    /// no clamps added to the shaders' indexing, no bound forced on their loops, no guard on
+    /// their integer divisions. (Where the driver has robust buffer access, as NVIDIA's and
+    /// lavapipe's do, wgpu adds no checks to storage buffers' indexing either way: what goes is
+    /// the clamps on workgroup, local and vector indices, the loops' bounds and the guards.)
+    /// Every index of the shaders is in range, every loop counts to a bound and every divisor
+    /// is at least 1 (device.rs says why), so the image is the same bits (tested on lavapipe);
+    /// what it saves is for a device to say.
     pub unchecked: bool,
 }
 
 impl Tuning {
     /// The settings the variables give, or the one line that says which variable holds what.
     pub fn from_env() -> std::result::Result<Self, String> {
-        let read = |name: &str| std::env::var(name).ok().filter(|v| !v.trim().is_empty());
+        // Unset is the default; a value that is set, even empty, must name a choice.
+        let read = |name: &str| std::env::var(name).ok();
         let item_planes = match read(ITEM_VARIABLE) {
             None => None,
             Some(v) => match v.trim().parse::<u32>() {
