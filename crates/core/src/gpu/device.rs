@@ -57,20 +57,6 @@ pub(super) fn kind_name(kind: wgpu::DeviceType) -> &'static str {
     }
 }
 
-/// The adapter's name and what follows it, as records hold a device's name
-/// ([`crate::options::Devices`]: `gpu: ` and at most [`crate::options::Devices::MOST_BYTES`]
-/// bytes in all, without "; " or control characters): the driver's name is cut, never what
-/// follows it, so that every record of a render on any adapter can be read back.
-fn named(name: &str, rest: &str) -> String {
-    let clean: String = name.replace("; ", ", ").chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
-    let room = crate::options::Devices::MOST_BYTES.saturating_sub("gpu: ".len() + 1 + rest.len());
-    let mut end = clean.len().min(room);
-    while !clean.is_char_boundary(end) {
-        end -= 1;
-    }
-    format!("{} {rest}", &clean[..end])
-}
-
 /// Runs a future of wgpu's to its end on this thread.
 pub(super) fn block_on<F: std::future::Future>(f: F) -> F::Output {
     let mut f = std::pin::pin!(f);
@@ -208,8 +194,8 @@ impl Gpu {
                 let items = tuning.item_planes.map(|n| super::item_planes(cpu, 0, Some(n)));
                 let shown = super::Tuning { item_planes: items, ..tuning };
                 match shown.label() {
-                    None => named(&info.name, &format!("({:?}, {kind})", info.backend)),
-                    Some(tuned) => named(&info.name, &format!("({:?}, {kind}, tuned: {tuned})", info.backend)),
+                    None => format!("{} ({:?}, {kind})", info.name, info.backend),
+                    Some(tuned) => format!("{} ({:?}, {kind}, tuned: {tuned})", info.name, info.backend),
                 }
             },
             cpu_adapter: info.device_type == wgpu::DeviceType::Cpu,
@@ -350,26 +336,4 @@ pub(super) fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry
 pub(super) fn grid(n: u64) -> (u32, u32) {
     let x = n.clamp(1, 65_535);
     (x as u32, n.div_ceil(x).max(1) as u32)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::named;
-    use crate::options::Devices;
-
-    /// Any driver's name makes a device's name that records can hold and read back: cut to
-    /// fit, its "; " and control characters replaced, what follows it kept whole.
-    #[test]
-    fn every_adapter_name_fits_a_record() {
-        let rest = "(Vulkan, discrete GPU, tuned: work items of 512 planes, the driver's exp, log and atan, no shader runtime checks)";
-        for driver in ["NVIDIA H100 80GB HBM3", "a; b\u{7}c", &"é".repeat(200), &"x".repeat(300)] {
-            let name = named(driver, rest);
-            assert!(name.ends_with(rest) && !name.contains("; "), "{name}");
-            assert!(Devices::from_names(vec![format!("gpu: {name}")]).is_ok(), "{name}");
-        }
-        assert_eq!(
-            named("NVIDIA H100 80GB HBM3", "(Vulkan, discrete GPU)"),
-            "NVIDIA H100 80GB HBM3 (Vulkan, discrete GPU)"
-        );
-    }
 }
