@@ -194,7 +194,7 @@ impl PlaneView {
         let sign = if scene.medium.g < 0.0 { -1.0 } else { 1.0 };
         let b = plane.origin - origin;
         let normal = plane.chord.cross(plane.direction);
-        let (sin_a, cos_a) = plane.alpha.sin_cos();
+        let (sin_a, cos_a) = (plane.sin_alpha, plane.cos_alpha);
         let chord_perp = -sin_a * light.u + cos_a * light.v;
         PlaneView {
             normal: normal.as_vec3(),
@@ -203,7 +203,7 @@ impl PlaneView {
             r_axis: b.cross(plane.chord).as_vec3(),
             t_det: b.dot(normal) as f32,
             toward: (sign * plane.direction).as_vec3(),
-            frame: PlaneFrame::new(plane.width, plane.alpha, plane.p0, plane.q0, light.width, light.height),
+            frame: PlaneFrame::from_cos_sin(plane.width, cos_a, sin_a, plane.p0, plane.q0, light.width, light.height),
             scale: (plane.power / planes_total as f64).as_vec3(),
             scale_max: (plane.power / planes_total as f64).as_vec3().max_element(),
             light: plane.light as u32,

@@ -100,12 +100,18 @@ pub fn occluders_of_polygon(scene: &Scene, plane: &PhotonPlane, poly: &Polygon<D
     let eps = 1e-9 * scene.medium.diagonal();
     let margin = 1e-6 * scene.medium.diagonal();
     let mut mask = 0u64;
+    let pts = poly.points();
+    // On the stack, not in vectors: this runs for every other light of every plane.
+    let mut dist = [0.0f64; Polygon::<DVec3>::CAPACITY];
+    let mut crossing = [(0.0f64, 0.0f64); Polygon::<DVec3>::CAPACITY];
     for (k, light) in scene.lights.iter().enumerate() {
         if k == plane.light {
             continue;
         }
-        let pts = poly.points();
-        let dist: Vec<f64> = pts.iter().map(|&v| (v - light.corner).dot(light.n)).collect();
+        let dist = &mut dist[..pts.len()];
+        for (d, &v) in dist.iter_mut().zip(pts) {
+            *d = (v - light.corner).dot(light.n);
+        }
         if dist.iter().all(|&d| d > eps) || dist.iter().all(|&d| d < -eps) {
             continue;
         }
@@ -113,18 +119,21 @@ pub fn occluders_of_polygon(scene: &Scene, plane: &PhotonPlane, poly: &Polygon<D
             mask |= 1 << k; // in the light's own plane: leave it to the per-hit test
             continue;
         }
-        // Where the polygon's boundary meets the light's plane, in the light's local frame.
-        let mut crossing = Vec::with_capacity(4);
+        // Where the polygon's boundary meets the light's plane, in the light's local frame
+        // (at most one point per edge).
+        let mut crossings = 0;
         for a in 0..pts.len() {
-            let b = (a + 1) % pts.len();
+            let b = if a + 1 == pts.len() { 0 } else { a + 1 };
             let (da, db) = (dist[a], dist[b]);
             if da.abs() <= eps {
-                crossing.push(light.local(pts[a]));
+                crossing[crossings] = light.local(pts[a]);
+                crossings += 1;
             } else if (da < 0.0) != (db < 0.0) && db.abs() > eps {
-                crossing.push(light.local(pts[a] + (pts[b] - pts[a]) * (da / (da - db))));
+                crossing[crossings] = light.local(pts[a] + (pts[b] - pts[a]) * (da / (da - db)));
+                crossings += 1;
             }
         }
-        if segment_meets_rectangle(&crossing, light.width, light.height, margin) {
+        if segment_meets_rectangle(&crossing[..crossings], light.width, light.height, margin) {
             mask |= 1 << k;
         }
     }
@@ -137,17 +146,14 @@ fn segment_meets_rectangle(points: &[(f64, f64)], w: f64, h: f64, m: f64) -> boo
     let Some(&first) = points.first() else {
         return false;
     };
-    // The extreme points along the line through the crossing points.
-    let far = points.iter().copied().max_by(|a, b| {
-        let da = (a.0 - first.0).hypot(a.1 - first.1);
-        da.total_cmp(&(b.0 - first.0).hypot(b.1 - first.1))
-    });
-    let a = far.unwrap_or(first);
-    let b = points
-        .iter()
-        .copied()
-        .max_by(|p, q| (p.0 - a.0).hypot(p.1 - a.1).total_cmp(&(q.0 - a.0).hypot(q.1 - a.1)))
-        .unwrap_or(a);
+    // The extreme points along the line through the crossing points (by squared distance:
+    // the same order as the distance, without a square root).
+    let farthest = |from: (f64, f64)| {
+        let far = |p: &(f64, f64)| (p.0 - from.0).powi(2) + (p.1 - from.1).powi(2);
+        points.iter().copied().max_by(|p, q| far(p).total_cmp(&far(q))).unwrap_or(from)
+    };
+    let a = farthest(first);
+    let b = farthest(a);
     let (a, b) = (DVec2::new(a.0, a.1), DVec2::new(b.0, b.1));
     clip_segment(a, b, DVec2::splat(-m), DVec2::new(w + m, h + m)).is_some()
 }

@@ -201,7 +201,8 @@ pub fn screen_polygon_of(camera: &Camera, world: &Polygon<DVec3>, medium: &Mediu
     // Only points in front of the camera can be hit; a tiny positive depth keeps the
     // projection finite (points closer than this lie within it of the camera).
     let near = 1e-9 * medium.diagonal().max(1e-30);
-    let cam = cam.clip(|v| v.z - near, |p, q, s| p + (q - p) * s);
+    let mut scratch = Polygon::<DVec3>::empty();
+    cam.clip_in_place(&mut scratch, |v| v.z - near, |p, q, s| p + (q - p) * s);
     let (mut screen, mut other) = (Polygon::<DVec2>::empty(), Polygon::<DVec2>::empty());
     for &v in cam.points() {
         let (x, y) = camera.project(v);
@@ -210,10 +211,10 @@ pub fn screen_polygon_of(camera: &Camera, world: &Polygon<DVec3>, medium: &Mediu
     }
     let (w, h) = (camera.width as f64, camera.height as f64);
     let lerp = |p: DVec2, q: DVec2, s: f64| p + (q - p) * s;
-    screen.clip_into(&mut other, |v| v.x + 1.0, lerp);
-    other.clip_into(&mut screen, |v| w + 1.0 - v.x, lerp);
-    screen.clip_into(&mut other, |v| v.y + 1.0, lerp);
-    other.clip_into(&mut screen, |v| h + 1.0 - v.y, lerp);
+    screen.clip_in_place(&mut other, |v| v.x + 1.0, lerp);
+    screen.clip_in_place(&mut other, |v| w + 1.0 - v.x, lerp);
+    screen.clip_in_place(&mut other, |v| v.y + 1.0, lerp);
+    screen.clip_in_place(&mut other, |v| h + 1.0 - v.y, lerp);
     screen
 }
 

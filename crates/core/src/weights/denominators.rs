@@ -30,6 +30,11 @@ pub struct PlaneFrame {
 impl PlaneFrame {
     pub fn new(width: f64, alpha: f64, p0: f64, q0: f64, light_w: f64, light_h: f64) -> Self {
         let (sin_a, cos_a) = alpha.sin_cos();
+        Self::from_cos_sin(width, cos_a, sin_a, p0, q0, light_w, light_h)
+    }
+
+    /// [`PlaneFrame::new`] with `alpha.sin_cos()` given (a plane computes it once).
+    pub fn from_cos_sin(width: f64, cos_a: f64, sin_a: f64, p0: f64, q0: f64, light_w: f64, light_h: f64) -> Self {
         // (-sin, cos) has a negative sine when cos < 0; the same line is (sin, -cos).
         let (pc, ps) = if cos_a >= 0.0 { (-sin_a, cos_a) } else { (sin_a, -cos_a) };
         PlaneFrame {
