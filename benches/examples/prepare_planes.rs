@@ -38,7 +38,7 @@ fn main() -> Result<(), String> {
     };
     let scene = Scene::load(Path::new(path)).map_err(|e| e.to_string())?;
     let (cam, medium) = (&scene.camera, &scene.medium);
-    let sampler = Sampler::default();
+    let set = Sampler::default().numbers(1);
     let lights = scene.light_distribution();
     // Timed in pieces, as a render prepares its planes (the benchmark's 40,960 planes are 16
     // pieces of 2,560, one per ray set, each with its own view and raster), each step's results
@@ -57,7 +57,7 @@ fn main() -> Result<(), String> {
         let piece = start as u64..(start + piece_planes).min(n) as u64;
         let t = Instant::now();
         numbers.clear();
-        numbers.extend(piece.map(|i| sampler.plane_numbers(1, i)));
+        numbers.extend(piece.map(|i| set.plane(i)));
         time(0, "the sampler's numbers", t);
         let t = Instant::now();
         planes.clear();

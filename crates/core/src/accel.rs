@@ -175,14 +175,14 @@ impl PreparedPlanes {
         let mut reach = Vec::new();
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
-        let lights = scene.light_distribution();
+        let (lights, numbers) = (scene.light_distribution(), set.sampler.numbers(set.seed));
         for start in range.clone().step_by(SAMPLING_PIECE) {
             control.check()?;
             let t = Instant::now();
             let piece = start..(start + SAMPLING_PIECE).min(range.end);
             let _s = crate::trace::span("planes sampled");
             let piece = control.map_units("sample", piece.len(), PLANE_UNIT, |j| {
-                sample_plane(scene, &lights, set.sampler.plane_numbers(set.seed, (piece.start + j) as u64))
+                sample_plane(scene, &lights, numbers.plane((piece.start + j) as u64))
             });
             seconds_sampling += t.elapsed().as_secs_f64();
             drop(_s);

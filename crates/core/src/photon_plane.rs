@@ -98,10 +98,10 @@ pub fn sample_plane_range(
     seed: u64,
     range: std::ops::Range<usize>,
 ) -> Vec<PhotonPlane> {
-    let lights = scene.light_distribution();
+    let (lights, numbers) = (scene.light_distribution(), sampler.numbers(seed));
     (range.start as u64..range.end as u64)
         .into_par_iter()
-        .map(|i| sample_plane(scene, &lights, sampler.plane_numbers(seed, i)))
+        .map(|i| sample_plane(scene, &lights, numbers.plane(i)))
         .collect()
 }
 

@@ -48,23 +48,46 @@ impl Sampler {
 
     /// The five uniform numbers in [0, 1) of plane `index` of the set made with `seed`, in the
     /// order [`crate::photon_plane::sample_plane`] reads them: light and orientation (one
-    /// number, see there), the direction's two, the point's p and q.
-    #[inline]
+    /// number, see there), the direction's two, the point's p and q. (For many planes of one
+    /// set, [`Sampler::numbers`] derives what depends on the seed once.)
     pub fn plane_numbers(self, seed: u64, index: u64) -> [f64; 5] {
-        match self {
+        self.numbers(seed).plane(index)
+    }
+
+    /// The numbers of the set made with `seed`, plane by plane ([`PlaneNumbers::plane`]).
+    pub fn numbers(self, seed: u64) -> PlaneNumbers {
+        let stream = splitmix64(seed ^ PLANE_STREAM);
+        PlaneNumbers { sampler: self, seed, stream, sobol: SobolSampler::new(stream) }
+    }
+}
+
+/// The numbers of one set of planes ([`Sampler::numbers`]), with what depends on its seed alone
+/// derived once: the Sobol sequence's scrambling seeds.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneNumbers {
+    sampler: Sampler,
+    seed: u64,
+    stream: u64,
+    sobol: SobolSampler,
+}
+
+impl PlaneNumbers {
+    /// [`Sampler::plane_numbers`] of this set's plane `index`.
+    #[inline]
+    pub fn plane(&self, index: u64) -> [f64; 5] {
+        match self.sampler {
             Sampler::Independent => {
-                let mut rng = rng_for(seed, PLANE_STREAM, index);
+                let mut rng = rng_for(self.seed, PLANE_STREAM, index);
                 std::array::from_fn(|_| unit_f64(rng.next_u64()))
             }
             Sampler::Sobol => {
                 // Plane counts stay far below 2^32 (limits::MAX_PLANES).
                 debug_assert!(index <= u32::MAX as u64, "plane index {index} beyond the Sobol sequence");
-                let stream = splitmix64(seed ^ PLANE_STREAM);
-                let point: [f64; 5] = SobolSampler::new(stream).point(index as u32);
+                let point: [f64; 5] = self.sobol.point(index as u32);
                 // The digits below the sequence's 32 bits, uniform and independent, as an Owen
                 // scrambling of unlimited depth would make them: the light's share of dimension
                 // 0 is stretched into the orientation, and must not come out on a grid.
-                let low = splitmix64(stream ^ splitmix64(index));
+                let low = splitmix64(self.stream ^ splitmix64(index));
                 std::array::from_fn(|d| {
                     let fine = unit_f64(splitmix64(low ^ d as u64)) * (1.0 / 4_294_967_296.0);
                     (point[d] + fine).min(ONE_BELOW)
