@@ -308,7 +308,12 @@ fn projected_panels(scene: &Scene) -> Vec<Option<Polygon<DVec2>>> {
 fn region_in_pixel(polygon: &Polygon<DVec2>, i: u32, j: u32) -> Polygon<DVec2> {
     let (x, y) = (i as f64, j as f64);
     let lerp = |p: DVec2, q: DVec2, s: f64| p + (q - p) * s;
-    polygon.clip(|v| v.x - x, lerp).clip(|v| x + 1.0 - v.x, lerp).clip(|v| v.y - y, lerp).clip(|v| y + 1.0 - v.y, lerp)
+    let (mut region, mut scratch) = (*polygon, Polygon::empty());
+    region.clip_in_place(&mut scratch, |v| v.x - x, lerp);
+    region.clip_in_place(&mut scratch, |v| x + 1.0 - v.x, lerp);
+    region.clip_in_place(&mut scratch, |v| v.y - y, lerp);
+    region.clip_in_place(&mut scratch, |v| y + 1.0 - v.y, lerp);
+    region
 }
 
 /// The area of a region of a pixel (at most 1 but for rounding; 0 for fewer than 3 vertices).
