@@ -6,6 +6,8 @@
 # Here, before the call:
 #   cargo build --release && cargo test --release --no-run
 #   strip -o .gl/all target/release/deps/all-<hash>        # the test binary (`--no-run` names it)
+#   cargo build --release -p fogplanes-bench --example prepare_planes && \
+#       strip -o .gl/prepare_planes target/release/examples/prepare_planes   # 2 MB
 #   git worktree add /tmp/base <commit> && (cd /tmp/base && CARGO_TARGET_DIR=/tmp/base-target \
 #       cargo build --release) && strip -o .gl/base/fogplanes /tmp/base-target/release/fogplanes
 # The call (device tool): `bash scripts/device_check.sh`, carrying target/release/fogplanes and
@@ -16,7 +18,8 @@
 # The base build's gpu_check leaves out the settings only this build knows (GPU_CHECK_TUNED=no);
 # the reply ends with this build's GPU time by setting (`gpu tuned`, gpu/mod.rs `Tuning`).
 # Its logs: gpu_check.log and gpu_timeline.log (this build), base/gpu_check.log and
-# base/gpu_timeline.log, cores_check.log, gpu_tests.log, devices.log. Commit them under
+# base/gpu_timeline.log, cores_check.log, gpu_tests.log, devices.log, prepare_planes.log (the
+# CPU's cost of preparing a plane, step by step, on the device machine's cores). Commit them under
 # docs/measurements/ with the date, the device, the commits and this command.
 cd "$(dirname "$0")/.."
 B=target/release/fogplanes
@@ -35,6 +38,11 @@ if [ -x .gl/base/fogplanes ]; then
     OUT="$out/base" FOGPLANES=.gl/base/fogplanes GPU_CHECK_TUNED=no timeout 170 bash scripts/gpu_check.sh >/dev/null 2>&1
     echo "gpu_check (base) rc $?" >>"$out/base/gpu_check.log"
 fi
+if [ -x .gl/prepare_planes ]; then
+    # One thread, twice (benches/examples/prepare_planes.rs): the CPU's side of a GPU render.
+    for run in 1 2; do RAYON_NUM_THREADS=1 timeout 30 .gl/prepare_planes media_scenes/six_lights.toml 163840; done \
+        >"$out/prepare_planes.log" 2>&1
+fi
 timeout 240 bash scripts/cores_check.sh "$B" >"$out/cores_check.log" 2>&1
 echo "cores_check rc $?" >>"$out/cores_check.log"
 if [ -x .gl/all ]; then
@@ -49,3 +57,4 @@ grep -h "^gpu [0-9]* again: smis-exact:" "$out/gpu_check.log" "$out"/base/gpu_ch
 # And this build's GPU time by setting (gpu/mod.rs `Tuning`), the second round's.
 grep -h "^gpu tuned .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).*/ \1: \2/' | sed 's/^gpu tuned //'
 tail -2 "$out/cores_check.log" "$out/gpu_tests.log" 2>/dev/null
+grep -h "a GPU render's" "$out/prepare_planes.log" 2>/dev/null
