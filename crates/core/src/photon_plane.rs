@@ -220,14 +220,11 @@ impl PhotonPlane {
         let mut poly = Polygon::from_slice(&[a, b, b + reach * self.direction, a + reach * self.direction]);
         let mut scratch = Polygon::empty();
         let lerp = |p: DVec3, q: DVec3, s: f64| p + (q - p) * s;
-        let (lo, hi) = (medium.min - margin, medium.max + margin);
-        // The faces in turn, each axis written out (an indexed axis is a branch per vertex).
-        poly.clip_in_place(&mut scratch, |v| v.x - lo.x, lerp);
-        poly.clip_in_place(&mut scratch, |v| hi.x - v.x, lerp);
-        poly.clip_in_place(&mut scratch, |v| v.y - lo.y, lerp);
-        poly.clip_in_place(&mut scratch, |v| hi.y - v.y, lerp);
-        poly.clip_in_place(&mut scratch, |v| v.z - lo.z, lerp);
-        poly.clip_in_place(&mut scratch, |v| hi.z - v.z, lerp);
+        for axis in 0..3 {
+            let (lo, hi) = (medium.min[axis] - margin, medium.max[axis] + margin);
+            poly.clip_in_place(&mut scratch, |v| v[axis] - lo, lerp);
+            poly.clip_in_place(&mut scratch, |v| hi - v[axis], lerp);
+        }
         poly
     }
 
@@ -272,6 +269,8 @@ mod tests {
                 assert!(on_edge, "end ({x}, {y}) of the chord through ({pp}, {qq})");
             }
             assert!(p.direction.dot(l.n) >= 0.0 && (p.direction.length() - 1.0).abs() < 1e-12);
+            // The sine and cosine it carries are alpha's, bit for bit.
+            assert_eq!((p.sin_alpha, p.cos_alpha), p.alpha.sin_cos());
         }
     }
 
