@@ -143,12 +143,20 @@ impl<T: Copy + Default> Polygon<T> {
     /// empties it, without copying either (the same vertices as [`Polygon::clip`] in every
     /// case).
     pub fn clip_in_place(&mut self, scratch: &mut Self, inside: impl Fn(T) -> f64, lerp: impl Fn(T, T, f64) -> T) {
-        let side = self.sides(inside);
-        let side_of = &side[..self.len];
-        if side_of.iter().all(|&d| d >= 0.0) {
+        // The sides written where they are read, and counted as they are made: returned by
+        // value, the array was copied in wide loads from narrow stores, a stall per clip (the
+        // box polygon's hottest instructions).
+        let mut side = [0.0f64; Polygon::<DVec3>::CAPACITY];
+        let mut kept = 0;
+        for (d, &v) in side.iter_mut().zip(self.points()) {
+            *d = inside(v);
+            kept += (*d >= 0.0) as usize;
+        }
+        if kept == self.len {
             return;
         }
-        if side_of.iter().all(|&d| d < 0.0) {
+        // None kept (a NaN side is not kept, and Sutherland-Hodgman keeps nothing of it either).
+        if kept == 0 {
             self.len = 0;
             return;
         }
@@ -157,8 +165,8 @@ impl<T: Copy + Default> Polygon<T> {
         self.len = scratch.len;
     }
 
-    /// Each vertex's side of a clip, computed once (an edge's two ends share their vertices
-    /// with its neighbours).
+    /// Each vertex's side of a clip (an edge's two ends share their vertices with its
+    /// neighbours).
     fn sides(&self, inside: impl Fn(T) -> f64) -> [f64; Polygon::<DVec3>::CAPACITY] {
         let mut side = [0.0f64; Polygon::<DVec3>::CAPACITY];
         for (d, &v) in side.iter_mut().zip(self.points()) {
