@@ -4,17 +4,21 @@
 //! view and occluders for the gather, to make what crosses for the GPU's reach
 //! (`gpu::screen_reach`) and to bin it in the CPU's raster. A GPU render pays all but the last,
 //! a CPU render all but the GPU's reach; at 655,360 planes they are the CPU's side of the render.
+//! Then the render's own preparation, whole (`accel::CpuSide::prepare`, its parallel loops on
+//! the threads of the pool: wall time a plane, and the process's CPU time a plane where the
+//! platform has a clock for it), for the GPU and for the raster, piece by piece.
 //!
 //! ```text
 //! RAYON_NUM_THREADS=1 cargo run --release -p fogplanes-bench --example prepare_planes -- SCENE [PLANES [PIECE]]
 //! ```
 
+use fogplanes::accel::{Accelerator, CpuSide};
 use fogplanes::control::Control;
 use fogplanes::gather::GatherContext;
 use fogplanes::gpu::screen_reach;
 use fogplanes::occlusion::occluders_of_polygon;
-use fogplanes::photon_plane::sample_plane;
-use fogplanes::raster::{ScreenRaster, box_polygon, screen_polygon_of};
+use fogplanes::photon_plane::{PlaneSet, sample_plane};
+use fogplanes::raster::{ScreenRaster, Tiling, box_polygon, screen_polygon_of};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
 use std::hint::black_box;
@@ -105,5 +109,41 @@ fn main() -> Result<(), String> {
         sum("binned in the CPU's raster"),
         sum("what crosses for the GPU's reach")
     );
+
+    // The render's own preparation, piece by piece as above, on the pool's threads.
+    let set = PlaneSet { sampler: Sampler::default(), seed: 1 };
+    let threads = rayon::current_num_threads();
+    println!("the render's own preparation (accel::CpuSide::prepare) on {threads} threads, ns a plane:");
+    for (name, accelerator) in [("for the GPU", Accelerator::Gpu(0)), ("for the raster", Accelerator::Raster)] {
+        let tiling = Tiling::new(cam.width, cam.height, threads);
+        let (wall, cpu) = (Instant::now(), process_cpu_seconds());
+        // On a thread of the pool, as a render prepares its pieces: its parallel loops are not
+        // injected from outside one by one, each waking a worker.
+        rayon::scope(|_| {
+            for start in (0..n).step_by(piece_planes) {
+                let range = start..(start + piece_planes).min(n);
+                let side = CpuSide::prepare(&scene, set, range, accelerator, tiling, Control::none())
+                    .map_err(|e| e.to_string())?;
+                black_box(&side);
+            }
+            Ok::<(), String>(())
+        })?;
+        let per_plane = |seconds: f64| seconds * 1e9 / n.max(1) as f64;
+        let cpu = process_cpu_seconds().zip(cpu).map(|(b, a)| format!(", {:.1} of CPU", per_plane(b - a)));
+        println!("  {:8.1}  wall{}  {name}", per_plane(wall.elapsed().as_secs_f64()), cpu.unwrap_or_default());
+    }
     Ok(())
+}
+
+/// The process's CPU seconds (user and system, every thread), where the platform says.
+fn process_cpu_seconds() -> Option<f64> {
+    #[cfg(unix)]
+    {
+        let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: clock_gettime writes the timespec it is given, and nothing else.
+        if unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) } == 0 {
+            return Some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9);
+        }
+    }
+    None
 }

@@ -13,7 +13,7 @@ use crate::gpu::{self, GpuPlanes, GpuRays, GpuSums};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::limits::PLANE_UNIT;
 use crate::occlusion::occluders_of_polygon;
-use crate::photon_plane::{PlaneSet, sample_plane};
+use crate::photon_plane::{PhotonPlane, PlaneSet, sample_plane};
 use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::raster::{RasterPiece, ScreenRaster, Tiling, box_polygon, screen_polygon_of};
 use crate::scene::Scene;
@@ -130,6 +130,95 @@ impl Aggregate for CpuStructure {
 /// only their prepared views and screen polygons are kept.
 const SAMPLING_PIECE: usize = 16_384;
 
+/// What the CPU prepares of a piece of planes before its structure is made
+/// ([`PreparedPlanes::in_tiles`]): the planes' constants, and the raster's binning, the GPU's
+/// reach records or the planes themselves (for the BVH), as the accelerator needs. Public so
+/// that `benches/examples/prepare_planes.rs` times the render's own preparation.
+pub struct CpuSide {
+    pub context: GatherContext,
+    pub raster: Option<ScreenRaster>,
+    /// What crosses for the GPU's reach, a plane's each (empty but on the GPU).
+    pub reach: Vec<gpu::ScreenReach>,
+    /// The planes, kept for the BVH only.
+    pub all: Vec<PhotonPlane>,
+    pub seconds_sampling: f64,
+    pub seconds_build: f64,
+}
+
+impl CpuSide {
+    /// Planes `range` of `set` sampled and prepared for `accelerator` in pieces of
+    /// [`SAMPLING_PIECE`]; [`crate::Error::Cancelled`] once `control` is cancelled.
+    pub fn prepare(
+        scene: &Scene,
+        set: PlaneSet,
+        range: Range<usize>,
+        accelerator: Accelerator,
+        tiling: Tiling,
+        control: Control,
+    ) -> Result<Self> {
+        let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
+        let origin = scene.camera.position;
+        let mut context = GatherContext::empty(scene, origin);
+        context.reserve(range.len());
+        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty_in(&scene.camera, tiling));
+        // What crosses for each plane's reach on the GPU (`gpu::screen_reach`), made from its
+        // screen polygon.
+        let mut reach = Vec::with_capacity(if matches!(accelerator, Accelerator::Gpu(_)) { range.len() } else { 0 });
+        // The BVH is built over the whole set at once; it keeps the planes while it does.
+        let mut all = Vec::new();
+        let (lights, numbers) = (scene.light_distribution(), set.sampler.numbers(set.seed));
+        for start in range.clone().step_by(SAMPLING_PIECE) {
+            control.check()?;
+            let t = Instant::now();
+            let piece = start..(start + SAMPLING_PIECE).min(range.end);
+            let _s = crate::trace::span("planes sampled");
+            let piece = control.map_units("sample", piece.len(), PLANE_UNIT, |j| {
+                sample_plane(scene, &lights, numbers.plane((piece.start + j) as u64))
+            });
+            seconds_sampling += t.elapsed().as_secs_f64();
+            drop(_s);
+            let _s = crate::trace::span("planes prepared");
+            let t = Instant::now();
+            if matches!(accelerator, Accelerator::Raster | Accelerator::Gpu(_)) {
+                // Each plane's box polygon made once, for its occluders and its screen polygon,
+                // and on the GPU what crosses for its reach made from that in the same loop.
+                let (cam, medium) = (&scene.camera, &scene.medium);
+                let footprint = |i: usize| {
+                    let world = box_polygon(&piece[i], medium);
+                    (occluders_of_polygon(scene, &piece[i], &world), screen_polygon_of(cam, &world, medium))
+                };
+                let masks: Vec<u64> = match &mut raster {
+                    Some(r) => {
+                        let footprints = control.map_units("footprints", piece.len(), PLANE_UNIT, footprint);
+                        r.push_projected_in(&piece, |i| footprints[i].1, control);
+                        footprints.iter().map(|f| f.0).collect()
+                    }
+                    None => {
+                        let footprints = control.map_units("footprints", piece.len(), PLANE_UNIT, |i| {
+                            let (mask, screen) = footprint(i);
+                            (mask, gpu::screen_reach(&screen, cam.width, cam.height))
+                        });
+                        let mut masks = Vec::with_capacity(footprints.len());
+                        for (mask, r) in footprints {
+                            masks.push(mask);
+                            reach.push(r);
+                        }
+                        masks
+                    }
+                };
+                context.push_planes_with_occluders_in(scene, &piece, &masks, 1, control);
+            } else {
+                context.push_planes_in(scene, &piece, 1, control);
+            }
+            seconds_build += t.elapsed().as_secs_f64();
+            if accelerator == Accelerator::Bvh {
+                all.extend(piece);
+            }
+        }
+        Ok(CpuSide { context, raster, reach, all, seconds_sampling, seconds_build })
+    }
+}
+
 /// Planes sampled and prepared for gathering from the camera, each weighted 1 (the division by
 /// the set's N comes once, when the image is finished: [`crate::film::Film::finish`]).
 pub struct PreparedPlanes {
@@ -166,54 +255,11 @@ impl PreparedPlanes {
         tiling: Tiling,
         control: Control,
     ) -> Result<Self> {
-        let (mut seconds_sampling, mut seconds_build) = (0.0, 0.0);
-        let origin = scene.camera.position;
-        let mut context = GatherContext::empty(scene, origin);
-        let mut raster = (accelerator == Accelerator::Raster).then(|| ScreenRaster::empty_in(&scene.camera, tiling));
-        // Each plane's screen polygon, from which the GPU finds the tiles it reaches
-        // (`gpu::screen_reach`).
-        let mut reach = Vec::new();
-        // The BVH is built over the whole set at once; it keeps the planes while it does.
-        let mut all = Vec::new();
-        let (lights, numbers) = (scene.light_distribution(), set.sampler.numbers(set.seed));
-        for start in range.clone().step_by(SAMPLING_PIECE) {
-            control.check()?;
-            let t = Instant::now();
-            let piece = start..(start + SAMPLING_PIECE).min(range.end);
-            let _s = crate::trace::span("planes sampled");
-            let piece = control.map_units("sample", piece.len(), PLANE_UNIT, |j| {
-                sample_plane(scene, &lights, numbers.plane((piece.start + j) as u64))
-            });
-            seconds_sampling += t.elapsed().as_secs_f64();
-            drop(_s);
-            let _s = crate::trace::span("planes prepared");
-            let t = Instant::now();
-            if matches!(accelerator, Accelerator::Raster | Accelerator::Gpu(_)) {
-                // Each plane's box polygon made once, for its occluders and its screen polygon.
-                let (cam, medium) = (&scene.camera, &scene.medium);
-                let footprints = control.map_units("footprints", piece.len(), PLANE_UNIT, |i| {
-                    let world = box_polygon(&piece[i], medium);
-                    (occluders_of_polygon(scene, &piece[i], &world), screen_polygon_of(cam, &world, medium))
-                });
-                let masks: Vec<u64> = footprints.iter().map(|f| f.0).collect();
-                context.push_planes_with_occluders_in(scene, &piece, &masks, 1, control);
-                match &mut raster {
-                    Some(r) => r.push_projected_in(&piece, |i| footprints[i].1, control),
-                    None => {
-                        use rayon::prelude::*;
-                        reach.par_extend(footprints.par_iter().map(|f| gpu::screen_reach(&f.1, cam.width, cam.height)));
-                    }
-                }
-            } else {
-                context.push_planes_in(scene, &piece, 1, control);
-            }
-            seconds_build += t.elapsed().as_secs_f64();
-            if accelerator == Accelerator::Bvh {
-                all.extend(piece);
-            }
-        }
+        let CpuSide { context, raster, reach, all, seconds_sampling, mut seconds_build } =
+            CpuSide::prepare(scene, set, range, accelerator, tiling, control)?;
         control.check()?;
         let t = Instant::now();
+        let origin = scene.camera.position;
         let structure = match (accelerator, raster) {
             (Accelerator::Raster, Some(r)) => Structure::Cpu(CpuStructure::Raster(r)),
             (Accelerator::Bvh, _) => {

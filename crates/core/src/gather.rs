@@ -517,6 +517,13 @@ impl GatherContext {
         }
     }
 
+    /// Room for `planes` more planes' views and their order by light, so that a context
+    /// filled piece by piece is not copied as it grows.
+    pub fn reserve(&mut self, planes: usize) {
+        self.views.reserve(planes);
+        self.by_light.reserve(planes);
+    }
+
     /// Prepares and appends the next planes of a set of `planes_total` planes (the same for every
     /// push: a context holds planes of one set).
     pub fn push_planes(&mut self, scene: &Scene, planes: &[PhotonPlane], planes_total: usize) {
@@ -580,14 +587,9 @@ impl GatherContext {
             self.occluders.extend(panels);
         }
         let origin = self.origin;
-        let views = control.map_units("views", planes.len(), PLANE_UNIT, |i| {
+        control.extend_units("views", &mut self.views, planes.len(), PLANE_UNIT, |i| {
             PlaneView::new(&planes[i], scene, origin, planes_total, ranges[i])
         });
-        if self.views.is_empty() {
-            self.views = views;
-        } else {
-            self.views.extend(views);
-        }
         // Every plane by light, each light's in index order: a counting sort (a stable one).
         let lights = self.views.iter().map(|v| v.light as usize + 1).max().unwrap_or(0);
         let mut next = vec![0u32; lights + 1];
