@@ -6,7 +6,8 @@
 //! a CPU render all but the GPU's reach; at 655,360 planes they are the CPU's side of the render.
 //! Then the render's own preparation, whole (`accel::CpuSide::prepare`, its parallel loops on
 //! the threads of the pool: wall time a plane, and the process's CPU time a plane where the
-//! platform has a clock for it), for the GPU and for the raster, piece by piece.
+//! platform has a clock for it, idle workers' spinning included), for the GPU and for the
+//! raster, piece by piece.
 //!
 //! ```text
 //! RAYON_NUM_THREADS=1 cargo run --release -p fogplanes-bench --example prepare_planes -- SCENE [PLANES [PIECE]]
@@ -97,8 +98,11 @@ fn main() -> Result<(), String> {
     }
 
     println!(
-        "{path} at {}x{}, {n} planes in pieces of {piece_planes}, ns a plane on one thread:",
-        cam.width, cam.height
+        "{path} at {}x{}, {n} planes in pieces of {piece_planes}, ns a plane (on this thread; the views' \
+         and the raster's parallel loops on the pool's {} threads):",
+        cam.width,
+        cam.height,
+        rayon::current_num_threads()
     );
     for (name, ns) in &steps {
         println!("  {ns:8.1}  {name}");

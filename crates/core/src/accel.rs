@@ -147,7 +147,8 @@ pub struct CpuSide {
 
 impl CpuSide {
     /// Planes `range` of `set` sampled and prepared for `accelerator` in pieces of
-    /// [`SAMPLING_PIECE`]; [`crate::Error::Cancelled`] once `control` is cancelled.
+    /// [`SAMPLING_PIECE`]; [`crate::Error::Cancelled`] once `control` is cancelled (checked
+    /// before each piece).
     pub fn prepare(
         scene: &Scene,
         set: PlaneSet,

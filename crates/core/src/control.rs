@@ -76,8 +76,9 @@ impl<'a> Control<'a> {
     }
 
     /// [`Control::map_units`] appended to `out`: `f(0), .., f(n - 1)` written in place after its
-    /// elements (in `out`'s spare capacity, grown once), so that a vector filled piece by piece
-    /// is neither copied from a vector of its own per piece nor copied again as it grows.
+    /// elements (in `out`'s spare capacity, grown first if it lacks room), so that a vector
+    /// filled piece by piece is not copied from a vector of its own per piece (nor as it grows,
+    /// where the caller reserved room for every piece).
     pub fn extend_units<T: Send>(
         &self,
         label: &'static str,
