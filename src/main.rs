@@ -18,6 +18,7 @@ use std::io::Write;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    system::keep_freed_memory();
     // The zero of the timeline `FOGPLANES_TRACE=1` prints (fogplanes::trace).
     drop(fogplanes::trace::span("process started"));
     STARTED.get_or_init(std::time::Instant::now);

@@ -491,8 +491,10 @@ pub struct GatherContext {
     /// The N of the set the planes belong to, once some are pushed: one N, so that every plane
     /// of a light has one scale (what the sums light by light rely on).
     planes_total: Option<usize>,
-    /// The planes' indices light by light, each light's ascending: the brute-force loop's order.
-    by_light: Vec<u32>,
+    /// The planes' indices light by light, each light's ascending: the brute-force loop's order,
+    /// made by its first call after the last push (a counting sort of every view: made per
+    /// push, it was a serial pass over all the context's views in every piece of every render).
+    by_light: std::sync::OnceLock<Vec<u32>>,
 }
 
 impl GatherContext {
@@ -513,15 +515,14 @@ impl GatherContext {
             extinction,
             phase: Phase::new(scene.medium.g),
             planes_total: None,
-            by_light: Vec::new(),
+            by_light: std::sync::OnceLock::new(),
         }
     }
 
-    /// Room for `planes` more planes' views and their order by light, so that a context
-    /// filled piece by piece is not copied as it grows.
+    /// Room for `planes` more planes' views, so that a context filled piece by piece is not
+    /// copied as it grows.
     pub fn reserve(&mut self, planes: usize) {
         self.views.reserve(planes);
-        self.by_light.reserve(planes);
     }
 
     /// Prepares and appends the next planes of a set of `planes_total` planes (the same for every
@@ -590,20 +591,27 @@ impl GatherContext {
         control.extend_units("views", &mut self.views, planes.len(), PLANE_UNIT, |i| {
             PlaneView::new(&planes[i], scene, origin, planes_total, ranges[i])
         });
-        // Every plane by light, each light's in index order: a counting sort (a stable one).
-        let lights = self.views.iter().map(|v| v.light as usize + 1).max().unwrap_or(0);
-        let mut next = vec![0u32; lights + 1];
-        for v in &self.views {
-            next[v.light as usize + 1] += 1;
-        }
-        for l in 1..next.len() {
-            next[l] += next[l - 1];
-        }
-        self.by_light.resize(self.views.len(), 0);
-        for (i, v) in self.views.iter().enumerate() {
-            self.by_light[next[v.light as usize] as usize] = i as u32;
-            next[v.light as usize] += 1;
-        }
+        self.by_light = std::sync::OnceLock::new();
+    }
+
+    /// Every plane by light, each light's in index order: a counting sort (a stable one).
+    fn by_light(&self) -> &[u32] {
+        self.by_light.get_or_init(|| {
+            let lights = self.views.iter().map(|v| v.light as usize + 1).max().unwrap_or(0);
+            let mut next = vec![0u32; lights + 1];
+            for v in &self.views {
+                next[v.light as usize + 1] += 1;
+            }
+            for l in 1..next.len() {
+                next[l] += next[l - 1];
+            }
+            let mut order = vec![0u32; self.views.len()];
+            for (i, v) in self.views.iter().enumerate() {
+                order[next[v.light as usize] as usize] = i as u32;
+                next[v.light as usize] += 1;
+            }
+            order
+        })
     }
 
     /// The panels that may shadow a plane.
@@ -672,7 +680,7 @@ impl GatherContext {
         let (mut sum, mut hits) = (Vec3::ZERO, 0);
         // The light being summed: its index, its scale and its hits' sum.
         let mut light: Option<(u32, Vec3, Vec3)> = None;
-        for &i in &self.by_light {
+        for &i in self.by_light() {
             let view = &self.views[i as usize];
             let Some(c) = self.gather_one(weights, view, ray) else {
                 continue;
