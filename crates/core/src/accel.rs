@@ -162,9 +162,12 @@ impl CpuSide {
         let mut context = GatherContext::empty(scene, origin);
         // On the GPU, the views and the reach records reserved whole (a piece of 40,960 planes
         // grown piece by piece cost 1.4 times the CPU of its preparation:
-        // benches/examples/prepare_planes.rs). Not for the raster: there the reserved views
-        // were fresh pages at every piece (ten times the page faults of a render of 655,360
-        // planes at 32x18, 0.25 s of system time), where grown ones reuse the heap's.
+        // benches/examples/prepare_planes.rs). Not for the raster: with glibc's own allocator
+        // settings (the Python module's; the command line sets its own,
+        // `system::keep_freed_memory`) its reserved views were fresh pages at every piece (a
+        // render of 655,360 planes at 32x18: 71,700 page faults against 10,400, 0.25 s of
+        // system time), where grown ones reuse the heap's; the BVH and the brute force are
+        // left as they were.
         let on_gpu = matches!(accelerator, Accelerator::Gpu(_));
         if on_gpu {
             context.reserve(range.len());
@@ -202,8 +205,8 @@ impl CpuSide {
                         let masks: Vec<u64> = footprints.iter().map(|f| f.0).collect();
                         context.push_planes_with_occluders_in(scene, &piece, &masks, 1, control);
                         // After the views, as before the footprints' loop was split: binning
-                        // first made the heap's reuse fail (fresh pages, seven times the page
-                        // faults of a render of 655,360 planes at 32x18).
+                        // first made the heap's reuse fail under glibc's own settings (fresh
+                        // pages: 78,000 page faults against 10,400, as above).
                         r.push_projected_in(&piece, |i| footprints[i].1, control);
                     }
                     None => {
@@ -213,11 +216,10 @@ impl CpuSide {
                         });
                         let masks: Vec<u64> = footprints.iter().map(|f| f.0).collect();
                         context.push_planes_with_occluders_in(scene, &piece, &masks, 1, control);
-                        // Moved in parallel, in place (the vector has room for every piece):
-                        // a serial move of the records (152 bytes a plane) would be the longest
-                        // serial step of a piece on many cores.
-                        use rayon::prelude::*;
-                        reach.par_extend(footprints.into_par_iter().map(|f| f.1));
+                        // Copied in parallel, in place (the vector has room for every piece): a
+                        // serial move of the records (152 bytes a plane) cost a tenth of the
+                        // piece's wall time on 2 threads, and would cost more on more.
+                        control.extend_units("reach", &mut reach, piece.len(), PLANE_UNIT, |i| footprints[i].1);
                     }
                 }
             } else {
