@@ -131,10 +131,12 @@ impl Aggregate for CpuStructure {
 const SAMPLING_PIECE: usize = 16_384;
 
 /// What the CPU prepares of a piece of planes before its structure is made
-/// ([`PreparedPlanes::in_tiles`]): the planes' constants, and the raster's binning, the GPU's
-/// reach records or the planes themselves (for the BVH), as the accelerator needs. Public so
-/// that `benches/examples/prepare_planes.rs` times the render's own preparation.
+/// ([`PreparedPlanes::from_cpu_side`]): the planes' constants, and the raster's binning, the
+/// GPU's reach records or the planes themselves (for the BVH), as the accelerator needs. Public
+/// so that `benches/examples/prepare_planes.rs` times the render's own preparation.
 pub struct CpuSide {
+    /// The structure it was prepared for.
+    pub accelerator: Accelerator,
     pub context: GatherContext,
     pub raster: Option<ScreenRaster>,
     /// What crosses for the GPU's reach, a plane's each (empty but on the GPU).
@@ -230,7 +232,7 @@ impl CpuSide {
                 all.extend(piece);
             }
         }
-        Ok(CpuSide { context, raster, reach, all, seconds_sampling, seconds_build })
+        Ok(CpuSide { accelerator, context, raster, reach, all, seconds_sampling, seconds_build })
     }
 }
 
@@ -247,8 +249,8 @@ pub struct PreparedPlanes {
 impl PreparedPlanes {
     /// Planes `range` of `set`, with the structure `accelerator` over them
     /// ([`Accelerator::Gpu`]: on the GPU, which the settings have found).
-    /// [`crate::Error::Cancelled`] once `control` is cancelled (checked after each piece of
-    /// planes sampled); [`crate::Error::Device`] if the GPU fails.
+    /// [`crate::Error::Cancelled`] once `control` is cancelled (checked before each piece of
+    /// planes sampled and after the last); [`crate::Error::Device`] if the GPU fails.
     pub fn new(
         scene: &Scene,
         set: PlaneSet,
@@ -257,21 +259,14 @@ impl PreparedPlanes {
         control: Control,
     ) -> Result<Self> {
         let (w, h) = (scene.camera.width, scene.camera.height);
-        Self::in_tiles(scene, set, range, accelerator, Tiling::new(w, h, crate::schedule::workers()), control)
+        let tiling = Tiling::new(w, h, crate::schedule::workers());
+        Self::from_cpu_side(scene, CpuSide::prepare(scene, set, range, accelerator, tiling, control)?, control)
     }
 
-    /// [`PreparedPlanes::new`] with the raster's tiles `tiling` (a render's windows of chunks:
-    /// [`Tiling::for_window`]).
-    pub fn in_tiles(
-        scene: &Scene,
-        set: PlaneSet,
-        range: Range<usize>,
-        accelerator: Accelerator,
-        tiling: Tiling,
-        control: Control,
-    ) -> Result<Self> {
-        let CpuSide { context, raster, reach, all, seconds_sampling, mut seconds_build } =
-            CpuSide::prepare(scene, set, range, accelerator, tiling, control)?;
+    /// The structure made over what the CPU prepared (a render's pieces: [`CpuSide::prepare`]
+    /// with the raster's tiles of its windows of chunks, [`Tiling::for_window`]).
+    pub fn from_cpu_side(scene: &Scene, side: CpuSide, control: Control) -> Result<Self> {
+        let CpuSide { accelerator, context, raster, reach, all, seconds_sampling, mut seconds_build } = side;
         control.check()?;
         let t = Instant::now();
         let origin = scene.camera.position;

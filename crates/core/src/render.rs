@@ -10,7 +10,7 @@
 //! [`crate::settings`]: nothing here checks them again.
 
 use crate::accel::{
-    Accelerator, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, RaySet, gather_pieces, gather_pieces_on_gpu,
+    Accelerator, CpuSide, GatherPiece, GpuPiece, OnGpu, PreparedPlanes, RaySet, gather_pieces, gather_pieces_on_gpu,
 };
 use crate::camera::CameraRay;
 use crate::control::Control;
@@ -121,7 +121,8 @@ impl<'g> Preparer<'g> {
         let set = self.opts.plane_set();
         let (w, h, workers) = (self.scene.camera.width, self.scene.camera.height, schedule::workers());
         let tiling = if self.windowed { Tiling::for_window(w, h, workers) } else { Tiling::new(w, h, workers) };
-        let p = PreparedPlanes::in_tiles(self.scene, set, spec.1.clone(), self.opts.structure(), tiling, control)?;
+        let side = CpuSide::prepare(self.scene, set, spec.1.clone(), self.opts.structure(), tiling, control)?;
+        let p = PreparedPlanes::from_cpu_side(self.scene, side, control)?;
         let seconds = (p.seconds_sampling, p.seconds_build);
         Ok((Piece { spec: spec.clone(), planes: Arc::new(p) }, seconds))
     }
