@@ -262,11 +262,14 @@ impl ScreenRaster {
     /// [`ScreenRaster::push_planes`] with its parallel loops recorded on `control`'s strand
     /// ([`crate::schedule`]).
     pub fn push_planes_in(&mut self, camera: &Camera, planes: &[PhotonPlane], medium: &Medium, control: Control) {
-        self.push_projected_in(planes, |i| screen_polygon(camera, &planes[i], medium), control);
+        let polygons =
+            control.map_units("polygons", planes.len(), PLANE_UNIT, |i| screen_polygon(camera, &planes[i], medium));
+        self.push_projected_in(planes, |i| polygons[i], control);
     }
 
     /// [`ScreenRaster::push_planes_in`] with plane `i`'s screen polygon `polygon(i)`
-    /// ([`screen_polygon`], made where the plane's box polygon serves its occluders too).
+    /// ([`screen_polygon`], made where the plane's box polygon serves its occluders too), read
+    /// twice: a copy of one made already.
     pub fn push_projected_in(
         &mut self,
         planes: &[PhotonPlane],
@@ -275,26 +278,27 @@ impl ScreenRaster {
     ) {
         let tiling = self.tiling;
         let (down, across) = (tiling.down(), tiling.across());
-        // Each new plane's polygon, the bands of rows it may cover (none: invisible) and its
-        // bounding box (for estimating the tiles' work).
-        let polygons: Vec<(Polygon<DVec2>, Range<u32>, [f32; 4])> =
-            control.map_units("polygons", planes.len(), PLANE_UNIT, |i| {
-                let poly = polygon(i);
-                if poly.len < 3 {
-                    return (poly, 0..0, [0.0; 4]);
-                }
-                let (lo, hi) = poly
-                    .points()
-                    .iter()
-                    .fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
-                let rows = tiling.rows;
-                let first = (lo.y - SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows;
-                let last = ((hi.y + SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows).min(down - 1);
-                (poly, first..last + 1, [lo.x as f32, hi.x as f32, lo.y as f32, hi.y as f32])
-            });
+        // Each new plane's bands of rows it may cover (none: invisible) and its bounding box
+        // (for estimating the tiles' work); not its polygon, which the caller keeps (a copy of
+        // each, 264 bytes a plane, was a piece's largest block of fresh memory).
+        let extents: Vec<(Range<u32>, [f32; 4])> = control.map_units("polygons", planes.len(), PLANE_UNIT, |i| {
+            let poly = polygon(i);
+            if poly.len < 3 {
+                return (0..0, [0.0; 4]);
+            }
+            let (lo, hi) = poly
+                .points()
+                .iter()
+                .fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(lo, hi), v| (lo.min(*v), hi.max(*v)));
+            let rows = tiling.rows;
+            let first = (lo.y - SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows;
+            let last = ((hi.y + SPAN_MARGIN as f64).floor().max(0.0) as u32 / rows).min(down - 1);
+            (first..last + 1, [lo.x as f32, hi.x as f32, lo.y as f32, hi.y as f32])
+        });
         let first_new = (self.offsets.len() - 1) as u32;
-        let mut reach = Vec::with_capacity(polygons.len());
-        for (poly, rows, bounds) in &polygons {
+        let mut reach = Vec::with_capacity(extents.len());
+        for (i, (rows, bounds)) in extents.iter().enumerate() {
+            let poly = polygon(i);
             if poly.len >= 3 {
                 self.vertices.extend(poly.points().iter().map(|v| v.as_vec2()));
             }
