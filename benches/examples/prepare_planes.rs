@@ -1,9 +1,9 @@
-//! What preparing a plane costs the CPU, step by step (docs/gpu.md, "What runs where"): per
-//! plane, on one thread, the time to draw its sampler's numbers, to sample it, to clip it to
-//! the box, to find the lights that may shadow it, to project its screen polygon, to make its
+//! What preparing a plane costs the CPU, step by step (docs/gpu.md, "The planes, prepared on the
+//! CPU"): per plane, on one thread, the time to draw its sampler's numbers, to sample it, to clip
+//! it to the box, to find the lights that may shadow it, to project its screen polygon, to make its
 //! view and occluders for the gather, to make what crosses for the GPU's reach
-//! (`gpu::screen_reach`) and to bin it in the CPU's raster. A GPU render pays all but the last,
-//! a CPU render all but the GPU's reach; at 655,360 planes they are the CPU's side of the render.
+//! (`gpu::screen_reach`) and to bin it in the CPU's raster. A GPU render pays all but the last, a
+//! CPU render all but the GPU's reach; at 655,360 planes they are the CPU's side of the render.
 //! Then the render's own preparation, whole (`accel::CpuSide::prepare`, its parallel loops on
 //! the threads of the pool: wall time a plane, and the process's CPU time a plane where the
 //! platform has a clock for it, idle workers' spinning included), for the GPU and for the

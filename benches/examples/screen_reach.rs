@@ -1,7 +1,7 @@
-//! What the GPU's reach costs and saves on a scene's planes (docs/gpu.md, "What runs where"):
-//! per plane, the CPU's time to project and clip its screen polygon, to find its reach on the
-//! CPU (`gpu::tile_reach`, the specification) and to make what crosses for the GPU to find it
-//! there (`gpu::screen_reach`); the rows of tiles, (tile, plane) pairs and tested pixels of the
+//! What the GPU's reach costs and saves on a scene's planes (docs/gpu.md, "The planes, prepared on
+//! the CPU"): per plane, the CPU's time to project and clip its screen polygon, to find its reach
+//! on the CPU (`gpu::tile_reach`, the specification) and to make what crosses for the GPU to find
+//! it there (`gpu::screen_reach`); the rows of tiles, (tile, plane) pairs and tested pixels of the
 //! reach, the bound on the pairs that sizes the binning's buffers, and the vertices that cross.
 //!
 //! ```text

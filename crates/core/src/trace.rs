@@ -4,7 +4,8 @@
 //! end of the render, in milliseconds since the first span (the process's start, in the command
 //! line). Made for device sessions, whose minutes are few: one run shows what the summary's
 //! totals cannot, such as a first gathering that waits 20 ms for memory or a step that runs
-//! alone while the other cores are idle (docs/gpu.md). Off, a span costs a load of a flag.
+//! alone while the other cores are idle (docs/gpu_measurements.md, "Where the end to end
+//! goes"). Off, a span costs a load of a flag.
 
 use std::sync::{Mutex, OnceLock};
 use std::time::Instant;

@@ -127,7 +127,8 @@ impl Gpu {
             // Small blocks of memory (4 MB on the host, 8 MB on the device, growing), not
             // wgpu's default of 64 and 128 MB: a render's first read-back buffer then costs no
             // 64 MB block of pinned host memory (about 20 ms on an H200's driver, in the first
-            // gathering of every process, docs/gpu.md), and fogplanes' buffers are few and large.
+            // gathering of every process: docs/gpu_measurements.md, the timeline), and
+            // fogplanes' buffers are few and large.
             memory_hints: wgpu::MemoryHints::MemoryUsage,
             ..Default::default()
         }))
