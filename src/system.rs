@@ -27,23 +27,19 @@ pub fn peak_memory_bytes() -> Option<u64> {
 
 /// Keeps freed memory in the process (glibc's allocator): blocks up to 32 MiB from the heap
 /// rather than each mapped afresh, and up to 64 MiB of free heap kept rather than handed back
-/// (twice the first, as glibc's moving thresholds keep them; 256 MiB gave the same page
-/// faults). A render allocates and frees each piece's planes, views and footprints
-/// (megabytes each), and glibc's own thresholds, which move with what was freed last, make
-/// the reuse of that memory a matter of the order of allocations: a change that only moved one vector's allocation made a
-/// render of 655,360 planes at 32x18 take 82,550 page faults instead of 10,380 (0.25 s of system
-/// time in 1.3 s), and with these settings both builds take 6,470. The cost: the process keeps
-/// what it freed (the benchmark's peak about 63 MB instead of 51 on 2 threads; not measured on
-/// more, where each thread's arena keeps its own). A library leaves this to its program; the
-/// Python module does not set it.
+/// ([`fogplanes::limits::MMAP_THRESHOLD`] says why: page faults that depend on the order of
+/// allocations, 82,550 against 10,380 for one render, 0.25 s of system time in 1.3 s). The
+/// cost: the process keeps what it freed (the benchmark's peak about 63 MB instead of 51 on 2
+/// threads; not measured on more, where each thread's arena keeps its own). A library leaves
+/// this to its program; the Python module does not set it for its host.
 pub fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets the allocator's parameters (before any thread exists here). A
     // value it refuses is ignored (it returns 0); either call alone still fixes thresholds that
     // glibc would otherwise move, which is harmless.
     unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, 64 << 20);
+        libc::mallopt(libc::M_MMAP_THRESHOLD, fogplanes::limits::MMAP_THRESHOLD as libc::c_int);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, fogplanes::limits::TRIM_THRESHOLD as libc::c_int);
     }
 }
 

@@ -86,6 +86,19 @@ def test_render_is_the_same_bits_for_1_and_2_workers_as_the_local_merge_and_rend
     assert np.all(np.isfinite(one)) and one.mean() > 0
 
 
+def test_the_local_clusters_workers_keep_freed_memory_as_the_command_line_does(client):
+    # `client`, a plain LocalCluster of this process, has left Dask's own trim threshold in this
+    # process's environment, which a nanny takes before its configuration.
+    settings = fogplanes.ALLOCATOR_ENVIRONMENT
+    assert set(settings) == {"MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"}
+    assert all(int(v) >= 1 << 20 for v in settings.values()), settings
+    before = dict(os.environ)
+    with fd.local_client(1, 1) as own:
+        seen = own.run(lambda: {name: os.environ.get(name) for name in settings})
+    assert list(seen.values()) == [settings]
+    assert dict(os.environ) == before, "this process's environment is put back"
+
+
 def test_a_worker_killed_mid_render_changes_no_bit(client, scene):
     kwargs = dict(resolution=(64, 36), planes=32 * chunk_planes(scene))
     future = fd.render_future(scene, client, threads=1, chunks_per_task=1, **kwargs)

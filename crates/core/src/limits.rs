@@ -33,6 +33,25 @@ pub const WINDOW_BYTES_PER_PIXEL: u64 = 36;
 /// a few hundred microseconds each, a unit of the schedule's record ([`crate::schedule`]).
 pub const PLANE_UNIT: usize = 256;
 
+/// How a render's process keeps the memory it frees, under glibc's allocator (Linux): blocks up
+/// to this many bytes come from the heap rather than each mapped afresh. A render allocates
+/// and frees each piece's planes, views and footprints (megabytes each), and glibc's own
+/// thresholds, which move with the last block freed, make the reuse of that memory a matter of
+/// the order of allocations (a change that only moved one vector's allocation made a render of
+/// 655,360 planes at 32x18 take 82,550 page faults instead of 10,380; with these settings both
+/// took 6,470). The command line sets both thresholds for itself (`mallopt`); the Python
+/// module leaves its host's allocator alone, and gives them to the workers of the Dask cluster
+/// it starts ([`ALLOCATOR_ENVIRONMENT`]), where Dask's own setting (a trim threshold of 64 KiB)
+/// cost a render of the benchmark about a tenth more CPU time.
+pub const MMAP_THRESHOLD: usize = 32 << 20;
+/// Free heap kept rather than handed back, in bytes: twice [`MMAP_THRESHOLD`], as glibc's
+/// moving thresholds keep them (256 MiB gave the same page faults).
+pub const TRIM_THRESHOLD: usize = 64 << 20;
+/// [`MMAP_THRESHOLD`] and [`TRIM_THRESHOLD`] as the environment variables glibc reads when a
+/// process starts (its tunables' older names, which Dask's nanny also sets).
+pub const ALLOCATOR_ENVIRONMENT: [(&str, usize); 2] =
+    [("MALLOC_MMAP_THRESHOLD_", MMAP_THRESHOLD), ("MALLOC_TRIM_THRESHOLD_", TRIM_THRESHOLD)];
+
 // ---------------------------------------------------------------------------------------------
 // Ranges
 

@@ -17,6 +17,7 @@ raises OSError (FileNotFoundError, ...). Ctrl-C stops a render with KeyboardInte
 
 from ._fogplanes import (
     ACCELERATORS,
+    ALLOCATOR_ENVIRONMENT,
     DEVICES,
     ESTIMATORS,
     KERNELS,
@@ -48,6 +49,7 @@ from ._fogplanes import (
 
 __all__ = [
     "ACCELERATORS",
+    "ALLOCATOR_ENVIRONMENT",
     "DEVICES",
     "ESTIMATORS",
     "KERNELS",

@@ -17,6 +17,11 @@ ACCELERATORS: Final[tuple[str, ...]]
 #: The processors that gather: cpu, gpu (through wgpu: Vulkan, Metal, DX12), auto (the GPU when
 #: an adapter is found, else the CPU). docs/gpu.md says what is identical where.
 DEVICES: Final[tuple[str, ...]]
+#: glibc's allocator settings a render's process runs best with, as the environment variables
+#: glibc reads when a process starts (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_: bytes, as
+#: text): the command line sets them for itself, and fogplanes.distributed's local cluster for its
+#: workers; a cluster of your own can export them for its workers (docs/cluster.md).
+ALLOCATOR_ENVIRONMENT: Final[dict[str, str]]
 
 Vec3: TypeAlias = tuple[float, float, float]
 Image: TypeAlias = npt.NDArray[np.float32]

@@ -73,6 +73,7 @@ import numpy as np
 from . import _fogplanes as native
 
 try:
+    import dask
     from dask.base import tokenize
     from distributed import Client, Future, LocalCluster
     from distributed.diagnostics.progressbar import TextProgressBar
@@ -240,22 +241,46 @@ def local_client(workers: int = 1, threads: int | None = None) -> Iterator[Clien
     """A `LocalCluster` of `workers` processes, one Dask thread each, on 127.0.0.1 (the
     dashboard, if bokeh is installed, on a free port: `client.dashboard_link`), and its client;
     both closed on exit. Each worker's rayon pool gets `threads` (default: this machine's
-    cores over `workers`) through RAYON_NUM_THREADS."""
+    cores over `workers`) through RAYON_NUM_THREADS, and its allocator the command line's
+    settings (`fogplanes.ALLOCATOR_ENVIRONMENT`, variables glibc reads as the process starts).
+
+    Dask's nanny starts each worker with a trim threshold of 64 KiB
+    (`distributed.nanny.pre-spawn-environ`), which hands a render's freed memory back at every
+    piece and faults it in again: on 2 cores, a render of the benchmark (40,960 planes, 640x360)
+    took 1.59 to 1.69 s of the worker's CPU against 1.40 to 1.53, and 655,360 planes at 32x18
+    2.11 to 2.25 s against 1.69 to 1.77. These settings are the local cluster's own: a cluster
+    of your own keeps its launcher's (docs/cluster.md says how to give them). The nanny writes
+    its variables into this process's `os.environ` before it starts a worker (as Dask does its
+    own), and takes a variable from there before its configuration (where a cluster this
+    process started earlier left Dask's 64 KiB): they are set there too while the cluster is
+    made, and put back as they were when it closes."""
     _check_layout(workers, threads)
     threads = threads or max(1, _cores() // workers)
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",  # a free port (its HTTP server runs even without the dashboard)
-        env={"RAYON_NUM_THREADS": str(threads)},
-    )
+    allocator = native.ALLOCATOR_ENVIRONMENT
+    spawn = "distributed.nanny.pre-spawn-environ"
+    before = {name: os.environ.get(name) for name in {*allocator, *dask.config.get(spawn)}}
     try:
-        with Client(cluster) as client:
-            yield client
+        os.environ.update(allocator)
+        with dask.config.set({f"{spawn}.{name}": value for name, value in allocator.items()}):
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address="127.0.0.1:0",  # a free port (its HTTP server runs even without the dashboard)
+                env={"RAYON_NUM_THREADS": str(threads)},
+            )
+        try:
+            with Client(cluster) as client:
+                yield client
+        finally:
+            cluster.close()
     finally:
-        cluster.close()
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 @contextlib.contextmanager
