@@ -7,9 +7,10 @@
 #   scripts/cores_check.sh [BINARY] [THREADS...]     (default: target/release/fogplanes, 1 2 4 8 16)
 #
 # Then the same one-thread render alone and one per core at once, as separate processes: what
-# the machine itself costs a process beside others (about 20 s more on 16 cores).
+# the machine itself costs a process beside others (about 10 s more on 16 cores, an estimate).
 #
-# Builds nothing: run `cargo build --release` first. About 4 minutes on 16 cores. Times with
+# Builds nothing: run `cargo build --release` first. About 2.5 minutes on 16 cores (the table
+# took 146 s on the H100's machine, 2026-11-28). Times with
 # bash's own `time` and reckons with awk: the device machine's image may have neither GNU time
 # nor bc.
 set -eu
@@ -54,8 +55,10 @@ if [ "${CONCURRENT:-1}" != 0 ]; then
     }
     alone=
     for k in 1 "$n"; do
-        for i in $(seq 1 "$k"); do one "$i" & done
-        wait
+        pids=()
+        for i in $(seq 1 "$k"); do one "$i" & pids+=($!); done
+        # Each waited for by its pid, so that a render that fails stops the script (set -e).
+        for pid in "${pids[@]}"; do wait "$pid"; done
         cat "$out"/c*.time | awk '{ print $1 + $2 }' | sort -g >"$out/cpu"
         rm -f "$out"/c*.time
         median=$(awk '{ a[NR] = $1 } END { print (NR % 2) ? a[(NR + 1) / 2] : (a[NR / 2] + a[NR / 2 + 1]) / 2 }' "$out/cpu")

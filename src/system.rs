@@ -25,12 +25,12 @@ pub fn peak_memory_bytes() -> Option<u64> {
     Some(if cfg!(target_os = "macos") { maxrss } else { maxrss * 1024 })
 }
 
-/// Keeps freed memory in the process (glibc's allocator): blocks up to 32 MiB from the heap
-/// rather than each mapped afresh, and up to 64 MiB of free heap kept rather than handed back
-/// ([`fogplanes::limits::MMAP_THRESHOLD`] says why: page faults that depend on the order of
-/// allocations, 82,550 against 10,380 for one render, 0.25 s of system time in 1.3 s). The
-/// cost: the process keeps what it freed (the benchmark's peak about 63 MB instead of 51 on 2
-/// threads; not measured on more, where each thread's arena keeps its own). A library leaves
+/// Keeps freed memory in the process (glibc's allocator): large blocks from the heap rather
+/// than each mapped afresh, and free heap kept rather than handed back
+/// ([`fogplanes::limits::MMAP_THRESHOLD`] and [`fogplanes::limits::TRIM_THRESHOLD`] say how
+/// much and why: page faults that otherwise depend on the order of allocations). The cost: the
+/// process keeps what it freed (the benchmark's peak about 63 MB instead of 51 on 2 threads;
+/// not measured on more, where each thread's arena keeps its own). A library leaves
 /// this to its program; the Python module does not set it for its host.
 pub fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]

@@ -92,7 +92,7 @@ fn main() -> Result<(), String> {
         black_box(&context);
         let t = Instant::now();
         let mut raster = ScreenRaster::empty(cam);
-        raster.push_projected_in(&planes, |i| screen[i], Control::none());
+        raster.push_projected_in(&planes, |i| &screen[i], Control::none());
         time(7, "binned in the CPU's raster", t);
         black_box(&raster);
     }

@@ -86,15 +86,30 @@ def test_render_is_the_same_bits_for_1_and_2_workers_as_the_local_merge_and_rend
     assert np.all(np.isfinite(one)) and one.mean() > 0
 
 
-def test_the_local_clusters_workers_keep_freed_memory_as_the_command_line_does(client):
-    # `client`, a plain LocalCluster of this process, has left Dask's own trim threshold in this
-    # process's environment, which a nanny takes before its configuration.
-    settings = fogplanes.ALLOCATOR_ENVIRONMENT
+def test_the_local_clusters_workers_keep_freed_memory_as_the_command_line_does(client, monkeypatch):
+    settings = dict(fogplanes.ALLOCATOR_ENVIRONMENT)
     assert set(settings) == {"MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"}
     assert all(int(v) >= 1 << 20 for v in settings.values()), settings
+    # As a plain LocalCluster of this process (`client`'s) leaves it: Dask's trim threshold in
+    # the environment, which a nanny takes before its configuration. And nothing of the
+    # nanny's own, so that what local_client leaves behind shows.
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    monkeypatch.delenv("MALLOC_MMAP_THRESHOLD_", raising=False)
+    monkeypatch.delenv("PYTHONHASHSEED", raising=False)
     before = dict(os.environ)
+
+    def started_with(names):
+        """The worker's variables as its process started, when glibc read them (Linux), else
+        as they are now."""
+        try:
+            with open("/proc/self/environ", "rb") as f:
+                env = dict(e.decode().split("=", 1) for e in f.read().split(b"\0") if b"=" in e)
+        except OSError:
+            env = dict(os.environ)
+        return {name: env.get(name) for name in names}
+
     with fd.local_client(1, 1) as own:
-        seen = own.run(lambda: {name: os.environ.get(name) for name in settings})
+        seen = own.run(started_with, list(settings))
     assert list(seen.values()) == [settings]
     assert dict(os.environ) == before, "this process's environment is put back"
 

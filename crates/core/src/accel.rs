@@ -209,7 +209,7 @@ impl CpuSide {
                         // After the views, as before the footprints' loop was split: binning
                         // first made the heap's reuse fail under glibc's own settings (fresh
                         // pages: 78,000 page faults against 10,400, as above).
-                        r.push_projected_in(&piece, |i| footprints[i].1, control);
+                        r.push_projected_in(&piece, |i| &footprints[i].1, control);
                     }
                     None => {
                         let footprints = control.map_units("footprints", piece.len(), PLANE_UNIT, |i| {

@@ -264,16 +264,16 @@ impl ScreenRaster {
     pub fn push_planes_in(&mut self, camera: &Camera, planes: &[PhotonPlane], medium: &Medium, control: Control) {
         let polygons =
             control.map_units("polygons", planes.len(), PLANE_UNIT, |i| screen_polygon(camera, &planes[i], medium));
-        self.push_projected_in(planes, |i| polygons[i], control);
+        self.push_projected_in(planes, |i| &polygons[i], control);
     }
 
     /// [`ScreenRaster::push_planes_in`] with plane `i`'s screen polygon `polygon(i)`
     /// ([`screen_polygon`], made where the plane's box polygon serves its occluders too), read
-    /// twice: a copy of one made already.
-    pub fn push_projected_in(
+    /// twice.
+    pub fn push_projected_in<'p>(
         &mut self,
         planes: &[PhotonPlane],
-        polygon: impl Fn(usize) -> Polygon<DVec2> + Sync + Send,
+        polygon: impl Fn(usize) -> &'p Polygon<DVec2> + Sync + Send,
         control: Control,
     ) {
         let tiling = self.tiling;
@@ -281,7 +281,7 @@ impl ScreenRaster {
         // Each new plane's bands of rows it may cover (none: invisible) and its bounding box
         // (for estimating the tiles' work); not its polygon, which the caller keeps (a copy of
         // each, 264 bytes a plane, was a piece's largest block of fresh memory).
-        let extents: Vec<(Range<u32>, [f32; 4])> = control.map_units("polygons", planes.len(), PLANE_UNIT, |i| {
+        let extents: Vec<(Range<u32>, [f32; 4])> = control.map_units("extents", planes.len(), PLANE_UNIT, |i| {
             let poly = polygon(i);
             if poly.len < 3 {
                 return (0..0, [0.0; 4]);

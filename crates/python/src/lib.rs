@@ -75,11 +75,12 @@ fn _fogplanes(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SAMPLERS", PyTuple::new(m.py(), Sampler::ALL.iter().map(|s| s.name()))?)?;
     m.add("ACCELERATORS", PyTuple::new(m.py(), Accelerator::ALL.iter().map(|a| a.name()))?)?;
     m.add("DEVICES", PyTuple::new(m.py(), fogplanes::gpu::Device::ALL.iter().map(|d| d.name()))?)?;
+    // Read-only, as the other constants are tuples.
     let allocator = pyo3::types::PyDict::new(m.py());
     for (name, bytes) in fogplanes::limits::ALLOCATOR_ENVIRONMENT {
         allocator.set_item(name, bytes.to_string())?;
     }
-    m.add("ALLOCATOR_ENVIRONMENT", allocator)?;
+    m.add("ALLOCATOR_ENVIRONMENT", m.py().import("types")?.getattr("MappingProxyType")?.call1((allocator,))?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

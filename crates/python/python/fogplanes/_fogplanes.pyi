@@ -1,6 +1,7 @@
 """Type stubs of the native module fogplanes._fogplanes (crates/python/src/lib.rs)."""
 
 import os
+from collections.abc import Mapping
 from typing import Final, Literal, TypeAlias, TypedDict, overload
 
 import numpy as np
@@ -21,7 +22,7 @@ DEVICES: Final[tuple[str, ...]]
 #: glibc reads when a process starts (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_: bytes, as
 #: text): the command line sets them for itself, and fogplanes.distributed's local cluster for its
 #: workers; a cluster of your own can export them for its workers (docs/cluster.md).
-ALLOCATOR_ENVIRONMENT: Final[dict[str, str]]
+ALLOCATOR_ENVIRONMENT: Final[Mapping[str, str]]
 
 Vec3: TypeAlias = tuple[float, float, float]
 Image: TypeAlias = npt.NDArray[np.float32]

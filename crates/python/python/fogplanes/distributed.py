@@ -246,19 +246,18 @@ def local_client(workers: int = 1, threads: int | None = None) -> Iterator[Clien
 
     Dask's nanny starts each worker with a trim threshold of 64 KiB
     (`distributed.nanny.pre-spawn-environ`), which hands a render's freed memory back at every
-    piece and faults it in again: on 2 cores, a render of the benchmark (40,960 planes, 640x360)
-    took 1.59 to 1.69 s of the worker's CPU against 1.40 to 1.53, and 655,360 planes at 32x18
-    2.11 to 2.25 s against 1.69 to 1.77. These settings are the local cluster's own: a cluster
-    of your own keeps its launcher's (docs/cluster.md says how to give them). The nanny writes
-    its variables into this process's `os.environ` before it starts a worker (as Dask does its
-    own), and takes a variable from there before its configuration (where a cluster this
-    process started earlier left Dask's 64 KiB): they are set there too while the cluster is
-    made, and put back as they were when it closes."""
+    piece and faults it in again (what that costs: docs/cluster.md, "The workers' allocator").
+    These settings are the local cluster's own, over any of this process's environment or Dask
+    configuration: a cluster of your own keeps its launcher's. The nanny writes its variables
+    (and PYTHONHASHSEED) into this process's `os.environ` before it starts a worker, and takes
+    a variable from there before its configuration (where a cluster this process started
+    earlier left Dask's 64 KiB): ours are set there too while the cluster is made, and all of
+    them put back as they were when it closes."""
     _check_layout(workers, threads)
     threads = threads or max(1, _cores() // workers)
     allocator = native.ALLOCATOR_ENVIRONMENT
     spawn = "distributed.nanny.pre-spawn-environ"
-    before = {name: os.environ.get(name) for name in {*allocator, *dask.config.get(spawn)}}
+    before = {name: os.environ.get(name) for name in {*allocator, *dask.config.get(spawn), "PYTHONHASHSEED"}}
     try:
         os.environ.update(allocator)
         with dask.config.set({f"{spawn}.{name}": value for name, value in allocator.items()}):
