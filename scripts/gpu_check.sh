@@ -114,6 +114,21 @@ for planes in $P_TUNED; do
         echo
     done
 done
+# K orientations made at each hit (the default) or once a gathering into a table
+# (FOGPLANES_GPU_ORIENTATIONS=table): smis-exact with K = 8 at the first planes count, two
+# rounds alternated (read the second), and whether the images are the same bits.
+if [ -n "$P_TUNED" ]; then
+    for round in 1 2; do
+        for how in per-hit table; do
+            FOGPLANES_GPU_ORIENTATIONS=$how timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$first" -e smis-exact \
+                --orientations 8 --device gpu -o "$work/orient_$how.exr" 2>&1 |
+                grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/gpu orientations $how round $round $first: /"
+        done
+    done
+    printf 'agreement orientations table against per-hit %s: ' "$first"
+    timeout 60 "$B" compare "$work/orient_table.exr" "$work/orient_per-hit.exr" | tr '\n' ' ' | tr -s ' '
+    echo
+fi
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).
 for t in 1 2 4 8 all; do
     threads=()

@@ -275,6 +275,11 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
             vec![("FOGPLANES_GPU_CHECKS", "no")],
             "--device: FOGPLANES_GPU_CHECKS=\"no\": expected on (the default) or off".to_string(),
         ),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU_ORIENTATIONS", "once")],
+            "--device: FOGPLANES_GPU_ORIENTATIONS=\"once\": expected per-hit (the default) or table".to_string(),
+        ),
     ] {
         let o = render(&device, &d.join("no.exr"), &env);
         let (_, err) = text(&o);
@@ -289,7 +294,9 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
 /// checks off (`FOGPLANES_GPU_CHECKS=off`) gives the same pixels, bit for bit (no index leaves
 /// its array, no loop is cut); the driver's exp, log and atan (`FOGPLANES_GPU_MATH=native`)
 /// an image within 1e-8 relative MSE of the polynomials' (cmis-exact, which calls all four
-/// functions; the bound that holds the GPU to the CPU elsewhere); and each image names its
+/// functions; the bound that holds the GPU to the CPU elsewhere); K orientations made once a
+/// gathering (`FOGPLANES_GPU_ORIENTATIONS=table`) the same pixels as made at each hit
+/// (smis-exact and smis-cosine with K = 5: the same operations); and each image names its
 /// setting after the adapter, the default none.
 #[test]
 fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
@@ -297,31 +304,29 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
         return;
     }
     let d = dir("tuned");
-    let render = |name: &str, env: &[(&str, &str)]| {
+    let render_with = |name: &str, estimator: &[&str], env: &[(&str, &str)]| {
         let out = d.join(format!("{name}.exr"));
-        let args = [
-            "render",
-            SCENE,
-            "--resolution",
-            "32x18",
-            "--planes",
-            "2048",
-            "-e",
-            "cmis-exact",
-            "-q",
-            "--device",
-            "gpu",
-            "-o",
-            path(&out),
-        ];
+        let mut args = vec!["render", SCENE, "--resolution", "32x18", "--planes", "2048", "-e"];
+        args.extend(estimator);
+        args.extend(["-q", "--device", "gpu", "-o", path(&out)]);
         // The other settings' variables as their defaults, whatever this process was given.
-        let tuning = ["FOGPLANES_GPU_MATH", "FOGPLANES_GPU_CHECKS", "FOGPLANES_GPU_ITEM_PLANES"];
+        let tuning =
+            ["FOGPLANES_GPU_MATH", "FOGPLANES_GPU_CHECKS", "FOGPLANES_GPU_ITEM_PLANES", "FOGPLANES_GPU_ORIENTATIONS"];
         let unset: Vec<&str> = tuning.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
         let o = run_with(&args, env, &unset);
         assert!(o.status.success(), "{name}: {}", text(&o).1);
         let pixels = fogplanes::film::Film::load_exr(&out).unwrap().pixels;
         (pixels, devices_of(&out))
     };
+    let render = |name: &str, env: &[(&str, &str)]| render_with(name, &["cmis-exact"], env);
+    for estimator in ["smis-exact", "smis-cosine"] {
+        let k = [estimator, "--orientations", "5"];
+        let (per_hit, _) = render_with(&format!("{estimator} per hit"), &k, &[]);
+        let (table, devices) =
+            render_with(&format!("{estimator} table"), &k, &[("FOGPLANES_GPU_ORIENTATIONS", "table")]);
+        assert!(devices.ends_with("tuned: orientations made once a gathering)"), "{devices}");
+        assert!(table == per_hit, "{estimator}: the orientations made once a gathering changed the image");
+    }
     let (base, base_devices) = render("default", &[]);
     assert!(!base_devices.contains("tuned"), "{base_devices}");
     let (unchecked, devices) = render("unchecked", &[("FOGPLANES_GPU_CHECKS", "off")]);

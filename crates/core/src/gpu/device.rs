@@ -34,7 +34,7 @@ pub struct Gpu {
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
     /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
-    gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 2]>>>,
+    gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 3]>>>,
     /// Errors the device reported outside every error scope ([`Gpu::checked`]: each call's own
     /// errors are caught on its thread), taken after each wait.
     errors: Arc<Mutex<Vec<String>>>,
@@ -177,7 +177,7 @@ impl Gpu {
         };
         let (r, w) = (true, false);
         let bin_layout = layout("bin", &[r, w, w, w, w, w, r, w, r]);
-        let gather_layout = layout("gather", &[r, r, r, r, r, r, r, w, w, r]);
+        let gather_layout = layout("gather", &[r, r, r, r, r, r, r, w, w, r, w]);
         let rays_layout = layout("rays", &[r, w]);
         let reach_layout = layout("reach", &[r, r, w, w]);
         let (bin_module, bin_pipeline_layout) = (shader("bin.wgsl", BIN_WGSL), pipeline_layout(&bin_layout));
@@ -237,6 +237,11 @@ impl Gpu {
         self.tuning.item_planes
     }
 
+    /// Whether K orientations are made once a gathering ([`super::Tuning::orientation_table`]).
+    pub(super) fn orientation_table(&self) -> bool {
+        self.tuning.orientation_table
+    }
+
     /// The most bytes one buffer binding holds on this device.
     pub fn max_binding(&self) -> u64 {
         self.max_binding
@@ -291,18 +296,22 @@ impl Gpu {
         })
     }
 
-    /// The gather and reduce pipelines of estimator `id`, made on first use.
-    pub(super) fn gather_pipelines(&self, id: u32) -> Arc<[wgpu::ComputePipeline; 2]> {
+    /// The gather, reduce and orient pipelines of estimator `id`, made on first use.
+    pub(super) fn gather_pipelines(&self, id: u32) -> Arc<[wgpu::ComputePipeline; 3]> {
         let mut cache = self.gather.lock().unwrap_or_else(|p| p.into_inner());
         cache
             .entry(id)
             .or_insert_with(|| {
-                let native = if self.tuning.native_math { 1.0 } else { 0.0 };
-                let constants = [("ESTIMATOR", id as f64), ("NATIVE_MATH", native)];
+                let flag = |on: bool| if on { 1.0 } else { 0.0 };
+                let constants = [
+                    ("ESTIMATOR", id as f64),
+                    ("NATIVE_MATH", flag(self.tuning.native_math)),
+                    ("ORIENTATION_TABLE", flag(self.tuning.orientation_table)),
+                ];
                 let options =
                     wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };
-                Arc::new(["gather", "reduce"].map(|entry| {
-                    let _s = crate::trace::span("pipeline made: gather or reduce");
+                Arc::new(["gather", "reduce", "orient"].map(|entry| {
+                    let _s = crate::trace::span("pipeline made: gather, reduce or orient");
                     compute_pipeline(
                         &self.device,
                         &self.gather_pipeline_layout,

@@ -19,6 +19,10 @@ override ESTIMATOR: u32 = 0u;
 // an argument where WGSL defines it (log of at least the least normal f32, atan2 of (0, 0)
 // as 0, as the polynomials give), so that what the polynomials keep finite stays finite.
 override NATIVE_MATH: bool = false;
+// K orientations read from the table `orient` made once a gathering (`orients`) rather than made
+// at each hit (gpu/mod.rs `Tuning::orientation_table`, for measuring it on a device): the same
+// operations, the same bits.
+override ORIENTATION_TABLE: bool = false;
 
 // gather.rs `PlaneRecord`, 144 bytes (nine rows of 16).
 struct Plane {
@@ -78,8 +82,9 @@ struct Params {
     phase_floor: f32,
     phase_inv_numerator: f32,
     phase_hg: u32,
+    // The gathering's planes (`orient`'s table holds K - 1 rows for each).
+    planes: u32,
     pad0: u32,
-    pad1: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -105,6 +110,9 @@ struct Params {
 @group(0) @binding(9) var<storage, read_write> image: array<u32>;
 // Per list entry, the plane's pixel columns within the tile per group of pixel rows (bin.wgsl).
 @group(0) @binding(10) var<storage, read> ranges: array<u32>;
+// With K orientations (estimators 5 and 6), each plane's K - 1 further orientations, made once a
+// gathering by `orient`: (cos, sin, 1 / |cos|, 1 / sin) of beta, 0 for an infinite reciprocal.
+@group(0) @binding(11) var<storage, read_write> orients: array<vec4<f32>>;
 
 const TILE: u32 = 16u;
 // The rows of 16 bytes of a `Plane` (144 bytes).
@@ -256,23 +264,35 @@ fn a_uv(pl: Plane, det: f32, det_perp: f32) -> vec2<f32> {
     return vec2<f32>(fma(det, pl.cos_a, -(pl.sin_a * det_perp)), fma(det, pl.sin_a, pl.cos_a * det_perp));
 }
 
+// beta = alpha + k pi / K of a plane at alpha, turned by `rot` (cos, sin of k pi / K) and
+// reduced to [0, pi) so that sin(beta) >= 0: (cos, sin, 1 / |cos|, 1 / sin) of beta, 0 for an
+// infinite reciprocal (denominators.rs `StratifiedK::prepare`).
+fn orientation(cos_a: f32, sin_a: f32, rot: vec2<f32>) -> vec4<f32> {
+    var c = cos_a * rot.x - sin_a * rot.y;
+    var s = sin_a * rot.x + cos_a * rot.y;
+    let flip = s < 0.0;
+    c = select(c, -c, flip);
+    s = select(s, -s, flip);
+    return vec4<f32>(c, s, reciprocal_or_zero(abs(c)), reciprocal_or_zero(s));
+}
+
 // smis-cosine and smis-exact with K orientations (denominators.rs `StratifiedK`), the
-// orientations summed in the order k = 0, 1, .., K - 1.
-fn stratified(pl: Plane, det: f32, det_perp: f32, a: f32, exact: bool) -> f32 {
+// orientations summed in the order k = 0, 1, .., K - 1; a plane's further orientations made
+// here, or read from `orients[at..]` (`orient`).
+fn stratified(pl: Plane, det: f32, det_perp: f32, a: f32, exact: bool, at: u32) -> f32 {
     let uv = a_uv(pl, det, det_perp);
     let pq = vertex(pl, a);
     var sum = select(abs(det), pl.width * abs(det), exact);
     for (var k = 0u; k + 1u < params.orientations; k++) {
-        let rot = rotations[k];
-        // beta = alpha + k pi / K, reduced to [0, pi) so that sin(beta) >= 0.
-        var c = pl.cos_a * rot.x - pl.sin_a * rot.y;
-        var s = pl.sin_a * rot.x + pl.cos_a * rot.y;
-        let flip = s < 0.0;
-        c = select(c, -c, flip);
-        s = select(s, -s, flip);
-        let d = abs(fma(uv.x, c, s * uv.y));
+        var o: vec4<f32>;
+        if (ORIENTATION_TABLE) {
+            o = orients[at + k];
+        } else {
+            o = orientation(pl.cos_a, pl.sin_a, rotations[k]);
+        }
+        let d = abs(fma(uv.x, o.x, o.y * uv.y));
         if (exact) {
-            let w = chord_width(pl.light_w, pl.light_h, pq.x, pq.y, c > 0.0, reciprocal_or_zero(abs(c)), reciprocal_or_zero(s));
+            let w = chord_width(pl.light_w, pl.light_h, pq.x, pq.y, o.x > 0.0, o.z, o.w);
             sum = fma(w, d, sum);
         } else {
             sum = sum + d;
@@ -385,8 +405,9 @@ fn cmis_exact_mean(w: f32, h: f32, p: f32, q: f32, a_u: f32, a_v: f32) -> f32 {
     return select(0.0, mean, mean > 0.0);
 }
 
-// D of a hit (section 2.4, the table's rows).
-fn denominator(pl: Plane, det: f32, det_perp: f32, a: f32) -> f32 {
+// D of a hit (section 2.4, the table's rows); `at`: where the plane's further orientations are
+// in `orients` (estimators 5 and 6).
+fn denominator(pl: Plane, det: f32, det_perp: f32, a: f32, at: u32) -> f32 {
     switch ESTIMATOR {
         case 0u: {
             return pl.width * abs(det);
@@ -409,10 +430,10 @@ fn denominator(pl: Plane, det: f32, det_perp: f32, a: f32) -> f32 {
             return cmis_exact_mean(pl.light_w * u, pl.light_h * u, pq.x * u, pq.y * u, uv.x, uv.y) * pl.unit;
         }
         case 5u: {
-            return stratified(pl, det, det_perp, a, false);
+            return stratified(pl, det, det_perp, a, false, at);
         }
         default: {
-            return stratified(pl, det, det_perp, a, true);
+            return stratified(pl, det, det_perp, a, true, at);
         }
     }
 }
@@ -470,6 +491,8 @@ fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
 
 var<workgroup> batch_rows: array<vec4<u32>, BATCH * PLANE_ROWS>;
 var<workgroup> batch_ranges: array<u32, BATCH>;
+// The staged planes' indices (where their orientations are in `orients`).
+var<workgroup> batch_planes: array<u32, BATCH>;
 
 // Row `k` of the staged planes as floats.
 fn row(k: u32) -> vec4<f32> {
@@ -538,6 +561,7 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         }
         if (li < n) {
             batch_ranges[li] = ranges[b + li];
+            batch_planes[li] = list[b + li];
         }
         workgroupBarrier();
         for (var j = 0u; j < n; j++) {
@@ -565,7 +589,7 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
                 let pl = plane_at(base);
                 if (!blocked(pl, a, r)) {
                     let det_perp = dot3(dir, pl.normal_perp);
-                    var d = denominator(pl, det, det_perp, a);
+                    var d = denominator(pl, det, det_perp, a, batch_planes[j] * (params.orientations - 1u));
                     // The phase value divides D (section 1.1); D > 0 is tested after, as the
                     // CPU's D > 0 and finite test drop the same hits.
                     if (params.phase_hg != 0u && d > 0.0) {
@@ -578,6 +602,24 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     }
     // Both counts in one float, exactly: hits + 1024 tests < 2^24.
     partial[index * THREADS + li] = vec4<f32>(sum, f32(hits | (tests << 10u)));
+}
+
+// With K orientations and ORIENTATION_TABLE, each plane's K - 1 further orientations, once a
+// gathering rather than at every hit (denominators.rs `StratifiedK::prepare` makes them once a
+// plane): a thread per (plane, k), `orientation` as at a hit.
+@compute @workgroup_size(256, 1, 1)
+fn orient(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_index) li: u32) {
+    let others = params.orientations - 1u;
+    let i = (wid.y * nwg.x + wid.x) * THREADS + li;
+    if (others == 0u || i >= params.planes * others) {
+        return;
+    }
+    let plane = i / others;
+    let k = i - plane * others;
+    // `Plane`'s sixth row: cos_a, sin_a, p0, q0.
+    let alpha = bitcast<vec4<f32>>(plane_rows[plane * PLANE_ROWS + 5u]);
+    orients[i] = orientation(alpha.x, alpha.y, rotations[k]);
 }
 
 var<workgroup> tile_hits: atomic<u32>;

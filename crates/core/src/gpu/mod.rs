@@ -184,9 +184,13 @@ pub const MATH_VARIABLE: &str = "FOGPLANES_GPU_MATH";
 /// The variable that turns wgpu's shader runtime checks off (`off`; `on`, the default), for
 /// measuring them.
 pub const CHECKS_VARIABLE: &str = "FOGPLANES_GPU_CHECKS";
+/// The variable that has each plane's K orientations made once a gathering (`table`) rather
+/// than at every hit (`per-hit`, the default), for measuring it.
+pub const ORIENTATIONS_VARIABLE: &str = "FOGPLANES_GPU_ORIENTATIONS";
 
 /// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
-/// transcendental functions, wgpu's runtime checks in the shaders), fixed by variables so that
+/// transcendental functions, wgpu's runtime checks in the shaders, where K orientations are
+/// made), fixed by variables so that
 /// `scripts/gpu_check.sh` can time each against the defaults in one process per setting. Read
 /// once where an adapter is resolved ([`adapter_at`]), which every front end's settings do once;
 /// a device is made with them and kept for the process. Any setting but the defaults is named
@@ -212,6 +216,15 @@ pub struct Tuning {
     /// is at least 1 (device.rs says why), so the image is the same bits (tested on lavapipe);
     /// what it saves is for a device to say.
     pub unchecked: bool,
+    /// With K orientations (smis-cosine and smis-exact, K != 2), each plane's K - 1 further
+    /// orientations (the rotated chord direction and its two reciprocals) made once a
+    /// gathering into a table (`gather.wgsl`'s `orient`, [`ORIENTATIONS_VARIABLE`]` = table`),
+    /// as the CPU makes them once a plane, instead of at every hit: two divisions and six
+    /// multiplies an orientation become a load of 16 bytes that every thread of a workgroup
+    /// reads alike. The same operations, so the same bits (tested on lavapipe); on lavapipe it
+    /// took about as long (K = 8, 160x90, 4,096 planes: 0.97 and 1.05 s of GPU time against
+    /// 0.95 and 0.93), so what it saves is for a device to say.
+    pub orientation_table: bool,
 }
 
 impl Tuning {
@@ -238,7 +251,8 @@ impl Tuning {
         };
         let native_math = choice(MATH_VARIABLE, "polynomials", "native")?;
         let unchecked = choice(CHECKS_VARIABLE, "on", "off")?;
-        Ok(Tuning { item_planes, native_math, unchecked })
+        let orientation_table = choice(ORIENTATIONS_VARIABLE, "per-hit", "table")?;
+        Ok(Tuning { item_planes, native_math, unchecked, orientation_table })
     }
 
     /// What a device made with these settings adds to its adapter's name, `None` for the
@@ -253,6 +267,9 @@ impl Tuning {
         }
         if self.unchecked {
             parts.push("no shader runtime checks".to_string());
+        }
+        if self.orientation_table {
+            parts.push("orientations made once a gathering".to_string());
         }
         (!parts.is_empty()).then(|| parts.join(", "))
     }
@@ -297,9 +314,12 @@ mod tests {
     #[test]
     fn a_tuning_is_named_unless_it_is_the_defaults() {
         assert_eq!(Tuning::default().label(), None);
-        let all = Tuning { item_planes: Some(64), native_math: true, unchecked: true };
+        let all = Tuning { item_planes: Some(64), native_math: true, unchecked: true, orientation_table: true };
         let label = all.label().unwrap();
-        assert_eq!(label, "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks");
+        assert_eq!(
+            label,
+            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering"
+        );
         let name = format!("gpu: {} (Vulkan, discrete GPU, tuned: {label})", "x".repeat(100));
         assert!(crate::options::Devices::from_names(vec![name]).is_ok());
     }

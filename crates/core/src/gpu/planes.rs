@@ -46,6 +46,8 @@ pub struct GpuPlanes {
     /// Whether a submission has run the pass that finds the planes' reach (`reach.wgsl`); until
     /// one has, each gathering records it before its binning (set by [`GpuSums`] as it submits).
     reach_found: Arc<AtomicBool>,
+    /// Its planes' count.
+    planes: u32,
     batches: Vec<Batch>,
     sigma_t: Vec3,
     grey: bool,
@@ -134,6 +136,7 @@ impl GpuPlanes {
             host: Mutex::new(Some(host)),
             buffers: OnceLock::new(),
             reach_found: Arc::new(AtomicBool::new(false)),
+            planes: reach.len() as u32,
             batches,
             sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
@@ -256,7 +259,7 @@ impl GpuPlanes {
     fn encode(
         &self,
         weighting: Weighting,
-        pipelines: &[wgpu::ComputePipeline; 2],
+        pipelines: &[wgpu::ComputePipeline; 3],
         planes: &PlaneBuffers,
         rays: &GpuRays,
         into: &GpuSums,
@@ -284,7 +287,8 @@ impl GpuPlanes {
             phase_floor: self.phase.floor,
             phase_inv_numerator: self.phase.inv_numerator,
             phase_hg: !self.phase.is_isotropic() as u32,
-            pad: [0; 2],
+            planes: self.planes,
+            pad: 0,
         };
         let storage = wgpu::BufferUsages::STORAGE;
         let uniform = wgpu::BufferUsages::UNIFORM;
@@ -292,6 +296,10 @@ impl GpuPlanes {
         let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
         let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
         let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
+        // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
+        // K - 1 further ones, made once here (`orient`) rather than at each hit.
+        let table = gpu.orientation_table() && matches!(estimator_id(weighting), 5 | 6);
+        let orients = if table { self.planes as u64 * (k as u64 - 1) } else { 0 };
         // The scratch buffers held only while they are found (grown if need be), so that the
         // pieces of a gathering record side by side: each piece's passes run after the piece's
         // before it on the queue, whichever buffers each one holds.
@@ -300,6 +308,7 @@ impl GpuPlanes {
             tiles as u64,
             max_pairs,
             max_items,
+            orients,
         );
         let gather_group = gather_group(gpu, &params, planes, rays, &rotations_buf, &s, &into.image);
         let batches = self.batches.len();
@@ -320,6 +329,21 @@ impl GpuPlanes {
             });
             planes.polygons.encode(gpu, &mut encoder, timestamp_writes);
         }
+        // The planes' orientations, timed with the first batch too.
+        if orients > 0 {
+            let timestamp_writes =
+                queries.as_ref().filter(|_| !reach_first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: None,
+                });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+            pass.set_pipeline(&pipelines[2]);
+            pass.set_bind_group(0, &gather_group, &[]);
+            let (x, y) = grid(orients.div_ceil(256));
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        let timed_before = reach_first || orients > 0;
         for (b, batch) in self.batches.iter().enumerate() {
             control.check()?;
             let bin_params = BinParams {
@@ -346,7 +370,7 @@ impl GpuPlanes {
                 // Batch b's passes timed from its first (batch 0's from the reach before it, if
                 // any) to its last, and its gather from its start: where the GPU's time goes,
                 // the reach and the binning or the gather and its reduction.
-                let starts = k == 0 && !(b == 0 && reach_first);
+                let starts = k == 0 && !(b == 0 && timed_before);
                 let begins = (starts || k == 3).then_some(TIMESTAMPS * b as u32 + if k == 3 { 1 } else { 0 });
                 let ends = (k == 4).then_some(TIMESTAMPS * b as u32 + 2);
                 let timestamp_writes =
@@ -427,6 +451,7 @@ fn gather_group(
             entry(8, &s.partial),
             entry(9, image),
             entry(10, &s.ranges),
+            entry(11, &s.orients),
         ],
     })
 }

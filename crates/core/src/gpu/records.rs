@@ -30,7 +30,9 @@ pub(super) struct GatherParams {
     pub(super) phase_floor: f32,
     pub(super) phase_inv_numerator: f32,
     pub(super) phase_hg: u32,
-    pub(super) pad: [u32; 2],
+    /// The gathering's planes (`orient`'s table has K - 1 rows for each).
+    pub(super) planes: u32,
+    pub(super) pad: u32,
 }
 
 /// `bin.wgsl`'s `Params`.
@@ -129,7 +131,7 @@ mod tests {
                 GATHER_WGSL,
                 "Params",
                 fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
-                    phase_h, phase_floor, phase_inv_numerator, phase_hg, pad),
+                    phase_h, phase_floor, phase_inv_numerator, phase_hg, planes, pad),
             ),
             (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
             (REACH_WGSL, "Params", fields!(ReachParams: width, height, planes, rows)),

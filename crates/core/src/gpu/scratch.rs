@@ -32,8 +32,8 @@ pub(super) fn indirect_offset(tiles: u32) -> u64 {
 
 #[derive(Clone)]
 pub(super) struct ScratchBuffers {
-    /// Tiles, (tile, plane) pairs and work items they hold.
-    capacity: (u64, u64, u64),
+    /// Tiles, (tile, plane) pairs, work items and (plane, orientation) rows they hold.
+    capacity: (u64, u64, u64, u64),
     pub(super) tile_counts: wgpu::Buffer,
     pub(super) offsets: wgpu::Buffer,
     /// Per tile its first work item, then the total, then the gather's grid (x, y, 1).
@@ -44,21 +44,32 @@ pub(super) struct ScratchBuffers {
     pub(super) ranges: wgpu::Buffer,
     pub(super) items: wgpu::Buffer,
     pub(super) partial: wgpu::Buffer,
+    /// Each plane's further orientations (`gather.wgsl`'s `orients`).
+    pub(super) orients: wgpu::Buffer,
 }
 
 impl Scratch {
-    /// Buffers for `tiles` tiles, `pairs` pairs and `items` work items (handles to them): those
-    /// held if they are large enough, else new ones of the larger of each.
-    pub(super) fn at_least(&mut self, device: &wgpu::Device, tiles: u64, pairs: u64, items: u64) -> ScratchBuffers {
-        let held = self.buffers.as_ref().map_or((0, 0, 0), |b| b.capacity);
-        if held.0 < tiles || held.1 < pairs || held.2 < items {
-            let (tiles, pairs, items) = (held.0.max(tiles), held.1.max(pairs), held.2.max(items));
+    /// Buffers for `tiles` tiles, `pairs` pairs, `items` work items and `orients` (plane,
+    /// orientation) rows (handles to them): those held if they are large enough, else new ones
+    /// of the larger of each.
+    pub(super) fn at_least(
+        &mut self,
+        device: &wgpu::Device,
+        tiles: u64,
+        pairs: u64,
+        items: u64,
+        orients: u64,
+    ) -> ScratchBuffers {
+        let held = self.buffers.as_ref().map_or((0, 0, 0, 0), |b| b.capacity);
+        if held.0 < tiles || held.1 < pairs || held.2 < items || held.3 < orients {
+            let (tiles, pairs, items, orients) =
+                (held.0.max(tiles), held.1.max(pairs), held.2.max(items), held.3.max(orients));
             let storage = wgpu::BufferUsages::STORAGE;
             let tile_words = (tiles + 1) * 4;
             // The old buffers are let go first (wgpu frees them once the work using them is done).
             self.buffers = None;
             self.buffers = Some(ScratchBuffers {
-                capacity: (tiles, pairs, items),
+                capacity: (tiles, pairs, items, orients),
                 tile_counts: buffer(device, "tile counts", tile_words, storage),
                 offsets: buffer(device, "offsets", tile_words, storage),
                 item_offsets: buffer(device, "item offsets", tile_words + 12, storage | wgpu::BufferUsages::INDIRECT),
@@ -66,6 +77,7 @@ impl Scratch {
                 ranges: buffer(device, "ranges", pairs * 4, storage),
                 items: buffer(device, "items", items * 16, storage),
                 partial: buffer(device, "partial", items * ITEM_BYTES, storage),
+                orients: buffer(device, "orientations", orients * 16, storage),
             });
         }
         self.buffers.clone().expect("made above")
