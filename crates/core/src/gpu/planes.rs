@@ -321,22 +321,20 @@ impl GpuPlanes {
         // with the first batch.
         let reach_first = !self.reach_found.load(Ordering::Acquire)
             && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, &self.reach_found));
-        if reach_first {
-            let timestamp_writes = queries.as_ref().map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+        // The first pass's start is the first batch's (`starts` below).
+        let first_pass = |first: bool| {
+            queries.as_ref().filter(|_| first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
                 query_set: set,
                 beginning_of_pass_write_index: Some(0),
                 end_of_pass_write_index: None,
-            });
-            planes.polygons.encode(gpu, &mut encoder, timestamp_writes);
+            })
+        };
+        if reach_first {
+            planes.polygons.encode(gpu, &mut encoder, first_pass(true));
         }
         // The planes' orientations, timed with the first batch too.
         if orients > 0 {
-            let timestamp_writes =
-                queries.as_ref().filter(|_| !reach_first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
-                    query_set: set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: None,
-                });
+            let timestamp_writes = first_pass(!reach_first);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
             pass.set_pipeline(&pipelines[2]);
             pass.set_bind_group(0, &gather_group, &[]);
