@@ -34,7 +34,7 @@ pub struct Gpu {
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
     /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
-    gather: Mutex<HashMap<u32, Arc<[wgpu::ComputePipeline; 3]>>>,
+    gather: Mutex<HashMap<u32, Arc<GatherPipelines>>>,
     /// Errors the device reported outside every error scope ([`Gpu::checked`]: each call's own
     /// errors are caught on its thread), taken after each wait.
     errors: Arc<Mutex<Vec<String>>>,
@@ -237,11 +237,6 @@ impl Gpu {
         self.tuning.item_planes
     }
 
-    /// Whether K orientations are made once a gathering ([`super::Tuning::orientation_table`]).
-    pub(super) fn orientation_table(&self) -> bool {
-        self.tuning.orientation_table
-    }
-
     /// The most bytes one buffer binding holds on this device.
     pub fn max_binding(&self) -> u64 {
         self.max_binding
@@ -296,8 +291,8 @@ impl Gpu {
         })
     }
 
-    /// The gather, reduce and orient pipelines of estimator `id`, made on first use.
-    pub(super) fn gather_pipelines(&self, id: u32) -> Arc<[wgpu::ComputePipeline; 3]> {
+    /// The gather's pipelines for estimator `id`, made on first use.
+    pub(super) fn gather_pipelines(&self, id: u32) -> Arc<GatherPipelines> {
         let mut cache = self.gather.lock().unwrap_or_else(|p| p.into_inner());
         cache
             .entry(id)
@@ -310,7 +305,7 @@ impl Gpu {
                 ];
                 let options =
                     wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };
-                Arc::new(["gather", "reduce", "orient"].map(|entry| {
+                let make = |entry: &str| {
                     let _s = crate::trace::span("pipeline made: gather, reduce or orient");
                     compute_pipeline(
                         &self.device,
@@ -319,7 +314,15 @@ impl Gpu {
                         entry,
                         options.clone(),
                     )
-                }))
+                };
+                // `orient` only where its table is read: a pipeline more is a translation and a
+                // driver's compilation more in every process.
+                let table = self.tuning.orientation_table && matches!(id, 5 | 6);
+                Arc::new(GatherPipelines {
+                    gather: make("gather"),
+                    reduce: make("reduce"),
+                    orient: table.then(|| make("orient")),
+                })
             })
             .clone()
     }
@@ -335,6 +338,15 @@ impl Gpu {
     pub(super) fn scratch(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
         scratch::buffer(&self.device, label, size, usage)
     }
+}
+
+/// The pipelines of `gather.wgsl` for one estimator: the gather, the reduction of a tile's
+/// work items, and where K orientations are read from a table (`Tuning::orientation_table`),
+/// the pass that makes it.
+pub(super) struct GatherPipelines {
+    pub(super) gather: wgpu::ComputePipeline,
+    pub(super) reduce: wgpu::ComputePipeline,
+    pub(super) orient: Option<wgpu::ComputePipeline>,
 }
 
 pub(super) fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {

@@ -561,6 +561,8 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
         }
         if (li < n) {
             batch_ranges[li] = ranges[b + li];
+        }
+        if (ORIENTATION_TABLE && li < n) {
             batch_planes[li] = list[b + li];
         }
         workgroupBarrier();
@@ -589,7 +591,8 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
                 let pl = plane_at(base);
                 if (!blocked(pl, a, r)) {
                     let det_perp = dot3(dir, pl.normal_perp);
-                    var d = denominator(pl, det, det_perp, a, batch_planes[j] * (params.orientations - 1u));
+                    let at = select(0u, batch_planes[j] * (params.orientations - 1u), ORIENTATION_TABLE);
+                    var d = denominator(pl, det, det_perp, a, at);
                     // The phase value divides D (section 1.1); D > 0 is tested after, as the
                     // CPU's D > 0 and finite test drop the same hits.
                     if (params.phase_hg != 0u && d > 0.0) {

@@ -219,11 +219,13 @@ pub struct Tuning {
     /// With K orientations (smis-cosine and smis-exact, K != 2), each plane's K - 1 further
     /// orientations (the rotated chord direction and its two reciprocals) made once a
     /// gathering into a table (`gather.wgsl`'s `orient`, [`ORIENTATIONS_VARIABLE`]` = table`),
-    /// as the CPU makes them once a plane, instead of at every hit: two divisions and six
-    /// multiplies an orientation become a load of 16 bytes that every thread of a workgroup
-    /// reads alike. The same operations, so the same bits (tested on lavapipe); on lavapipe it
-    /// took about as long (K = 8, 160x90, 4,096 planes: 0.97 and 1.05 s of GPU time against
-    /// 0.95 and 0.93), so what it saves is for a device to say.
+    /// as the CPU makes them once a plane, instead of at every hit: four multiplies, two adds
+    /// and a flip an orientation and hit (and for smis-exact two divisions) become a load of 16
+    /// bytes that every thread of a workgroup reads alike. The same operations, so the same bits
+    /// on lavapipe (tested; a driver that fuses multiply-adds may fuse the two shaders' alike or
+    /// not: `scripts/gpu_check.sh` compares the images on a device); on lavapipe it took about
+    /// as long (K = 8, 160x90, 4,096 planes: 0.97 and 1.05 s of GPU time against 0.95 and
+    /// 0.93), so what it saves is for a device to say.
     pub orientation_table: bool,
 }
 

@@ -3,7 +3,7 @@
 //! submitted; per batch, the binning's three, the gather and its reduction) encoded into one
 //! command buffer kept with the sums.
 
-use super::device::{Gpu, entry, grid};
+use super::device::{GatherPipelines, Gpu, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams, ITEM_BYTES};
@@ -259,7 +259,7 @@ impl GpuPlanes {
     fn encode(
         &self,
         weighting: Weighting,
-        pipelines: &[wgpu::ComputePipeline; 3],
+        pipelines: &GatherPipelines,
         planes: &PlaneBuffers,
         rays: &GpuRays,
         into: &GpuSums,
@@ -297,9 +297,19 @@ impl GpuPlanes {
         let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
         let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
         // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
-        // K - 1 further ones, made once here (`orient`) rather than at each hit.
-        let table = gpu.orientation_table() && matches!(estimator_id(weighting), 5 | 6);
-        let orients = if table { self.planes as u64 * (k as u64 - 1) } else { 0 };
+        // K - 1 further ones, made once here (`orient`) rather than at each hit: 16 bytes each,
+        // within one binding (a piece is at most a chunk, 16,384 planes: 16.5 MB at K = 64).
+        let orients = if pipelines.orient.is_some() { self.planes as u64 * (k as u64 - 1) } else { 0 };
+        if orients * 16 > gpu.max_binding() {
+            return Err(Error::Device(format!(
+                "the table of {} planes' {} orientations takes {} bytes, more than the GPU binds at once ({} bytes): gather them with {}=per-hit",
+                self.planes,
+                k,
+                orients * 16,
+                gpu.max_binding(),
+                super::ORIENTATIONS_VARIABLE
+            )));
+        }
         // The scratch buffers held only while they are found (grown if need be), so that the
         // pieces of a gathering record side by side: each piece's passes run after the piece's
         // before it on the queue, whichever buffers each one holds.
@@ -333,10 +343,10 @@ impl GpuPlanes {
             planes.polygons.encode(gpu, &mut encoder, first_pass(true));
         }
         // The planes' orientations, timed with the first batch too.
-        if orients > 0 {
+        if let Some(orient) = pipelines.orient.as_ref().filter(|_| orients > 0) {
             let timestamp_writes = first_pass(!reach_first);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
-            pass.set_pipeline(&pipelines[2]);
+            pass.set_pipeline(orient);
             pass.set_bind_group(0, &gather_group, &[]);
             let (x, y) = grid(orients.div_ceil(256));
             pass.dispatch_workgroups(x, y, 1);
@@ -361,8 +371,8 @@ impl GpuPlanes {
                 (&gpu.bin[0], &bin_group, Some(tile_grid)),
                 (&gpu.bin[1], &bin_group, Some((1, 1))),
                 (&gpu.bin[2], &bin_group, Some(tile_grid)),
-                (&pipelines[0], &gather_group, None),
-                (&pipelines[1], &gather_group, Some((tiles_x, tiles_y))),
+                (&pipelines.gather, &gather_group, None),
+                (&pipelines.reduce, &gather_group, Some((tiles_x, tiles_y))),
             ];
             for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
                 // Batch b's passes timed from its first (batch 0's from the reach before it, if
