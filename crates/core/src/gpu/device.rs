@@ -33,7 +33,7 @@ pub struct Gpu {
     pub(super) reach: wgpu::ComputePipeline,
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
-    /// Per estimator (`gather.wgsl`'s ESTIMATOR): its gather and reduce pipelines.
+    /// Per estimator (`gather.wgsl`'s ESTIMATOR): its pipelines ([`GatherPipelines`]).
     gather: Mutex<HashMap<u32, Arc<GatherPipelines>>>,
     /// Errors the device reported outside every error scope ([`Gpu::checked`]: each call's own
     /// errors are caught on its thread), taken after each wait.

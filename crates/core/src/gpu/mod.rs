@@ -190,11 +190,11 @@ pub const ORIENTATIONS_VARIABLE: &str = "FOGPLANES_GPU_ORIENTATIONS";
 
 /// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
 /// transcendental functions, wgpu's runtime checks in the shaders, where K orientations are
-/// made), fixed by variables so that
-/// `scripts/gpu_check.sh` can time each against the defaults in one process per setting. Read
-/// once where an adapter is resolved ([`adapter_at`]), which every front end's settings do once;
-/// a device is made with them and kept for the process. Any setting but the defaults is named
-/// after the adapter in the summary and in every record of the render ([`Tuning::label`]).
+/// made), fixed by variables so that `scripts/gpu_check.sh` can time each against the
+/// defaults in one process per setting. Read once where an adapter is resolved
+/// ([`adapter_at`]), which every front end's settings do once; a device is made with them and
+/// kept for the process. Any setting but the defaults is named after the adapter in the
+/// summary and in every record of the render ([`Tuning::label`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Tuning {
     /// The planes of every work item ([`ITEM_VARIABLE`]), else sized by the batch
