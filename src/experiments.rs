@@ -107,6 +107,7 @@ fn measure(settings: &ResolvedTable, planes: usize, seed: u64) -> Result<Vec<Mea
                 wait_ns: ((after.seconds_waited - before.seconds_waited) * 1e9) as u64,
                 bytes_crossed: after.bytes_crossed - before.bytes_crossed,
                 submissions: after.submissions - before.submissions,
+                dispatches: after.dispatches - before.dispatches,
             };
             out.push(Measured { entry: Entry { weighting, sampler }, film, stats, gather_seconds, shared_seconds });
         }

@@ -310,8 +310,13 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
         args.extend(estimator);
         args.extend(["-q", "--device", "gpu", "-o", path(&out)]);
         // The other settings' variables as their defaults, whatever this process was given.
-        let tuning =
-            ["FOGPLANES_GPU_MATH", "FOGPLANES_GPU_CHECKS", "FOGPLANES_GPU_ITEM_PLANES", "FOGPLANES_GPU_ORIENTATIONS"];
+        let tuning = [
+            "FOGPLANES_GPU_MATH",
+            "FOGPLANES_GPU_CHECKS",
+            "FOGPLANES_GPU_ITEM_PLANES",
+            "FOGPLANES_GPU_ORIENTATIONS",
+            "FOGPLANES_GPU_PIECES",
+        ];
         let unset: Vec<&str> = tuning.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
         let o = run_with(&args, env, &unset);
         assert!(o.status.success(), "{name}: {}", text(&o).1);
@@ -341,5 +346,49 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
     let rel = num / den;
     println!("the driver's exp, log and atan against the polynomials: relative MSE {rel:.2e}");
     assert!(den > 0.0 && rel <= 1e-8, "{rel}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A chunk's pieces (a ray set's share of its planes each) are joined into one structure on the
+/// GPU, and their work items gathered in one dispatch along their sets made into one buffer
+/// (gpu/planes.rs `GpuPlanes::join`): 2,048 planes in 16 ray sets, one chunk, are one gather
+/// dispatch, not 16 (`FOGPLANES_GPU_PIECES=apart`), and with the work items' size fixed the
+/// same pixels, bit for bit (each batch's sums added to a pixel as they were alone); with
+/// smis-exact at K = 5 and the orientations' table too, whose rows are the joined planes'.
+#[test]
+fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {
+    if !have_gpu("a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits") {
+        return;
+    }
+    let d = dir("joined");
+    let render = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
+        let out = d.join(format!("{name}.exr"));
+        let mut args = vec!["render", SCENE, "--resolution", "40x24", "--planes", "2048", "--device", "gpu"];
+        args.extend(extra);
+        args.extend(["-o", path(&out)]);
+        let mut env = env.to_vec();
+        env.push(("FOGPLANES_GPU_ITEM_PLANES", "8"));
+        let o = run_with(&args, &env, &["FOGPLANES_GPU_MATH", "FOGPLANES_GPU_CHECKS", "FOGPLANES_GPU_ORIENTATIONS"]);
+        let (out_text, err) = text(&o);
+        assert!(o.status.success(), "{name}: {err}");
+        let dispatches = out_text
+            .split(" gather dispatches")
+            .next()
+            .and_then(|head| head.rsplit(' ').next())
+            .and_then(|n| n.parse::<u64>().ok())
+            .unwrap_or_else(|| panic!("{name}: no dispatches in {out_text}"));
+        (fogplanes::film::Film::load_exr(&out).unwrap().pixels, dispatches)
+    };
+    for (extra, env) in [
+        (&["-e", "smis-exact"][..], &[][..]),
+        (&["-e", "smis-exact", "--orientations", "5"][..], &[("FOGPLANES_GPU_ORIENTATIONS", "table")][..]),
+    ] {
+        let (joined, one) = render("joined", extra, env);
+        let apart_env: Vec<(&str, &str)> = env.iter().copied().chain([("FOGPLANES_GPU_PIECES", "apart")]).collect();
+        let (apart, sixteen) = render("apart", extra, &apart_env);
+        assert_eq!((one, sixteen), (1, 16), "{extra:?}: the gather dispatches joined and apart");
+        assert!(joined.iter().any(|p| p.x > 0.0), "{extra:?}: a black image says nothing");
+        assert!(joined == apart, "{extra:?}: the join changed the image");
+    }
     let _ = std::fs::remove_dir_all(&d);
 }

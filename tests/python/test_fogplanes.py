@@ -534,6 +534,8 @@ def test_device_gpu_renders_what_the_command_line_renders_on_the_gpu(tmp_path):
     assert stats["seconds_waited"] > 0
     # The gather's share of the GPU's time, where its timestamps split it (else 0).
     assert 0 <= stats["seconds_device_gather"] < stats["seconds_device"]
+    # Pixel centres: one ray set, one chunk, one round of batches.
+    assert stats["submissions"] == 1 and stats["gather_dispatches"] == 1
     assert stats["devices"] == [stats["device"]]
     # Every adapter listed; `gpu:N` picks one by its index: the default's is "gpu"'s image.
     adapters = fogplanes.devices()

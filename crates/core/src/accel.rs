@@ -354,7 +354,8 @@ pub struct GpuPiece<'a> {
 /// pieces along it.
 pub struct OnGpu {
     sums: Vec<Option<GpuSums>>,
-    rays: Option<(u32, Arc<GpuRays>)>,
+    /// The set made last: its index, its buffer and where it begins there, in floats.
+    rays: Option<(u32, Arc<GpuRays>, u32)>,
     /// The set before, whose work may still be under way.
     before: Option<Arc<GpuRays>>,
     /// Each target's hits and tests told by earlier reads.
@@ -399,10 +400,11 @@ pub enum RaySet {
 /// Makes ray set `k` for the GPU structure given ([`RaySet`]).
 pub type RaySetMaker<'m> = &'m mut dyn FnMut(u32, &GpuPlanes) -> Result<RaySet>;
 
-/// A piece's rays: a set made, or the set of a gathering's records to make.
+/// A piece's rays: a set made (its buffer, and where it begins there, in floats), or the set
+/// of a gathering's records to make.
 #[derive(Clone)]
 enum Along {
-    Made(Arc<GpuRays>),
+    Made(Arc<GpuRays>, u32),
     Record(usize),
 }
 
@@ -431,7 +433,7 @@ pub fn gather_pieces_on_gpu<'p>(
 ) -> Result<Vec<GatherStats>> {
     let mut found = vec![GatherStats::default(); on_gpu.sums.len()];
     let mut waiting = Waiting::default();
-    let mut current = on_gpu.rays.as_ref().map(|(set, r)| (*set, Along::Made(r.clone())));
+    let mut current = on_gpu.rays.as_ref().map(|(set, r, at)| (*set, Along::Made(r.clone(), *at)));
     for p in pieces {
         let g = p.planes.gpu();
         if current.as_ref().is_none_or(|(set, _)| *set != p.set) {
@@ -456,8 +458,8 @@ pub fn gather_pieces_on_gpu<'p>(
                     found[p.target].upload_ns += rays.upload_ns();
                     found[p.target].bytes_crossed += rays.bytes_up();
                     let rays = Arc::new(rays);
-                    on_gpu.before = on_gpu.rays.replace((p.set, rays.clone())).map(|(_, r)| r);
-                    current = Some((p.set, Along::Made(rays)));
+                    on_gpu.before = on_gpu.rays.replace((p.set, rays.clone(), 0)).map(|(_, r, _)| r);
+                    current = Some((p.set, Along::Made(rays, 0)));
                 }
             }
         }
@@ -466,7 +468,7 @@ pub fn gather_pieces_on_gpu<'p>(
         }
         let along = current.as_ref().expect("made above").1.clone();
         match along {
-            Along::Made(rays) if !rays.made_on_gpu() => {
+            Along::Made(rays, _) if !rays.made_on_gpu() => {
                 let sums = on_gpu.sums[p.target].as_mut().expect("made above");
                 found[p.target] += g.gather_into(weighting, &rays, sums, control)?;
             }
@@ -477,9 +479,50 @@ pub fn gather_pieces_on_gpu<'p>(
     Ok(found)
 }
 
+/// Pieces of a gathering recorded together: consecutive pieces of one target, along sets made
+/// together into one buffer (`sets`, indices into [`Waiting::sets`]), or one piece along a set
+/// made before (`made`).
+struct Run {
+    target: usize,
+    pieces: Vec<usize>,
+    sets: Vec<usize>,
+    made: Option<(Arc<GpuRays>, u32)>,
+}
+
+/// The runs of `waiting`'s pieces, in order: consecutive pieces of one target along this
+/// gathering's sets, at most `fitting` sets a run (what one buffer holds); each piece along a
+/// set made before alone.
+fn runs(waiting: &Waiting, fitting: usize) -> Vec<Run> {
+    let mut runs: Vec<Run> = Vec::new();
+    for (k, (p, along)) in waiting.pieces.iter().enumerate() {
+        match along {
+            Along::Made(rays, at) => {
+                runs.push(Run { target: p.target, pieces: vec![k], sets: Vec::new(), made: Some((rays.clone(), *at)) })
+            }
+            Along::Record(i) => match runs.last_mut() {
+                Some(r)
+                    if r.made.is_none()
+                        && r.target == p.target
+                        && (r.sets.contains(i) || r.sets.len() < fitting) =>
+                {
+                    r.pieces.push(k);
+                    if !r.sets.contains(i) {
+                        r.sets.push(*i);
+                    }
+                }
+                _ => runs.push(Run { target: p.target, pieces: vec![k], sets: vec![*i], made: None }),
+            },
+        }
+    }
+    runs
+}
+
 /// The ray sets and pieces `waiting` made and recorded side by side, then the pieces added to
 /// their sums' work in their order (each after its rays' pass, the first time), what they
-/// found added to `found`; the last set made is kept as the set made last.
+/// found added to `found`; the last set made is kept as the set made last. The pieces of a run
+/// ([`runs`]) are joined into one structure ([`GpuPlanes::join`]) where the GPU allows it
+/// (`FOGPLANES_GPU_PIECES`), so that their work items are gathered in one dispatch, along
+/// their sets made into one buffer.
 fn record_side_by_side(
     waiting: &mut Waiting,
     weighting: Weighting,
@@ -487,31 +530,75 @@ fn record_side_by_side(
     found: &mut [GatherStats],
     control: Control,
 ) -> Result<()> {
-    let made = control.map_units("ray sets", waiting.sets.len(), 1, |i| {
-        let (_, record, panels, g, _) = &waiting.sets[i];
+    let Some((first, _)) = waiting.pieces.first() else {
+        return Ok(());
+    };
+    let first = first.planes.gpu();
+    let (join, fitting) = (first.joins_pieces(), first.ray_sets_fitting());
+    let runs = runs(waiting, if join { fitting } else { 1 });
+    let sets = &waiting.sets;
+    let made = control.map_units("ray sets", runs.len(), 1, |r| {
+        let Some(&i) = runs[r].sets.first() else {
+            return Ok(None);
+        };
         let _s = crate::trace::span("ray set recorded");
-        g.rays_on_gpu(record, panels).map(Arc::new)
+        let records: Vec<(&RaySetRecord, &[PanelRecord])> =
+            runs[r].sets.iter().map(|&i| (&sets[i].1, sets[i].2.as_slice())).collect();
+        sets[i].3.rays_on_gpu(&records).map(|rays| Some(Arc::new(rays)))
     });
-    let made: Vec<Arc<GpuRays>> = made.into_iter().collect::<Result<_>>()?;
-    for ((set, _, _, _, target), rays) in waiting.sets.drain(..).zip(&made) {
-        found[target].upload_ns += rays.upload_ns();
-        found[target].bytes_crossed += rays.bytes_up();
-        on_gpu.rays = Some((set, rays.clone()));
+    let made: Vec<Option<Arc<GpuRays>>> = made.into_iter().collect::<Result<_>>()?;
+    for (run, rays) in runs.iter().zip(&made) {
+        if let Some(rays) = rays {
+            found[run.target].upload_ns += rays.upload_ns();
+            found[run.target].bytes_crossed += rays.bytes_up();
+        }
     }
-    let rays_of = |along: &Along| match along {
-        Along::Made(rays) => rays.clone(),
-        Along::Record(i) => made[*i].clone(),
+    // The set made last: the gathering's last, in the last run that made it.
+    if let Some(last) = sets.len().checked_sub(1) {
+        let (run, rays) = runs.iter().zip(&made).rfind(|(r, _)| r.sets.contains(&last)).expect("a run made it");
+        let slot = run.sets.iter().position(|&i| i == last).expect("made there") as u32;
+        let rays = rays.clone().expect("its sets made");
+        on_gpu.rays = Some((sets[last].0, rays.clone(), rays.floats_at(slot)));
+    }
+    // Each run's rays, and where each of its pieces' set begins there.
+    let along = |r: usize, k: usize| -> (Arc<GpuRays>, u32) {
+        match (&runs[r].made, &waiting.pieces[k].1) {
+            (Some((rays, at)), _) => (rays.clone(), *at),
+            (None, Along::Record(i)) => {
+                let rays = made[r].clone().expect("its sets made");
+                let slot = runs[r].sets.iter().position(|j| j == i).expect("a set of its run") as u32;
+                let at = rays.floats_at(slot);
+                (rays, at)
+            }
+            (None, Along::Made(..)) => unreachable!("a piece along a set made before is a run of its own"),
+        }
     };
     let sums = &on_gpu.sums;
-    let recorded = control.map_units("record", waiting.pieces.len(), 1, |i| {
-        let (p, along) = &waiting.pieces[i];
-        let into = sums[p.target].as_ref().expect("made before the piece waits");
-        p.planes.gpu().record(weighting, &rays_of(along), into, control)
+    let recorded = control.map_units("record", runs.len(), 1, |r| {
+        let run = &runs[r];
+        let into = sums[run.target].as_ref().expect("made before the piece waits");
+        let parts: Vec<(&GpuPlanes, (Arc<GpuRays>, u32))> =
+            run.pieces.iter().map(|&k| (waiting.pieces[k].0.planes.gpu(), along(r, k))).collect();
+        let rays = parts[0].1.0.clone();
+        if parts.len() > 1 {
+            let joined: Vec<(&GpuPlanes, u32)> = parts.iter().map(|(g, (_, at))| (*g, *at)).collect();
+            if let Some(whole) = GpuPlanes::join(&joined) {
+                return Ok(vec![(whole.record(weighting, &rays, 0, into, control)?, rays)]);
+            }
+        }
+        parts
+            .into_iter()
+            .map(|(g, (rays, at))| Ok((g.record(weighting, &rays, at, into, control)?, rays)))
+            .collect::<Result<Vec<_>>>()
     });
-    for ((p, along), recorded) in waiting.pieces.drain(..).zip(recorded) {
-        let into = on_gpu.sums[p.target].as_mut().expect("made before the piece waits");
-        found[p.target] += into.add(recorded?, &rays_of(&along));
+    for (run, recorded) in runs.iter().zip(recorded) {
+        let into = on_gpu.sums[run.target].as_mut().expect("made before the piece waits");
+        for (recorded, rays) in recorded? {
+            found[run.target] += into.add(recorded, &rays);
+        }
     }
+    waiting.sets.clear();
+    waiting.pieces.clear();
     Ok(())
 }
 

@@ -464,6 +464,8 @@ pub struct GatherStats {
     /// timestamps back), and the GPU's queue submissions; 0 on the CPU.
     pub bytes_crossed: u64,
     pub submissions: u64,
+    /// The GPU's gather dispatches (a round of batches each, gpu/batches.rs); 0 on the CPU.
+    pub dispatches: u64,
 }
 
 impl std::ops::AddAssign for GatherStats {
@@ -476,6 +478,7 @@ impl std::ops::AddAssign for GatherStats {
         self.wait_ns += o.wait_ns;
         self.bytes_crossed += o.bytes_crossed;
         self.submissions += o.submissions;
+        self.dispatches += o.dispatches;
     }
 }
 

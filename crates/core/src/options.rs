@@ -276,6 +276,9 @@ pub struct RenderStats {
     /// queue submissions; 0 on the CPU.
     pub bytes_crossed: u64,
     pub submissions: u64,
+    /// The GPU's gather dispatches (each a round of batches of planes, whose work items it
+    /// gathers at once); 0 on the CPU.
+    pub dispatches: u64,
     pub seconds_total: f64,
     /// The estimated standard error of each pixel, when the options asked for it
     /// (docs/mathematics.md section 10).
@@ -334,6 +337,7 @@ impl RenderStats {
         self.seconds_waited += s.wait_ns as f64 * 1e-9;
         self.bytes_crossed += s.bytes_crossed;
         self.submissions += s.submissions;
+        self.dispatches += s.dispatches;
         self.hits += s.hits;
         self.tests += s.tests;
     }
@@ -402,12 +406,13 @@ impl RenderStats {
                 String::new()
             };
             format!(
-                "{}; GPU time {:.4} s{split}, {:.4} G hits/s, {:.1} MB crossed in {} submissions; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s; it waited for the GPU {:.4} s",
+                "{}; GPU time {:.4} s{split}, {:.4} G hits/s, {:.1} MB crossed in {} submissions, {} gather dispatches; the CPU's work: planes sampled {:.4} s, prepared {:.4} s, rays (into the upload buffers, or their records where the GPU makes them) and the emission {:.4} s, the uploads' own {:.4} s; it waited for the GPU {:.4} s",
                 self.device,
                 self.seconds_device,
                 self.device_hits_per_second() * 1e-9,
                 self.bytes_crossed as f64 * 1e-6,
                 self.submissions,
+                self.dispatches,
                 self.seconds_sampling,
                 self.seconds_build,
                 self.seconds_rays,

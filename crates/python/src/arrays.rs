@@ -66,6 +66,7 @@ pub(crate) fn stats_dict<'py>(py: Python<'py>, s: &RenderStats) -> PyResult<Boun
     d.set_item("seconds_waited", s.seconds_waited)?;
     d.set_item("bytes_crossed", s.bytes_crossed)?;
     d.set_item("submissions", s.submissions)?;
+    d.set_item("gather_dispatches", s.dispatches)?;
     d.set_item("planes", s.planes)?;
     d.set_item("plane_passes", s.plane_passes)?;
     d.set_item("rays", s.rays)?;

@@ -67,8 +67,17 @@ impl GpuPlanes {
     pub fn make_rays(&self, _: RayRowFn) -> Result<GpuRays> {
         match *self {}
     }
-    pub fn rays_on_gpu(&self, _: &RaySetRecord, _: &[PanelRecord]) -> Result<GpuRays> {
+    pub fn rays_on_gpu(&self, _: &[(&RaySetRecord, &[PanelRecord])]) -> Result<GpuRays> {
         match *self {}
+    }
+    pub fn ray_sets_fitting(&self) -> usize {
+        match *self {}
+    }
+    pub fn joins_pieces(&self) -> bool {
+        match *self {}
+    }
+    pub fn join(parts: &[(&GpuPlanes, u32)]) -> Option<GpuPlanes> {
+        match *parts.first()?.0 {}
     }
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
         match *self {}
@@ -76,7 +85,7 @@ impl GpuPlanes {
     pub fn gather_into(&self, _: Weighting, _: &GpuRays, _: &mut GpuSums, _: Control) -> Result<GatherStats> {
         match *self {}
     }
-    pub fn record(&self, _: Weighting, _: &GpuRays, _: &GpuSums, _: Control) -> Result<Recorded> {
+    pub fn record(&self, _: Weighting, _: &GpuRays, _: u32, _: &GpuSums, _: Control) -> Result<Recorded> {
         match *self {}
     }
 }
@@ -92,6 +101,9 @@ impl GpuRays {
         match **gpu {}
     }
     pub fn made_on_gpu(&self) -> bool {
+        match *self {}
+    }
+    pub fn floats_at(&self, _: u32) -> u32 {
         match *self {}
     }
     pub fn wait(&self) -> Result<u64> {

@@ -11,6 +11,12 @@
 // work items. Plane order within a tile is what makes the gather's sums the same bits from run
 // to run; a scatter by atomic cursors would not keep it.
 //
+// The batches of a round (gpu/batches.rs) are binned one after another into one list and one
+// array of work items, each batch's after the one's before it (`scan` reads where that one
+// ended), so that the gather takes the whole round's items in one dispatch. Each batch keeps its
+// own tiles' first entries and first items, a region of `offsets` and `item_offsets` of tiles + 1
+// words, for the scatter and for the reduction, which adds a tile's items batch by batch.
+//
 // Every loop of an invocation runs at most count / 256 (<= 64) or tiles / 256 times, well
 // within llvmpipe's silent limit of about 65,000 loop iterations per invocation.
 
@@ -23,7 +29,13 @@ struct Params {
     count: u32,
     first: u32,
     item_planes: u32,
-    pad: u32,
+    // The batch's index in its round: its region of `offsets` and `item_offsets`.
+    region: u32,
+    // Where its ray set begins in the gathering's rays, in floats (its work items carry it).
+    rays_at: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -31,10 +43,13 @@ struct Params {
 // in `spans` and `groups`, and its first vertex (read by reach.wgsl only).
 @group(0) @binding(1) var<storage, read> reach: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read_write> tile_counts: array<u32>;
+// Per batch of the round (`region`), per tile its first list entry, then the batch's end.
 @group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
-// Per tile its first work item, then their total, then the gather's grid (x, y, 1) of them.
+// The gather's grid (x, y, 1) of the round's work items so far and their number (4 words), then
+// per batch of the round, per tile its first work item, then the batch's end.
 @group(0) @binding(4) var<storage, read_write> item_offsets: array<u32>;
 @group(0) @binding(5) var<storage, read_write> list: array<u32>;
+// Work items: (tile, first list entry, end, where the batch's ray set begins).
 @group(0) @binding(6) var<storage, read_write> items: array<vec4<u32>>;
 // Per plane and row of tiles: its first and last column of tiles (inclusive; empty when first >
 // last), packed `first | last << 16`.
@@ -53,6 +68,14 @@ const TILE: u32 = 16u;
 
 var<workgroup> scratch: array<u32, 256>;
 var<workgroup> scratch_items: array<u32, 256>;
+
+// The first word of this batch's region of `offsets`, and of `item_offsets` (after the grid).
+fn list_region() -> u32 {
+    return params.region * (params.tiles + 1u);
+}
+fn item_region() -> u32 {
+    return 4u + params.region * (params.tiles + 1u);
+}
 
 // Whether plane `plane` reaches tile `tile`: the tile's row among the plane's and its column in
 // that row's span.
@@ -125,6 +148,13 @@ fn scan(@builtin(local_invocation_index) li: u32) {
     let per = (tiles + THREADS - 1u) / THREADS;
     let lo = min(li * per, tiles);
     let hi = min(lo + per, tiles);
+    // This batch's list and items begin where the round's batch before it ended.
+    var list_base = 0u;
+    var item_base = 0u;
+    if (params.region > 0u) {
+        list_base = offsets[list_region() - 1u];
+        item_base = item_offsets[item_region() - 1u];
+    }
     var c = 0u;
     var n_items = 0u;
     for (var t = lo; t < hi; t++) {
@@ -135,28 +165,32 @@ fn scan(@builtin(local_invocation_index) li: u32) {
     // Both prefix sums through `scratch`, one after the other.
     scratch[li] = c;
     scan_scratch(li);
-    var run = scratch[li] - c;
-    let total = scratch[THREADS - 1u];
+    var run = list_base + scratch[li] - c;
+    let total = list_base + scratch[THREADS - 1u];
     workgroupBarrier();
     scratch[li] = n_items;
     scan_scratch(li);
-    var run_items = scratch[li] - n_items;
-    let total_items = scratch[THREADS - 1u];
+    var run_items = item_base + scratch[li] - n_items;
+    let total_items = item_base + scratch[THREADS - 1u];
+    let lr = list_region();
+    let ir = item_region();
     for (var t = lo; t < hi; t++) {
         let k = tile_counts[t];
-        offsets[t] = run;
-        item_offsets[t] = run_items;
+        offsets[lr + t] = run;
+        item_offsets[ir + t] = run_items;
         run += k;
         run_items += (k + params.item_planes - 1u) / params.item_planes;
     }
     if (li == 0u) {
-        offsets[tiles] = total;
-        item_offsets[tiles] = total_items;
-        // A workgroup per item, as gpu/device.rs `grid` lays them out (none where there are none).
+        offsets[lr + tiles] = total;
+        item_offsets[ir + tiles] = total_items;
+        // A workgroup per item of the round so far, as gpu/device.rs `grid` lays them out (none
+        // where there are none); the round's last batch writes its grid.
         let x = min(total_items, 65535u);
-        item_offsets[tiles + 1u] = x;
-        item_offsets[tiles + 2u] = select(1u, (total_items + x - 1u) / max(x, 1u), x > 0u);
-        item_offsets[tiles + 3u] = 1u;
+        item_offsets[0] = x;
+        item_offsets[1] = select(1u, (total_items + x - 1u) / max(x, 1u), x > 0u);
+        item_offsets[2] = 1u;
+        item_offsets[3] = total_items;
     }
 }
 
@@ -167,13 +201,13 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     if (tile >= params.tiles) {
         return;
     }
-    let base = offsets[tile];
-    let end = offsets[tile + 1u];
-    let first_item = item_offsets[tile];
-    let n_items = item_offsets[tile + 1u] - first_item;
+    let base = offsets[list_region() + tile];
+    let end = offsets[list_region() + tile + 1u];
+    let first_item = item_offsets[item_region() + tile];
+    let n_items = item_offsets[item_region() + tile + 1u] - first_item;
     for (var k = li; k < n_items; k += THREADS) {
         let s = base + k * params.item_planes;
-        items[first_item + k] = vec4<u32>(tile, s, min(s + params.item_planes, end), 0u);
+        items[first_item + k] = vec4<u32>(tile, s, min(s + params.item_planes, end), params.rays_at);
     }
     var written = 0u;
     for (var b = 0u; b < params.count; b += THREADS) {

@@ -237,6 +237,12 @@ impl Gpu {
         self.tuning.item_planes
     }
 
+    /// Whether a render's pieces of a chunk are joined into one gathering
+    /// ([`super::Tuning::pieces_apart`] not asked for).
+    pub fn joins_pieces(&self) -> bool {
+        !self.tuning.pieces_apart
+    }
+
     /// The most bytes one buffer binding holds on this device.
     pub fn max_binding(&self) -> u64 {
         self.max_binding

@@ -84,7 +84,8 @@ struct Params {
     phase_hg: u32,
     // The gathering's planes (`orient`'s table holds K - 1 rows for each).
     planes: u32,
-    pad0: u32,
+    // The batches of the round (bin.wgsl's regions of `item_offsets`).
+    regions: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -97,10 +98,11 @@ struct Params {
 @group(0) @binding(3) var<storage, read> rays: array<f32>;
 // (cos, sin) of k pi / K for k = 1 .. K - 1 (weights/denominators.rs `StratifiedK`).
 @group(0) @binding(4) var<storage, read> rotations: array<vec2<f32>>;
-// The tiles' plane lists, each tile's first list entry and first work item (bin.wgsl).
+// The tiles' plane lists; the round's grid of work items and their number, then per batch of the
+// round each tile's first work item (bin.wgsl).
 @group(0) @binding(5) var<storage, read> list: array<u32>;
 @group(0) @binding(6) var<storage, read> item_offsets: array<u32>;
-// Work items: (tile, first list entry, end, 0).
+// Work items: (tile, first list entry, end, where the ray set begins in `rays`, in floats).
 @group(0) @binding(7) var<storage, read> items: array<vec4<u32>>;
 // Each work item's 256 pixel sums: (rgb, hits + 1024 tests).
 @group(0) @binding(8) var<storage, read_write> partial: array<vec4<f32>>;
@@ -525,8 +527,8 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
           @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let index = wid.y * nwg.x + wid.x;
     if (li == 0u) {
-        wg_total = item_offsets[params.tiles];
-        wg_item = items[min(index, max(item_offsets[params.tiles], 1u) - 1u)];
+        wg_total = item_offsets[3];
+        wg_item = items[min(index, max(item_offsets[3], 1u) - 1u)];
     }
     // The dispatch is sized by a bound on the items; those past the count do nothing.
     if (index >= workgroupUniformLoad(&wg_total)) {
@@ -537,7 +539,7 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     let px = (tile % params.tiles_x) * TILE + lid.x;
     let py = (tile / params.tiles_x) * TILE + lid.y;
     let valid = px < params.width && py < params.height;
-    let at = (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
+    let at = item.w + (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
     let dir = vec3<f32>(rays[at], rays[at + 1u], rays[at + 2u]);
     let t0 = rays[at + 3u];
     // A pixel outside the image has an empty segment, and is tested at no plane: column 16 is
@@ -628,8 +630,9 @@ fn orient(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
 var<workgroup> tile_hits: atomic<u32>;
 var<workgroup> tile_tests: atomic<u32>;
 
-// Adds each pixel's work items in order (deterministic) to the image, and the tile's hits and
-// tests (integer sums: the same in any order) to its counts.
+// Adds each pixel's work items to the image in order, batch by batch (each batch's sum added to
+// the pixel's as it would be alone: the same bits however a gathering's batches are cut into
+// rounds), and the tile's hits and tests (integer sums: the same in any order) to its counts.
 @compute @workgroup_size(16, 16, 1)
 fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
           @builtin(local_invocation_index) li: u32) {
@@ -643,19 +646,23 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
     let tile = wid.y * params.tiles_x + wid.x;
     // No early return: every invocation reaches the barrier below.
     if (px < params.width && py < params.height) {
-        var sum = vec3<f32>(0.0);
+        let at = 3u * (py * params.width + px);
+        var held = vec3<f32>(bitcast<f32>(image[at]), bitcast<f32>(image[at + 1u]), bitcast<f32>(image[at + 2u]));
         var hits = 0u;
         var tests = 0u;
-        for (var k = item_offsets[tile]; k < item_offsets[tile + 1u]; k++) {
-            let v = partial[k * THREADS + li];
-            sum += v.xyz;
-            let counts = u32(v.w);
-            hits += counts & 1023u;
-            tests += counts >> 10u;
+        for (var r = 0u; r < params.regions; r++) {
+            let region = 4u + r * (params.tiles + 1u) + tile;
+            var sum = vec3<f32>(0.0);
+            for (var k = item_offsets[region]; k < item_offsets[region + 1u]; k++) {
+                let v = partial[k * THREADS + li];
+                sum += v.xyz;
+                let counts = u32(v.w);
+                hits += counts & 1023u;
+                tests += counts >> 10u;
+            }
+            held = held + sum;
         }
-        let at = 3u * (py * params.width + px);
-        let held = vec3<f32>(bitcast<f32>(image[at]), bitcast<f32>(image[at + 1u]), bitcast<f32>(image[at + 2u]));
-        let added = bitcast<vec3<u32>>(held + sum);
+        let added = bitcast<vec3<u32>>(held);
         image[at] = added.x;
         image[at + 1u] = added.y;
         image[at + 2u] = added.z;
@@ -664,8 +671,8 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
     }
     workgroupBarrier();
     if (li == 0u) {
-        // A batch adds at most 256 pixels x 16,384 planes hits (and tests) to a tile: within a
-        // u32, and the tile's totals carried into their high words.
+        // A round adds at most 256 pixels x ROUND_PLANES (2^22) planes hits (and tests) to a
+        // tile: within a u32, and the tile's totals carried into their high words.
         let at = 3u * params.width * params.height + 4u * tile;
         let added = vec2<u32>(atomicLoad(&tile_hits), atomicLoad(&tile_tests));
         for (var c = 0u; c < 2u; c++) {

@@ -23,6 +23,8 @@ pub use reach::{GROUP_ROWS, GROUPS, SLACK, ScreenReach, TileReach, screen_reach,
 #[cfg(feature = "gpu")]
 mod adapter;
 #[cfg(feature = "gpu")]
+mod batches;
+#[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
 mod planes;
@@ -188,9 +190,14 @@ pub const CHECKS_VARIABLE: &str = "FOGPLANES_GPU_CHECKS";
 /// than at every hit (`per-hit`, the default), for measuring it.
 pub const ORIENTATIONS_VARIABLE: &str = "FOGPLANES_GPU_ORIENTATIONS";
 
+/// The variable that has a render's pieces of a chunk gathered one by one (`apart`), not joined
+/// into one structure whose work items are gathered in one dispatch (`joined`, the default),
+/// for measuring the join.
+pub const PIECES_VARIABLE: &str = "FOGPLANES_GPU_PIECES";
+
 /// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
 /// transcendental functions, wgpu's runtime checks in the shaders, where K orientations are
-/// made), fixed by variables so that `scripts/gpu_check.sh` can time each against the
+/// made, whether a chunk's pieces are gathered in one dispatch), fixed by variables so that `scripts/gpu_check.sh` can time each against the
 /// defaults in one process per setting. Read once where an adapter is resolved
 /// ([`adapter_at`]), which every front end's settings do once; a device is made with them and
 /// kept for the process. Any setting but the defaults is named after the adapter in the
@@ -227,6 +234,13 @@ pub struct Tuning {
     /// as long (K = 8, 160x90, 4,096 planes: 0.97 and 1.05 s of GPU time against 0.95 and
     /// 0.93), so what it saves is for a device to say.
     pub orientation_table: bool,
+    /// A render's pieces gathered one by one ([`PIECES_VARIABLE`]` = apart`), as before the
+    /// join: each piece's batches binned and gathered in dispatches of their own, along its own
+    /// ray set's buffer, rather than the pieces of a chunk along one gathering's sets joined
+    /// into one structure ([`GpuPlanes::join`]) whose work items a dispatch a round gathers.
+    /// The same bits where the work items' size is fixed ([`ITEM_VARIABLE`]; tested on
+    /// lavapipe), else within f32 rounding: a joined round's items are sized by all its pairs.
+    pub pieces_apart: bool,
 }
 
 impl Tuning {
@@ -254,7 +268,8 @@ impl Tuning {
         let native_math = choice(MATH_VARIABLE, "polynomials", "native")?;
         let unchecked = choice(CHECKS_VARIABLE, "on", "off")?;
         let orientation_table = choice(ORIENTATIONS_VARIABLE, "per-hit", "table")?;
-        Ok(Tuning { item_planes, native_math, unchecked, orientation_table })
+        let pieces_apart = choice(PIECES_VARIABLE, "joined", "apart")?;
+        Ok(Tuning { item_planes, native_math, unchecked, orientation_table, pieces_apart })
     }
 
     /// What a device made with these settings adds to its adapter's name, `None` for the
@@ -272,6 +287,9 @@ impl Tuning {
         }
         if self.orientation_table {
             parts.push("orientations made once a gathering".to_string());
+        }
+        if self.pieces_apart {
+            parts.push("pieces gathered apart".to_string());
         }
         (!parts.is_empty()).then(|| parts.join(", "))
     }
@@ -316,11 +334,12 @@ mod tests {
     #[test]
     fn a_tuning_is_named_unless_it_is_the_defaults() {
         assert_eq!(Tuning::default().label(), None);
-        let all = Tuning { item_planes: Some(64), native_math: true, unchecked: true, orientation_table: true };
+        let all =
+            Tuning { item_planes: Some(64), native_math: true, unchecked: true, orientation_table: true, pieces_apart: true };
         let label = all.label().unwrap();
         assert_eq!(
             label,
-            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering"
+            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart"
         );
         let name = format!("gpu: {} (Vulkan, discrete GPU, tuned: {label})", "x".repeat(100));
         assert!(crate::options::Devices::from_names(vec![name]).is_ok());

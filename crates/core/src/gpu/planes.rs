@@ -6,10 +6,11 @@
 use super::device::{GatherPipelines, Gpu, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
-use super::records::{BinParams, GatherParams, ITEM_BYTES};
-use super::scratch::{ScratchBuffers, indirect_offset};
+use super::batches::{Batch, Bounds, Round, batches, rounds};
+use super::records::{BinParams, GatherParams};
+use super::scratch::ScratchBuffers;
 use super::sums::GpuSums;
-use super::{BATCH_PLANES, ScreenReach, TILE, TIMESTAMPS, estimator_id, item_planes};
+use super::{ScreenReach, TILE, TIMESTAMPS, estimator_id};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -20,18 +21,6 @@ use glam::Vec3;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
-
-/// One batch of planes: binned and gathered together.
-struct Batch {
-    first: u32,
-    count: u32,
-    /// A bound on its (tile, plane) pairs, the tiles' lists' total length ([`ScreenReach`]).
-    pairs: u64,
-    /// The most planes of one of its work items ([`item_planes`]).
-    item: u32,
-    /// A bound on its work items.
-    items: u64,
-}
 
 /// A structure's planes for the GPU, for gathering camera rays of one image size: made on the
 /// CPU, uploaded by their first gathering ([`GpuPlanes::buffers`]).
@@ -49,6 +38,7 @@ pub struct GpuPlanes {
     /// Its planes' count.
     planes: u32,
     batches: Vec<Batch>,
+    rounds: Vec<Round>,
     sigma_t: Vec3,
     grey: bool,
     phase: Phase,
@@ -90,37 +80,10 @@ impl GpuPlanes {
                 gpu.max_binding()
             )));
         }
-        let tiles = (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64;
-        let fixed = gpu.fixed_item_planes();
-        let cpu = gpu.is_cpu_adapter();
-        // A bound on the work items of a batch of `pairs` pairs (at most, each tile's one more).
-        let items = |pairs: u64| pairs.min(tiles) + pairs / item_planes(cpu, pairs, fixed) as u64;
-        // Batches of consecutive planes whose work items' partial sums fit one binding.
-        let max_items = gpu.max_binding() / ITEM_BYTES;
-        let mut batches: Vec<Batch> = Vec::new();
-        for (i, r) in reach.iter().enumerate() {
-            let pairs = r.pairs;
-            let fits = |batch: &Batch| {
-                let p = batch.pairs + pairs;
-                (batch.count as usize) < BATCH_PLANES && items(p) <= max_items && p * 4 <= gpu.max_binding()
-            };
-            match batches.last_mut() {
-                Some(batch) if fits(batch) => {
-                    batch.count += 1;
-                    batch.pairs += pairs;
-                }
-                _ => batches.push(Batch { first: i as u32, count: 1, pairs, item: 0, items: 0 }),
-            }
-        }
-        for b in &mut batches {
-            (b.item, b.items) = (item_planes(cpu, b.pairs, fixed), items(b.pairs));
-            if b.items > max_items || b.pairs * 4 > gpu.max_binding() {
-                return Err(Error::Device(format!(
-                    "a plane covers more of this {width}x{height} image than the GPU's buffers hold ({} bytes a binding): render smaller images on it",
-                    gpu.max_binding()
-                )));
-            }
-        }
+        let bounds = bounds(&gpu, width, height);
+        let batches = batches(reach.iter().map(|r| r.pairs), &bounds);
+        let rounds = rounds(&batches, &bounds)
+            .map_err(|why| Error::Device(format!("{why} at {width}x{height}: render smaller images on it")))?;
         let planes: Vec<PlaneRecord> = {
             use rayon::prelude::*;
             ctx.views.par_iter().map(PlaneRecord::from).collect()
@@ -138,9 +101,83 @@ impl GpuPlanes {
             reach_found: Arc::new(AtomicBool::new(false)),
             planes: reach.len() as u32,
             batches,
+            rounds,
             sigma_t: ctx.extinction.sigma_t,
             grey: ctx.extinction.grey,
             phase: ctx.phase,
+        })
+    }
+
+    /// Several structures' planes as one, not yet uploaded: `parts`' planes in order, each
+    /// gathered along its ray set, which begins at the floats given in the rays the whole is
+    /// gathered along ([`super::GpuRays::sets_on_gpu`]). Their batches are kept (each a part's,
+    /// carrying its set) and cut into rounds afresh, so that the parts' work items are gathered
+    /// in one dispatch a round; a batch's sums are added to each pixel as they would be alone.
+    /// The parts' planes move into the whole, which only they are gathered in after it.
+    /// `None` where the whole does not fit the GPU's bindings (or a part was uploaded): the
+    /// parts are then gathered one by one.
+    pub fn join(parts: &[(&GpuPlanes, u32)]) -> Option<GpuPlanes> {
+        let (first, _) = parts.first()?;
+        let gpu = &first.gpu;
+        let (width, height) = (first.width, first.height);
+        let mut hosts: Vec<_> = parts.iter().map(|(p, _)| p.host.lock().unwrap_or_else(|e| e.into_inner())).collect();
+        if hosts.iter().any(|h| h.is_none()) {
+            return None;
+        }
+        let data = |i: usize| hosts[i].as_ref().expect("checked above");
+        let planes: usize = (0..parts.len()).map(|i| data(i).planes.len()).sum();
+        let occluders: usize = (0..parts.len()).map(|i| data(i).occluders.len()).sum();
+        let rows: u64 = (0..parts.len()).map(|i| data(i).polygons.rows).sum();
+        let fits = [
+            planes * std::mem::size_of::<PlaneRecord>(),
+            occluders * std::mem::size_of::<crate::occlusion::Occluder>(),
+            rows as usize * std::mem::size_of::<[u32; super::GROUPS]>(),
+        ]
+        .iter()
+        .all(|&b| b as u64 <= gpu.max_binding());
+        let mut batches = Vec::new();
+        let mut at = 0u32;
+        for (p, rays_at) in parts {
+            assert!(Arc::ptr_eq(&p.gpu, gpu) && (p.width, p.height) == (width, height), "parts of one image");
+            batches.extend(p.batches.iter().map(|b| Batch { first: b.first + at, rays_at: *rays_at, ..b.clone() }));
+            at += p.planes;
+        }
+        let rounds = rounds(&batches, &bounds(gpu, width, height)).ok().filter(|_| fits && planes <= u32::MAX as usize)?;
+        let mut host = PlaneData {
+            planes: Vec::with_capacity(planes),
+            occluders: Vec::with_capacity(occluders),
+            polygons: Polygons { reach: Vec::with_capacity(planes + 1), vertices: Vec::new(), rows },
+        };
+        let mut rows = 0u32;
+        for h in hosts.iter_mut() {
+            let part = h.take().expect("checked above");
+            let base = host.occluders.len() as u32;
+            host.planes.extend(part.planes.iter().map(|r| PlaneRecord {
+                occluders_start: r.occluders_start + base,
+                occluders_end: r.occluders_end + base,
+                ..*r
+            }));
+            host.occluders.extend_from_slice(&part.occluders);
+            let vertices = host.polygons.vertices.len() as u32;
+            let reach = &part.polygons.reach[..part.polygons.reach.len() - 1];
+            host.polygons.reach.extend(reach.iter().map(|r| [r[0], r[1], r[2] + rows, r[3] + vertices]));
+            host.polygons.vertices.extend_from_slice(&part.polygons.vertices);
+            rows += part.polygons.rows as u32;
+        }
+        host.polygons.reach.push([0, 0, rows, host.polygons.vertices.len() as u32]);
+        Some(GpuPlanes {
+            gpu: gpu.clone(),
+            width,
+            height,
+            host: Mutex::new(Some(host)),
+            buffers: OnceLock::new(),
+            reach_found: Arc::new(AtomicBool::new(false)),
+            planes: planes as u32,
+            batches,
+            rounds,
+            sigma_t: first.sigma_t,
+            grey: first.grey,
+            phase: first.phase,
         })
     }
 
@@ -185,11 +222,21 @@ impl GpuPlanes {
         GpuRays::made(&self.gpu, self.width as usize, self.height as usize, row)
     }
 
-    /// Ray set `set` (with its panels) made on the GPU ([`GpuRays::on_gpu`]), for this
-    /// structure's image.
-    pub fn rays_on_gpu(&self, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<GpuRays> {
-        assert_eq!((set.width, set.height), (self.width, self.height), "a ray per pixel");
-        GpuRays::on_gpu(&self.gpu, set, panels)
+    /// Ray sets `sets` (each with its panels) made on the GPU into one buffer
+    /// ([`GpuRays::sets_on_gpu`]), for this structure's image.
+    pub fn rays_on_gpu(&self, sets: &[(&RaySetRecord, &[PanelRecord])]) -> Result<GpuRays> {
+        assert!(sets.iter().all(|(s, _)| (s.width, s.height) == (self.width, self.height)), "a ray per pixel");
+        GpuRays::sets_on_gpu(&self.gpu, sets)
+    }
+
+    /// Whether its GPU joins a render's pieces ([`Gpu::joins_pieces`]).
+    pub fn joins_pieces(&self) -> bool {
+        self.gpu.joins_pieces()
+    }
+
+    /// How many ray sets of this structure's image one buffer holds ([`GpuRays::sets_fitting`]).
+    pub fn ray_sets_fitting(&self) -> usize {
+        GpuRays::sets_fitting(&self.gpu, self.width as usize * self.height as usize)
     }
 
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
@@ -226,20 +273,29 @@ impl GpuPlanes {
         into: &mut GpuSums,
         control: Control,
     ) -> Result<GatherStats> {
-        let recorded = self.record(weighting, rays, into, control)?;
+        let recorded = self.record(weighting, rays, 0, into, control)?;
         Ok(into.add(recorded, rays))
     }
 
     /// [`GpuPlanes::gather_into`]'s work recorded (the planes uploaded by their first
     /// gathering, every batch in one command buffer), not yet added to `into`'s: the pieces of
-    /// a gathering record side by side, and [`GpuSums::add`] adds each in order.
-    pub fn record(&self, weighting: Weighting, rays: &GpuRays, into: &GpuSums, control: Control) -> Result<Recorded> {
+    /// a gathering record side by side, and [`GpuSums::add`] adds each in order. The planes'
+    /// ray set begins `rays_at` floats into `rays` (one set of several,
+    /// [`GpuRays::floats_at`]); a join's parts' sets where each part's begins after that.
+    pub fn record(
+        &self,
+        weighting: Weighting,
+        rays: &GpuRays,
+        rays_at: u32,
+        into: &GpuSums,
+        control: Control,
+    ) -> Result<Recorded> {
         let (gpu, w, h) = (&*self.gpu, self.width, self.height);
         let pixels = w as usize * h as usize;
         assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
         control.check()?;
         let _s = crate::trace::span("piece recorded");
-        if self.batches.is_empty() {
+        if self.rounds.is_empty() {
             control.progress();
             return Ok(Recorded::default());
         }
@@ -249,8 +305,9 @@ impl GpuPlanes {
             let _s = crate::trace::span("planes uploaded");
             self.buffers()?
         };
-        let mut recorded = gpu.checked(|| self.encode(weighting, &pipelines, planes, rays, into, control))??;
-        recorded.stats = GatherStats { upload_ns, bytes_crossed, ..GatherStats::default() };
+        let mut recorded = gpu.checked(|| self.encode(weighting, &pipelines, planes, (rays, rays_at), into, control))??;
+        let dispatches = self.rounds.len() as u64;
+        recorded.stats = GatherStats { upload_ns, bytes_crossed, dispatches, ..GatherStats::default() };
         control.progress();
         Ok(recorded)
     }
@@ -261,7 +318,7 @@ impl GpuPlanes {
         weighting: Weighting,
         pipelines: &GatherPipelines,
         planes: &PlaneBuffers,
-        rays: &GpuRays,
+        (rays, rays_at): (&GpuRays, u32),
         into: &GpuSums,
         control: Control,
     ) -> Result<Recorded> {
@@ -288,14 +345,14 @@ impl GpuPlanes {
             phase_inv_numerator: self.phase.inv_numerator,
             phase_hg: !self.phase.is_isotropic() as u32,
             planes: self.planes,
-            pad: 0,
+            regions: 0,
         };
         let storage = wgpu::BufferUsages::STORAGE;
         let uniform = wgpu::BufferUsages::UNIFORM;
-        let params = gpu.upload("gather params", bytemuck::bytes_of(&gather_params), uniform);
         let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
-        let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
-        let max_items = self.batches.iter().map(|b| b.items).max().unwrap_or(0);
+        let max_pairs = self.rounds.iter().map(|r| r.pairs).max().unwrap_or(0);
+        let max_items = self.rounds.iter().map(|r| r.items).max().unwrap_or(0);
+        let max_regions = self.rounds.iter().map(|r| r.batches.len() as u64).max().unwrap_or(0);
         // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
         // K - 1 further ones, made once here (`orient`) rather than at each hit: 16 bytes each,
         // within one binding (a piece is at most a chunk, 16,384 planes: 16.5 MB at K = 64).
@@ -315,23 +372,33 @@ impl GpuPlanes {
         // before it on the queue, whichever buffers each one holds.
         let s = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(
             &gpu.device,
-            tiles as u64,
+            max_regions * (tiles as u64 + 1),
             max_pairs,
             max_items,
             orients,
         );
-        let gather_group = gather_group(gpu, &params, planes, rays, &rotations_buf, &s, &into.image);
-        let batches = self.batches.len();
-        let queries = timestamp_queries(gpu, batches);
+        // A round's gather parameters (its batches' regions) and bindings each.
+        let groups: Vec<(wgpu::BindGroup, u64)> = self
+            .rounds
+            .iter()
+            .map(|r| {
+                let round_params = GatherParams { regions: r.batches.len() as u32, ..gather_params };
+                let params = gpu.upload("gather params", bytemuck::bytes_of(&round_params), uniform);
+                let group = gather_group(gpu, &params, planes, rays, &rotations_buf, &s, &into.image);
+                (group, std::mem::size_of::<GatherParams>() as u64)
+            })
+            .collect();
+        let rounds = self.rounds.len();
+        let queries = timestamp_queries(gpu, rounds);
         let tile_grid = grid(tiles as u64);
-        // Every batch in one command buffer (the passes run in order, the scratch buffers
-        // reused from batch to batch).
+        // Every round in one command buffer (the passes run in order, the scratch buffers
+        // reused from round to round).
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
         // The planes' reach, until a submission has found it (once for `into`'s work), timed
-        // with the first batch.
+        // with the first round.
         let reach_first = !self.reach_found.load(Ordering::Acquire)
             && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, &self.reach_found));
-        // The first pass's start is the first batch's (`starts` below).
+        // The first pass's start is the first round's (`starts` below).
         let first_pass = |first: bool| {
             queries.as_ref().filter(|_| first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
                 query_set: set,
@@ -342,45 +409,55 @@ impl GpuPlanes {
         if reach_first {
             planes.polygons.encode(gpu, &mut encoder, first_pass(true));
         }
-        // The planes' orientations, timed with the first batch too.
+        // The planes' orientations, timed with the first round too.
         if let Some(orient) = pipelines.orient.as_ref().filter(|_| orients > 0) {
             let timestamp_writes = first_pass(!reach_first);
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
             pass.set_pipeline(orient);
-            pass.set_bind_group(0, &gather_group, &[]);
+            pass.set_bind_group(0, &groups[0].0, &[]);
             let (x, y) = grid(orients.div_ceil(256));
             pass.dispatch_workgroups(x, y, 1);
         }
         let timed_before = reach_first || orients > 0;
-        for (b, batch) in self.batches.iter().enumerate() {
+        let mut bytes_up = std::mem::size_of_val(rotations.as_slice()) as u64;
+        for (r, (round, (gather_group, params_bytes))) in self.rounds.iter().zip(&groups).enumerate() {
             control.check()?;
-            let bin_params = BinParams {
-                width: w,
-                height: h,
-                tiles_x,
-                tiles,
-                count: batch.count,
-                first: batch.first,
-                item_planes: batch.item,
-                pad: 0,
-            };
-            let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
-            let bin_group = bin_group(gpu, &bin_params, planes, &s);
-            // The gather's work items as many as `scan` counts (`bin.wgsl` writes the grid).
-            let steps: [Step; 5] = [
-                (&gpu.bin[0], &bin_group, Some(tile_grid)),
-                (&gpu.bin[1], &bin_group, Some((1, 1))),
-                (&gpu.bin[2], &bin_group, Some(tile_grid)),
-                (&pipelines.gather, &gather_group, None),
-                (&pipelines.reduce, &gather_group, Some((tiles_x, tiles_y))),
-            ];
+            bytes_up += params_bytes;
+            // Each batch binned into its region, then the round's items gathered at once.
+            let mut steps: Vec<Step> = Vec::new();
+            for (region, batch) in self.batches[round.batches.clone()].iter().enumerate() {
+                let bin_params = BinParams {
+                    width: w,
+                    height: h,
+                    tiles_x,
+                    tiles,
+                    count: batch.count,
+                    first: batch.first,
+                    item_planes: round.item,
+                    region: region as u32,
+                    rays_at: rays_at + batch.rays_at,
+                    pad: [0; 3],
+                };
+                let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
+                bytes_up += std::mem::size_of::<BinParams>() as u64;
+                let bin_group = bin_group(gpu, &bin_params, planes, &s);
+                steps.push((&gpu.bin[0], bin_group.clone(), Some(tile_grid)));
+                steps.push((&gpu.bin[1], bin_group.clone(), Some((1, 1))));
+                steps.push((&gpu.bin[2], bin_group, Some(tile_grid)));
+            }
+            // The gather's work items as many as the last `scan` counts (`bin.wgsl` writes the grid).
+            let gather_at = steps.len();
+            steps.push((&pipelines.gather, gather_group.clone(), None));
+            steps.push((&pipelines.reduce, gather_group.clone(), Some((tiles_x, tiles_y))));
+            let last = steps.len() - 1;
             for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
-                // Batch b's passes timed from its first (batch 0's from the reach before it, if
+                // Round r's passes timed from its first (round 0's from the reach before it, if
                 // any) to its last, and its gather from its start: where the GPU's time goes,
                 // the reach and the binning or the gather and its reduction.
-                let starts = k == 0 && !(b == 0 && timed_before);
-                let begins = (starts || k == 3).then_some(TIMESTAMPS * b as u32 + if k == 3 { 1 } else { 0 });
-                let ends = (k == 4).then_some(TIMESTAMPS * b as u32 + 2);
+                let starts = k == 0 && !(r == 0 && timed_before);
+                let at = TIMESTAMPS * r as u32;
+                let begins = if k == gather_at { Some(at + 1) } else { starts.then_some(at) };
+                let ends = (k == last).then_some(at + 2);
                 let timestamp_writes =
                     queries.as_ref().filter(|_| begins.is_some() || ends.is_some()).map(|(set, _, _)| {
                         wgpu::ComputePassTimestampWrites {
@@ -392,14 +469,14 @@ impl GpuPlanes {
                 let mut pass =
                     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
                 pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, group, &[]);
+                pass.set_bind_group(0, &group, &[]);
                 match size {
                     Some((x, y)) => pass.dispatch_workgroups(x, y, 1),
-                    None => pass.dispatch_workgroups_indirect(&s.item_offsets, indirect_offset(tiles)),
+                    None => pass.dispatch_workgroups_indirect(&s.item_offsets, 0),
                 }
             }
-            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| b + 1 == batches) {
-                let queries = TIMESTAMPS * batches as u32;
+            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| r + 1 == rounds) {
+                let queries = TIMESTAMPS * rounds as u32;
                 encoder.resolve_query_set(set, 0..queries, resolve, 0);
                 encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 8 * queries as u64);
             }
@@ -408,8 +485,7 @@ impl GpuPlanes {
             commands: Some(encoder.finish()),
             timestamps: queries.map(|(_, _, readback)| readback),
             reach: reach_first.then(|| self.reach_found.clone()),
-            bytes_up: (std::mem::size_of_val(&gather_params) + std::mem::size_of_val(rotations.as_slice())) as u64
-                + (self.batches.len() * std::mem::size_of::<BinParams>()) as u64,
+            bytes_up,
             stats: GatherStats::default(),
         })
     }
@@ -430,11 +506,22 @@ pub struct Recorded {
     pub(super) stats: GatherStats,
 }
 
-/// A pass of a batch: its pipeline, its bindings, and its grid of workgroups (`None`: the
-/// gather's, as `bin.wgsl`'s `scan` counted its work items).
-type Step<'a> = (&'a wgpu::ComputePipeline, &'a wgpu::BindGroup, Option<(u32, u32)>);
 
-/// The gather's bindings (`gather.wgsl`), the same for every batch of a gathering.
+/// A pass of a round: its pipeline, its bindings, and its grid of workgroups (`None`: the
+/// gather's, as `bin.wgsl`'s `scan` counted the round's work items).
+type Step<'a> = (&'a wgpu::ComputePipeline, wgpu::BindGroup, Option<(u32, u32)>);
+
+/// The bounds of a gathering's batches and rounds on `gpu` for a `width x height` image.
+fn bounds(gpu: &Gpu, width: u32, height: u32) -> Bounds {
+    Bounds {
+        tiles: (width.div_ceil(TILE) * height.div_ceil(TILE)) as u64,
+        cpu: gpu.is_cpu_adapter(),
+        fixed: gpu.fixed_item_planes(),
+        max_binding: gpu.max_binding(),
+    }
+}
+
+/// The gather's bindings (`gather.wgsl`) for one round's parameters.
 fn gather_group(
     gpu: &Gpu,
     params: &wgpu::Buffer,

@@ -11,10 +11,16 @@ use std::time::Instant;
 
 /// Camera rays on the GPU, one per pixel, row-major: [`CameraRay`]s (20 bytes, `gather.wgsl`'s
 /// `RAY_FLOATS`), made there by `rays.wgsl` ([`GpuRays::on_gpu`]) or uploaded
-/// ([`GpuRays::new`]), for every piece gathered along them.
+/// ([`GpuRays::new`]), for every piece gathered along them. Made on the GPU, a buffer may hold
+/// several ray sets ([`GpuRays::sets_on_gpu`]), each at a multiple of the binding offset's
+/// alignment, so that the pieces along them are gathered in one dispatch.
 pub struct GpuRays {
     pub(super) buffer: wgpu::Buffer,
+    /// Rays in one set (a pixel's each).
     pub(super) len: usize,
+    /// Its sets, and the bytes from one's start to the next's.
+    sets: u32,
+    stride: u64,
     gpu: Arc<Gpu>,
     /// The pass that makes them, submitted with the first gathering along them (or when they
     /// are read back).
@@ -53,6 +59,8 @@ impl GpuRays {
         Ok(GpuRays {
             buffer,
             len: rays.len(),
+            sets: 1,
+            stride: bytes,
             gpu: gpu.clone(),
             pending: Mutex::new(None),
             upload_ns: t.elapsed().as_nanos() as u64,
@@ -66,8 +74,19 @@ impl GpuRays {
     /// thread a pixel: only the record and the panels cross. The pass is submitted with the
     /// first gathering along the rays. Refused in one line where they exceed one binding.
     pub fn on_gpu(gpu: &Arc<Gpu>, set: &RaySetRecord, panels: &[PanelRecord]) -> Result<Self> {
-        let (w, h) = (set.width, set.height);
+        Self::sets_on_gpu(gpu, &[(set, panels)])
+    }
+
+    /// The ray sets `sets` (each with its light panels) made on `gpu` into one buffer, set `k`
+    /// at [`GpuRays::floats_at`]`(k)`: one pass a set, recorded together, submitted with the
+    /// first gathering along them. Refused in one line where a set exceeds one binding; `sets`
+    /// must fit one binding together ([`GpuRays::sets_fitting`]).
+    pub fn sets_on_gpu(gpu: &Arc<Gpu>, sets: &[(&RaySetRecord, &[PanelRecord])]) -> Result<Self> {
+        let (w, h) = (sets[0].0.width, sets[0].0.height);
+        assert!(sets.iter().all(|(s, _)| (s.width, s.height) == (w, h)), "the sets of one image");
         let bytes = Self::check(gpu, w as usize * h as usize)?;
+        let stride = Self::stride(gpu, bytes);
+        assert!(stride * sets.len() as u64 <= gpu.max_binding(), "the sets fit one binding");
         let groups = (w.div_ceil(super::TILE), h.div_ceil(super::TILE));
         if groups.0 > 65_535 || groups.1 > 65_535 {
             return Err(Error::Device(format!(
@@ -77,16 +96,21 @@ impl GpuRays {
         let t = Instant::now();
         let (buffer, commands) = gpu.checked(|| {
             let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-            let buffer = gpu.scratch("rays", bytes, usage);
-            let record = gpu.upload("ray set", bytemuck::bytes_of(set), wgpu::BufferUsages::UNIFORM);
-            let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
-            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("rays"),
-                layout: &gpu.rays_layout,
-                entries: &[entry(0, &record), entry(1, &panels), entry(2, &buffer)],
-            });
+            let buffer = gpu.scratch("rays", stride * (sets.len() as u64 - 1) + bytes, usage);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
-            {
+            for (k, (set, panels)) in sets.iter().enumerate() {
+                let record = gpu.upload("ray set", bytemuck::bytes_of(*set), wgpu::BufferUsages::UNIFORM);
+                let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
+                let rays = wgpu::BufferBinding { buffer: &buffer, offset: stride * k as u64, size: wgpu::BufferSize::new(bytes) };
+                let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("rays"),
+                    layout: &gpu.rays_layout,
+                    entries: &[
+                        entry(0, &record),
+                        entry(1, &panels),
+                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Buffer(rays) },
+                    ],
+                });
                 let mut pass = encoder.begin_compute_pass(&Default::default());
                 pass.set_pipeline(&gpu.rays);
                 pass.set_bind_group(0, &group, &[]);
@@ -94,16 +118,46 @@ impl GpuRays {
             }
             (buffer, encoder.finish())
         })?;
+        let crossed: usize = sets.iter().map(|(s, p)| std::mem::size_of_val(*s) + std::mem::size_of_val(*p)).sum();
         Ok(GpuRays {
             buffer,
             len: w as usize * h as usize,
+            sets: sets.len() as u32,
+            stride,
             gpu: gpu.clone(),
             pending: Mutex::new(Some(commands)),
             upload_ns: t.elapsed().as_nanos() as u64,
-            bytes_up: (std::mem::size_of_val(set) + std::mem::size_of_val(panels)) as u64,
+            bytes_up: crossed as u64,
             made_on_gpu: true,
             last_use: Mutex::new(None),
         })
+    }
+
+    /// Bytes from one set's start to the next's in a buffer of several: a set's `bytes` rounded
+    /// up to the alignment of a binding's offset.
+    fn stride(gpu: &Gpu, bytes: u64) -> u64 {
+        bytes.next_multiple_of(gpu.device.limits().min_storage_buffer_offset_alignment as u64)
+    }
+
+    /// How many ray sets of a `pixels`-pixel image one buffer of [`GpuRays::sets_on_gpu`] holds
+    /// (at least 1).
+    pub fn sets_fitting(gpu: &Gpu, pixels: usize) -> usize {
+        let bytes = (pixels * std::mem::size_of::<CameraRay>()) as u64;
+        let stride = Self::stride(gpu, bytes).max(1);
+        // The shaders index the floats with u32.
+        let most = gpu.max_binding().min(4 * u32::MAX as u64);
+        (most.saturating_sub(bytes) / stride + 1) as usize
+    }
+
+    /// Bytes of the buffer (every set's).
+    pub(super) fn bytes(&self) -> u64 {
+        self.stride * (self.sets as u64 - 1) + (self.len * std::mem::size_of::<CameraRay>()) as u64
+    }
+
+    /// Where set `k` begins, in floats (what a gathering's work items carry).
+    pub fn floats_at(&self, k: u32) -> u32 {
+        assert!(k < self.sets, "set {k} of {}", self.sets);
+        (self.stride / 4 * k as u64) as u32
     }
 
     /// `height` rows of `width` rays on `gpu`, row `j` made by `row(j, out)` and written
@@ -154,6 +208,8 @@ impl GpuRays {
         Ok(GpuRays {
             buffer,
             len,
+            sets: 1,
+            stride: bytes,
             gpu: gpu.clone(),
             pending: Mutex::new(None),
             upload_ns,

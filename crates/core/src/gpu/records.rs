@@ -32,7 +32,8 @@ pub(super) struct GatherParams {
     pub(super) phase_hg: u32,
     /// The gathering's planes (`orient`'s table has K - 1 rows for each).
     pub(super) planes: u32,
-    pub(super) pad: u32,
+    /// The batches of the round (`bin.wgsl`'s regions).
+    pub(super) regions: u32,
 }
 
 /// `bin.wgsl`'s `Params`.
@@ -46,7 +47,11 @@ pub(super) struct BinParams {
     pub(super) count: u32,
     pub(super) first: u32,
     pub(super) item_planes: u32,
-    pub(super) pad: u32,
+    /// The batch's index in its round: its region of the tiles' offsets.
+    pub(super) region: u32,
+    /// Where its ray set begins in the gathering's rays, in floats.
+    pub(super) rays_at: u32,
+    pub(super) pad: [u32; 3],
 }
 
 /// `reach.wgsl`'s `Params`.
@@ -131,9 +136,9 @@ mod tests {
                 GATHER_WGSL,
                 "Params",
                 fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
-                    phase_h, phase_floor, phase_inv_numerator, phase_hg, planes, pad),
+                    phase_h, phase_floor, phase_inv_numerator, phase_hg, planes, regions),
             ),
-            (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, pad)),
+            (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, rays_at, pad)),
             (REACH_WGSL, "Params", fields!(ReachParams: width, height, planes, rows)),
             (
                 RAYS_WGSL,

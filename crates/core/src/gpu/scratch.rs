@@ -24,19 +24,18 @@ pub(super) struct Scratch {
     buffers: Option<ScratchBuffers>,
 }
 
-/// Where in `item_offsets` the gather's grid of work items is (`bin.wgsl`'s `scan` writes it
-/// after the tiles' first items and their total), in bytes: the gather is dispatched from it.
-pub(super) fn indirect_offset(tiles: u32) -> u64 {
-    (tiles as u64 + 1) * 4
-}
-
 #[derive(Clone)]
 pub(super) struct ScratchBuffers {
-    /// Tiles, (tile, plane) pairs, work items and (plane, orientation) rows they hold.
+    /// Words of a round's regions (tiles + 1 a batch), (tile, plane) pairs, work items and
+    /// (plane, orientation) rows they hold.
     capacity: (u64, u64, u64, u64),
+    /// Per tile, a batch's planes that reach it.
     pub(super) tile_counts: wgpu::Buffer,
+    /// Per batch of a round (its region), per tile its first list entry, then the batch's end.
     pub(super) offsets: wgpu::Buffer,
-    /// Per tile its first work item, then the total, then the gather's grid (x, y, 1).
+    /// The gather's grid (x, y, 1) and the round's work items, then per batch of the round,
+    /// per tile its first work item, then the batch's end: the gather is dispatched from its
+    /// first bytes.
     pub(super) item_offsets: wgpu::Buffer,
     pub(super) list: wgpu::Buffer,
     /// Per list entry, the plane's pixel columns in the tile per group of pixel rows
@@ -49,30 +48,30 @@ pub(super) struct ScratchBuffers {
 }
 
 impl Scratch {
-    /// Buffers for `tiles` tiles, `pairs` pairs, `items` work items and `orients` (plane,
-    /// orientation) rows (handles to them): those held if they are large enough, else new ones
-    /// of the larger of each.
+    /// Buffers for `regions` words of a round's regions (at least its tiles'), `pairs` pairs,
+    /// `items` work items and `orients` (plane, orientation) rows (handles to them): those held
+    /// if they are large enough, else new ones of the larger of each.
     pub(super) fn at_least(
         &mut self,
         device: &wgpu::Device,
-        tiles: u64,
+        regions: u64,
         pairs: u64,
         items: u64,
         orients: u64,
     ) -> ScratchBuffers {
         let held = self.buffers.as_ref().map_or((0, 0, 0, 0), |b| b.capacity);
-        if held.0 < tiles || held.1 < pairs || held.2 < items || held.3 < orients {
-            let (tiles, pairs, items, orients) =
-                (held.0.max(tiles), held.1.max(pairs), held.2.max(items), held.3.max(orients));
+        if held.0 < regions || held.1 < pairs || held.2 < items || held.3 < orients {
+            let (regions, pairs, items, orients) =
+                (held.0.max(regions), held.1.max(pairs), held.2.max(items), held.3.max(orients));
             let storage = wgpu::BufferUsages::STORAGE;
-            let tile_words = (tiles + 1) * 4;
+            let words = regions * 4;
             // The old buffers are let go first (wgpu frees them once the work using them is done).
             self.buffers = None;
             self.buffers = Some(ScratchBuffers {
-                capacity: (tiles, pairs, items, orients),
-                tile_counts: buffer(device, "tile counts", tile_words, storage),
-                offsets: buffer(device, "offsets", tile_words, storage),
-                item_offsets: buffer(device, "item offsets", tile_words + 12, storage | wgpu::BufferUsages::INDIRECT),
+                capacity: (regions, pairs, items, orients),
+                tile_counts: buffer(device, "tile counts", words, storage),
+                offsets: buffer(device, "offsets", words, storage),
+                item_offsets: buffer(device, "item offsets", words + 16, storage | wgpu::BufferUsages::INDIRECT),
                 list: buffer(device, "list", pairs * 4, storage),
                 ranges: buffer(device, "ranges", pairs * 4, storage),
                 items: buffer(device, "items", items * 16, storage),

@@ -125,7 +125,7 @@ impl GpuSums {
         self.pending.extend(rays.take_pending());
         self.pending.push(commands);
         self.on_submit.extend(recorded.reach);
-        self.pending_rays += (rays.len * std::mem::size_of::<crate::camera::CameraRay>()) as u64;
+        self.pending_rays += rays.bytes();
         self.bytes_up += recorded.bytes_up;
         if !rays.made_on_gpu || self.pending_rays > super::PENDING_RAY_BYTES {
             *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = self.submit();

@@ -174,6 +174,8 @@ class RenderStats(TypedDict):
     bytes_crossed: int
     #: The GPU's queue submissions; 0 on the CPU.
     submissions: int
+    #: The GPU's gather dispatches (a round of batches of planes each); 0 on the CPU.
+    gather_dispatches: int
     planes: int
     #: 1, or the passes of a render on a time budget.
     plane_passes: int

@@ -1,0 +1,194 @@
+//! How a gathering's planes are cut for the GPU: into batches of consecutive planes, each binned
+//! on its own (`bin.wgsl`, its loops bounded by [`BATCH_PLANES`]), and the batches into rounds,
+//! each round's work items gathered in one dispatch and added to the image by one reduction
+//! (`gather.wgsl`), so that a gathering of many small batches (a window's pieces, joined) fills
+//! the GPU with one dispatch rather than one each. Plain data, made on the CPU.
+
+use super::records::ITEM_BYTES;
+use super::{BATCH_PLANES, item_planes};
+use std::ops::Range;
+
+/// The most planes of a round: the reduction counts a tile's hits and tests of a round in a
+/// u32, at most 256 pixels times these.
+pub const ROUND_PLANES: u64 = 1 << 22;
+
+/// The most batches of a round: the reduction's loop over them (and llvmpipe's limit on a
+/// loop's iterations, docs/gpu.md) stays short.
+pub const ROUND_BATCHES: usize = 64;
+
+/// One batch of planes: binned together.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Batch {
+    pub(super) first: u32,
+    pub(super) count: u32,
+    /// A bound on its (tile, plane) pairs, the tiles' lists' total length
+    /// ([`super::ScreenReach`]).
+    pub(super) pairs: u64,
+    /// Where its ray set begins in the gathering's rays, in floats (0 but for a join).
+    pub(super) rays_at: u32,
+}
+
+/// Consecutive batches whose work items are gathered in one dispatch.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Round {
+    pub(super) batches: Range<usize>,
+    /// Their pairs: the round's lists' length, at most.
+    pub(super) pairs: u64,
+    /// The most planes of one of its work items ([`item_planes`] of its pairs).
+    pub(super) item: u32,
+    /// A bound on its work items.
+    pub(super) items: u64,
+}
+
+/// What bounds the batches and rounds: the image's tiles, the adapter (a CPU adapter's work
+/// items are at most 256 planes), the fixed size of a work item if any, and the GPU's largest
+/// binding.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Bounds {
+    pub(super) tiles: u64,
+    pub(super) cpu: bool,
+    pub(super) fixed: Option<u32>,
+    pub(super) max_binding: u64,
+}
+
+impl Bounds {
+    /// A bound on the work items of batches of `pairs` pairs each, cut into items of `item`
+    /// planes: at most each tile's one more than its pairs over `item`.
+    fn items(&self, pairs: impl Iterator<Item = u64>, item: u32) -> u64 {
+        pairs.map(|p| p.min(self.tiles) + p / item as u64).sum()
+    }
+
+    /// The most work items whose partial sums one binding holds.
+    fn max_items(&self) -> u64 {
+        self.max_binding / ITEM_BYTES
+    }
+
+    /// Whether a round of batches of `pairs` pairs each fits the GPU's bindings: its lists
+    /// (4 bytes an entry) and its items' partial sums; with its items' size and bound.
+    fn round(&self, pairs: &[u64]) -> Option<(u32, u64)> {
+        let total: u64 = pairs.iter().sum();
+        let item = item_planes(self.cpu, total, self.fixed);
+        let items = self.items(pairs.iter().copied(), item);
+        (items <= self.max_items() && total * 4 <= self.max_binding).then_some((item, items))
+    }
+}
+
+/// The batches of planes whose pairs are `pairs` (one per plane, in order): runs of consecutive
+/// planes, at most [`BATCH_PLANES`], each of whose work items fit one binding alone.
+pub(super) fn batches(pairs: impl Iterator<Item = u64>, bounds: &Bounds) -> Vec<Batch> {
+    let mut batches: Vec<Batch> = Vec::new();
+    for (i, p) in pairs.enumerate() {
+        match batches.last_mut() {
+            Some(b) if (b.count as usize) < BATCH_PLANES && bounds.round(&[b.pairs + p]).is_some() => {
+                b.count += 1;
+                b.pairs += p;
+            }
+            _ => batches.push(Batch { first: i as u32, count: 1, pairs: p, rays_at: 0 }),
+        }
+    }
+    batches
+}
+
+/// `batches` cut into rounds of consecutive batches whose lists and items fit the GPU's
+/// bindings (at most [`ROUND_PLANES`] planes and [`ROUND_BATCHES`] batches), or the one line
+/// that says a batch does not fit alone (a plane that covers more of the image than a binding
+/// holds).
+pub(super) fn rounds(batches: &[Batch], bounds: &Bounds) -> Result<Vec<Round>, String> {
+    let mut rounds: Vec<Round> = Vec::new();
+    let mut pairs: Vec<u64> = Vec::new();
+    let mut planes = 0u64;
+    for (i, b) in batches.iter().enumerate() {
+        pairs.push(b.pairs);
+        let joins = rounds.last().is_some_and(|r| r.batches.end == i)
+            && pairs.len() <= ROUND_BATCHES
+            && planes + b.count as u64 <= ROUND_PLANES;
+        match bounds.round(&pairs).filter(|_| joins) {
+            Some((item, items)) => {
+                let r = rounds.last_mut().expect("joins a round");
+                (r.batches.end, r.pairs, r.item, r.items) = (i + 1, r.pairs + b.pairs, item, items);
+                planes += b.count as u64;
+            }
+            None => {
+                pairs.clear();
+                pairs.push(b.pairs);
+                planes = b.count as u64;
+                let Some((item, items)) = bounds.round(&pairs) else {
+                    return Err(format!(
+                        "a plane covers more of this image than the GPU's buffers hold ({} bytes a binding)",
+                        bounds.max_binding
+                    ));
+                };
+                rounds.push(Round { batches: i..i + 1, pairs: b.pairs, item, items });
+            }
+        }
+    }
+    Ok(rounds)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BENCHMARK: Bounds = Bounds { tiles: 40 * 23, cpu: false, fixed: None, max_binding: 2 << 30 };
+
+    /// Batches hold at most BATCH_PLANES planes, in order, every plane once; rounds hold
+    /// consecutive batches, every batch once, within the bindings.
+    #[test]
+    fn batches_and_rounds_cover_the_planes_in_order() {
+        let pairs: Vec<u64> = (0..40_000u64).map(|i| i % 97).collect();
+        let bs = batches(pairs.iter().copied(), &BENCHMARK);
+        assert_eq!(bs.iter().map(|b| b.count as usize).sum::<usize>(), pairs.len());
+        let mut next = 0;
+        for b in &bs {
+            assert_eq!(b.first, next);
+            assert!(b.count as usize <= BATCH_PLANES);
+            let range = b.first as usize..(b.first + b.count) as usize;
+            assert_eq!(b.pairs, pairs[range].iter().sum::<u64>());
+            next += b.count;
+        }
+        let rs = rounds(&bs, &BENCHMARK).unwrap();
+        assert_eq!(rs.len(), 1, "40,000 planes of a few pairs each: one round");
+        assert_eq!(rs[0].batches, 0..bs.len());
+        assert_eq!(rs[0].pairs, pairs.iter().sum::<u64>());
+        assert_eq!(rs[0].item, item_planes(false, rs[0].pairs, None));
+    }
+
+    /// A binding that holds fewer items cuts the batches into more rounds, each within it; a
+    /// plane that no binding holds alone is refused in one line.
+    #[test]
+    fn rounds_fit_the_binding_or_are_refused() {
+        let small = Bounds { max_binding: 40_000 * ITEM_BYTES, ..BENCHMARK };
+        let bs: Vec<Batch> =
+            (0..6).map(|i| Batch { first: i * 1000, count: 1000, pairs: 400_000, rays_at: 0 }).collect();
+        let rs = rounds(&bs, &small).unwrap();
+        assert!(rs.len() > 1);
+        assert_eq!(rs.first().unwrap().batches.start, 0);
+        assert_eq!(rs.last().unwrap().batches.end, bs.len());
+        for w in rs.windows(2) {
+            assert_eq!(w[0].batches.end, w[1].batches.start);
+        }
+        for r in &rs {
+            assert!(r.items <= small.max_items() && r.pairs * 4 <= small.max_binding);
+            let pairs: Vec<u64> = bs[r.batches.clone()].iter().map(|b| b.pairs).collect();
+            assert_eq!(small.round(&pairs), Some((r.item, r.items)));
+        }
+        let tiny = Bounds { max_binding: 100 * ITEM_BYTES, ..BENCHMARK };
+        let err = rounds(&bs, &tiny).unwrap_err();
+        assert!(err.contains("covers more of this image"), "{err}");
+    }
+
+    /// A round holds at most ROUND_BATCHES batches and ROUND_PLANES planes.
+    #[test]
+    fn rounds_are_bounded_in_batches_and_planes() {
+        let bs: Vec<Batch> = (0..200).map(|i| Batch { first: i, count: 1, pairs: 1, rays_at: 0 }).collect();
+        let rs = rounds(&bs, &BENCHMARK).unwrap();
+        assert!(rs.iter().all(|r| r.batches.len() <= ROUND_BATCHES));
+        assert_eq!(rs.len(), 200usize.div_ceil(ROUND_BATCHES));
+        let big: Vec<Batch> =
+            (0..600).map(|i| Batch { first: i * 16_384, count: 16_384, pairs: 0, rays_at: 0 }).collect();
+        let rs = rounds(&big, &BENCHMARK).unwrap();
+        for r in &rs {
+            assert!(big[r.batches.clone()].iter().map(|b| b.count as u64).sum::<u64>() <= ROUND_PLANES);
+        }
+    }
+}
