@@ -37,6 +37,8 @@ pub struct GpuPlanes {
     reach_found: Arc<AtomicBool>,
     /// Its planes' count.
     planes: u32,
+    /// The render's pieces it holds: 1, or a join's parts (a unit of progress each).
+    pieces: u32,
     batches: Vec<Batch>,
     rounds: Vec<Round>,
     sigma_t: Vec3,
@@ -100,6 +102,7 @@ impl GpuPlanes {
             buffers: OnceLock::new(),
             reach_found: Arc::new(AtomicBool::new(false)),
             planes: reach.len() as u32,
+            pieces: 1,
             batches,
             rounds,
             sigma_t: ctx.extinction.sigma_t,
@@ -173,6 +176,7 @@ impl GpuPlanes {
             buffers: OnceLock::new(),
             reach_found: Arc::new(AtomicBool::new(false)),
             planes: planes as u32,
+            pieces: parts.iter().map(|(p, _)| p.pieces).sum(),
             batches,
             rounds,
             sigma_t: first.sigma_t,
@@ -241,7 +245,7 @@ impl GpuPlanes {
 
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
     /// `sums`: [`GpuPlanes::gather_into`] fresh sums on the GPU, read back once. Checks
-    /// `control` before each batch; reports one unit of progress.
+    /// `control` before each batch; reports a unit of progress a piece it holds.
     pub fn gather(
         &self,
         weighting: Weighting,
@@ -263,7 +267,7 @@ impl GpuPlanes {
     /// the planes in batches, each binned and gathered in turn, the work kept with `into` and
     /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
     /// or sooner where the work held passes [`super::PENDING_RAY_BYTES`] of ray sets. Checks `control`
-    /// before each batch (a cancel drops the work not submitted); reports one unit of progress.
+    /// before each batch (a cancel drops the work not submitted); reports a unit of progress a piece it holds.
     /// The result holds the planes' upload; the tests, the hits and the GPU's time are counted
     /// on the GPU, and when `into` is read back. [`GpuPlanes::record`] then [`GpuSums::add`].
     pub fn gather_into(
@@ -295,8 +299,9 @@ impl GpuPlanes {
         assert!(rays.len == pixels && into.pixels == pixels, "one ray and one sum per pixel");
         control.check()?;
         let _s = crate::trace::span("piece recorded");
+        let progress = || (0..self.pieces).for_each(|_| control.progress());
         if self.rounds.is_empty() {
-            control.progress();
+            progress();
             return Ok(Recorded::default());
         }
         // Compiled on first use, before the scratch buffers are held.
@@ -308,7 +313,7 @@ impl GpuPlanes {
         let mut recorded = gpu.checked(|| self.encode(weighting, &pipelines, planes, (rays, rays_at), into, control))??;
         let dispatches = self.rounds.len() as u64;
         recorded.stats = GatherStats { upload_ns, bytes_crossed, dispatches, ..GatherStats::default() };
-        control.progress();
+        progress();
         Ok(recorded)
     }
 
