@@ -149,7 +149,7 @@ impl Devices {
     /// The most devices a record may name (a merge of parts from many machines).
     pub const MOST: usize = 256;
     /// The most bytes of one device's name.
-    pub const MOST_BYTES: usize = 256;
+    pub const MOST_BYTES: usize = 512;
 
     /// One device.
     pub fn one(label: impl Into<String>) -> Self {

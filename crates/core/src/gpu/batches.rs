@@ -157,7 +157,7 @@ mod tests {
     /// plane that no binding holds alone is refused in one line.
     #[test]
     fn rounds_fit_the_binding_or_are_refused() {
-        let small = Bounds { max_binding: 40_000 * ITEM_BYTES, ..BENCHMARK };
+        let small = Bounds { max_binding: 8_000 * ITEM_BYTES, ..BENCHMARK };
         let bs: Vec<Batch> =
             (0..6).map(|i| Batch { first: i * 1000, count: 1000, pairs: 400_000, rays_at: 0 }).collect();
         let rs = rounds(&bs, &small).unwrap();
