@@ -501,9 +501,7 @@ fn runs(waiting: &Waiting, fitting: usize) -> Vec<Run> {
             }
             Along::Record(i) => match runs.last_mut() {
                 Some(r)
-                    if r.made.is_none()
-                        && r.target == p.target
-                        && (r.sets.contains(i) || r.sets.len() < fitting) =>
+                    if r.made.is_none() && r.target == p.target && (r.sets.contains(i) || r.sets.len() < fitting) =>
                 {
                     r.pieces.push(k);
                     if !r.sets.contains(i) {

@@ -340,6 +340,38 @@ impl Gpu {
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
     }
 
+    /// A buffer of `parts`' bytes one after another, written straight into its mapping (a
+    /// join's parts cross without a copy of the whole made first); never empty.
+    pub(super) fn upload_parts<'a, T: bytemuck::Pod>(
+        &self,
+        label: &str,
+        parts: impl Iterator<Item = &'a [T]> + Clone,
+        usage: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer> {
+        let bytes: usize = parts.clone().map(std::mem::size_of_val).sum();
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: (bytes as u64).max(32).next_multiple_of(4),
+            usage,
+            mapped_at_creation: true,
+        });
+        {
+            let mut view = buffer
+                .slice(..)
+                .get_mapped_range_mut()
+                .map_err(|e| crate::error::Error::Device(format!("writing {label} to the GPU: {e}")))?;
+            let mut rest = view.slice(..bytes);
+            for part in parts {
+                let (first, tail) = rest.split_at(std::mem::size_of_val(part));
+                let mut first = first;
+                first.copy_from_slice(bytemuck::cast_slice(part));
+                rest = tail;
+            }
+        }
+        buffer.unmap();
+        Ok(buffer)
+    }
+
     /// A buffer the GPU fills ([`scratch::buffer`]).
     pub(super) fn scratch(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
         scratch::buffer(&self.device, label, size, usage)

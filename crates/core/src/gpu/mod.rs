@@ -334,8 +334,13 @@ mod tests {
     #[test]
     fn a_tuning_is_named_unless_it_is_the_defaults() {
         assert_eq!(Tuning::default().label(), None);
-        let all =
-            Tuning { item_planes: Some(64), native_math: true, unchecked: true, orientation_table: true, pieces_apart: true };
+        let all = Tuning {
+            item_planes: Some(64),
+            native_math: true,
+            unchecked: true,
+            orientation_table: true,
+            pieces_apart: true,
+        };
         let label = all.label().unwrap();
         assert_eq!(
             label,

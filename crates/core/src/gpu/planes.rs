@@ -3,10 +3,10 @@
 //! submitted; per batch, the binning's three, the gather and its reduction) encoded into one
 //! command buffer kept with the sums.
 
+use super::batches::{Batch, Bounds, Round, batches, rounds};
 use super::device::{GatherPipelines, Gpu, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
-use super::batches::{Batch, Bounds, Round, batches, rounds};
 use super::records::{BinParams, GatherParams};
 use super::scratch::ScratchBuffers;
 use super::sums::GpuSums;
@@ -28,8 +28,9 @@ pub struct GpuPlanes {
     gpu: Arc<Gpu>,
     width: u32,
     height: u32,
-    /// What crosses, until it has.
-    host: Mutex<Option<PlaneData>>,
+    /// What crosses, until it has: one structure's, or a join's parts' (each part's indices
+    /// already the whole's), which cross one after another.
+    host: Mutex<Option<Vec<PlaneData>>>,
     /// Boxed: a structure is held in an enum beside the CPU's, and these are many handles.
     buffers: OnceLock<Box<PlaneBuffers>>,
     /// Whether a submission has run the pass that finds the planes' reach (`reach.wgsl`); until
@@ -93,7 +94,7 @@ impl GpuPlanes {
         // Not uploaded here: the render prepares planes beside its gathering, and an upload
         // waits for the device while a submission is under way (on a CPU adapter, which runs a
         // submission before it returns, for the other side's whole gathering).
-        let host = PlaneData { planes, occluders: ctx.occluders.clone(), polygons };
+        let host = vec![PlaneData { planes, occluders: ctx.occluders.clone(), polygons }];
         Ok(GpuPlanes {
             gpu,
             width,
@@ -121,16 +122,17 @@ impl GpuPlanes {
     /// parts are then gathered one by one.
     pub fn join(parts: &[(&GpuPlanes, u32)]) -> Option<GpuPlanes> {
         let (first, _) = parts.first()?;
+        let _s = crate::trace::span("pieces joined");
         let gpu = &first.gpu;
         let (width, height) = (first.width, first.height);
         let mut hosts: Vec<_> = parts.iter().map(|(p, _)| p.host.lock().unwrap_or_else(|e| e.into_inner())).collect();
         if hosts.iter().any(|h| h.is_none()) {
             return None;
         }
-        let data = |i: usize| hosts[i].as_ref().expect("checked above");
-        let planes: usize = (0..parts.len()).map(|i| data(i).planes.len()).sum();
-        let occluders: usize = (0..parts.len()).map(|i| data(i).occluders.len()).sum();
-        let rows: u64 = (0..parts.len()).map(|i| data(i).polygons.rows).sum();
+        let data = || hosts.iter().flat_map(|h| h.as_ref().expect("checked above"));
+        let planes: usize = data().map(|d| d.planes.len()).sum();
+        let occluders: usize = data().map(|d| d.occluders.len()).sum();
+        let rows: u64 = data().map(|d| d.polygons.rows).sum();
         let fits = [
             planes * std::mem::size_of::<PlaneRecord>(),
             occluders * std::mem::size_of::<crate::occlusion::Occluder>(),
@@ -145,29 +147,25 @@ impl GpuPlanes {
             batches.extend(p.batches.iter().map(|b| Batch { first: b.first + at, rays_at: *rays_at, ..b.clone() }));
             at += p.planes;
         }
-        let rounds = rounds(&batches, &bounds(gpu, width, height)).ok().filter(|_| fits && planes <= u32::MAX as usize)?;
-        let mut host = PlaneData {
-            planes: Vec::with_capacity(planes),
-            occluders: Vec::with_capacity(occluders),
-            polygons: Polygons { reach: Vec::with_capacity(planes + 1), vertices: Vec::new(), rows },
-        };
-        let mut rows = 0u32;
-        for h in hosts.iter_mut() {
-            let part = h.take().expect("checked above");
-            let base = host.occluders.len() as u32;
-            host.planes.extend(part.planes.iter().map(|r| PlaneRecord {
-                occluders_start: r.occluders_start + base,
-                occluders_end: r.occluders_end + base,
-                ..*r
-            }));
-            host.occluders.extend_from_slice(&part.occluders);
-            let vertices = host.polygons.vertices.len() as u32;
-            let reach = &part.polygons.reach[..part.polygons.reach.len() - 1];
-            host.polygons.reach.extend(reach.iter().map(|r| [r[0], r[1], r[2] + rows, r[3] + vertices]));
-            host.polygons.vertices.extend_from_slice(&part.polygons.vertices);
-            rows += part.polygons.rows as u32;
+        let rounds =
+            rounds(&batches, &bounds(gpu, width, height)).ok().filter(|_| fits && planes <= u32::MAX as usize)?;
+        // Each part's data moved, its indices made the whole's where it lies in it: its
+        // planes' occluders, its polygons' rows and vertices (their sentinels too, which only
+        // the whole's last is uploaded of).
+        let mut host: Vec<PlaneData> = Vec::new();
+        let (mut occluders, mut rows, mut vertices) = (0u32, 0u32, 0u32);
+        for mut d in hosts.iter_mut().flat_map(|h| h.take().expect("checked above")) {
+            for r in &mut d.planes {
+                (r.occluders_start, r.occluders_end) = (r.occluders_start + occluders, r.occluders_end + occluders);
+            }
+            for r in &mut d.polygons.reach {
+                (r[2], r[3]) = (r[2] + rows, r[3] + vertices);
+            }
+            occluders += d.occluders.len() as u32;
+            rows += d.polygons.rows as u32;
+            vertices += d.polygons.vertices.len() as u32;
+            host.push(d);
         }
-        host.polygons.reach.push([0, 0, rows, host.polygons.vertices.len() as u32]);
         Some(GpuPlanes {
             gpu: gpu.clone(),
             width,
@@ -195,11 +193,13 @@ impl GpuPlanes {
         let host =
             self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
         let (gpu, usage) = (&self.gpu, wgpu::BufferUsages::STORAGE);
-        let made = gpu.checked(|| PlaneBuffers {
-            planes: gpu.upload("planes", bytemuck::cast_slice(&host.planes), usage),
-            occluders: gpu.upload("occluders", bytemuck::cast_slice(&host.occluders), usage),
-            polygons: PolygonBuffers::upload(gpu, &host.polygons, self.width, self.height),
-        })?;
+        let made = gpu.checked(|| -> Result<PlaneBuffers> {
+            Ok(PlaneBuffers {
+                planes: gpu.upload_parts("planes", host.iter().map(|d| d.planes.as_slice()), usage)?,
+                occluders: gpu.upload_parts("occluders", host.iter().map(|d| d.occluders.as_slice()), usage)?,
+                polygons: PolygonBuffers::upload(gpu, host.iter().map(|d| &d.polygons), self.width, self.height)?,
+            })
+        })??;
         let bytes = made.planes.size() + made.occluders.size() + made.polygons.bytes_up();
         Ok((self.buffers.get_or_init(|| Box::new(made)), t.elapsed().as_nanos() as u64, bytes))
     }
@@ -310,7 +310,8 @@ impl GpuPlanes {
             let _s = crate::trace::span("planes uploaded");
             self.buffers()?
         };
-        let mut recorded = gpu.checked(|| self.encode(weighting, &pipelines, planes, (rays, rays_at), into, control))??;
+        let mut recorded =
+            gpu.checked(|| self.encode(weighting, &pipelines, planes, (rays, rays_at), into, control))??;
         let dispatches = self.rounds.len() as u64;
         recorded.stats = GatherStats { upload_ns, bytes_crossed, dispatches, ..GatherStats::default() };
         progress();
@@ -510,7 +511,6 @@ pub struct Recorded {
     /// Its planes' upload (time and bytes).
     pub(super) stats: GatherStats,
 }
-
 
 /// A pass of a round: its pipeline, its bindings, and its grid of workgroups (`None`: the
 /// gather's, as `bin.wgsl`'s `scan` counted the round's work items).

@@ -54,21 +54,32 @@ pub(super) struct PolygonBuffers {
 }
 
 impl PolygonBuffers {
-    /// `host` uploaded for a `width x height` image, and the buffers of its rows made (filled by
-    /// [`PolygonBuffers::encode`]'s pass).
-    pub(super) fn upload(gpu: &Gpu, host: &Polygons, width: u32, height: u32) -> Self {
+    /// `parts` uploaded one after another for a `width x height` image (each part's indices
+    /// already the whole's: a join's, [`super::GpuPlanes::join`]), and the buffers of their
+    /// rows made (filled by [`PolygonBuffers::encode`]'s pass).
+    pub(super) fn upload<'a>(
+        gpu: &Gpu,
+        parts: impl Iterator<Item = &'a Polygons> + Clone,
+        width: u32,
+        height: u32,
+    ) -> Result<Self> {
         let storage = wgpu::BufferUsages::STORAGE;
         let filled = storage | wgpu::BufferUsages::COPY_SRC;
-        let planes = host.reach.len() as u32 - 1;
-        let params = ReachParams { width, height, planes, rows: host.rows as u32 };
-        PolygonBuffers {
-            reach: gpu.upload("reach", bytemuck::cast_slice(&host.reach), storage),
-            vertices: gpu.upload("vertices", bytemuck::cast_slice(&host.vertices), storage),
-            spans: gpu.scratch("spans", host.rows * 4, filled),
-            groups: gpu.scratch("groups", host.row_bytes(), filled),
+        let planes = parts.clone().map(|p| p.reach.len() as u32 - 1).sum();
+        let rows: u64 = parts.clone().map(|p| p.rows).sum();
+        let vertices = parts.clone().map(|p| p.vertices.len() as u32).sum();
+        // Each part's reach but its sentinel, then the whole's.
+        let last = [[0, 0, rows as u32, vertices]];
+        let reach = parts.clone().map(|p| &p.reach[..p.reach.len() - 1]).chain([&last[..]]);
+        let params = ReachParams { width, height, planes, rows: rows as u32 };
+        Ok(PolygonBuffers {
+            reach: gpu.upload_parts("reach", reach, storage)?,
+            vertices: gpu.upload_parts("vertices", parts.map(|p| p.vertices.as_slice()), storage)?,
+            spans: gpu.scratch("spans", rows * 4, filled),
+            groups: gpu.scratch("groups", rows * std::mem::size_of::<[u32; GROUPS]>() as u64, filled),
             params: gpu.upload("reach params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM),
-            rows: host.rows,
-        }
+            rows,
+        })
     }
 
     /// The bytes that crossed for them.
@@ -107,8 +118,8 @@ impl PolygonBuffers {
 pub fn reach_on_gpu(gpu: &Arc<Gpu>, planes: &[ScreenReach], width: u32, height: u32) -> Result<Vec<TileReach>> {
     let host = Polygons::new(planes);
     let readback = |label, size| gpu.scratch(label, size, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-    let (buffers, spans, groups) = gpu.checked(|| {
-        let buffers = PolygonBuffers::upload(gpu, &host, width, height);
+    let (buffers, spans, groups) = gpu.checked(|| -> Result<_> {
+        let buffers = PolygonBuffers::upload(gpu, [&host].into_iter(), width, height)?;
         let (spans, groups) =
             (readback("spans read back", buffers.spans.size()), readback("groups read back", buffers.groups.size()));
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
@@ -119,8 +130,8 @@ pub fn reach_on_gpu(gpu: &Arc<Gpu>, planes: &[ScreenReach], width: u32, height: 
         for b in [&spans, &groups] {
             b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
         }
-        (buffers, spans, groups)
-    })?;
+        Ok((buffers, spans, groups))
+    })??;
     gpu.device
         .poll(wgpu::PollType::wait_indefinitely())
         .map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;

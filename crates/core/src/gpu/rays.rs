@@ -101,7 +101,11 @@ impl GpuRays {
             for (k, (set, panels)) in sets.iter().enumerate() {
                 let record = gpu.upload("ray set", bytemuck::bytes_of(*set), wgpu::BufferUsages::UNIFORM);
                 let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
-                let rays = wgpu::BufferBinding { buffer: &buffer, offset: stride * k as u64, size: wgpu::BufferSize::new(bytes) };
+                let rays = wgpu::BufferBinding {
+                    buffer: &buffer,
+                    offset: stride * k as u64,
+                    size: wgpu::BufferSize::new(bytes),
+                };
                 let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("rays"),
                     layout: &gpu.rays_layout,

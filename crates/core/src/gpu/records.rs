@@ -138,7 +138,11 @@ mod tests {
                 fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
                     phase_h, phase_floor, phase_inv_numerator, phase_hg, planes, regions),
             ),
-            (BIN_WGSL, "Params", fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, rays_at, pad)),
+            (
+                BIN_WGSL,
+                "Params",
+                fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, rays_at, pad),
+            ),
             (REACH_WGSL, "Params", fields!(ReachParams: width, height, planes, rows)),
             (
                 RAYS_WGSL,
