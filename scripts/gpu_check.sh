@@ -129,6 +129,25 @@ if [ -n "$P_TUNED" ]; then
     timeout 60 "$B" compare "$work/orient_table.exr" "$work/orient_per-hit.exr" | tr '\n' ' ' | tr -s ' '
     echo
 fi
+# A chunk's pieces joined into one gathering, their work items in one dispatch a round (the
+# default), or gathered apart, a piece's own dispatches each (FOGPLANES_GPU_PIECES=apart), for
+# smis-exact at each planes count: two rounds alternated (read the second's GPU time, gather
+# dispatches and end to end), and how far the image moves (a joined round's work items are
+# sized by all its pairs: within f32 rounding, the same bits where the size is fixed).
+if [ -n "$P_TUNED" ]; then
+    for planes in $P; do
+        for round in 1 2; do
+            for how in joined apart; do
+                FOGPLANES_GPU_PIECES=$how timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$planes" -e smis-exact \
+                    --device gpu -o "$work/pieces_$how.exr" 2>&1 |
+                    grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/gpu pieces $how round $round $planes: /"
+            done
+        done
+        printf 'agreement pieces joined against apart %s: ' "$planes"
+        timeout 60 "$B" compare "$work/pieces_joined.exr" "$work/pieces_apart.exr" | tr '\n' ' ' | tr -s ' '
+        echo
+    done
+fi
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).
 for t in 1 2 4 8 all; do
     threads=()

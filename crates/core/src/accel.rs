@@ -490,8 +490,8 @@ struct Run {
 }
 
 /// The runs of `waiting`'s pieces, in order: consecutive pieces of one target along this
-/// gathering's sets, at most `fitting` sets a run (what one buffer holds); each piece along a
-/// set made before alone.
+/// gathering's sets, at most `fitting` sets a run (what one buffer holds), or each piece alone
+/// where `fitting` is 0 (the pieces apart); each piece along a set made before alone.
 fn runs(waiting: &Waiting, fitting: usize) -> Vec<Run> {
     let mut runs: Vec<Run> = Vec::new();
     for (k, (p, along)) in waiting.pieces.iter().enumerate() {
@@ -501,7 +501,10 @@ fn runs(waiting: &Waiting, fitting: usize) -> Vec<Run> {
             }
             Along::Record(i) => match runs.last_mut() {
                 Some(r)
-                    if r.made.is_none() && r.target == p.target && (r.sets.contains(i) || r.sets.len() < fitting) =>
+                    if fitting > 0
+                        && r.made.is_none()
+                        && r.target == p.target
+                        && (r.sets.contains(i) || r.sets.len() < fitting) =>
                 {
                     r.pieces.push(k);
                     if !r.sets.contains(i) {
@@ -533,7 +536,7 @@ fn record_side_by_side(
     };
     let first = first.planes.gpu();
     let (join, fitting) = (first.joins_pieces(), first.ray_sets_fitting());
-    let runs = runs(waiting, if join { fitting } else { 1 });
+    let runs = runs(waiting, if join { fitting } else { 0 });
     let sets = &waiting.sets;
     let made = control.map_units("ray sets", runs.len(), 1, |r| {
         let Some(&i) = runs[r].sets.first() else {
