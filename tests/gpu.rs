@@ -604,3 +604,34 @@ fn a_cancelled_gpu_render_stops_and_leaves_the_next_render_whole() {
     let (again, _) = render(&s, &opts, Control::none()).unwrap();
     assert!(again.pixels == whole.pixels, "the render after a cancelled one differs");
 }
+
+/// A prepared render's pieces are gathered once a weighting (the equal-time table's
+/// `ChunkRenderer::render_with`), on the GPU joined afresh each time (gpu/planes.rs
+/// `GpuPlanes::join`): every weighting's sums are the bits of a render of that weighting alone,
+/// the first weighting's again at the end. (The join had moved its parts' planes into the whole,
+/// and the second weighting's gathering panicked.)
+#[test]
+fn gpu_prepared_pieces_are_gathered_again_for_each_weighting() {
+    use fogplanes::render::ChunkRenderer;
+    if !have_gpu("gpu_prepared_pieces_are_gathered_again_for_each_weighting") {
+        return;
+    }
+    let s = scene("media_scenes/six_lights.toml", 40, 24);
+    let given = |estimator| Overrides {
+        planes: Some(4096),
+        device: Some(Device::GPU),
+        estimator: Some(estimator),
+        ..Overrides::default()
+    };
+    let opts = options(&s, given(Estimator::SmisExact));
+    let planes = 4096;
+    let mut prepared = ChunkRenderer::prepared(&s, &opts, Control::none()).unwrap();
+    for estimator in [Estimator::SmisExact, Estimator::Unweighted, Estimator::SmisExact] {
+        let weighting = Weighting::new(estimator, None).unwrap();
+        let again = prepared.render_with(weighting, 0..planes).unwrap();
+        let alone_opts = options(&s, given(estimator));
+        let alone = ChunkRenderer::new(&s, &alone_opts, Control::none()).render(0..planes).unwrap();
+        assert!(again.sums.iter().any(|v| v.x > 0.0), "{estimator:?}: a black image says nothing");
+        assert!(again.sums == alone.sums, "{estimator:?}: the prepared pieces gathered again differ");
+    }
+}

@@ -479,51 +479,40 @@ pub fn gather_pieces_on_gpu<'p>(
     Ok(found)
 }
 
-/// Pieces of a gathering recorded together: consecutive pieces of one target, along sets made
-/// together into one buffer (`sets`, indices into [`Waiting::sets`]), or one piece along a set
-/// made before (`made`).
+/// Pieces of a gathering recorded together: consecutive pieces of one target along sets of one
+/// buffer, or one piece alone.
 struct Run {
     target: usize,
     pieces: Vec<usize>,
-    sets: Vec<usize>,
-    made: Option<(Arc<GpuRays>, u32)>,
 }
 
 /// The runs of `waiting`'s pieces, in order: consecutive pieces of one target along this
-/// gathering's sets, at most `fitting` sets a run (what one buffer holds), or each piece alone
-/// where `fitting` is 0 (the pieces apart); each piece along a set made before alone.
-fn runs(waiting: &Waiting, fitting: usize) -> Vec<Run> {
+/// gathering's sets of one buffer (`group` of a set's index), or each piece alone where
+/// `join` is false (the pieces apart); each piece along a set made before alone.
+fn runs(waiting: &Waiting, join: bool, group: impl Fn(usize) -> usize) -> Vec<Run> {
     let mut runs: Vec<Run> = Vec::new();
+    let mut last: Option<usize> = None;
     for (k, (p, along)) in waiting.pieces.iter().enumerate() {
-        match along {
-            Along::Made(rays, at) => {
-                runs.push(Run { target: p.target, pieces: vec![k], sets: Vec::new(), made: Some((rays.clone(), *at)) })
-            }
-            Along::Record(i) => match runs.last_mut() {
-                Some(r)
-                    if fitting > 0
-                        && r.made.is_none()
-                        && r.target == p.target
-                        && (r.sets.contains(i) || r.sets.len() < fitting) =>
-                {
-                    r.pieces.push(k);
-                    if !r.sets.contains(i) {
-                        r.sets.push(*i);
-                    }
-                }
-                _ => runs.push(Run { target: p.target, pieces: vec![k], sets: vec![*i], made: None }),
-            },
+        let buffer = match along {
+            Along::Record(i) => Some(group(*i)),
+            Along::Made(..) => None,
+        };
+        match runs.last_mut() {
+            Some(r) if join && buffer.is_some() && buffer == last && r.target == p.target => r.pieces.push(k),
+            _ => runs.push(Run { target: p.target, pieces: vec![k] }),
         }
+        last = buffer;
     }
     runs
 }
 
 /// The ray sets and pieces `waiting` made and recorded side by side, then the pieces added to
 /// their sums' work in their order (each after its rays' pass, the first time), what they
-/// found added to `found`; the last set made is kept as the set made last. The pieces of a run
-/// ([`runs`]) are joined into one structure ([`GpuPlanes::join`]) where the GPU allows it
-/// (`FOGPLANES_GPU_PIECES`), so that their work items are gathered in one dispatch, along
-/// their sets made into one buffer.
+/// found added to `found`; the last set made is kept as the set made last. The gathering's sets
+/// are made into as few buffers as hold them ([`GpuRays::sets_fitting`]: one, but for a very
+/// large image), each set once; the pieces of a run ([`runs`]) are joined into one structure
+/// ([`GpuPlanes::join`]) where the GPU allows it (`FOGPLANES_GPU_PIECES`), so that their work
+/// items are gathered in one dispatch a round.
 fn record_side_by_side(
     waiting: &mut Waiting,
     weighting: Weighting,
@@ -535,43 +524,40 @@ fn record_side_by_side(
         return Ok(());
     };
     let first = first.planes.gpu();
-    let (join, fitting) = (first.joins_pieces(), first.ray_sets_fitting());
-    let runs = runs(waiting, if join { fitting } else { 0 });
+    let join = first.joins_pieces();
+    // Sets a buffer: one each for the pieces apart, as before the join.
+    let per = if join { first.ray_sets_fitting().max(1) } else { 1 };
     let sets = &waiting.sets;
-    let made = control.map_units("ray sets", runs.len(), 1, |r| {
-        let Some(&i) = runs[r].sets.first() else {
-            return Ok(None);
-        };
+    let groups = sets.len().div_ceil(per);
+    let made = control.map_units("ray sets", groups, 1, |g| {
         let _s = crate::trace::span("ray set recorded");
+        let range = g * per..((g + 1) * per).min(sets.len());
         let records: Vec<(&RaySetRecord, &[PanelRecord])> =
-            runs[r].sets.iter().map(|&i| (&sets[i].1, sets[i].2.as_slice())).collect();
-        sets[i].3.rays_on_gpu(&records).map(|rays| Some(Arc::new(rays)))
+            sets[range.clone()].iter().map(|s| (&s.1, s.2.as_slice())).collect();
+        sets[range.start].3.rays_on_gpu(&records).map(Arc::new)
     });
-    let made: Vec<Option<Arc<GpuRays>>> = made.into_iter().collect::<Result<_>>()?;
-    for (run, rays) in runs.iter().zip(&made) {
-        if let Some(rays) = rays {
-            found[run.target].upload_ns += rays.upload_ns();
-            found[run.target].bytes_crossed += rays.bytes_up();
-        }
+    let made: Vec<Arc<GpuRays>> = made.into_iter().collect::<Result<_>>()?;
+    for (g, rays) in made.iter().enumerate() {
+        // Counted to the target of the first piece along its first set.
+        let target = sets[g * per].4;
+        found[target].upload_ns += rays.upload_ns();
+        found[target].bytes_crossed += rays.bytes_up();
     }
-    // The set made last: the gathering's last, in the last run that made it.
+    // Set i's buffer, and where it begins there.
+    let set = |i: usize| -> (Arc<GpuRays>, u32) {
+        let rays = made[i / per].clone();
+        let at = rays.floats_at((i % per) as u32);
+        (rays, at)
+    };
     if let Some(last) = sets.len().checked_sub(1) {
-        let (run, rays) = runs.iter().zip(&made).rfind(|(r, _)| r.sets.contains(&last)).expect("a run made it");
-        let slot = run.sets.iter().position(|&i| i == last).expect("made there") as u32;
-        let rays = rays.clone().expect("its sets made");
-        on_gpu.rays = Some((sets[last].0, rays.clone(), rays.floats_at(slot)));
+        let (rays, at) = set(last);
+        on_gpu.rays = Some((sets[last].0, rays, at));
     }
-    // Each run's rays, and where each of its pieces' set begins there.
-    let along = |r: usize, k: usize| -> (Arc<GpuRays>, u32) {
-        match (&runs[r].made, &waiting.pieces[k].1) {
-            (Some((rays, at)), _) => (rays.clone(), *at),
-            (None, Along::Record(i)) => {
-                let rays = made[r].clone().expect("its sets made");
-                let slot = runs[r].sets.iter().position(|j| j == i).expect("a set of its run") as u32;
-                let at = rays.floats_at(slot);
-                (rays, at)
-            }
-            (None, Along::Made(..)) => unreachable!("a piece along a set made before is a run of its own"),
+    let runs = runs(waiting, join, |i| i / per);
+    let along = |k: usize| -> (Arc<GpuRays>, u32) {
+        match &waiting.pieces[k].1 {
+            Along::Made(rays, at) => (rays.clone(), *at),
+            Along::Record(i) => set(*i),
         }
     };
     let sums = &on_gpu.sums;
@@ -579,11 +565,11 @@ fn record_side_by_side(
         let run = &runs[r];
         let into = sums[run.target].as_ref().expect("made before the piece waits");
         let parts: Vec<(&GpuPlanes, (Arc<GpuRays>, u32))> =
-            run.pieces.iter().map(|&k| (waiting.pieces[k].0.planes.gpu(), along(r, k))).collect();
-        let rays = parts[0].1.0.clone();
+            run.pieces.iter().map(|&k| (waiting.pieces[k].0.planes.gpu(), along(k))).collect();
         if parts.len() > 1 {
             let joined: Vec<(&GpuPlanes, u32)> = parts.iter().map(|(g, (_, at))| (*g, *at)).collect();
-            if let Some(whole) = GpuPlanes::join(&joined) {
+            if let Some(whole) = GpuPlanes::join(&joined)? {
+                let rays = parts[0].1.0.clone();
                 return Ok(vec![(whole.record(weighting, &rays, 0, into, control)?, rays)]);
             }
         }

@@ -76,8 +76,11 @@ impl GpuPlanes {
     pub fn joins_pieces(&self) -> bool {
         match *self {}
     }
-    pub fn join(parts: &[(&GpuPlanes, u32)]) -> Option<GpuPlanes> {
-        match *parts.first()?.0 {}
+    pub fn join(parts: &[(&GpuPlanes, u32)]) -> Result<Option<GpuPlanes>> {
+        match parts.first() {
+            Some((p, _)) => match **p {},
+            None => Ok(None),
+        }
     }
     pub fn gather(&self, _: Weighting, _: &[CameraRay], _: &mut [Vec3], _: Control) -> Result<GatherStats> {
         match *self {}

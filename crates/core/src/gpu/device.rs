@@ -340,12 +340,15 @@ impl Gpu {
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
     }
 
-    /// A buffer of `parts`' bytes one after another, written straight into its mapping (a
-    /// join's parts cross without a copy of the whole made first); never empty.
+    /// A buffer of `parts` one after another, written straight into its mapping (a join's
+    /// parts cross without a copy of the whole made first), each element of part `i` changed by
+    /// `patch(i, _)` on its way where given (through a copy of one part at a time, reused);
+    /// never empty.
     pub(super) fn upload_parts<'a, T: bytemuck::Pod>(
         &self,
         label: &str,
         parts: impl Iterator<Item = &'a [T]> + Clone,
+        patch: Option<Patch<'_, T>>,
         usage: wgpu::BufferUsages,
     ) -> Result<wgpu::Buffer> {
         let bytes: usize = parts.clone().map(std::mem::size_of_val).sum();
@@ -361,10 +364,18 @@ impl Gpu {
                 .get_mapped_range_mut()
                 .map_err(|e| crate::error::Error::Device(format!("writing {label} to the GPU: {e}")))?;
             let mut rest = view.slice(..bytes);
-            for part in parts {
-                let (first, tail) = rest.split_at(std::mem::size_of_val(part));
-                let mut first = first;
-                first.copy_from_slice(bytemuck::cast_slice(part));
+            let mut patched: Vec<T> = Vec::new();
+            for (i, part) in parts.enumerate() {
+                let (mut first, tail) = rest.split_at(std::mem::size_of_val(part));
+                match patch {
+                    Some(patch) => {
+                        patched.clear();
+                        patched.extend_from_slice(part);
+                        patched.iter_mut().for_each(|t| patch(i, t));
+                        first.copy_from_slice(bytemuck::cast_slice(&patched));
+                    }
+                    None => first.copy_from_slice(bytemuck::cast_slice(part)),
+                }
                 rest = tail;
             }
         }
@@ -386,6 +397,10 @@ pub(super) struct GatherPipelines {
     pub(super) reduce: wgpu::ComputePipeline,
     pub(super) orient: Option<wgpu::ComputePipeline>,
 }
+
+/// What [`Gpu::upload_parts`] does to each element of a part on its way (the part's index, the
+/// element).
+pub(super) type Patch<'p, T> = &'p dyn Fn(usize, &mut T);
 
 pub(super) fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry { binding, resource: buffer.as_entire_binding() }

@@ -632,7 +632,7 @@ var<workgroup> tile_tests: atomic<u32>;
 
 // Adds each pixel's work items to the image in order, batch by batch (each batch's sum added to
 // the pixel's as it would be alone: the same bits however a gathering's batches are cut into
-// rounds), and the tile's hits and tests (integer sums: the same in any order) to its counts.
+// rounds, given the work items' size), and the tile's hits and tests (integer sums: the same in any order) to its counts.
 @compute @workgroup_size(16, 16, 1)
 fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
           @builtin(local_invocation_index) li: u32) {

@@ -143,7 +143,7 @@ pub const TILE: u32 = 16;
 /// times per invocation.
 pub const BATCH_PLANES: usize = 16_384;
 
-/// The work items a batch's item size aims at ([`item_planes`]): several waves of the gather's
+/// The work items a round's item size aims at ([`item_planes`]): several waves of the gather's
 /// workgroups on a large GPU (an H100 holds about a thousand at once). A render's piece of
 /// planes (a chunk's share of a ray set: about 2,300 planes on the benchmark) lists a mean of
 /// about 140 planes a tile and the longest tiles about 7 times that: in items of 512 planes, a
@@ -156,13 +156,13 @@ pub const ITEMS_AIMED: u64 = 8192;
 /// makes its sets side by side up to it at a time.
 pub const PENDING_RAY_BYTES: u64 = 256 << 20;
 
-/// The most planes of one work item of a batch of at most `pairs` (tile, plane) pairs: a power
+/// The most planes of one work item of a round of at most `pairs` (tile, plane) pairs: a power
 /// of two near `pairs / ITEMS_AIMED`, from 32 planes to 512 on a GPU (the prototype's best on
 /// an H100 with 40,960 planes in one batch, a mean of about 2,400 planes a tile) and to 256 on
 /// a CPU adapter, whose llvmpipe silently ends an invocation's loops after about 65,000
 /// iterations (a work item with 64 orientations and 63 panels' occluders per hit stays at
 /// 256 x 127: tested by the hit counts against the CPU's); `fixed` instead where given
-/// ([`ITEM_VARIABLE`]), within the same most. A batch's items are then at most its tiles and
+/// ([`ITEM_VARIABLE`]), within the same most. A round's items are then at most its batches' tiles and
 /// `2 ITEMS_AIMED` more, or its pairs over 512 where they are many.
 pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
     let most = if cpu_adapter { 256 } else { 512 };
@@ -172,7 +172,7 @@ pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
     }
 }
 
-/// The timestamps of a batch of a gathering, where the adapter has them: its first pass's
+/// The timestamps of a round of a gathering, where the adapter has them: its first pass's
 /// start, its gather's start, its last pass's end (written by `planes.rs`, read in threes by
 /// `sums.rs`).
 pub const TIMESTAMPS: u32 = 3;
@@ -204,7 +204,7 @@ pub const PIECES_VARIABLE: &str = "FOGPLANES_GPU_PIECES";
 /// summary and in every record of the render ([`Tuning::label`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Tuning {
-    /// The planes of every work item ([`ITEM_VARIABLE`]), else sized by the batch
+    /// The planes of every work item ([`ITEM_VARIABLE`]), else sized by the round
     /// ([`item_planes`]).
     pub item_planes: Option<u32>,
     /// `exp`, `log`, `atan` and `atan2` of the GPU's driver ([`MATH_VARIABLE`]` = native`) in

@@ -1,10 +1,11 @@
 //! A structure's planes on the GPU ([`GpuPlanes`]): cut into batches on the CPU, uploaded by
 //! their first gathering, and each gathering's passes (the planes' reach until it has been
-//! submitted; per batch, the binning's three, the gather and its reduction) encoded into one
+//! submitted; per batch, the binning's three, per round of batches the gather and its
+//! reduction: gpu/batches.rs) encoded into one
 //! command buffer kept with the sums.
 
 use super::batches::{Batch, Bounds, Round, batches, rounds};
-use super::device::{GatherPipelines, Gpu, entry, grid};
+use super::device::{GatherPipelines, Gpu, Patch, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams};
@@ -28,11 +29,12 @@ pub struct GpuPlanes {
     gpu: Arc<Gpu>,
     width: u32,
     height: u32,
-    /// What crosses, until it has: one structure's, or a join's parts' (each part's indices
-    /// already the whole's), which cross one after another.
-    host: Mutex<Option<Vec<PlaneData>>>,
+    /// What crosses, until it has (a join's parts keep theirs: it crosses as it is joined).
+    host: Mutex<Option<PlaneData>>,
     /// Boxed: a structure is held in an enum beside the CPU's, and these are many handles.
     buffers: OnceLock<Box<PlaneBuffers>>,
+    /// A join's upload (nanoseconds, bytes), made as it was joined, until a gathering tells it.
+    joined_upload: Mutex<Option<(u64, u64)>>,
     /// Whether a submission has run the pass that finds the planes' reach (`reach.wgsl`); until
     /// one has, each gathering records it before its binning (set by [`GpuSums`] as it submits).
     reach_found: Arc<AtomicBool>,
@@ -60,6 +62,39 @@ struct PlaneBuffers {
     planes: wgpu::Buffer,
     occluders: wgpu::Buffer,
     polygons: PolygonBuffers,
+}
+
+impl PlaneBuffers {
+    /// `parts` uploaded one after another for a `width x height` image, each part's indices
+    /// made the whole's as they cross (its planes' occluders; its polygons' rows and vertices,
+    /// [`PolygonBuffers::upload`]), the parts themselves untouched.
+    fn upload(gpu: &Gpu, parts: &[&PlaneData], width: u32, height: u32) -> Result<Self> {
+        let usage = wgpu::BufferUsages::STORAGE;
+        // Where each part's occluders begin in the whole's.
+        let bases: Vec<u32> = parts
+            .iter()
+            .scan(0u32, |at, d| {
+                let base = *at;
+                *at += d.occluders.len() as u32;
+                Some(base)
+            })
+            .collect();
+        let shift = |i: usize, r: &mut PlaneRecord| {
+            (r.occluders_start, r.occluders_end) = (r.occluders_start + bases[i], r.occluders_end + bases[i]);
+        };
+        let shifted = bases.iter().any(|&b| b > 0);
+        let planes = parts.iter().map(|d| d.planes.as_slice());
+        Ok(PlaneBuffers {
+            planes: gpu.upload_parts("planes", planes, shifted.then_some(&shift as Patch<PlaneRecord>), usage)?,
+            occluders: gpu.upload_parts("occluders", parts.iter().map(|d| d.occluders.as_slice()), None, usage)?,
+            polygons: PolygonBuffers::upload(gpu, parts.iter().map(|d| &d.polygons), width, height)?,
+        })
+    }
+
+    /// The bytes that crossed for them.
+    fn bytes_up(&self) -> u64 {
+        self.planes.size() + self.occluders.size() + self.polygons.bytes_up()
+    }
 }
 
 impl GpuPlanes {
@@ -94,13 +129,14 @@ impl GpuPlanes {
         // Not uploaded here: the render prepares planes beside its gathering, and an upload
         // waits for the device while a submission is under way (on a CPU adapter, which runs a
         // submission before it returns, for the other side's whole gathering).
-        let host = vec![PlaneData { planes, occluders: ctx.occluders.clone(), polygons }];
+        let host = PlaneData { planes, occluders: ctx.occluders.clone(), polygons };
         Ok(GpuPlanes {
             gpu,
             width,
             height,
             host: Mutex::new(Some(host)),
             buffers: OnceLock::new(),
+            joined_upload: Mutex::new(None),
             reach_found: Arc::new(AtomicBool::new(false)),
             planes: reach.len() as u32,
             pieces: 1,
@@ -112,27 +148,28 @@ impl GpuPlanes {
         })
     }
 
-    /// Several structures' planes as one, not yet uploaded: `parts`' planes in order, each
+    /// Several structures' planes as one, uploaded here: `parts`' planes in order, each
     /// gathered along its ray set, which begins at the floats given in the rays the whole is
     /// gathered along ([`super::GpuRays::sets_on_gpu`]). Their batches are kept (each a part's,
     /// carrying its set) and cut into rounds afresh, so that the parts' work items are gathered
     /// in one dispatch a round; a batch's sums are added to each pixel as they would be alone.
-    /// The parts' planes move into the whole, which only they are gathered in after it.
-    /// `None` where the whole does not fit the GPU's bindings (or a part was uploaded): the
-    /// parts are then gathered one by one.
-    pub fn join(parts: &[(&GpuPlanes, u32)]) -> Option<GpuPlanes> {
-        let (first, _) = parts.first()?;
+    /// The parts keep their planes (a prepared render gathers its pieces once a weighting, each
+    /// time joined afresh). `Ok(None)` where the whole does not fit the GPU's bindings, or a
+    /// part was uploaded alone: the parts are then gathered one by one.
+    pub fn join(parts: &[(&GpuPlanes, u32)]) -> Result<Option<GpuPlanes>> {
+        let Some((first, _)) = parts.first() else {
+            return Ok(None);
+        };
         let _s = crate::trace::span("pieces joined");
         let gpu = &first.gpu;
         let (width, height) = (first.width, first.height);
-        let mut hosts: Vec<_> = parts.iter().map(|(p, _)| p.host.lock().unwrap_or_else(|e| e.into_inner())).collect();
-        if hosts.iter().any(|h| h.is_none()) {
-            return None;
-        }
-        let data = || hosts.iter().flat_map(|h| h.as_ref().expect("checked above"));
-        let planes: usize = data().map(|d| d.planes.len()).sum();
-        let occluders: usize = data().map(|d| d.occluders.len()).sum();
-        let rows: u64 = data().map(|d| d.polygons.rows).sum();
+        let hosts: Vec<_> = parts.iter().map(|(p, _)| p.host.lock().unwrap_or_else(|e| e.into_inner())).collect();
+        let Some(data) = hosts.iter().map(|h| h.as_ref()).collect::<Option<Vec<&PlaneData>>>() else {
+            return Ok(None);
+        };
+        let planes: usize = data.iter().map(|d| d.planes.len()).sum();
+        let occluders: usize = data.iter().map(|d| d.occluders.len()).sum();
+        let rows: u64 = data.iter().map(|d| d.polygons.rows).sum();
         let fits = [
             planes * std::mem::size_of::<PlaneRecord>(),
             occluders * std::mem::size_of::<crate::occlusion::Occluder>(),
@@ -147,31 +184,21 @@ impl GpuPlanes {
             batches.extend(p.batches.iter().map(|b| Batch { first: b.first + at, rays_at: *rays_at, ..b.clone() }));
             at += p.planes;
         }
-        let rounds =
-            rounds(&batches, &bounds(gpu, width, height)).ok().filter(|_| fits && planes <= u32::MAX as usize)?;
-        // Each part's data moved, its indices made the whole's where it lies in it: its
-        // planes' occluders, its polygons' rows and vertices (their sentinels too, which only
-        // the whole's last is uploaded of).
-        let mut host: Vec<PlaneData> = Vec::new();
-        let (mut occluders, mut rows, mut vertices) = (0u32, 0u32, 0u32);
-        for mut d in hosts.iter_mut().flat_map(|h| h.take().expect("checked above")) {
-            for r in &mut d.planes {
-                (r.occluders_start, r.occluders_end) = (r.occluders_start + occluders, r.occluders_end + occluders);
-            }
-            for r in &mut d.polygons.reach {
-                (r[2], r[3]) = (r[2] + rows, r[3] + vertices);
-            }
-            occluders += d.occluders.len() as u32;
-            rows += d.polygons.rows as u32;
-            vertices += d.polygons.vertices.len() as u32;
-            host.push(d);
-        }
-        Some(GpuPlanes {
+        let Some(rounds) =
+            rounds(&batches, &bounds(gpu, width, height)).ok().filter(|_| fits && planes <= u32::MAX as usize)
+        else {
+            return Ok(None);
+        };
+        let t = Instant::now();
+        let made = gpu.checked(|| PlaneBuffers::upload(gpu, &data, width, height))??;
+        let upload = (t.elapsed().as_nanos() as u64, made.bytes_up());
+        Ok(Some(GpuPlanes {
             gpu: gpu.clone(),
             width,
             height,
-            host: Mutex::new(Some(host)),
-            buffers: OnceLock::new(),
+            host: Mutex::new(None),
+            buffers: OnceLock::from(Box::new(made)),
+            joined_upload: Mutex::new(Some(upload)),
             reach_found: Arc::new(AtomicBool::new(false)),
             planes: planes as u32,
             pieces: parts.iter().map(|(p, _)| p.pieces).sum(),
@@ -180,27 +207,22 @@ impl GpuPlanes {
             sigma_t: first.sigma_t,
             grey: first.grey,
             phase: first.phase,
-        })
+        }))
     }
 
     /// The planes on the GPU, uploaded by the first call, with the nanoseconds this call spent
-    /// uploading and the bytes it uploaded.
+    /// uploading and the bytes it uploaded (a join's, made as it was joined, told by its first
+    /// call).
     fn buffers(&self) -> Result<(&PlaneBuffers, u64, u64)> {
         if let Some(b) = self.buffers.get() {
-            return Ok((b, 0, 0));
+            let (ns, bytes) = self.joined_upload.lock().unwrap_or_else(|p| p.into_inner()).take().unwrap_or((0, 0));
+            return Ok((b, ns, bytes));
         }
         let t = Instant::now();
         let host =
             self.host.lock().unwrap_or_else(|p| p.into_inner()).take().expect("uploaded once, on the gather side");
-        let (gpu, usage) = (&self.gpu, wgpu::BufferUsages::STORAGE);
-        let made = gpu.checked(|| -> Result<PlaneBuffers> {
-            Ok(PlaneBuffers {
-                planes: gpu.upload_parts("planes", host.iter().map(|d| d.planes.as_slice()), usage)?,
-                occluders: gpu.upload_parts("occluders", host.iter().map(|d| d.occluders.as_slice()), usage)?,
-                polygons: PolygonBuffers::upload(gpu, host.iter().map(|d| &d.polygons), self.width, self.height)?,
-            })
-        })??;
-        let bytes = made.planes.size() + made.occluders.size() + made.polygons.bytes_up();
+        let made = self.gpu.checked(|| PlaneBuffers::upload(&self.gpu, &[&host], self.width, self.height))??;
+        let bytes = made.bytes_up();
         Ok((self.buffers.get_or_init(|| Box::new(made)), t.elapsed().as_nanos() as u64, bytes))
     }
 
@@ -245,7 +267,7 @@ impl GpuPlanes {
 
     /// Gathers `rays` (one per pixel, row-major) with `weighting`, adding each pixel's sum to
     /// `sums`: [`GpuPlanes::gather_into`] fresh sums on the GPU, read back once. Checks
-    /// `control` before each batch; reports a unit of progress a piece it holds.
+    /// `control` before each round; reports a unit of progress a piece it holds.
     pub fn gather(
         &self,
         weighting: Weighting,
@@ -264,10 +286,11 @@ impl GpuPlanes {
     }
 
     /// Gathers `rays` with `weighting`, adding each pixel's sum and hits to `into` on the GPU:
-    /// the planes in batches, each binned and gathered in turn, the work kept with `into` and
+    /// the planes in batches, each binned, and rounds of them gathered in turn, the work kept with `into` and
     /// submitted when it is read ([`GpuSums::read_into`]: a chunk's pieces in one submission),
     /// or sooner where the work held passes [`super::PENDING_RAY_BYTES`] of ray sets. Checks `control`
-    /// before each batch (a cancel drops the work not submitted); reports a unit of progress a piece it holds.
+    /// before each round (a cancel drops the work not submitted); reports a unit of progress a
+    /// piece it holds.
     /// The result holds the planes' upload; the tests, the hits and the GPU's time are counted
     /// on the GPU, and when `into` is read back. [`GpuPlanes::record`] then [`GpuSums::add`].
     pub fn gather_into(
@@ -282,7 +305,7 @@ impl GpuPlanes {
     }
 
     /// [`GpuPlanes::gather_into`]'s work recorded (the planes uploaded by their first
-    /// gathering, every batch in one command buffer), not yet added to `into`'s: the pieces of
+    /// gathering, every round in one command buffer), not yet added to `into`'s: the pieces of
     /// a gathering record side by side, and [`GpuSums::add`] adds each in order. The planes'
     /// ray set begins `rays_at` floats into `rays` (one set of several,
     /// [`GpuRays::floats_at`]); a join's parts' sets where each part's begins after that.
@@ -318,7 +341,7 @@ impl GpuPlanes {
         Ok(recorded)
     }
 
-    /// [`GpuPlanes::record`]'s work: its batches one after another in one command buffer.
+    /// [`GpuPlanes::record`]'s work: its rounds one after another in one command buffer.
     fn encode(
         &self,
         weighting: Weighting,
@@ -576,11 +599,11 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
     })
 }
 
-/// [`TIMESTAMPS`] a batch, where the adapter has them, read when the sums are; else (or for a
-/// gathering of more batches than a query set of wgpu's 4,096 queries takes) the sums are timed
+/// [`TIMESTAMPS`] a round, where the adapter has them, read when the sums are; else (or for a
+/// gathering of more rounds than a query set of wgpu's 4,096 queries takes) the sums are timed
 /// by the wall time from their first submission to their reading back.
-fn timestamp_queries(gpu: &Gpu, batches: usize) -> Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)> {
-    let count = TIMESTAMPS as usize * batches;
+fn timestamp_queries(gpu: &Gpu, rounds: usize) -> Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)> {
+    let count = TIMESTAMPS as usize * rounds;
     (gpu.has_timestamps() && count <= 4096).then(|| {
         let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
             label: Some("gather time"),

@@ -3,7 +3,7 @@
 //! (`reach.wgsl`), recorded before a chunk's first binning. [`reach_on_gpu`] reads what it finds
 //! back, for holding it to the specification ([`super::tile_reach`]) in tests/gpu.rs.
 
-use super::device::{Gpu, entry, grid};
+use super::device::{Gpu, Patch, entry, grid};
 use super::records::ReachParams;
 use super::{GROUPS, ScreenReach, TileReach};
 use crate::error::{Error, Result};
@@ -54,9 +54,10 @@ pub(super) struct PolygonBuffers {
 }
 
 impl PolygonBuffers {
-    /// `parts` uploaded one after another for a `width x height` image (each part's indices
-    /// already the whole's: a join's, [`super::GpuPlanes::join`]), and the buffers of their
-    /// rows made (filled by [`PolygonBuffers::encode`]'s pass).
+    /// `parts` uploaded one after another for a `width x height` image (a join's,
+    /// [`super::GpuPlanes::join`]), each part's rows and vertices made the whole's as its reach
+    /// crosses, and the buffers of their rows made (filled by [`PolygonBuffers::encode`]'s
+    /// pass).
     pub(super) fn upload<'a>(
         gpu: &Gpu,
         parts: impl Iterator<Item = &'a Polygons> + Clone,
@@ -68,13 +69,25 @@ impl PolygonBuffers {
         let planes = parts.clone().map(|p| p.reach.len() as u32 - 1).sum();
         let rows: u64 = parts.clone().map(|p| p.rows).sum();
         let vertices = parts.clone().map(|p| p.vertices.len() as u32).sum();
-        // Each part's reach but its sentinel, then the whole's.
+        // Each part's reach but its sentinel, its row and vertex indices moved by the parts'
+        // before it, then the whole's sentinel.
+        let bases: Vec<(u32, u32)> = parts
+            .clone()
+            .scan((0u32, 0u32), |at, p| {
+                let base = *at;
+                *at = (at.0 + p.rows as u32, at.1 + p.vertices.len() as u32);
+                Some(base)
+            })
+            .chain([(0, 0)])
+            .collect();
+        let shift = |i: usize, r: &mut [u32; 4]| (r[2], r[3]) = (r[2] + bases[i].0, r[3] + bases[i].1);
+        let shifted = bases.iter().any(|&b| b != (0, 0));
         let last = [[0, 0, rows as u32, vertices]];
         let reach = parts.clone().map(|p| &p.reach[..p.reach.len() - 1]).chain([&last[..]]);
         let params = ReachParams { width, height, planes, rows: rows as u32 };
         Ok(PolygonBuffers {
-            reach: gpu.upload_parts("reach", reach, storage)?,
-            vertices: gpu.upload_parts("vertices", parts.map(|p| p.vertices.as_slice()), storage)?,
+            reach: gpu.upload_parts("reach", reach, shifted.then_some(&shift as Patch<[u32; 4]>), storage)?,
+            vertices: gpu.upload_parts("vertices", parts.map(|p| p.vertices.as_slice()), None, storage)?,
             spans: gpu.scratch("spans", rows * 4, filled),
             groups: gpu.scratch("groups", rows * std::mem::size_of::<[u32; GROUPS]>() as u64, filled),
             params: gpu.upload("reach params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM),

@@ -86,7 +86,7 @@ impl GpuRays {
         assert!(sets.iter().all(|(s, _)| (s.width, s.height) == (w, h)), "the sets of one image");
         let bytes = Self::check(gpu, w as usize * h as usize)?;
         let stride = Self::stride(gpu, bytes);
-        assert!(stride * sets.len() as u64 <= gpu.max_binding(), "the sets fit one binding");
+        assert!(stride * (sets.len() as u64 - 1) + bytes <= gpu.max_binding(), "the sets fit one binding");
         let groups = (w.div_ceil(super::TILE), h.div_ceil(super::TILE));
         if groups.0 > 65_535 || groups.1 > 65_535 {
             return Err(Error::Device(format!(

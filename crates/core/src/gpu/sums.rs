@@ -35,8 +35,11 @@ pub struct GpuSums {
     /// Set once the pending work is submitted: whether a structure's reach has been found
     /// ([`super::GpuPlanes`] records the pass into the first gatherings until then).
     pub(super) on_submit: Vec<Arc<AtomicBool>>,
-    /// Bytes of the ray sets the pending work holds on the GPU ([`super::PENDING_RAY_BYTES`]).
+    /// Bytes of the ray sets the pending work holds on the GPU ([`super::PENDING_RAY_BYTES`]),
+    /// each buffer counted where the work along it begins (consecutive gatherings along one
+    /// buffer of several sets count it once), and that buffer's address.
     pub(super) pending_rays: u64,
+    last_rays: usize,
     /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
     /// the last read.
     pub(super) bytes_up: u64,
@@ -85,6 +88,7 @@ impl GpuSums {
             pending: Vec::new(),
             on_submit: Vec::new(),
             pending_rays: 0,
+            last_rays: 0,
             bytes_up: 0,
             submissions: 0,
             reading: None,
@@ -100,6 +104,7 @@ impl GpuSums {
         self.first_submission.get_or_insert_with(Instant::now);
         self.submissions += 1;
         self.pending_rays = 0;
+        self.last_rays = 0;
         let index = self.gpu.queue.submit(work);
         for found in self.on_submit.drain(..) {
             found.store(true, Ordering::Release);
@@ -125,7 +130,10 @@ impl GpuSums {
         self.pending.extend(rays.take_pending());
         self.pending.push(commands);
         self.on_submit.extend(recorded.reach);
-        self.pending_rays += rays.bytes();
+        let at = rays as *const super::GpuRays as usize;
+        if at != std::mem::replace(&mut self.last_rays, at) {
+            self.pending_rays += rays.bytes();
+        }
         self.bytes_up += recorded.bytes_up;
         if !rays.made_on_gpu || self.pending_rays > super::PENDING_RAY_BYTES {
             *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = self.submit();
