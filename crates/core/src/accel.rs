@@ -579,9 +579,14 @@ fn record_side_by_side(
             .collect::<Result<Vec<_>>>()
     });
     for (run, recorded) in runs.iter().zip(recorded) {
-        let into = on_gpu.sums[run.target].as_mut().expect("made before the piece waits");
         for (recorded, rays) in recorded? {
+            let into = on_gpu.sums[run.target].as_mut().expect("made before the piece waits");
             found[run.target] += into.add(recorded, &rays);
+            // Too many ray sets held: every target's work submitted, in order, so that a buffer
+            // of sets goes with (or after) the work that makes it, an earlier target's.
+            if into.holds_too_many_rays() {
+                on_gpu.sums.iter_mut().flatten().for_each(GpuSums::submit_held);
+            }
         }
     }
     waiting.sets.clear();

@@ -37,9 +37,9 @@ pub struct GpuSums {
     pub(super) on_submit: Vec<Arc<AtomicBool>>,
     /// Bytes of the ray sets the pending work holds on the GPU ([`super::PENDING_RAY_BYTES`]),
     /// each buffer counted where the work along it begins (consecutive gatherings along one
-    /// buffer of several sets count it once), and that buffer's address.
+    /// buffer of several sets count it once), and that buffer.
     pub(super) pending_rays: u64,
-    last_rays: usize,
+    last_rays: Option<wgpu::Buffer>,
     /// Bytes that crossed to the GPU for these sums' gatherings, and the submissions, since
     /// the last read.
     pub(super) bytes_up: u64,
@@ -88,7 +88,7 @@ impl GpuSums {
             pending: Vec::new(),
             on_submit: Vec::new(),
             pending_rays: 0,
-            last_rays: 0,
+            last_rays: None,
             bytes_up: 0,
             submissions: 0,
             reading: None,
@@ -104,7 +104,7 @@ impl GpuSums {
         self.first_submission.get_or_insert_with(Instant::now);
         self.submissions += 1;
         self.pending_rays = 0;
-        self.last_rays = 0;
+        self.last_rays = None;
         let index = self.gpu.queue.submit(work);
         for found in self.on_submit.drain(..) {
             found.store(true, Ordering::Release);
@@ -120,8 +120,11 @@ impl GpuSums {
     /// Adds a gathering recorded along `rays` ([`super::GpuPlanes::record`]) to the work on
     /// these sums, after the pass that makes the rays if it is not added yet: submitted when
     /// the sums are read, or now where the rays were made on the CPU (so that the CPU makes the
-    /// next set while the GPU gathers) or the work held passes [`super::PENDING_RAY_BYTES`] of ray
-    /// sets. Returns what the recording found (the planes' upload).
+    /// next set while the GPU gathers). Where the work held passes [`super::PENDING_RAY_BYTES`]
+    /// of ray sets ([`GpuSums::holds_too_many_rays`]), the caller submits every sums' work in
+    /// order ([`GpuSums::submit_held`]): a buffer of sets is made by the work of the first sums
+    /// that gathers along it, which must go first. Returns what the recording found (the
+    /// planes' upload).
     pub fn add(&mut self, recorded: super::Recorded, rays: &super::GpuRays) -> GatherStats {
         assert!(self.reading.is_none(), "a gathering added to sums whose reading is under way");
         let Some(commands) = recorded.commands else {
@@ -130,12 +133,12 @@ impl GpuSums {
         self.pending.extend(rays.take_pending());
         self.pending.push(commands);
         self.on_submit.extend(recorded.reach);
-        let at = rays as *const super::GpuRays as usize;
-        if at != std::mem::replace(&mut self.last_rays, at) {
+        if self.last_rays.as_ref() != Some(&rays.buffer) {
             self.pending_rays += rays.bytes();
+            self.last_rays = Some(rays.buffer.clone());
         }
         self.bytes_up += recorded.bytes_up;
-        if !rays.made_on_gpu || self.pending_rays > super::PENDING_RAY_BYTES {
+        if !rays.made_on_gpu {
             *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = self.submit();
         }
         match recorded.timestamps {
@@ -143,6 +146,18 @@ impl GpuSums {
             None => self.untimed = true,
         }
         recorded.stats
+    }
+
+    /// Whether the work not submitted yet holds more than [`super::PENDING_RAY_BYTES`] of ray
+    /// sets: the caller then submits every sums' work, in order ([`GpuSums::add`]).
+    pub fn holds_too_many_rays(&self) -> bool {
+        self.pending_rays > super::PENDING_RAY_BYTES
+    }
+
+    /// Submits the work not submitted yet (a large image's ray sets are then let go as their
+    /// gatherings end).
+    pub fn submit_held(&mut self) {
+        self.submit();
     }
 
     /// Submits the gatherings not submitted yet with the copy of the sums for reading back
