@@ -131,11 +131,12 @@ if [ -n "$P_TUNED" ]; then
 fi
 # A chunk's pieces joined into one gathering, their work items in one dispatch a round (the
 # default), or gathered apart, a piece's own dispatches each (FOGPLANES_GPU_PIECES=apart), for
-# smis-exact at each planes count: two rounds alternated (read the second's GPU time, gather
-# dispatches and end to end), and how far the image moves (a joined round's work items are
-# sized by all its pairs: within f32 rounding, the same bits where the size is fixed).
+# smis-exact at the first planes count (the benchmark's 18 pieces; at 655,360 planes a piece is
+# about a chunk): two rounds alternated (read the second's GPU time, gather dispatches and end
+# to end), and how far the image moves (a joined round's work items are sized by all its pairs:
+# within f32 rounding, the same bits where the size is fixed).
 if [ -n "$P_TUNED" ]; then
-    for planes in $P; do
+    for planes in $first; do
         for round in 1 2; do
             for how in joined apart; do
                 FOGPLANES_GPU_PIECES=$how timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$planes" -e smis-exact \
