@@ -16,6 +16,10 @@ pub const ROUND_PLANES: u64 = 1 << 22;
 /// loop's iterations, docs/gpu.md) stays short.
 pub const ROUND_BATCHES: usize = 64;
 
+/// The most segments of a batch (`bin.wgsl`'s `Params::segments`): a join's pieces along their
+/// ray sets, each binned with the batch and cut into work items of its own.
+pub const BATCH_SEGMENTS: usize = 32;
+
 /// One batch of planes: binned together.
 #[derive(Clone, Debug, PartialEq)]
 pub(super) struct Batch {
@@ -24,8 +28,35 @@ pub(super) struct Batch {
     /// A bound on its (tile, plane) pairs, the tiles' lists' total length
     /// ([`super::ScreenReach`]).
     pub(super) pairs: u64,
-    /// Where its ray set begins in the gathering's rays, in floats (0 but for a join).
-    pub(super) rays_at: u32,
+    /// Its segments (at most [`BATCH_SEGMENTS`]): runs of its planes along one ray set each, as
+    /// (the segment's first plane, from the batch's first; where its ray set begins in the
+    /// gathering's rays, in floats). One for a structure's own batch; a join's batches hold
+    /// several of its parts'.
+    pub(super) segments: Vec<(u32, u32)>,
+}
+
+/// `batches` (consecutive, each one segment or more) merged where they fit one batch together:
+/// at most [`BATCH_PLANES`] planes and [`BATCH_SEGMENTS`] segments, whose work items fit one
+/// binding alone (a join's pieces binned in one batch, not one each).
+pub(super) fn merged(batches: Vec<Batch>, bounds: &Bounds) -> Vec<Batch> {
+    let mut out: Vec<Batch> = Vec::new();
+    for b in batches {
+        match out.last_mut() {
+            Some(m)
+                if m.first + m.count == b.first
+                    && (m.count + b.count) as usize <= BATCH_PLANES
+                    && m.segments.len() + b.segments.len() <= BATCH_SEGMENTS
+                    && bounds.round(&[(m.pairs + b.pairs, (m.segments.len() + b.segments.len()) as u64)]).is_some() =>
+            {
+                let at = m.count;
+                m.segments.extend(b.segments.iter().map(|&(first, rays)| (first + at, rays)));
+                m.count += b.count;
+                m.pairs += b.pairs;
+            }
+            _ => out.push(b),
+        }
+    }
+    out
 }
 
 /// Consecutive batches whose work items are gathered in one dispatch.
@@ -52,10 +83,10 @@ pub(super) struct Bounds {
 }
 
 impl Bounds {
-    /// A bound on the work items of batches of `pairs` pairs each, cut into items of `item`
-    /// planes: at most each tile's one more than its pairs over `item`.
-    fn items(&self, pairs: impl Iterator<Item = u64>, item: u32) -> u64 {
-        pairs.map(|p| p.min(self.tiles) + p / item as u64).sum()
+    /// A bound on the work items of batches of (pairs, segments) each, cut into items of `item`
+    /// planes: at most each tile's segments' one more each than their pairs over `item`.
+    fn items(&self, batches: impl Iterator<Item = (u64, u64)>, item: u32) -> u64 {
+        batches.map(|(p, segments)| p.min(self.tiles * segments) + p / item as u64).sum()
     }
 
     /// The most work items whose partial sums one binding holds.
@@ -63,12 +94,12 @@ impl Bounds {
         self.max_binding / ITEM_BYTES
     }
 
-    /// Whether a round of batches of `pairs` pairs each fits the GPU's bindings: its lists
+    /// Whether a round of batches of (pairs, segments) each fits the GPU's bindings: its lists
     /// (4 bytes an entry) and its items' partial sums; with its items' size and bound.
-    fn round(&self, pairs: &[u64]) -> Option<(u32, u64)> {
-        let total: u64 = pairs.iter().sum();
+    fn round(&self, batches: &[(u64, u64)]) -> Option<(u32, u64)> {
+        let total: u64 = batches.iter().map(|b| b.0).sum();
         let item = item_planes(self.cpu, total, self.fixed);
-        let items = self.items(pairs.iter().copied(), item);
+        let items = self.items(batches.iter().copied(), item);
         (items <= self.max_items() && total * 4 <= self.max_binding).then_some((item, items))
     }
 }
@@ -79,11 +110,11 @@ pub(super) fn batches(pairs: impl Iterator<Item = u64>, bounds: &Bounds) -> Vec<
     let mut batches: Vec<Batch> = Vec::new();
     for (i, p) in pairs.enumerate() {
         match batches.last_mut() {
-            Some(b) if (b.count as usize) < BATCH_PLANES && bounds.round(&[b.pairs + p]).is_some() => {
+            Some(b) if (b.count as usize) < BATCH_PLANES && bounds.round(&[(b.pairs + p, 1)]).is_some() => {
                 b.count += 1;
                 b.pairs += p;
             }
-            _ => batches.push(Batch { first: i as u32, count: 1, pairs: p, rays_at: 0 }),
+            _ => batches.push(Batch { first: i as u32, count: 1, pairs: p, segments: vec![(0, 0)] }),
         }
     }
     batches
@@ -95,10 +126,11 @@ pub(super) fn batches(pairs: impl Iterator<Item = u64>, bounds: &Bounds) -> Vec<
 /// holds).
 pub(super) fn rounds(batches: &[Batch], bounds: &Bounds) -> Result<Vec<Round>, String> {
     let mut rounds: Vec<Round> = Vec::new();
-    let mut pairs: Vec<u64> = Vec::new();
+    let mut pairs: Vec<(u64, u64)> = Vec::new();
     let mut planes = 0u64;
     for (i, b) in batches.iter().enumerate() {
-        pairs.push(b.pairs);
+        let this = (b.pairs, b.segments.len() as u64);
+        pairs.push(this);
         let joins = rounds.last().is_some_and(|r| r.batches.end == i)
             && pairs.len() <= ROUND_BATCHES
             && planes + b.count as u64 <= ROUND_PLANES;
@@ -110,7 +142,7 @@ pub(super) fn rounds(batches: &[Batch], bounds: &Bounds) -> Result<Vec<Round>, S
             }
             None => {
                 pairs.clear();
-                pairs.push(b.pairs);
+                pairs.push(this);
                 planes = b.count as u64;
                 let Some((item, items)) = bounds.round(&pairs) else {
                     return Err(format!(
@@ -159,7 +191,7 @@ mod tests {
     fn rounds_fit_the_binding_or_are_refused() {
         let small = Bounds { max_binding: 8_000 * ITEM_BYTES, ..BENCHMARK };
         let bs: Vec<Batch> =
-            (0..6).map(|i| Batch { first: i * 1000, count: 1000, pairs: 400_000, rays_at: 0 }).collect();
+            (0..6).map(|i| Batch { first: i * 1000, count: 1000, pairs: 400_000, segments: vec![(0, 0)] }).collect();
         let rs = rounds(&bs, &small).unwrap();
         assert!(rs.len() > 1);
         assert_eq!(rs.first().unwrap().batches.start, 0);
@@ -169,7 +201,7 @@ mod tests {
         }
         for r in &rs {
             assert!(r.items <= small.max_items() && r.pairs * 4 <= small.max_binding);
-            let pairs: Vec<u64> = bs[r.batches.clone()].iter().map(|b| b.pairs).collect();
+            let pairs: Vec<(u64, u64)> = bs[r.batches.clone()].iter().map(|b| (b.pairs, 1)).collect();
             assert_eq!(small.round(&pairs), Some((r.item, r.items)));
         }
         let tiny = Bounds { max_binding: 100 * ITEM_BYTES, ..BENCHMARK };
@@ -177,15 +209,37 @@ mod tests {
         assert!(err.contains("covers more of this image"), "{err}");
     }
 
+    /// Merged batches keep every plane in order and each segment where its planes are, within
+    /// BATCH_PLANES planes and BATCH_SEGMENTS segments a batch.
+    #[test]
+    fn merged_batches_keep_their_segments_in_order() {
+        let parts: Vec<Batch> = (0..40u32)
+            .map(|i| Batch { first: i * 2_000, count: 2_000, pairs: 10_000, segments: vec![(0, 7 * i)] })
+            .collect();
+        let m = merged(parts.clone(), &BENCHMARK);
+        assert!(m.len() > 1 && m.len() < parts.len());
+        let mut next = 0;
+        let mut all = Vec::new();
+        for b in &m {
+            assert_eq!(b.first, next);
+            assert!(b.count as usize <= BATCH_PLANES && b.segments.len() <= BATCH_SEGMENTS);
+            assert_eq!(b.segments[0].0, 0);
+            all.extend(b.segments.iter().map(|&(first, rays)| (b.first + first, rays)));
+            next += b.count;
+        }
+        assert_eq!(all, parts.iter().map(|p| (p.first, p.segments[0].1)).collect::<Vec<_>>());
+        assert_eq!(m.iter().map(|b| b.pairs).sum::<u64>(), 400_000);
+    }
+
     /// A round holds at most ROUND_BATCHES batches and ROUND_PLANES planes.
     #[test]
     fn rounds_are_bounded_in_batches_and_planes() {
-        let bs: Vec<Batch> = (0..200).map(|i| Batch { first: i, count: 1, pairs: 1, rays_at: 0 }).collect();
+        let bs: Vec<Batch> = (0..200).map(|i| Batch { first: i, count: 1, pairs: 1, segments: vec![(0, 0)] }).collect();
         let rs = rounds(&bs, &BENCHMARK).unwrap();
         assert!(rs.iter().all(|r| r.batches.len() <= ROUND_BATCHES));
         assert_eq!(rs.len(), 200usize.div_ceil(ROUND_BATCHES));
         let big: Vec<Batch> =
-            (0..600).map(|i| Batch { first: i * 16_384, count: 16_384, pairs: 0, rays_at: 0 }).collect();
+            (0..600).map(|i| Batch { first: i * 16_384, count: 16_384, pairs: 0, segments: vec![(0, 0)] }).collect();
         let rs = rounds(&big, &BENCHMARK).unwrap();
         for r in &rs {
             assert!(big[r.batches.clone()].iter().map(|b| b.count as u64).sum::<u64>() <= ROUND_PLANES);

@@ -31,17 +31,23 @@ struct Params {
     item_planes: u32,
     // The batch's index in its round: its region of `offsets` and `item_offsets`.
     region: u32,
-    // Where its ray set begins in the gathering's rays, in floats (its work items carry it).
-    rays_at: u32,
+    // Its segments (gpu/batches.rs `Batch::segments`: a join's pieces, each along its ray set):
+    // a tile's planes of each segment are cut into work items of their own, which carry where
+    // its ray set begins in the gathering's rays.
+    segments: u32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
+    // Per segment its first plane (from the batch's first) and its ray set's first float, two
+    // segments a row (BATCH_SEGMENTS = 32).
+    segs: array<vec4<u32>, 16>,
 };
 
 @group(0) @binding(0) var<uniform> params: Params;
 // Per plane (gpu/polygons.rs `Polygons`): its first row of tiles, its rows, where its rows start
 // in `spans` and `groups`, and its first vertex (read by reach.wgsl only).
 @group(0) @binding(1) var<storage, read> reach: array<vec4<u32>>;
+// Per tile, per segment, the segment's planes that reach the tile.
 @group(0) @binding(2) var<storage, read_write> tile_counts: array<u32>;
 // Per batch of the round (`region`), per tile its first list entry, then the batch's end.
 @group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
@@ -68,6 +74,31 @@ const TILE: u32 = 16u;
 
 var<workgroup> scratch: array<u32, 256>;
 var<workgroup> scratch_items: array<u32, 256>;
+
+// Segment s's first plane (from the batch's first), its end, and its ray set's first float.
+fn seg_first(s: u32) -> u32 {
+    let v = params.segs[s / 2u];
+    return select(v.x, v.z, (s & 1u) == 1u);
+}
+fn seg_end(s: u32) -> u32 {
+    return select(params.count, seg_first(min(s + 1u, 31u)), s + 1u < params.segments);
+}
+fn seg_rays(s: u32) -> u32 {
+    let v = params.segs[s / 2u];
+    return select(v.y, v.w, (s & 1u) == 1u);
+}
+
+// A tile's planes of every segment, and its work items (each segment's cut on its own).
+fn tile_total(t: u32) -> vec2<u32> {
+    var c = 0u;
+    var n = 0u;
+    for (var s = 0u; s < params.segments; s++) {
+        let k = tile_counts[t * params.segments + s];
+        c += k;
+        n += (k + params.item_planes - 1u) / params.item_planes;
+    }
+    return vec2<u32>(c, n);
+}
 
 // The first word of this batch's region of `offsets`, and of `item_offsets` (after the grid).
 fn list_region() -> u32 {
@@ -126,19 +157,23 @@ fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if (tile >= params.tiles) {
         return;
     }
-    var c = 0u;
-    for (var i = li; i < params.count; i += THREADS) {
-        c += select(0u, 1u, covers(params.first + i, tile));
-    }
-    scratch[li] = c;
-    for (var s = THREADS / 2u; s > 0u; s >>= 1u) {
-        workgroupBarrier();
-        if (li < s) {
-            scratch[li] += scratch[li + s];
+    for (var s = 0u; s < params.segments; s++) {
+        var c = 0u;
+        let end = seg_end(s);
+        for (var i = seg_first(s) + li; i < end; i += THREADS) {
+            c += select(0u, 1u, covers(params.first + i, tile));
         }
-    }
-    if (li == 0u) {
-        tile_counts[tile] = scratch[0];
+        scratch[li] = c;
+        for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
+            workgroupBarrier();
+            if (li < h) {
+                scratch[li] += scratch[li + h];
+            }
+        }
+        if (li == 0u) {
+            tile_counts[tile * params.segments + s] = scratch[0];
+        }
+        workgroupBarrier();
     }
 }
 
@@ -158,9 +193,9 @@ fn scan(@builtin(local_invocation_index) li: u32) {
     var c = 0u;
     var n_items = 0u;
     for (var t = lo; t < hi; t++) {
-        let k = tile_counts[t];
-        c += k;
-        n_items += (k + params.item_planes - 1u) / params.item_planes;
+        let k = tile_total(t);
+        c += k.x;
+        n_items += k.y;
     }
     // Both prefix sums through `scratch`, one after the other.
     scratch[li] = c;
@@ -175,11 +210,11 @@ fn scan(@builtin(local_invocation_index) li: u32) {
     let lr = list_region();
     let ir = item_region();
     for (var t = lo; t < hi; t++) {
-        let k = tile_counts[t];
+        let k = tile_total(t);
         offsets[lr + t] = run;
         item_offsets[ir + t] = run_items;
-        run += k;
-        run_items += (k + params.item_planes - 1u) / params.item_planes;
+        run += k.x;
+        run_items += k.y;
     }
     if (li == 0u) {
         offsets[lr + tiles] = total;
@@ -202,12 +237,20 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         return;
     }
     let base = offsets[list_region() + tile];
-    let end = offsets[list_region() + tile + 1u];
-    let first_item = item_offsets[item_region() + tile];
-    let n_items = item_offsets[item_region() + tile + 1u] - first_item;
-    for (var k = li; k < n_items; k += THREADS) {
-        let s = base + k * params.item_planes;
-        items[first_item + k] = vec4<u32>(tile, s, min(s + params.item_planes, end), params.rays_at);
+    // Each segment's part of the tile's list (the list is in plane order, so segment by
+    // segment) cut into work items of its own.
+    var item_at = item_offsets[item_region() + tile];
+    var list_at = base;
+    for (var s = 0u; s < params.segments; s++) {
+        let n = tile_counts[tile * params.segments + s];
+        let n_items = (n + params.item_planes - 1u) / params.item_planes;
+        let rays = seg_rays(s);
+        for (var k = li; k < n_items; k += THREADS) {
+            let st = list_at + k * params.item_planes;
+            items[item_at + k] = vec4<u32>(tile, st, min(st + params.item_planes, list_at + n), rays);
+        }
+        item_at += n_items;
+        list_at += n;
     }
     var written = 0u;
     for (var b = 0u; b < params.count; b += THREADS) {

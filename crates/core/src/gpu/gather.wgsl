@@ -630,9 +630,9 @@ fn orient(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
 var<workgroup> tile_hits: atomic<u32>;
 var<workgroup> tile_tests: atomic<u32>;
 
-// Adds each pixel's work items to the image in order, batch by batch (each batch's sum added to
-// the pixel's as it would be alone: the same bits however a gathering's batches are cut into
-// rounds, given the work items' size), and the tile's hits and tests (integer sums: the same in any order) to its counts.
+// Adds each pixel's work items to the image in order, batch by batch and a batch's segments one
+// by one (each one's sum added to the pixel's as it would be alone: the same bits however a
+// gathering's pieces are cut into batches and rounds, given the work items' size), and the tile's hits and tests (integer sums: the same in any order) to its counts.
 @compute @workgroup_size(16, 16, 1)
 fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
           @builtin(local_invocation_index) li: u32) {
@@ -652,8 +652,22 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) l
         var tests = 0u;
         for (var r = 0u; r < params.regions; r++) {
             let region = 4u + r * (params.tiles + 1u) + tile;
+            let lo = item_offsets[region];
+            let hi = item_offsets[region + 1u];
             var sum = vec3<f32>(0.0);
-            for (var k = item_offsets[region]; k < item_offsets[region + 1u]; k++) {
+            // A batch's segments (a join's pieces, each along its ray set) added one by one,
+            // each as it would be alone: its items' ray set tells where the next begins.
+            var rays = 0u;
+            if (lo < hi) {
+                rays = items[lo].w;
+            }
+            for (var k = lo; k < hi; k++) {
+                let w = items[k].w;
+                if (w != rays) {
+                    held = held + sum;
+                    sum = vec3<f32>(0.0);
+                    rays = w;
+                }
                 let v = partial[k * THREADS + li];
                 sum += v.xyz;
                 let counts = u32(v.w);

@@ -4,7 +4,7 @@
 //! reduction: gpu/batches.rs) encoded into one
 //! command buffer kept with the sums.
 
-use super::batches::{Batch, Bounds, Round, batches, rounds};
+use super::batches::{BATCH_SEGMENTS, Batch, Bounds, Round, batches, merged, rounds};
 use super::device::{GatherPipelines, Gpu, Patch, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
@@ -181,12 +181,17 @@ impl GpuPlanes {
         let mut at = 0u32;
         for (p, rays_at) in parts {
             assert!(Arc::ptr_eq(&p.gpu, gpu) && (p.width, p.height) == (width, height), "parts of one image");
-            batches.extend(p.batches.iter().map(|b| Batch { first: b.first + at, rays_at: *rays_at, ..b.clone() }));
+            batches.extend(p.batches.iter().map(|b| Batch {
+                first: b.first + at,
+                segments: b.segments.iter().map(|&(first, rays)| (first, rays + *rays_at)).collect(),
+                ..b.clone()
+            }));
             at += p.planes;
         }
-        let Some(rounds) =
-            rounds(&batches, &bounds(gpu, width, height)).ok().filter(|_| fits && planes <= u32::MAX as usize)
-        else {
+        // The parts' batches binned together where they fit one (a chunk's pieces: one batch).
+        let bounds = bounds(gpu, width, height);
+        let batches = merged(batches, &bounds);
+        let Some(rounds) = rounds(&batches, &bounds).ok().filter(|_| fits && planes <= u32::MAX as usize) else {
             return Ok(None);
         };
         let t = Instant::now();
@@ -382,6 +387,7 @@ impl GpuPlanes {
         let max_pairs = self.rounds.iter().map(|r| r.pairs).max().unwrap_or(0);
         let max_items = self.rounds.iter().map(|r| r.items).max().unwrap_or(0);
         let max_regions = self.rounds.iter().map(|r| r.batches.len() as u64).max().unwrap_or(0);
+        let max_segments = self.batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
         // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
         // K - 1 further ones, made once here (`orient`) rather than at each hit: 16 bytes each,
         // within one binding (a piece is at most a chunk, 16,384 planes: 16.5 MB at K = 64).
@@ -401,7 +407,7 @@ impl GpuPlanes {
         // before it on the queue, whichever buffers each one holds.
         let s = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(
             &gpu.device,
-            max_regions * (tiles as u64 + 1),
+            (max_regions * (tiles as u64 + 1)).max(max_segments * tiles as u64),
             max_pairs,
             max_items,
             orients,
@@ -455,6 +461,10 @@ impl GpuPlanes {
             // Each batch binned into its region, then the round's items gathered at once.
             let mut steps: Vec<Step> = Vec::new();
             for (region, batch) in self.batches[round.batches.clone()].iter().enumerate() {
+                let mut segs = [[0u32; 4]; BATCH_SEGMENTS / 2];
+                for (k, &(first, rays)) in batch.segments.iter().enumerate() {
+                    segs[k / 2][2 * (k % 2)..2 * (k % 2) + 2].copy_from_slice(&[first, rays_at + rays]);
+                }
                 let bin_params = BinParams {
                     width: w,
                     height: h,
@@ -464,8 +474,9 @@ impl GpuPlanes {
                     first: batch.first,
                     item_planes: round.item,
                     region: region as u32,
-                    rays_at: rays_at + batch.rays_at,
+                    segments: batch.segments.len() as u32,
                     pad: [0; 3],
+                    segs,
                 };
                 let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
                 bytes_up += std::mem::size_of::<BinParams>() as u64;

@@ -49,9 +49,13 @@ pub(super) struct BinParams {
     pub(super) item_planes: u32,
     /// The batch's index in its round: its region of the tiles' offsets.
     pub(super) region: u32,
-    /// Where its ray set begins in the gathering's rays, in floats.
-    pub(super) rays_at: u32,
+    /// Its segments ([`super::batches::Batch::segments`]), at most
+    /// [`super::batches::BATCH_SEGMENTS`].
+    pub(super) segments: u32,
     pub(super) pad: [u32; 3],
+    /// Each segment's first plane (from the batch's first) and where its ray set begins in the
+    /// gathering's rays (floats), two segments a row.
+    pub(super) segs: [[u32; 4]; super::batches::BATCH_SEGMENTS / 2],
 }
 
 /// `reach.wgsl`'s `Params`.
@@ -141,7 +145,8 @@ mod tests {
             (
                 BIN_WGSL,
                 "Params",
-                fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, rays_at, pad),
+                fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, segments, pad,
+                    segs),
             ),
             (REACH_WGSL, "Params", fields!(ReachParams: width, height, planes, rows)),
             (

@@ -29,7 +29,7 @@ pub(super) struct ScratchBuffers {
     /// Words of a round's regions (tiles + 1 a batch), (tile, plane) pairs, work items and
     /// (plane, orientation) rows they hold.
     capacity: (u64, u64, u64, u64),
-    /// Per tile, a batch's planes that reach it.
+    /// Per tile and segment of a batch, its planes that reach the tile.
     pub(super) tile_counts: wgpu::Buffer,
     /// Per batch of a round (its region), per tile its first list entry, then the batch's end.
     pub(super) offsets: wgpu::Buffer,
