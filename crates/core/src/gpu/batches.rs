@@ -5,7 +5,7 @@
 //! the GPU with one dispatch rather than one each. Plain data, made on the CPU.
 
 use super::records::ITEM_BYTES;
-use super::{BATCH_PLANES, item_planes};
+use super::{BATCH_PLANES, BATCH_SEGMENTS, item_planes};
 use std::ops::Range;
 
 /// The most planes of a round: the reduction counts a tile's hits and tests of a round in a
@@ -15,10 +15,6 @@ pub const ROUND_PLANES: u64 = 1 << 22;
 /// The most batches of a round: the reduction's loop over them (and llvmpipe's limit on a
 /// loop's iterations, docs/gpu.md) stays short.
 pub const ROUND_BATCHES: usize = 64;
-
-/// The most segments of a batch (`bin.wgsl`'s `Params::segments`): a join's pieces along their
-/// ray sets, each binned with the batch and cut into work items of its own.
-pub const BATCH_SEGMENTS: usize = 32;
 
 /// One batch of planes: binned together.
 #[derive(Clone, Debug, PartialEq)]

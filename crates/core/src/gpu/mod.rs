@@ -143,6 +143,11 @@ pub const TILE: u32 = 16;
 /// times per invocation.
 pub const BATCH_PLANES: usize = 16_384;
 
+/// The most segments of a batch (`bin.wgsl`'s `Params::segments`, its `segs` two a row): a
+/// join's pieces along their ray sets, each binned with the batch and cut into work items of
+/// its own (gpu/batches.rs).
+pub const BATCH_SEGMENTS: usize = 32;
+
 /// The work items a round's item size aims at ([`item_planes`]): several waves of the gather's
 /// workgroups on a large GPU (an H100 holds about a thousand at once). A render's piece of
 /// planes (a chunk's share of a ray set: about 2,300 planes on the benchmark) lists a mean of

@@ -4,14 +4,14 @@
 //! reduction: gpu/batches.rs) encoded into one
 //! command buffer kept with the sums.
 
-use super::batches::{BATCH_SEGMENTS, Batch, Bounds, Round, batches, merged, rounds};
+use super::batches::{Batch, Bounds, Round, batches, merged, rounds};
 use super::device::{GatherPipelines, Gpu, Patch, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams};
 use super::scratch::ScratchBuffers;
 use super::sums::GpuSums;
-use super::{ScreenReach, TILE, TIMESTAMPS, estimator_id};
+use super::{BATCH_SEGMENTS, ScreenReach, TILE, TIMESTAMPS, estimator_id};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};

@@ -49,13 +49,12 @@ pub(super) struct BinParams {
     pub(super) item_planes: u32,
     /// The batch's index in its round: its region of the tiles' offsets.
     pub(super) region: u32,
-    /// Its segments ([`super::batches::Batch::segments`]), at most
-    /// [`super::batches::BATCH_SEGMENTS`].
+    /// Its segments (gpu/batches.rs `Batch::segments`), at most [`super::BATCH_SEGMENTS`].
     pub(super) segments: u32,
     pub(super) pad: [u32; 3],
     /// Each segment's first plane (from the batch's first) and where its ray set begins in the
     /// gathering's rays (floats), two segments a row.
-    pub(super) segs: [[u32; 4]; super::batches::BATCH_SEGMENTS / 2],
+    pub(super) segs: [[u32; 4]; super::BATCH_SEGMENTS / 2],
 }
 
 /// `reach.wgsl`'s `Params`.
