@@ -114,40 +114,34 @@ for planes in $P_TUNED; do
         echo
     done
 done
-# K orientations made at each hit (the default) or once a gathering into a table
-# (FOGPLANES_GPU_ORIENTATIONS=table): smis-exact with K = 8 at the first planes count, two
-# rounds alternated (read the second), and whether the images are the same bits.
-if [ -n "$P_TUNED" ]; then
+# A setting against the default, smis-exact at the first planes count: two rounds, the two
+# values alternated within each (the first round's processes compile the shaders; read the
+# second's lines), then whether the images are the same bits, or how far apart (relative MSE).
+#   ab NAME VARIABLE DEFAULT OTHER [render arguments]
+ab() {
+    local name=$1 var=$2 one=$3 other=$4
+    shift 4
     for round in 1 2; do
-        for how in per-hit table; do
-            FOGPLANES_GPU_ORIENTATIONS=$how timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$first" -e smis-exact \
-                --orientations 8 --device gpu -o "$work/orient_$how.exr" 2>&1 |
-                grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/gpu orientations $how round $round $first: /"
+        for how in "$one" "$other"; do
+            env "$var=$how" timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$first" -e smis-exact \
+                --device gpu -o "$work/${name}_$how.exr" "$@" 2>&1 |
+                grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/gpu $name $how round $round $first: /"
         done
     done
-    printf 'agreement orientations table against per-hit %s: ' "$first"
-    timeout 60 "$B" compare "$work/orient_table.exr" "$work/orient_per-hit.exr" | tr '\n' ' ' | tr -s ' '
+    printf 'agreement %s %s against %s %s: ' "$name" "$other" "$one" "$first"
+    timeout 60 "$B" compare "$work/${name}_$other.exr" "$work/${name}_$one.exr" | tr '\n' ' ' | tr -s ' '
     echo
-fi
-# A chunk's pieces joined into one gathering, their work items in one dispatch a round (the
-# default), or gathered apart, a piece's own dispatches each (FOGPLANES_GPU_PIECES=apart), for
-# smis-exact at the first planes count (the benchmark's 18 pieces; at 655,360 planes a piece is
-# about a chunk): two rounds alternated (read the second's GPU time, gather dispatches and end
-# to end), and how far the image moves (a joined round's work items are sized by all its pairs:
-# within f32 rounding, the same bits where the size is fixed).
+}
 if [ -n "$P_TUNED" ]; then
-    for planes in $first; do
-        for round in 1 2; do
-            for how in joined apart; do
-                FOGPLANES_GPU_PIECES=$how timeout 150 "$B" render "$S" --resolution "$R" -q --planes "$planes" -e smis-exact \
-                    --device gpu -o "$work/pieces_$how.exr" 2>&1 |
-                    grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/gpu pieces $how round $round $planes: /"
-            done
-        done
-        printf 'agreement pieces joined against apart %s: ' "$planes"
-        timeout 60 "$B" compare "$work/pieces_joined.exr" "$work/pieces_apart.exr" | tr '\n' ' ' | tr -s ' '
-        echo
-    done
+    # K orientations made at each hit (the default) or once a gathering into a table
+    # (FOGPLANES_GPU_ORIENTATIONS=table), with K = 8.
+    ab orientations FOGPLANES_GPU_ORIENTATIONS per-hit table --orientations 8
+    # A chunk's pieces joined into one gathering, their work items in one dispatch a round (the
+    # default), or gathered apart, a piece's own dispatches each (FOGPLANES_GPU_PIECES=apart):
+    # the benchmark's 18 pieces (at 655,360 planes a piece is about a chunk); the end to end
+    # and the gather dispatches in the lines too. A joined round's work items are sized by all
+    # its pairs: within f32 rounding, the same bits where the size is fixed.
+    ab pieces FOGPLANES_GPU_PIECES joined apart
 fi
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).
 for t in 1 2 4 8 all; do

@@ -41,6 +41,30 @@ fn text(o: &Output) -> (String, String) {
     (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
+/// The variables of gpu/mod.rs `Tuning`, the choices fixed for measuring on a device.
+const TUNING: [&str; 5] = [
+    "FOGPLANES_GPU_MATH",
+    "FOGPLANES_GPU_CHECKS",
+    "FOGPLANES_GPU_ITEM_PLANES",
+    "FOGPLANES_GPU_ORIENTATIONS",
+    "FOGPLANES_GPU_PIECES",
+];
+
+/// A GPU render of the scene to `d/name.exr` with `args`, the tuning variables of `env` set and
+/// the others removed (their defaults, whatever this process was given): its pixels and what it
+/// printed.
+fn tuned_render(d: &Path, name: &str, args: &[&str], env: &[(&str, &str)]) -> (Vec<glam::Vec3>, String) {
+    let out = d.join(format!("{name}.exr"));
+    let mut all = vec!["render", SCENE, "--device", "gpu"];
+    all.extend(args);
+    all.extend(["-o", path(&out)]);
+    let unset: Vec<&str> = TUNING.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
+    let o = run_with(&all, env, &unset);
+    let (printed, err) = text(&o);
+    assert!(o.status.success(), "{name}: {err}");
+    (fogplanes::film::Film::load_exr(&out).unwrap().pixels, printed)
+}
+
 /// What `fogplanes info` prints of `image`'s devices.
 fn devices_of(image: &Path) -> String {
     let o = fogplanes(&["info", path(image)]);
@@ -305,23 +329,10 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
     }
     let d = dir("tuned");
     let render_with = |name: &str, estimator: &[&str], env: &[(&str, &str)]| {
-        let out = d.join(format!("{name}.exr"));
-        let mut args = vec!["render", SCENE, "--resolution", "32x18", "--planes", "2048", "-e"];
+        let mut args = vec!["--resolution", "32x18", "--planes", "2048", "-q", "-e"];
         args.extend(estimator);
-        args.extend(["-q", "--device", "gpu", "-o", path(&out)]);
-        // The other settings' variables as their defaults, whatever this process was given.
-        let tuning = [
-            "FOGPLANES_GPU_MATH",
-            "FOGPLANES_GPU_CHECKS",
-            "FOGPLANES_GPU_ITEM_PLANES",
-            "FOGPLANES_GPU_ORIENTATIONS",
-            "FOGPLANES_GPU_PIECES",
-        ];
-        let unset: Vec<&str> = tuning.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
-        let o = run_with(&args, env, &unset);
-        assert!(o.status.success(), "{name}: {}", text(&o).1);
-        let pixels = fogplanes::film::Film::load_exr(&out).unwrap().pixels;
-        (pixels, devices_of(&out))
+        let (pixels, _) = tuned_render(&d, name, &args, env);
+        (pixels, devices_of(&d.join(format!("{name}.exr"))))
     };
     let render = |name: &str, env: &[(&str, &str)]| render_with(name, &["cmis-exact"], env);
     for estimator in ["smis-exact", "smis-cosine"] {
@@ -364,22 +375,18 @@ fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {
     }
     let d = dir("joined");
     let render = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
-        let out = d.join(format!("{name}.exr"));
-        let mut args = vec!["render", SCENE, "--resolution", "40x24", "--planes", "2048", "--device", "gpu"];
+        let mut args = vec!["--resolution", "40x24", "--planes", "2048"];
         args.extend(extra);
-        args.extend(["-o", path(&out)]);
         let mut env = env.to_vec();
         env.push(("FOGPLANES_GPU_ITEM_PLANES", "8"));
-        let o = run_with(&args, &env, &["FOGPLANES_GPU_MATH", "FOGPLANES_GPU_CHECKS", "FOGPLANES_GPU_ORIENTATIONS"]);
-        let (out_text, err) = text(&o);
-        assert!(o.status.success(), "{name}: {err}");
+        let (pixels, out_text) = tuned_render(&d, name, &args, &env);
         let dispatches = out_text
             .split(" gather dispatches")
             .next()
             .and_then(|head| head.rsplit(' ').next())
             .and_then(|n| n.parse::<u64>().ok())
             .unwrap_or_else(|| panic!("{name}: no dispatches in {out_text}"));
-        (fogplanes::film::Film::load_exr(&out).unwrap().pixels, dispatches)
+        (pixels, dispatches)
     };
     // 48 ray sets: 48 pieces, binned in two batches of one round (at most 32 segments a batch).
     for (extra, env, pieces) in [
