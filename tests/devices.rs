@@ -42,12 +42,13 @@ fn text(o: &Output) -> (String, String) {
 }
 
 /// The variables of gpu/mod.rs `Tuning`, the choices fixed for measuring on a device.
-const TUNING: [&str; 5] = [
+const TUNING: [&str; 6] = [
     "FOGPLANES_GPU_MATH",
     "FOGPLANES_GPU_CHECKS",
     "FOGPLANES_GPU_ITEM_PLANES",
     "FOGPLANES_GPU_ORIENTATIONS",
     "FOGPLANES_GPU_PIECES",
+    "FOGPLANES_GPU_BINNING",
 ];
 
 /// A GPU render of the scene to `d/name.exr` with `args`, the tuning variables of `env` set and
@@ -400,6 +401,44 @@ fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {
         assert_eq!((one, each), (1, pieces), "{extra:?}: the gather dispatches joined and apart");
         assert!(joined.iter().any(|p| p.x > 0.0), "{extra:?}: a black image says nothing");
         assert!(joined == apart, "{extra:?}: the join changed the image");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// The binning's first tier (blocks of 4 x 4 tiles, whose lists give each tile its candidates)
+/// loses no (tile, plane) pair and adds none: the same image bits, hits and tests per hit as
+/// every plane tested at every tile (`FOGPLANES_GPU_BINNING=flat`). The images are sized so
+/// that blocks and tiles are cut by the image's edges (77 rows: 5 rows of tiles, 2 of blocks,
+/// the last of one tile; a strip of 1,000 x 20 pixels, 16 blocks across of 63 tiles), with a
+/// chunk's pieces joined (segments whose lists must stay in their order) and apart. It fails
+/// where a block's list misses a plane: checked by taking a row of tiles off each block
+/// (`BLOCK` 3 in `reaches_block`'s rows only), which lost hits and changed the image.
+#[test]
+fn the_binnings_blocks_give_each_tile_its_planes() {
+    if !have_gpu("the_binnings_blocks_give_each_tile_its_planes") {
+        return;
+    }
+    let d = dir("blocks");
+    // What the summary says of the hits: their count and the tests per hit.
+    let hits = |printed: &str| -> (u64, String) {
+        let (head, tail) = printed.split_once(" hits (").unwrap_or_else(|| panic!("no hits in {printed}"));
+        let n = head.rsplit(' ').next().and_then(|n| n.parse().ok()).unwrap_or_else(|| panic!("{printed}"));
+        let tests = tail.split(" tests per hit").next().and_then(|t| t.rsplit(' ').next()).unwrap_or_default();
+        (n, tests.to_string())
+    };
+    for (resolution, planes, pieces) in
+        [("150x77", "4096", "joined"), ("150x77", "4096", "apart"), ("1000x20", "2048", "joined")]
+    {
+        let args = ["--resolution", resolution, "--planes", planes, "-e", "smis-exact"];
+        let given = [("FOGPLANES_GPU_PIECES", pieces)];
+        let (blocked, printed) = tuned_render(&d, "blocks", &args, &given);
+        let flat_env = [given[0], ("FOGPLANES_GPU_BINNING", "flat")];
+        let (flat, flat_printed) = tuned_render(&d, "flat", &args, &flat_env);
+        assert!(flat_printed.contains("flat binning"), "{flat_printed}");
+        let (n, tests) = hits(&printed);
+        assert!(n > 0 && blocked.iter().any(|p| p.x > 0.0), "{resolution}: a black image says nothing");
+        assert_eq!((n, tests), hits(&flat_printed), "{resolution} {pieces}: hits and tests per hit, blocks and flat");
+        assert!(blocked == flat, "{resolution} {pieces}: the blocks changed the image");
     }
     let _ = std::fs::remove_dir_all(&d);
 }

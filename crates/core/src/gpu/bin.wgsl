@@ -1,13 +1,21 @@
 // Binning a batch of planes to 16 x 16 pixel tiles on the GPU (docs/gpu.md): count, prefix sum,
-// scatter, as tiled splatting rasterizers do, without atomics and without a sort.
+// scatter, as tiled splatting rasterizers do, without atomics and without a sort, in two tiers.
 //
 // Each plane comes with the tiles its screen polygon can touch, row of tiles by row (found from
 // the polygon by reach.wgsl before a chunk's first binning; gpu/reach.rs `tile_reach` is its
-// specification). `count`: a workgroup per tile counts the planes that reach the tile. `scan`:
+// specification). First to **blocks** of 4 x 4 tiles (`block_count`, `block_scan`,
+// `block_scatter`): a workgroup per block lists the batch's planes that reach one of its tiles,
+// in plane order. Then to tiles (`count`, `scan`, `scatter`): a workgroup per tile takes its
+// candidates from its block's list, not from every plane of the batch, so that the binning's
+// tests are about 3.5 times the (tile, plane) pairs on the benchmark rather than the tiles
+// times the planes (16.8 times the pairs at 640x360, and growing with the image).
+// `Params::blocked` = 0 skips the first tier (gpu/mod.rs `Tuning::flat_binning`, for measuring
+// it): every plane of the batch is then each tile's candidate. A tile's list is the same either
+// way. `count`: a workgroup per tile counts the planes that reach the tile. `scan`:
 // one workgroup turns the counts into each tile's first list entry and first work item (a tile
 // of n planes is cut into ceil(n / item_planes) work items), and writes the gather's grid of
 // work items, which it is dispatched from. `scatter`: a workgroup per tile
-// writes its list in plane order (a prefix sum of the flags of 256 planes at a time) and its
+// writes its list in plane order (a prefix sum of the flags of 256 candidates at a time) and its
 // work items. Plane order within a tile is what makes the gather's sums the same bits from run
 // to run; a scatter by atomic cursors would not keep it.
 //
@@ -17,8 +25,8 @@
 // own tiles' first entries and first items, a region of `offsets` and `item_offsets` of tiles + 1
 // words, for the scatter and for the reduction, which adds a tile's items batch by batch.
 //
-// Every loop of an invocation runs at most count / 256 (<= 64) or tiles / 256 times, well
-// within llvmpipe's silent limit of about 65,000 loop iterations per invocation.
+// Every loop of an invocation runs at most count / 256 (<= 64), tiles / 256 or blocks / 256
+// times, well within llvmpipe's silent limit of about 65,000 loop iterations per invocation.
 
 struct Params {
     width: u32,
@@ -35,7 +43,8 @@ struct Params {
     // a tile's planes of each segment are cut into work items of their own, which carry where
     // its ray set begins in the gathering's rays.
     segments: u32,
-    pad0: u32,
+    // 1: the tiles' candidates from their blocks' lists; 0: every plane of the batch.
+    blocked: u32,
     pad1: u32,
     pad2: u32,
     // Per segment its first plane (from the batch's first) and its ray set's first float, two
@@ -68,12 +77,23 @@ struct Params {
 // last pixel column, packed `first | last << 16`, first > last where none (gpu/reach.rs
 // `TileReach::groups`).
 @group(0) @binding(9) var<storage, read> groups: array<vec4<u32>>;
+// The blocks' lists: per block, per segment, its first entry (from `block_scan`, where
+// `block_count` wrote the counts), then the batch's end (blocks x segments + 1 words); from
+// there, per block its planes (indices into `reach`) that reach one of its tiles, segment by
+// segment in plane order.
+@group(0) @binding(10) var<storage, read_write> blocks: array<u32>;
 
 const THREADS: u32 = 256u;
 const TILE: u32 = 16u;
+// Tiles across and down a block (gpu/mod.rs `BLOCK_TILES`).
+const BLOCK: u32 = 4u;
 
 var<workgroup> scratch: array<u32, 256>;
 var<workgroup> scratch_items: array<u32, 256>;
+// A tile's candidates, read by one thread and given to all (loops with barriers inside need
+// bounds the whole workgroup is known to share).
+var<workgroup> shared_lo: u32;
+var<workgroup> shared_hi: u32;
 
 // Segment s's first plane (from the batch's first), its end, and its ray set's first float.
 fn seg_first(s: u32) -> u32 {
@@ -121,6 +141,57 @@ fn covers(plane: u32, tile: u32) -> bool {
     return (span & 0xffffu) <= col && col <= (span >> 16u);
 }
 
+// Blocks across, and in all.
+fn blocks_x() -> u32 {
+    return (params.tiles_x + BLOCK - 1u) / BLOCK;
+}
+fn block_count_all() -> u32 {
+    return blocks_x() * ((params.tiles / params.tiles_x + BLOCK - 1u) / BLOCK);
+}
+// Where the blocks' lists begin in `blocks` (after their offsets).
+fn block_lists() -> u32 {
+    return block_count_all() * params.segments + 1u;
+}
+// The block that holds tile `tile`.
+fn block_of(tile: u32) -> u32 {
+    return (tile / params.tiles_x / BLOCK) * blocks_x() + (tile % params.tiles_x) / BLOCK;
+}
+
+// Whether plane `plane` reaches one of block `block`'s tiles: a span of one of its rows of
+// tiles within the block meets the block's columns.
+fn reaches_block(plane: u32, block: u32) -> bool {
+    let r = reach[plane];
+    let row0 = (block / blocks_x()) * BLOCK;
+    let col0 = (block % blocks_x()) * BLOCK;
+    let lo = max(row0, r.x);
+    let hi = min(row0 + BLOCK, r.x + r.y);
+    var meets = false;
+    for (var row = lo; row < hi; row++) {
+        let span = spans[r.z + row - r.x];
+        let a = span & 0xffffu;
+        let b = span >> 16u;
+        meets = meets || (a <= b && a < col0 + BLOCK && b >= col0);
+    }
+    return meets;
+}
+
+// Segment s's candidates for tile `tile`, as a range of candidate indices ([`candidate`]):
+// its part of the tile's block's list, or (flat) the segment's planes.
+fn seg_candidates(tile: u32, s: u32) -> vec2<u32> {
+    if (params.blocked == 0u) {
+        return vec2<u32>(seg_first(s), seg_end(s));
+    }
+    let at = block_of(tile) * params.segments + s;
+    return vec2<u32>(blocks[at], blocks[at + 1u]);
+}
+// The plane of candidate index i.
+fn candidate(i: u32) -> u32 {
+    if (params.blocked == 0u) {
+        return params.first + i;
+    }
+    return blocks[block_lists() + i];
+}
+
 // The pixel columns of plane `plane` within tile `tile` (which it reaches) per group of pixel
 // rows, packed for `ranges`: each group's columns kept in the tile's, 15 and 0 (no column)
 // where they miss it.
@@ -159,9 +230,9 @@ fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     }
     for (var s = 0u; s < params.segments; s++) {
         var c = 0u;
-        let end = seg_end(s);
-        for (var i = seg_first(s) + li; i < end; i += THREADS) {
-            c += select(0u, 1u, covers(params.first + i, tile));
+        let range = seg_candidates(tile, s);
+        for (var i = range.x + li; i < range.y; i += THREADS) {
+            c += select(0u, 1u, covers(candidate(i), tile));
         }
         scratch[li] = c;
         for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
@@ -252,18 +323,103 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
         item_at += n_items;
         list_at += n;
     }
+    // The tile's candidates, all its segments', as bounds the workgroup shares.
+    if (li == 0u) {
+        shared_lo = seg_candidates(tile, 0u).x;
+        shared_hi = seg_candidates(tile, params.segments - 1u).y;
+    }
+    let lo = workgroupUniformLoad(&shared_lo);
+    let hi = workgroupUniformLoad(&shared_hi);
     var written = 0u;
-    for (var b = 0u; b < params.count; b += THREADS) {
+    for (var b = lo; b < hi; b += THREADS) {
         let i = b + li;
-        let hit = i < params.count && covers(params.first + min(i, params.count - 1u), tile);
+        let plane = candidate(min(i, hi - 1u));
+        let hit = i < hi && covers(plane, tile);
         let flag = select(0u, 1u, hit);
         workgroupBarrier();
         scratch[li] = flag;
         scan_scratch(li);
         if (hit) {
             let at = base + written + scratch[li] - 1u;
-            list[at] = params.first + i;
-            ranges[at] = ranges_in(params.first + i, tile);
+            list[at] = plane;
+            ranges[at] = ranges_in(plane, tile);
+        }
+        written += scratch[THREADS - 1u];
+    }
+}
+
+// The first tier: a workgroup per block counts each segment's planes that reach the block.
+@compute @workgroup_size(256, 1, 1)
+fn block_count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+               @builtin(local_invocation_index) li: u32) {
+    let block = wid.y * nwg.x + wid.x;
+    if (block >= block_count_all()) {
+        return;
+    }
+    for (var s = 0u; s < params.segments; s++) {
+        var c = 0u;
+        let end = seg_end(s);
+        for (var i = seg_first(s) + li; i < end; i += THREADS) {
+            c += select(0u, 1u, reaches_block(params.first + i, block));
+        }
+        scratch[li] = c;
+        for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
+            workgroupBarrier();
+            if (li < h) {
+                scratch[li] += scratch[li + h];
+            }
+        }
+        if (li == 0u) {
+            blocks[block * params.segments + s] = scratch[0];
+        }
+        workgroupBarrier();
+    }
+}
+
+// One workgroup turns the blocks' counts (block by block, segment by segment) into their first
+// entries, in place, and writes the batch's end after them.
+@compute @workgroup_size(256, 1, 1)
+fn block_scan(@builtin(local_invocation_index) li: u32) {
+    let n = block_count_all() * params.segments;
+    let per = (n + THREADS - 1u) / THREADS;
+    let lo = min(li * per, n);
+    let hi = min(lo + per, n);
+    var c = 0u;
+    for (var k = lo; k < hi; k++) {
+        c += blocks[k];
+    }
+    scratch[li] = c;
+    scan_scratch(li);
+    var run = scratch[li] - c;
+    for (var k = lo; k < hi; k++) {
+        let v = blocks[k];
+        blocks[k] = run;
+        run += v;
+    }
+    if (li == 0u) {
+        blocks[n] = scratch[THREADS - 1u];
+    }
+}
+
+// A workgroup per block writes its list: the batch's planes that reach it, in plane order (so
+// segment by segment), by a prefix sum of 256 flags at a time.
+@compute @workgroup_size(256, 1, 1)
+fn block_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+                 @builtin(local_invocation_index) li: u32) {
+    let block = wid.y * nwg.x + wid.x;
+    if (block >= block_count_all()) {
+        return;
+    }
+    let base = block_lists() + blocks[block * params.segments];
+    var written = 0u;
+    for (var b = 0u; b < params.count; b += THREADS) {
+        let i = b + li;
+        let hit = i < params.count && reaches_block(params.first + min(i, params.count - 1u), block);
+        workgroupBarrier();
+        scratch[li] = select(0u, 1u, hit);
+        scan_scratch(li);
+        if (hit) {
+            blocks[base + written + scratch[li] - 1u] = params.first + i;
         }
         written += scratch[THREADS - 1u];
     }

@@ -26,7 +26,8 @@ pub struct Gpu {
     max_binding: u64,
     pub(super) bin_layout: wgpu::BindGroupLayout,
     pub(super) gather_layout: wgpu::BindGroupLayout,
-    pub(super) bin: [wgpu::ComputePipeline; 3],
+    /// The binning's passes (`bin.wgsl`): the blocks' count, scan and scatter, then the tiles'.
+    pub(super) bin: [wgpu::ComputePipeline; 6],
     pub(super) rays_layout: wgpu::BindGroupLayout,
     pub(super) rays: wgpu::ComputePipeline,
     pub(super) reach_layout: wgpu::BindGroupLayout,
@@ -176,13 +177,14 @@ impl Gpu {
             compute_pipeline(&device, layout, module, entry, Default::default())
         };
         let (r, w) = (true, false);
-        let bin_layout = layout("bin", &[r, w, w, w, w, w, r, w, r]);
+        let bin_layout = layout("bin", &[r, w, w, w, w, w, r, w, r, w]);
         let gather_layout = layout("gather", &[r, r, r, r, r, r, r, w, w, r, w]);
         let rays_layout = layout("rays", &[r, w]);
         let reach_layout = layout("reach", &[r, r, w, w]);
         let (bin_module, bin_pipeline_layout) = (shader("bin.wgsl", BIN_WGSL), pipeline_layout(&bin_layout));
         let _s = crate::trace::span("pipelines made: bin, rays, reach");
-        let bin = ["count", "scan", "scatter"].map(|entry| pipeline(&bin_pipeline_layout, &bin_module, entry));
+        let bin = ["block_count", "block_scan", "block_scatter", "count", "scan", "scatter"]
+            .map(|entry| pipeline(&bin_pipeline_layout, &bin_module, entry));
         let rays = pipeline(&pipeline_layout(&rays_layout), &shader("rays.wgsl", RAYS_WGSL), "rays_main");
         let reach = pipeline(&pipeline_layout(&reach_layout), &shader("reach.wgsl", REACH_WGSL), "reach_rows");
         let gather_module = shader("gather.wgsl", GATHER_WGSL);
@@ -241,6 +243,12 @@ impl Gpu {
     /// ([`super::Tuning::pieces_apart`] not asked for).
     pub fn joins_pieces(&self) -> bool {
         !self.tuning.pieces_apart
+    }
+
+    /// Whether the binning tests every plane of a batch at every tile
+    /// ([`super::Tuning::flat_binning`]).
+    pub fn bins_flat(&self) -> bool {
+        self.tuning.flat_binning
     }
 
     /// The most bytes one buffer binding holds on this device.

@@ -139,6 +139,19 @@ impl std::str::FromStr for Device {
 /// Pixels on a tile's side: a tile is a workgroup of 16 x 16 threads, a pixel each.
 pub const TILE: u32 = 16;
 
+/// Tiles on a block's side: the binning's first tier lists a batch's planes per block of 4 x 4
+/// tiles (64 x 64 pixels), and each tile takes its candidates from its block's list
+/// (`bin.wgsl`). Counted on the benchmark's planes at 640x360 (16,384 planes), the two tiers
+/// test 3.5 times the (tile, plane) pairs with blocks of 4 x 4 tiles, 5.8 with 2 x 2 and 4.8
+/// with 8 x 8, where one tier (every plane at every tile) tests 16.8 times; at 1280x720, 3.2
+/// times against 21.
+pub const BLOCK_TILES: u32 = 4;
+
+/// The blocks of a `width x height` image.
+pub fn blocks(width: u32, height: u32) -> u64 {
+    (width.div_ceil(TILE).div_ceil(BLOCK_TILES) * height.div_ceil(TILE).div_ceil(BLOCK_TILES)) as u64
+}
+
 /// The most planes binned and gathered in one batch: the binning's loops then run at most 64
 /// times per invocation.
 pub const BATCH_PLANES: usize = 16_384;
@@ -200,9 +213,14 @@ pub const ORIENTATIONS_VARIABLE: &str = "FOGPLANES_GPU_ORIENTATIONS";
 /// for measuring the join.
 pub const PIECES_VARIABLE: &str = "FOGPLANES_GPU_PIECES";
 
+/// The variable that has every plane of a batch tested at every tile (`flat`), not the tiles'
+/// candidates taken from their blocks' lists (`blocks`, the default), for measuring the first
+/// tier of the binning.
+pub const BINNING_VARIABLE: &str = "FOGPLANES_GPU_BINNING";
+
 /// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
 /// transcendental functions, wgpu's runtime checks in the shaders, where K orientations are
-/// made, whether a chunk's pieces are gathered in one dispatch), fixed by variables so that `scripts/gpu_check.sh` can time each against the
+/// made, whether a chunk's pieces are gathered in one dispatch, the binning's tiers), fixed by variables so that `scripts/gpu_check.sh` can time each against the
 /// defaults in one process per setting. Read once where an adapter is resolved
 /// ([`adapter_at`]), which every front end's settings do once; a device is made with them and
 /// kept for the process. Any setting but the defaults is named after the adapter in the
@@ -246,6 +264,14 @@ pub struct Tuning {
     /// The same bits where the work items' size is fixed ([`ITEM_VARIABLE`]; tested on
     /// lavapipe), else within f32 rounding: a joined round's items are sized by all its pairs.
     pub pieces_apart: bool,
+    /// The binning in one tier ([`BINNING_VARIABLE`]` = flat`), as before the blocks: each
+    /// tile's workgroup tests every plane of its batch, rather than the planes its block of
+    /// [`BLOCK_TILES`] x [`BLOCK_TILES`] tiles lists (`bin.wgsl`). The tiles' lists are the same,
+    /// so the image is the same bits (tested on lavapipe); the first tier costs three more
+    /// passes a batch, each much shorter (on lavapipe, the binning of the benchmark's batches
+    /// a fifth to a quarter of the flat one's time; a GPU's passes are not bound by their work
+    /// alone: for a device to say).
+    pub flat_binning: bool,
 }
 
 impl Tuning {
@@ -274,7 +300,8 @@ impl Tuning {
         let unchecked = choice(CHECKS_VARIABLE, "on", "off")?;
         let orientation_table = choice(ORIENTATIONS_VARIABLE, "per-hit", "table")?;
         let pieces_apart = choice(PIECES_VARIABLE, "joined", "apart")?;
-        Ok(Tuning { item_planes, native_math, unchecked, orientation_table, pieces_apart })
+        let flat_binning = choice(BINNING_VARIABLE, "blocks", "flat")?;
+        Ok(Tuning { item_planes, native_math, unchecked, orientation_table, pieces_apart, flat_binning })
     }
 
     /// What a device made with these settings adds to its adapter's name, `None` for the
@@ -295,6 +322,9 @@ impl Tuning {
         }
         if self.pieces_apart {
             parts.push("pieces gathered apart".to_string());
+        }
+        if self.flat_binning {
+            parts.push("flat binning".to_string());
         }
         (!parts.is_empty()).then(|| parts.join(", "))
     }
@@ -345,11 +375,12 @@ mod tests {
             unchecked: true,
             orientation_table: true,
             pieces_apart: true,
+            flat_binning: true,
         };
         let label = all.label().unwrap();
         assert_eq!(
             label,
-            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart"
+            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart, flat binning"
         );
         let name = format!("gpu: {} (Vulkan, discrete GPU, tuned: {label})", "x".repeat(100));
         assert!(crate::options::Devices::from_names(vec![name]).is_ok());

@@ -9,7 +9,7 @@ use super::device::{GatherPipelines, Gpu, Patch, entry, grid};
 use super::polygons::{PolygonBuffers, Polygons};
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams};
-use super::scratch::ScratchBuffers;
+use super::scratch::{Need, ScratchBuffers};
 use super::sums::GpuSums;
 use super::{BATCH_SEGMENTS, ScreenReach, TILE, TIMESTAMPS, estimator_id};
 use crate::camera::{CameraRay, RayRowFn};
@@ -405,12 +405,19 @@ impl GpuPlanes {
         // The scratch buffers held only while they are found (grown if need be), so that the
         // pieces of a gathering record side by side: each piece's passes run after the piece's
         // before it on the queue, whichever buffers each one holds.
+        // A batch's blocks' lists hold at most its (tile, plane) pairs (a plane that reaches a
+        // block reaches one of its tiles), after an offset per block and segment.
+        let blocked = !gpu.bins_flat();
+        let block_words = if blocked { super::blocks(w, h) * max_segments + 1 + max_pairs } else { 0 };
         let s = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(
             &gpu.device,
-            (max_regions * (tiles as u64 + 1)).max(max_segments * tiles as u64),
-            max_pairs,
-            max_items,
-            orients,
+            Need {
+                regions: (max_regions * (tiles as u64 + 1)).max(max_segments * tiles as u64),
+                pairs: max_pairs,
+                items: max_items,
+                orients,
+                blocks: block_words,
+            },
         );
         // A round's gather parameters (its batches' regions) and bindings each.
         let groups: Vec<(wgpu::BindGroup, u64)> = self
@@ -426,6 +433,7 @@ impl GpuPlanes {
         let rounds = self.rounds.len();
         let queries = timestamp_queries(gpu, rounds);
         let tile_grid = grid(tiles as u64);
+        let block_grid = grid(super::blocks(w, h));
         // Every round in one command buffer (the passes run in order, the scratch buffers
         // reused from round to round).
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
@@ -475,15 +483,20 @@ impl GpuPlanes {
                     item_planes: round.item,
                     region: region as u32,
                     segments: batch.segments.len() as u32,
-                    pad: [0; 3],
+                    blocked: blocked as u32,
+                    pad: [0; 2],
                     segs,
                 };
                 let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
                 bytes_up += std::mem::size_of::<BinParams>() as u64;
                 let bin_group = bin_group(gpu, &bin_params, planes, &s);
-                steps.push((&gpu.bin[0], bin_group.clone(), Some(tile_grid)));
-                steps.push((&gpu.bin[1], bin_group.clone(), Some((1, 1))));
-                steps.push((&gpu.bin[2], bin_group, Some(tile_grid)));
+                // The blocks' lists first (count, scan, scatter), then the tiles' from them.
+                let tiers = [(&gpu.bin[..3], block_grid), (&gpu.bin[3..], tile_grid)];
+                for (passes, size) in tiers.into_iter().skip(!blocked as usize) {
+                    for (pass, size) in passes.iter().zip([size, (1, 1), size]) {
+                        steps.push((pass, bin_group.clone(), Some(size)));
+                    }
+                }
             }
             // The gather's work items as many as the last `scan` counts (`bin.wgsl` writes the grid).
             let gather_at = steps.len();
@@ -606,6 +619,7 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
             entry(7, &planes.polygons.spans),
             entry(8, &s.ranges),
             entry(9, &planes.polygons.groups),
+            entry(10, &s.blocks),
         ],
     })
 }

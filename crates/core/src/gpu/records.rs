@@ -51,7 +51,11 @@ pub(super) struct BinParams {
     pub(super) region: u32,
     /// Its segments (gpu/batches.rs `Batch::segments`), at most [`super::BATCH_SEGMENTS`].
     pub(super) segments: u32,
-    pub(super) pad: [u32; 3],
+    /// 1 where the tiles take their candidates from their blocks' lists (the first tier,
+    /// [`super::BLOCK_TILES`]), 0 where every plane of the batch is each tile's candidate
+    /// ([`super::Tuning::flat_binning`]).
+    pub(super) blocked: u32,
+    pub(super) pad: [u32; 2],
     /// Each segment's first plane (from the batch's first) and where its ray set begins in the
     /// gathering's rays (floats), two segments a row.
     pub(super) segs: [[u32; 4]; super::BATCH_SEGMENTS / 2],
@@ -144,8 +148,8 @@ mod tests {
             (
                 BIN_WGSL,
                 "Params",
-                fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, segments, pad,
-                    segs),
+                fields!(BinParams: width, height, tiles_x, tiles, count, first, item_planes, region, segments,
+                    blocked, pad, segs),
             ),
             (REACH_WGSL, "Params", fields!(ReachParams: width, height, planes, rows)),
             (
@@ -169,6 +173,7 @@ mod tests {
         // Where the GPU finds the reach, with the specification's tiles and groups, and slack.
         assert_eq!(wgsl_u32(REACH_WGSL, "GROUP_ROWS"), GROUP_ROWS, "pixel rows a group");
         assert_eq!(wgsl_u32(REACH_WGSL, "TILE"), TILE, "pixels a tile's side");
+        assert_eq!(wgsl_u32(BIN_WGSL, "BLOCK"), crate::gpu::BLOCK_TILES, "tiles a block's side");
         assert_eq!(wgsl_f32(REACH_WGSL, "SLACK") as f64, crate::gpu::SLACK, "the GPU's slack");
         let at = [offset_of!(CameraRay, dir), offset_of!(CameraRay, t0), offset_of!(CameraRay, t1)];
         assert_eq!(at, [0, 12, 16], "a ray's floats: x, y, z, t0, t1");
