@@ -142,6 +142,11 @@ if [ -n "$P_TUNED" ]; then
     # and the gather dispatches in the lines too. A joined round's work items are sized by all
     # its pairs: within f32 rounding, the same bits where the size is fixed.
     ab pieces FOGPLANES_GPU_PIECES joined apart
+    # The binning in two tiers, each tile's candidates from its block of 4 x 4 tiles (the
+    # default), or in one, every plane of a batch tested at every tile (FOGPLANES_GPU_BINNING=flat):
+    # the same lists, the same bits; the lines split the GPU time into the reach and the
+    # binning, and the gather.
+    ab binning FOGPLANES_GPU_BINNING blocks flat
 fi
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).
 for t in 1 2 4 8 all; do

@@ -5,7 +5,8 @@
 //! what crosses is defined once, beside the CPU's prepared plane: [`PlaneRecord`] per plane,
 //! the [`crate::occlusion::Occluder`]s as they are, and per plane its screen polygon
 //! ([`ScreenReach`]). On the GPU, `reach.wgsl` finds the tiles and pixels each polygon comes
-//! near (the specification: [`tile_reach`]), `bin.wgsl` bins the planes to 16 x 16 tiles
+//! near (the specification: [`tile_reach`]), `bin.wgsl` bins the planes to blocks of
+//! [`BLOCK_TILES`] x [`BLOCK_TILES`] tiles and from each block's list to its 16 x 16 tiles
 //! (count, prefix sum, scatter, in plane order) and cuts each tile's list into work items
 //! of at most [`item_planes`] planes; `gather.wgsl` gathers a work item per workgroup, each
 //! pixel's sum in registers, and adds a tile's items in order. The f32 sums come back and are
