@@ -411,8 +411,9 @@ fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {
 /// that blocks and tiles are cut by the image's edges (77 rows: 5 rows of tiles, 2 of blocks,
 /// the last of one tile; a strip of 1,000 x 20 pixels, 16 blocks across of 63 tiles), with a
 /// chunk's pieces joined (16 segments whose lists must stay in their order) and apart (one). It fails
-/// where a block's list misses a plane: checked by taking a row of tiles off each block
-/// (`BLOCK` 3 in `reaches_block`'s rows only), which lost hits and changed the image.
+/// where a block's list misses a plane: checked by taking a row of tiles off each block, and
+/// then a column (`BLOCK - 1` in `reaches_block`'s rows, then in its columns), each of which
+/// lost hits.
 #[test]
 fn the_binnings_blocks_give_each_tile_its_planes() {
     if !have_gpu("the_binnings_blocks_give_each_tile_its_planes") {
