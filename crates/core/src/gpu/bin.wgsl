@@ -14,8 +14,8 @@
 // way. `count`: a workgroup per tile counts the planes that reach the tile. `scan`:
 // one workgroup turns the counts into each tile's first list entry and first work item (a tile
 // of n planes is cut into ceil(n / item_planes) work items), and writes the gather's grid of
-// work items, which it is dispatched from. `scatter`: a workgroup per tile
-// writes its list in plane order (a prefix sum of the flags of 256 candidates at a time) and its
+// work items, which it is dispatched from. `scatter`: a workgroup per tile writes its list in
+// plane order (a prefix sum of the hits of 1,024 candidates at a time, 4 a thread) and its
 // work items. Plane order within a tile is what makes the gather's sums the same bits from run
 // to run; a scatter by atomic cursors would not keep it.
 //
@@ -87,6 +87,10 @@ const THREADS: u32 = 256u;
 const TILE: u32 = 16u;
 // Tiles across and down a block (gpu/mod.rs `BLOCK_TILES`).
 const BLOCK: u32 = 4u;
+// Consecutive candidates a thread flags per step of a scatter, and a step's candidates: one
+// prefix sum (8 rounds of barriers) serves 1,024 of them, not 256.
+const PER_THREAD: u32 = 4u;
+const STEP: u32 = THREADS * PER_THREAD;
 
 var<workgroup> scratch: array<u32, 256>;
 var<workgroup> scratch_items: array<u32, 256>;
@@ -331,18 +335,27 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     let lo = workgroupUniformLoad(&shared_lo);
     let hi = workgroupUniformLoad(&shared_hi);
     var written = 0u;
-    for (var b = lo; b < hi; b += THREADS) {
-        let i = b + li;
-        let plane = candidate(min(i, hi - 1u));
-        let hit = i < hi && covers(plane, tile);
-        let flag = select(0u, 1u, hit);
+    for (var b = lo; b < hi; b += STEP) {
+        let i0 = b + li * PER_THREAD;
+        var hits = 0u;
+        for (var k = 0u; k < PER_THREAD; k++) {
+            let i = i0 + k;
+            if (i < hi && covers(candidate(i), tile)) {
+                hits |= 1u << k;
+            }
+        }
+        let mine = countOneBits(hits);
         workgroupBarrier();
-        scratch[li] = flag;
+        scratch[li] = mine;
         scan_scratch(li);
-        if (hit) {
-            let at = base + written + scratch[li] - 1u;
-            list[at] = plane;
-            ranges[at] = ranges_in(plane, tile);
+        var at = base + written + scratch[li] - mine;
+        for (var k = 0u; k < PER_THREAD; k++) {
+            if ((hits & (1u << k)) != 0u) {
+                let plane = candidate(i0 + k);
+                list[at] = plane;
+                ranges[at] = ranges_in(plane, tile);
+                at++;
+            }
         }
         written += scratch[THREADS - 1u];
     }
@@ -402,7 +415,7 @@ fn block_scan(@builtin(local_invocation_index) li: u32) {
 }
 
 // A workgroup per block writes its list: the batch's planes that reach it, in plane order (so
-// segment by segment), by a prefix sum of 256 flags at a time.
+// segment by segment), by a prefix sum of the hits of 1,024 planes at a time.
 @compute @workgroup_size(256, 1, 1)
 fn block_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
                  @builtin(local_invocation_index) li: u32) {
@@ -412,14 +425,25 @@ fn block_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups)
     }
     let base = block_lists() + blocks[block * params.segments];
     var written = 0u;
-    for (var b = 0u; b < params.count; b += THREADS) {
-        let i = b + li;
-        let hit = i < params.count && reaches_block(params.first + min(i, params.count - 1u), block);
+    for (var b = 0u; b < params.count; b += STEP) {
+        let i0 = b + li * PER_THREAD;
+        var hits = 0u;
+        for (var k = 0u; k < PER_THREAD; k++) {
+            let i = i0 + k;
+            if (i < params.count && reaches_block(params.first + i, block)) {
+                hits |= 1u << k;
+            }
+        }
+        let mine = countOneBits(hits);
         workgroupBarrier();
-        scratch[li] = select(0u, 1u, hit);
+        scratch[li] = mine;
         scan_scratch(li);
-        if (hit) {
-            blocks[base + written + scratch[li] - 1u] = params.first + i;
+        var at = base + written + scratch[li] - mine;
+        for (var k = 0u; k < PER_THREAD; k++) {
+            if ((hits & (1u << k)) != 0u) {
+                blocks[at] = params.first + i0 + k;
+                at++;
+            }
         }
         written += scratch[THREADS - 1u];
     }
