@@ -1,8 +1,8 @@
 //! The GPU through wgpu: the device and queue of the adapter a render gathers on, its pipelines
 //! and bind group layouts, and the helpers every piece of work on it uses (error scopes,
 //! buffers, bind group entries, grids). The work itself is in the files beside it: the planes
-//! and their gathering ([`super::planes`]), the rays ([`super::rays`]), the sums
-//! ([`super::sums`]).
+//! ([`super::planes`], their buffers in [`super::plane_buffers`]), a gathering's passes
+//! ([`super::passes`]), the rays ([`super::rays`]), the sums ([`super::sums`]).
 
 use super::records::{BIN_WGSL, GATHER_WGSL, RAYS_WGSL, REACH_WGSL};
 use super::scratch::{self, Scratch};

@@ -28,6 +28,10 @@ mod batches;
 #[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
+mod passes;
+#[cfg(feature = "gpu")]
+mod plane_buffers;
+#[cfg(feature = "gpu")]
 mod planes;
 #[cfg(feature = "gpu")]
 mod polygons;
@@ -44,7 +48,9 @@ pub use adapter::{adapter, adapter_at, adapters};
 #[cfg(feature = "gpu")]
 pub use device::Gpu;
 #[cfg(feature = "gpu")]
-pub use planes::{GpuPlanes, Recorded};
+pub use passes::Recorded;
+#[cfg(feature = "gpu")]
+pub use planes::GpuPlanes;
 #[cfg(feature = "gpu")]
 pub use polygons::reach_on_gpu;
 #[cfg(feature = "gpu")]
@@ -192,7 +198,7 @@ pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
 }
 
 /// The timestamps of a round of a gathering, where the adapter has them: its first pass's
-/// start, its gather's start, its last pass's end (written by `planes.rs`, read in threes by
+/// start, its gather's start, its last pass's end (written by `passes.rs`, read in threes by
 /// `sums.rs`).
 pub const TIMESTAMPS: u32 = 3;
 

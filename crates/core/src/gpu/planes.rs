@@ -1,17 +1,16 @@
-//! A structure's planes on the GPU ([`GpuPlanes`]): cut into batches on the CPU, uploaded by
-//! their first gathering, and each gathering's passes (the planes' reach until it has been
-//! submitted; per batch, the binning's three, per round of batches the gather and its
-//! reduction: gpu/batches.rs) encoded into one
-//! command buffer kept with the sums.
+//! A structure's planes on the GPU ([`GpuPlanes`]): cut into batches and rounds on the CPU
+//! (gpu/batches.rs), joined with other pieces' where they are gathered together, uploaded by
+//! their first gathering (gpu/plane_buffers.rs), and each gathering's passes recorded
+//! (gpu/passes.rs) to be kept with the sums.
 
 use super::batches::{Batch, Bounds, Round, batches, merged, rounds};
-use super::device::{GatherPipelines, Gpu, Patch, entry, grid};
-use super::polygons::{PolygonBuffers, Polygons};
+use super::device::Gpu;
+use super::passes::{Gathering, Recorded};
+use super::plane_buffers::{PlaneBuffers, PlaneData};
+use super::polygons::Polygons;
 use super::rays::GpuRays;
-use super::records::{BinParams, GatherParams};
-use super::scratch::{Need, ScratchBuffers};
 use super::sums::GpuSums;
-use super::{BATCH_SEGMENTS, ScreenReach, TILE, TIMESTAMPS, estimator_id};
+use super::{ScreenReach, TILE, estimator_id};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -19,7 +18,7 @@ use crate::gather::{GatherContext, GatherStats, Phase, PlaneRecord};
 use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::weights::Weighting;
 use glam::Vec3;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
@@ -47,54 +46,6 @@ pub struct GpuPlanes {
     sigma_t: Vec3,
     grey: bool,
     phase: Phase,
-}
-
-/// A structure's planes as they cross: [`PlaneRecord`]s, the occluders, and their screen
-/// polygons.
-struct PlaneData {
-    planes: Vec<PlaneRecord>,
-    occluders: Vec<crate::occlusion::Occluder>,
-    polygons: Polygons,
-}
-
-/// [`PlaneData`] on the GPU.
-struct PlaneBuffers {
-    planes: wgpu::Buffer,
-    occluders: wgpu::Buffer,
-    polygons: PolygonBuffers,
-}
-
-impl PlaneBuffers {
-    /// `parts` uploaded one after another for a `width x height` image, each part's indices
-    /// made the whole's as they cross (its planes' occluders; its polygons' rows and vertices,
-    /// [`PolygonBuffers::upload`]), the parts themselves untouched.
-    fn upload(gpu: &Gpu, parts: &[&PlaneData], width: u32, height: u32) -> Result<Self> {
-        let usage = wgpu::BufferUsages::STORAGE;
-        // Where each part's occluders begin in the whole's.
-        let bases: Vec<u32> = parts
-            .iter()
-            .scan(0u32, |at, d| {
-                let base = *at;
-                *at += d.occluders.len() as u32;
-                Some(base)
-            })
-            .collect();
-        let shift = |i: usize, r: &mut PlaneRecord| {
-            (r.occluders_start, r.occluders_end) = (r.occluders_start + bases[i], r.occluders_end + bases[i]);
-        };
-        let shifted = bases.iter().any(|&b| b > 0);
-        let planes = parts.iter().map(|d| d.planes.as_slice());
-        Ok(PlaneBuffers {
-            planes: gpu.upload_parts("planes", planes, shifted.then_some(&shift as Patch<PlaneRecord>), usage)?,
-            occluders: gpu.upload_parts("occluders", parts.iter().map(|d| d.occluders.as_slice()), None, usage)?,
-            polygons: PolygonBuffers::upload(gpu, parts.iter().map(|d| &d.polygons), width, height)?,
-        })
-    }
-
-    /// The bytes that crossed for them.
-    fn bytes_up(&self) -> u64 {
-        self.planes.size() + self.occluders.size() + self.polygons.bytes_up()
-    }
 }
 
 impl GpuPlanes {
@@ -338,230 +289,27 @@ impl GpuPlanes {
             let _s = crate::trace::span("planes uploaded");
             self.buffers()?
         };
+        let gathering = Gathering {
+            gpu,
+            width: w,
+            height: h,
+            planes,
+            count: self.planes,
+            batches: &self.batches,
+            rounds: &self.rounds,
+            sigma_t: self.sigma_t,
+            grey: self.grey,
+            phase: self.phase,
+            reach_found: &self.reach_found,
+        };
         let mut recorded =
-            gpu.checked(|| self.encode(weighting, &pipelines, planes, (rays, rays_at), into, control))??;
+            gpu.checked(|| gathering.encode(weighting, &pipelines, (rays, rays_at), into, control))??;
         let dispatches = self.rounds.len() as u64;
         recorded.stats = GatherStats { upload_ns, bytes_crossed, dispatches, ..GatherStats::default() };
         progress();
         Ok(recorded)
     }
-
-    /// [`GpuPlanes::record`]'s work: its rounds one after another in one command buffer.
-    fn encode(
-        &self,
-        weighting: Weighting,
-        pipelines: &GatherPipelines,
-        planes: &PlaneBuffers,
-        (rays, rays_at): (&GpuRays, u32),
-        into: &GpuSums,
-        control: Control,
-    ) -> Result<Recorded> {
-        let _s = crate::trace::span("batches encoded");
-        let (gpu, w, h) = (&*self.gpu, self.width, self.height);
-        let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
-        let tiles = tiles_x * tiles_y;
-        let k = weighting.orientations.max(1);
-        let rotations: Vec<[f32; 2]> = (1..k)
-            .map(|i| i as f64 * std::f64::consts::PI / k as f64)
-            .map(|b| [b.cos() as f32, b.sin() as f32])
-            .collect();
-        let gather_params = GatherParams {
-            width: w,
-            height: h,
-            tiles_x,
-            tiles,
-            sigma_t: self.sigma_t.to_array(),
-            grey: self.grey as u32,
-            orientations: k,
-            inv_orientations: 1.0 / k as f32,
-            phase_h: self.phase.h,
-            phase_floor: self.phase.floor,
-            phase_inv_numerator: self.phase.inv_numerator,
-            phase_hg: !self.phase.is_isotropic() as u32,
-            planes: self.planes,
-            regions: 0,
-        };
-        let storage = wgpu::BufferUsages::STORAGE;
-        let uniform = wgpu::BufferUsages::UNIFORM;
-        let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), storage);
-        let max_pairs = self.rounds.iter().map(|r| r.pairs).max().unwrap_or(0);
-        let max_items = self.rounds.iter().map(|r| r.items).max().unwrap_or(0);
-        let max_regions = self.rounds.iter().map(|r| r.batches.len() as u64).max().unwrap_or(0);
-        let max_segments = self.batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
-        // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
-        // K - 1 further ones, made once here (`orient`) rather than at each hit: 16 bytes each,
-        // within one binding (a piece is at most a chunk, 16,384 planes: 16.5 MB at K = 64).
-        let orients = if pipelines.orient.is_some() { self.planes as u64 * (k as u64 - 1) } else { 0 };
-        if orients * 16 > gpu.max_binding() {
-            return Err(Error::Device(format!(
-                "the table of {} planes' {} orientations takes {} bytes, more than the GPU binds at once ({} bytes): gather them with {}=per-hit",
-                self.planes,
-                k,
-                orients * 16,
-                gpu.max_binding(),
-                super::ORIENTATIONS_VARIABLE
-            )));
-        }
-        // The scratch buffers held only while they are found (grown if need be), so that the
-        // pieces of a gathering record side by side: each piece's passes run after the piece's
-        // before it on the queue, whichever buffers each one holds.
-        // A batch's blocks' lists hold at most its (tile, plane) pairs (a plane that reaches a
-        // block reaches one of its tiles), after an offset per block and segment.
-        let blocked = !gpu.bins_flat();
-        let block_words = if blocked { super::blocks(w, h) * max_segments + 1 + max_pairs } else { 0 };
-        let s = self.gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(
-            &gpu.device,
-            Need {
-                regions: (max_regions * (tiles as u64 + 1)).max(max_segments * tiles as u64),
-                pairs: max_pairs,
-                items: max_items,
-                orients,
-                blocks: block_words,
-            },
-        );
-        // A round's gather parameters (its batches' regions) and bindings each.
-        let groups: Vec<(wgpu::BindGroup, u64)> = self
-            .rounds
-            .iter()
-            .map(|r| {
-                let round_params = GatherParams { regions: r.batches.len() as u32, ..gather_params };
-                let params = gpu.upload("gather params", bytemuck::bytes_of(&round_params), uniform);
-                let group = gather_group(gpu, &params, planes, rays, &rotations_buf, &s, &into.image);
-                (group, std::mem::size_of::<GatherParams>() as u64)
-            })
-            .collect();
-        let rounds = self.rounds.len();
-        let queries = timestamp_queries(gpu, rounds);
-        let tile_grid = grid(tiles as u64);
-        let block_grid = grid(super::blocks(w, h));
-        // Every round in one command buffer (the passes run in order, the scratch buffers
-        // reused from round to round).
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        // The planes' reach, until a submission has found it (once for `into`'s work), timed
-        // with the first round.
-        let reach_first = !self.reach_found.load(Ordering::Acquire)
-            && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, &self.reach_found));
-        // The first pass's start is the first round's (`starts` below).
-        let first_pass = |first: bool| {
-            queries.as_ref().filter(|_| first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
-                query_set: set,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: None,
-            })
-        };
-        if reach_first {
-            planes.polygons.encode(gpu, &mut encoder, first_pass(true));
-        }
-        // The planes' orientations, timed with the first round too.
-        if let Some(orient) = pipelines.orient.as_ref().filter(|_| orients > 0) {
-            let timestamp_writes = first_pass(!reach_first);
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
-            pass.set_pipeline(orient);
-            pass.set_bind_group(0, &groups[0].0, &[]);
-            let (x, y) = grid(orients.div_ceil(256));
-            pass.dispatch_workgroups(x, y, 1);
-        }
-        let timed_before = reach_first || orients > 0;
-        let mut bytes_up = std::mem::size_of_val(rotations.as_slice()) as u64;
-        for (r, (round, (gather_group, params_bytes))) in self.rounds.iter().zip(&groups).enumerate() {
-            control.check()?;
-            bytes_up += params_bytes;
-            // Each batch binned into its region, then the round's items gathered at once.
-            let mut steps: Vec<Step> = Vec::new();
-            for (region, batch) in self.batches[round.batches.clone()].iter().enumerate() {
-                let mut segs = [[0u32; 4]; BATCH_SEGMENTS / 2];
-                for (k, &(first, rays)) in batch.segments.iter().enumerate() {
-                    segs[k / 2][2 * (k % 2)..2 * (k % 2) + 2].copy_from_slice(&[first, rays_at + rays]);
-                }
-                let bin_params = BinParams {
-                    width: w,
-                    height: h,
-                    tiles_x,
-                    tiles,
-                    count: batch.count,
-                    first: batch.first,
-                    item_planes: round.item,
-                    region: region as u32,
-                    segments: batch.segments.len() as u32,
-                    blocked: blocked as u32,
-                    pad: [0; 2],
-                    segs,
-                };
-                let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), uniform);
-                bytes_up += std::mem::size_of::<BinParams>() as u64;
-                let bin_group = bin_group(gpu, &bin_params, planes, &s);
-                // The blocks' lists first (count, scan, scatter), then the tiles' from them.
-                let tiers = [(&gpu.bin[..3], block_grid), (&gpu.bin[3..], tile_grid)];
-                for (passes, size) in tiers.into_iter().skip(!blocked as usize) {
-                    for (pass, size) in passes.iter().zip([size, (1, 1), size]) {
-                        steps.push((pass, bin_group.clone(), Some(size)));
-                    }
-                }
-            }
-            // The gather's work items as many as the last `scan` counts (`bin.wgsl` writes the grid).
-            let gather_at = steps.len();
-            steps.push((&pipelines.gather, gather_group.clone(), None));
-            steps.push((&pipelines.reduce, gather_group.clone(), Some((tiles_x, tiles_y))));
-            let last = steps.len() - 1;
-            for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
-                // Round r's passes timed from its first (round 0's from the reach before it, if
-                // any) to its last, and its gather from its start: where the GPU's time goes,
-                // the reach and the binning or the gather and its reduction.
-                let starts = k == 0 && !(r == 0 && timed_before);
-                let at = TIMESTAMPS * r as u32;
-                let begins = if k == gather_at { Some(at + 1) } else { starts.then_some(at) };
-                let ends = (k == last).then_some(at + 2);
-                let timestamp_writes =
-                    queries.as_ref().filter(|_| begins.is_some() || ends.is_some()).map(|(set, _, _)| {
-                        wgpu::ComputePassTimestampWrites {
-                            query_set: set,
-                            beginning_of_pass_write_index: begins,
-                            end_of_pass_write_index: ends,
-                        }
-                    });
-                let mut pass =
-                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &group, &[]);
-                match size {
-                    Some((x, y)) => pass.dispatch_workgroups(x, y, 1),
-                    None => pass.dispatch_workgroups_indirect(&s.item_offsets, 0),
-                }
-            }
-            if let Some((set, resolve, readback)) = queries.as_ref().filter(|_| r + 1 == rounds) {
-                let queries = TIMESTAMPS * rounds as u32;
-                encoder.resolve_query_set(set, 0..queries, resolve, 0);
-                encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 8 * queries as u64);
-            }
-        }
-        Ok(Recorded {
-            commands: Some(encoder.finish()),
-            timestamps: queries.map(|(_, _, readback)| readback),
-            reach: reach_first.then(|| self.reach_found.clone()),
-            bytes_up,
-            stats: GatherStats::default(),
-        })
-    }
 }
-
-/// A piece's gathering recorded ([`GpuPlanes::record`]), to add to its sums' work in order
-/// ([`GpuSums::add`]): nothing where the piece has no planes.
-#[derive(Default)]
-pub struct Recorded {
-    pub(super) commands: Option<wgpu::CommandBuffer>,
-    /// Its timestamps' read-back, where the adapter has them.
-    pub(super) timestamps: Option<wgpu::Buffer>,
-    /// The flag its reach pass sets once submitted, where it records one.
-    pub(super) reach: Option<Arc<AtomicBool>>,
-    /// Bytes of its parameters, uploaded.
-    pub(super) bytes_up: u64,
-    /// Its planes' upload (time and bytes).
-    pub(super) stats: GatherStats,
-}
-
-/// A pass of a round: its pipeline, its bindings, and its grid of workgroups (`None`: the
-/// gather's, as `bin.wgsl`'s `scan` counted the round's work items).
-type Step<'a> = (&'a wgpu::ComputePipeline, wgpu::BindGroup, Option<(u32, u32)>);
 
 /// The bounds of a gathering's batches and rounds on `gpu` for a `width x height` image.
 fn bounds(gpu: &Gpu, width: u32, height: u32) -> Bounds {
@@ -571,75 +319,4 @@ fn bounds(gpu: &Gpu, width: u32, height: u32) -> Bounds {
         fixed: gpu.fixed_item_planes(),
         max_binding: gpu.max_binding(),
     }
-}
-
-/// The gather's bindings (`gather.wgsl`) for one round's parameters.
-fn gather_group(
-    gpu: &Gpu,
-    params: &wgpu::Buffer,
-    planes: &PlaneBuffers,
-    rays: &GpuRays,
-    rotations: &wgpu::Buffer,
-    s: &ScratchBuffers,
-    image: &wgpu::Buffer,
-) -> wgpu::BindGroup {
-    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("gather"),
-        layout: &gpu.gather_layout,
-        entries: &[
-            entry(0, params),
-            entry(1, &planes.planes),
-            entry(2, &planes.occluders),
-            entry(3, &rays.buffer),
-            entry(4, rotations),
-            entry(5, &s.list),
-            entry(6, &s.item_offsets),
-            entry(7, &s.items),
-            entry(8, &s.partial),
-            entry(9, image),
-            entry(10, &s.ranges),
-            entry(11, &s.orients),
-        ],
-    })
-}
-
-/// The binning's bindings (`bin.wgsl`) for one batch's parameters.
-fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &ScratchBuffers) -> wgpu::BindGroup {
-    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("bin"),
-        layout: &gpu.bin_layout,
-        entries: &[
-            entry(0, params),
-            entry(1, &planes.polygons.reach),
-            entry(2, &s.tile_counts),
-            entry(3, &s.offsets),
-            entry(4, &s.item_offsets),
-            entry(5, &s.list),
-            entry(6, &s.items),
-            entry(7, &planes.polygons.spans),
-            entry(8, &s.ranges),
-            entry(9, &planes.polygons.groups),
-            entry(10, &s.blocks),
-        ],
-    })
-}
-
-/// [`TIMESTAMPS`] a round, where the adapter has them, read when the sums are; else (or for a
-/// gathering of more rounds than a query set of wgpu's 4,096 queries takes) the sums are timed
-/// by the wall time from their first submission to their reading back.
-fn timestamp_queries(gpu: &Gpu, rounds: usize) -> Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)> {
-    let count = TIMESTAMPS as usize * rounds;
-    (gpu.has_timestamps() && count <= 4096).then(|| {
-        let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-            label: Some("gather time"),
-            ty: wgpu::QueryType::Timestamp,
-            count: count as u32,
-        });
-        let bytes = 8 * count as u64;
-        let copy_src = wgpu::BufferUsages::COPY_SRC;
-        let resolve = gpu.scratch("timestamps", bytes, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
-        let readback =
-            gpu.scratch("timestamps read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-        (set, resolve, readback)
-    })
 }

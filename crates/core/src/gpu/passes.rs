@@ -1,0 +1,380 @@
+//! A gathering's passes, encoded into one command buffer that is kept with the sums
+//! ([`Gathering::encode`]): the planes' reach until a submission has found it, the
+//! orientations' table where it is asked for, per batch the binning's two tiers (`bin.wgsl`),
+//! and per round of batches (gpu/batches.rs) the gather and its reduction (`gather.wgsl`),
+//! timed by the GPU's timestamps where it has them.
+
+use super::batches::{Batch, Round};
+use super::device::{GatherPipelines, Gpu, entry, grid};
+use super::plane_buffers::PlaneBuffers;
+use super::rays::GpuRays;
+use super::records::{BinParams, GatherParams};
+use super::scratch::{Need, ScratchBuffers};
+use super::sums::GpuSums;
+use super::{BATCH_SEGMENTS, TILE, TIMESTAMPS};
+use crate::control::Control;
+use crate::error::{Error, Result};
+use crate::gather::{GatherStats, Phase};
+use crate::weights::Weighting;
+use glam::Vec3;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// What a gathering's passes are encoded from: a structure's planes on the GPU, how they are
+/// cut into batches and rounds, and the medium they are gathered in.
+pub(super) struct Gathering<'a> {
+    pub(super) gpu: &'a Gpu,
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) planes: &'a PlaneBuffers,
+    /// The planes' count.
+    pub(super) count: u32,
+    pub(super) batches: &'a [Batch],
+    pub(super) rounds: &'a [Round],
+    pub(super) sigma_t: Vec3,
+    pub(super) grey: bool,
+    pub(super) phase: Phase,
+    /// Set once a submission has found the planes' reach ([`GpuSums`] sets it as it submits).
+    pub(super) reach_found: &'a Arc<AtomicBool>,
+}
+
+/// A piece's gathering recorded ([`super::GpuPlanes::record`]), to add to its sums' work in
+/// order ([`GpuSums::add`]): nothing where the piece has no planes.
+#[derive(Default)]
+pub struct Recorded {
+    pub(super) commands: Option<wgpu::CommandBuffer>,
+    /// Its timestamps' read-back, where the adapter has them.
+    pub(super) timestamps: Option<wgpu::Buffer>,
+    /// The flag its reach pass sets once submitted, where it records one.
+    pub(super) reach: Option<Arc<AtomicBool>>,
+    /// Bytes of its parameters, uploaded.
+    pub(super) bytes_up: u64,
+    /// Its planes' upload (time and bytes).
+    pub(super) stats: GatherStats,
+}
+
+/// A pass of a round: its pipeline, its bindings, and its grid of workgroups (`None`: the
+/// gather's, as `bin.wgsl`'s `scan` counted the round's work items).
+type Step<'a> = (&'a wgpu::ComputePipeline, wgpu::BindGroup, Option<(u32, u32)>);
+
+/// A timestamp query set with its resolve and read-back buffers.
+type Queries = (wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer);
+
+impl Gathering<'_> {
+    /// The gathering along the ray set that begins `rays_at` floats into `rays` (a join's
+    /// parts' sets where each part's begins after that) with `weighting`, into `into`: its
+    /// rounds one after another in one command buffer, `control` checked before each.
+    pub(super) fn encode(
+        &self,
+        weighting: Weighting,
+        pipelines: &GatherPipelines,
+        (rays, rays_at): (&GpuRays, u32),
+        into: &GpuSums,
+        control: Control,
+    ) -> Result<Recorded> {
+        let _s = crate::trace::span("batches encoded");
+        let gpu = self.gpu;
+        let k = weighting.orientations.max(1);
+        // beta_k - alpha for k = 1 .. K - 1 (`gather.wgsl`'s `rotations`).
+        let rotations: Vec<[f32; 2]> = (1..k)
+            .map(|i| i as f64 * std::f64::consts::PI / k as f64)
+            .map(|b| [b.cos() as f32, b.sin() as f32])
+            .collect();
+        let rotations_buf = gpu.upload("rotations", bytemuck::cast_slice(&rotations), wgpu::BufferUsages::STORAGE);
+        // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
+        // K - 1 further ones, made once here (`orient`) rather than at each hit.
+        let orients = if pipelines.orient.is_some() { self.count as u64 * (k as u64 - 1) } else { 0 };
+        let s = self.scratch(k, orients)?;
+        // A round's gather parameters (its batches' regions) and bindings each.
+        let gather_params = self.gather_params(k);
+        let groups: Vec<wgpu::BindGroup> = self
+            .rounds
+            .iter()
+            .map(|r| {
+                let round_params = GatherParams { regions: r.batches.len() as u32, ..gather_params };
+                let params =
+                    gpu.upload("gather params", bytemuck::bytes_of(&round_params), wgpu::BufferUsages::UNIFORM);
+                gather_group(gpu, &params, self.planes, rays, &rotations_buf, &s, &into.image)
+            })
+            .collect();
+        let queries = timestamp_queries(gpu, self.rounds.len());
+        // Every round in one command buffer (the passes run in order, the scratch buffers
+        // reused from round to round).
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        // The planes' reach, until a submission has found it (once for `into`'s work), timed
+        // with the first round.
+        let reach_first = !self.reach_found.load(Ordering::Acquire)
+            && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, self.reach_found));
+        // The first pass's start is the first round's (`starts` in `encode_round`).
+        let first_pass = |first: bool| {
+            queries.as_ref().filter(|_| first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: None,
+            })
+        };
+        if reach_first {
+            self.planes.polygons.encode(gpu, &mut encoder, first_pass(true));
+        }
+        // The planes' orientations, timed with the first round too.
+        if let Some(orient) = pipelines.orient.as_ref().filter(|_| orients > 0) {
+            let timestamp_writes = first_pass(!reach_first);
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+            pass.set_pipeline(orient);
+            pass.set_bind_group(0, &groups[0], &[]);
+            let (x, y) = grid(orients.div_ceil(256));
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        let timed_before = reach_first || orients > 0;
+        let mut bytes_up = std::mem::size_of_val(rotations.as_slice()) as u64;
+        for (r, (round, gather_group)) in self.rounds.iter().zip(&groups).enumerate() {
+            control.check()?;
+            bytes_up += std::mem::size_of::<GatherParams>() as u64;
+            let steps = self.round_steps(round, pipelines, gather_group, &s, rays_at, &mut bytes_up);
+            let timed_from_first = !(r == 0 && timed_before);
+            encode_round(&mut encoder, steps, queries.as_ref(), r as u32, timed_from_first, &s);
+        }
+        if let Some((set, resolve, readback)) = queries.as_ref() {
+            let queries = TIMESTAMPS * self.rounds.len() as u32;
+            encoder.resolve_query_set(set, 0..queries, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 8 * queries as u64);
+        }
+        Ok(Recorded {
+            commands: Some(encoder.finish()),
+            timestamps: queries.map(|(_, _, readback)| readback),
+            reach: reach_first.then(|| self.reach_found.clone()),
+            bytes_up,
+            stats: GatherStats::default(),
+        })
+    }
+
+    /// Tiles across and down the image.
+    fn tiles(&self) -> (u32, u32) {
+        (self.width.div_ceil(TILE), self.height.div_ceil(TILE))
+    }
+
+    /// `gather.wgsl`'s parameters with K orientations, for a round of one batch.
+    fn gather_params(&self, k: u32) -> GatherParams {
+        let (tiles_x, tiles_y) = self.tiles();
+        GatherParams {
+            width: self.width,
+            height: self.height,
+            tiles_x,
+            tiles: tiles_x * tiles_y,
+            sigma_t: self.sigma_t.to_array(),
+            grey: self.grey as u32,
+            orientations: k,
+            inv_orientations: 1.0 / k as f32,
+            phase_h: self.phase.h,
+            phase_floor: self.phase.floor,
+            phase_inv_numerator: self.phase.inv_numerator,
+            phase_hg: !self.phase.is_isotropic() as u32,
+            planes: self.count,
+            regions: 0,
+        }
+    }
+
+    /// The scratch buffers this gathering needs, with `orients` (plane, orientation) rows of the
+    /// table of K orientations: held only while they are found (grown if need be), so that the
+    /// pieces of a gathering record side by side (each piece's passes run after the piece's
+    /// before it on the queue, whichever buffers each one holds). A table larger than one
+    /// binding is refused in one line.
+    fn scratch(&self, k: u32, orients: u64) -> Result<ScratchBuffers> {
+        let gpu = self.gpu;
+        // 16 bytes a row, within one binding (a piece is at most a chunk, 16,384 planes: 16.5
+        // MB at K = 64).
+        if orients * 16 > gpu.max_binding() {
+            return Err(Error::Device(format!(
+                "the table of {} planes' {} orientations takes {} bytes, more than the GPU binds at once ({} bytes): gather them with {}=per-hit",
+                self.count,
+                k,
+                orients * 16,
+                gpu.max_binding(),
+                super::ORIENTATIONS_VARIABLE
+            )));
+        }
+        let tiles = {
+            let (x, y) = self.tiles();
+            x as u64 * y as u64
+        };
+        let max_pairs = self.rounds.iter().map(|r| r.pairs).max().unwrap_or(0);
+        let max_items = self.rounds.iter().map(|r| r.items).max().unwrap_or(0);
+        let max_regions = self.rounds.iter().map(|r| r.batches.len() as u64).max().unwrap_or(0);
+        let max_segments = self.batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
+        // A batch's blocks' lists hold at most its (tile, plane) pairs (a plane that reaches a
+        // block reaches one of its tiles), after an offset per block and segment.
+        let blocks =
+            if gpu.bins_flat() { 0 } else { super::blocks(self.width, self.height) * max_segments + 1 + max_pairs };
+        let need = Need {
+            regions: (max_regions * (tiles + 1)).max(max_segments * tiles),
+            pairs: max_pairs,
+            items: max_items,
+            orients,
+            blocks,
+        };
+        Ok(gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(&gpu.device, need))
+    }
+
+    /// A round's passes: each of its batches binned into its region (the blocks' tier first,
+    /// unless the binning is flat), then the round's work items gathered at once and added to
+    /// the image by the reduction. The bytes of the batches' parameters are added to `bytes_up`.
+    fn round_steps<'p>(
+        &self,
+        round: &Round,
+        pipelines: &'p GatherPipelines,
+        gather_group: &wgpu::BindGroup,
+        s: &ScratchBuffers,
+        rays_at: u32,
+        bytes_up: &mut u64,
+    ) -> Vec<Step<'p>>
+    where
+        Self: 'p,
+    {
+        let gpu = self.gpu;
+        let (tiles_x, tiles_y) = self.tiles();
+        let blocked = !gpu.bins_flat();
+        let (tile_grid, block_grid) =
+            (grid(tiles_x as u64 * tiles_y as u64), grid(super::blocks(self.width, self.height)));
+        let mut steps: Vec<Step> = Vec::new();
+        for (region, batch) in self.batches[round.batches.clone()].iter().enumerate() {
+            let mut segs = [[0u32; 4]; BATCH_SEGMENTS / 2];
+            for (k, &(first, rays)) in batch.segments.iter().enumerate() {
+                segs[k / 2][2 * (k % 2)..2 * (k % 2) + 2].copy_from_slice(&[first, rays_at + rays]);
+            }
+            let bin_params = BinParams {
+                width: self.width,
+                height: self.height,
+                tiles_x,
+                tiles: tiles_x * tiles_y,
+                count: batch.count,
+                first: batch.first,
+                item_planes: round.item,
+                region: region as u32,
+                segments: batch.segments.len() as u32,
+                blocked: blocked as u32,
+                pad: [0; 2],
+                segs,
+            };
+            let bin_params = gpu.upload("bin params", bytemuck::bytes_of(&bin_params), wgpu::BufferUsages::UNIFORM);
+            *bytes_up += std::mem::size_of::<BinParams>() as u64;
+            let bin_group = bin_group(gpu, &bin_params, self.planes, s);
+            // The blocks' lists first (count, scan, scatter), then the tiles' from them.
+            let tiers = [(&gpu.bin[..3], block_grid), (&gpu.bin[3..], tile_grid)];
+            for (passes, size) in tiers.into_iter().skip(!blocked as usize) {
+                for (pass, size) in passes.iter().zip([size, (1, 1), size]) {
+                    steps.push((pass, bin_group.clone(), Some(size)));
+                }
+            }
+        }
+        // The gather's work items as many as the last `scan` counts (`bin.wgsl` writes the grid).
+        steps.push((&pipelines.gather, gather_group.clone(), None));
+        steps.push((&pipelines.reduce, gather_group.clone(), Some((tiles_x, tiles_y))));
+        steps
+    }
+}
+
+/// Round `r`'s passes encoded: timed from its first (unless `timed_from_first` is false: round
+/// 0's from the reach or the orientations before it) to its last, and its gather from its
+/// start, so that the summary splits the GPU's time into the reach and the binning, and the
+/// gather and its reduction.
+fn encode_round(
+    encoder: &mut wgpu::CommandEncoder,
+    steps: Vec<Step>,
+    queries: Option<&Queries>,
+    r: u32,
+    timed_from_first: bool,
+    s: &ScratchBuffers,
+) {
+    let last = steps.len() - 1;
+    let gather_at = steps.len() - 2;
+    for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
+        let at = TIMESTAMPS * r;
+        let begins = if k == gather_at { Some(at + 1) } else { (k == 0 && timed_from_first).then_some(at) };
+        let ends = (k == last).then_some(at + 2);
+        let timestamp_writes = queries.filter(|_| begins.is_some() || ends.is_some()).map(|(set, _, _)| {
+            wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: begins,
+                end_of_pass_write_index: ends,
+            }
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        match size {
+            Some((x, y)) => pass.dispatch_workgroups(x, y, 1),
+            None => pass.dispatch_workgroups_indirect(&s.item_offsets, 0),
+        }
+    }
+}
+
+/// The gather's bindings (`gather.wgsl`) for one round's parameters.
+fn gather_group(
+    gpu: &Gpu,
+    params: &wgpu::Buffer,
+    planes: &PlaneBuffers,
+    rays: &GpuRays,
+    rotations: &wgpu::Buffer,
+    s: &ScratchBuffers,
+    image: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("gather"),
+        layout: &gpu.gather_layout,
+        entries: &[
+            entry(0, params),
+            entry(1, &planes.planes),
+            entry(2, &planes.occluders),
+            entry(3, &rays.buffer),
+            entry(4, rotations),
+            entry(5, &s.list),
+            entry(6, &s.item_offsets),
+            entry(7, &s.items),
+            entry(8, &s.partial),
+            entry(9, image),
+            entry(10, &s.ranges),
+            entry(11, &s.orients),
+        ],
+    })
+}
+
+/// The binning's bindings (`bin.wgsl`) for one batch's parameters.
+fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &ScratchBuffers) -> wgpu::BindGroup {
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("bin"),
+        layout: &gpu.bin_layout,
+        entries: &[
+            entry(0, params),
+            entry(1, &planes.polygons.reach),
+            entry(2, &s.tile_counts),
+            entry(3, &s.offsets),
+            entry(4, &s.item_offsets),
+            entry(5, &s.list),
+            entry(6, &s.items),
+            entry(7, &planes.polygons.spans),
+            entry(8, &s.ranges),
+            entry(9, &planes.polygons.groups),
+            entry(10, &s.blocks),
+        ],
+    })
+}
+
+/// [`TIMESTAMPS`] a round, where the adapter has them, read when the sums are; else (or for a
+/// gathering of more rounds than a query set of wgpu's 4,096 queries takes) the sums are timed
+/// by the wall time from their first submission to their reading back.
+fn timestamp_queries(gpu: &Gpu, rounds: usize) -> Option<Queries> {
+    let count = TIMESTAMPS as usize * rounds;
+    (gpu.has_timestamps() && count <= 4096).then(|| {
+        let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("gather time"),
+            ty: wgpu::QueryType::Timestamp,
+            count: count as u32,
+        });
+        let bytes = 8 * count as u64;
+        let copy_src = wgpu::BufferUsages::COPY_SRC;
+        let resolve = gpu.scratch("timestamps", bytes, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
+        let readback =
+            gpu.scratch("timestamps read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+        (set, resolve, readback)
+    })
+}
