@@ -410,7 +410,8 @@ fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {
 /// every plane tested at every tile (`FOGPLANES_GPU_BINNING=flat`). The images are sized so
 /// that blocks and tiles are cut by the image's edges (77 rows: 5 rows of tiles, 2 of blocks,
 /// the last of one tile; a strip of 1,000 x 20 pixels, 16 blocks across of 63 tiles), with a
-/// chunk's pieces joined (16 segments whose lists must stay in their order) and apart (one). It fails
+/// chunk's pieces joined (16 segments whose lists must stay in their order; 48 in two batches
+/// of a round) and apart (one). It fails
 /// where a block's list misses a plane: checked by taking a row of tiles off each block, and
 /// then a column (`BLOCK - 1` in `reaches_block`'s rows, then in its columns), each of which
 /// lost hits.
@@ -427,13 +428,20 @@ fn the_binnings_blocks_give_each_tile_its_planes() {
         let tests = tail.split(" tests per hit").next().and_then(|t| t.rsplit(' ').next()).unwrap_or_default();
         (n, tests.to_string())
     };
-    for (resolution, planes, pieces) in [("150x77", "2048", "joined"), ("1000x20", "1024", "apart")] {
-        let args = ["--resolution", resolution, "--planes", planes, "-e", "smis-exact"];
+    // 48 ray sets: a chunk's 48 pieces joined into two batches of one round (at most 32
+    // segments a batch), the second's planes and region not the round's first.
+    for (resolution, planes, spp, pieces) in
+        [("150x77", "2048", "16", "joined"), ("1000x20", "1024", "16", "apart"), ("100x70", "2048", "48", "joined")]
+    {
+        let args = ["--resolution", resolution, "--planes", planes, "--spp", spp, "-e", "smis-exact"];
         let given = [("FOGPLANES_GPU_PIECES", pieces)];
         let (blocked, printed) = tuned_render(&d, "blocks", &args, &given);
         let flat_env = [given[0], ("FOGPLANES_GPU_BINNING", "flat")];
         let (flat, flat_printed) = tuned_render(&d, "flat", &args, &flat_env);
-        assert!(flat_printed.contains("flat binning"), "{flat_printed}");
+        assert!(
+            flat_printed.contains("flat binning") && !printed.contains("flat binning"),
+            "{printed}\n{flat_printed}"
+        );
         let (n, tests) = hits(&printed);
         assert!(n > 0 && blocked.iter().any(|p| p.x > 0.0), "{resolution}: a black image says nothing");
         assert_eq!((n, tests), hits(&flat_printed), "{resolution} {pieces}: hits and tests per hit, blocks and flat");

@@ -25,8 +25,9 @@
 // own tiles' first entries and first items, a region of `offsets` and `item_offsets` of tiles + 1
 // words, for the scatter and for the reduction, which adds a tile's items batch by batch.
 //
-// Every loop of an invocation runs at most count / 256 (<= 64), tiles / 256 or blocks / 256
-// times, well within llvmpipe's silent limit of about 65,000 loop iterations per invocation.
+// Every loop of an invocation runs at most count / 256 (<= 64), tiles / 256 or blocks x
+// segments / 256 times, well within llvmpipe's silent limit of about 65,000 loop iterations
+// per invocation.
 
 struct Params {
     width: u32,

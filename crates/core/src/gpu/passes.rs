@@ -84,7 +84,8 @@ impl Gathering<'_> {
         // With K orientations and the table asked for (`Tuning::orientation_table`), each plane's
         // K - 1 further ones, made once here (`orient`) rather than at each hit.
         let orients = if pipelines.orient.is_some() { self.count as u64 * (k as u64 - 1) } else { 0 };
-        let s = self.scratch(k, orients)?;
+        let block_words = self.block_words();
+        let s = self.scratch(k, orients, block_words.unwrap_or(0))?;
         // A round's gather parameters (its batches' regions) and bindings each.
         let gather_params = self.gather_params(k);
         let groups: Vec<wgpu::BindGroup> = self
@@ -130,7 +131,8 @@ impl Gathering<'_> {
         for (r, (round, gather_group)) in self.rounds.iter().zip(&groups).enumerate() {
             control.check()?;
             bytes_up += std::mem::size_of::<GatherParams>() as u64;
-            let steps = self.round_steps(round, pipelines, gather_group, &s, rays_at, &mut bytes_up);
+            let blocked = block_words.is_some();
+            let steps = self.round_steps(round, (pipelines, gather_group), &s, (rays_at, blocked), &mut bytes_up);
             let timed_from_first = !(r == 0 && timed_before);
             encode_round(&mut encoder, steps, queries.as_ref(), r as u32, timed_from_first, &s);
         }
@@ -174,12 +176,29 @@ impl Gathering<'_> {
         }
     }
 
+    /// The words of the blocks' offsets and lists (`bin.wgsl`'s `blocks`) for this gathering's
+    /// batches, one batch's at a time; `None` where it is binned in one tier: by the setting
+    /// ([`super::Tuning::flat_binning`]), or where they would pass one binding (a batch cut
+    /// near the binding's bound by its pairs, with an offset per block and segment more). The
+    /// tiles' lists are the same either way.
+    fn block_words(&self) -> Option<u64> {
+        if self.gpu.bins_flat() {
+            return None;
+        }
+        let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
+        let max_segments = self.batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
+        // A batch's blocks' lists hold at most its (tile, plane) pairs (a plane that reaches a
+        // block reaches one of its tiles), after an offset per block and segment.
+        let words = super::blocks(self.width, self.height) * max_segments + 1 + max_pairs;
+        (words * 4 <= self.gpu.max_binding()).then_some(words)
+    }
+
     /// The scratch buffers this gathering needs, with `orients` (plane, orientation) rows of the
-    /// table of K orientations: held only while they are found (grown if need be), so that the
+    /// table of K orientations and `blocks` words of the blocks' lists: held only while they are found (grown if need be), so that the
     /// pieces of a gathering record side by side (each piece's passes run after the piece's
     /// before it on the queue, whichever buffers each one holds). A table larger than one
     /// binding is refused in one line.
-    fn scratch(&self, k: u32, orients: u64) -> Result<ScratchBuffers> {
+    fn scratch(&self, k: u32, orients: u64, blocks: u64) -> Result<ScratchBuffers> {
         let gpu = self.gpu;
         // 16 bytes a row, within one binding (a piece is at most a chunk, 16,384 planes: 16.5
         // MB at K = 64).
@@ -201,10 +220,6 @@ impl Gathering<'_> {
         let max_items = self.rounds.iter().map(|r| r.items).max().unwrap_or(0);
         let max_regions = self.rounds.iter().map(|r| r.batches.len() as u64).max().unwrap_or(0);
         let max_segments = self.batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
-        // A batch's blocks' lists hold at most its (tile, plane) pairs (a plane that reaches a
-        // block reaches one of its tiles), after an offset per block and segment.
-        let blocks =
-            if gpu.bins_flat() { 0 } else { super::blocks(self.width, self.height) * max_segments + 1 + max_pairs };
         let need = Need {
             regions: (max_regions * (tiles + 1)).max(max_segments * tiles),
             pairs: max_pairs,
@@ -215,16 +230,16 @@ impl Gathering<'_> {
         Ok(gpu.scratch.lock().unwrap_or_else(|p| p.into_inner()).at_least(&gpu.device, need))
     }
 
-    /// A round's passes: each of its batches binned into its region (the blocks' tier first,
-    /// unless the binning is flat), then the round's work items gathered at once and added to
-    /// the image by the reduction. The bytes of the batches' parameters are added to `bytes_up`.
+    /// A round's passes: each of its batches binned into its region (the blocks' tier first
+    /// where `blocked`), then the round's work items gathered at once (`pipelines` with the
+    /// round's bindings) and added to the image by the reduction, along the ray set that begins
+    /// `rays_at` floats in. The bytes of the batches' parameters are added to `bytes_up`.
     fn round_steps<'p>(
         &self,
         round: &Round,
-        pipelines: &'p GatherPipelines,
-        gather_group: &wgpu::BindGroup,
+        (pipelines, gather_group): (&'p GatherPipelines, &wgpu::BindGroup),
         s: &ScratchBuffers,
-        rays_at: u32,
+        (rays_at, blocked): (u32, bool),
         bytes_up: &mut u64,
     ) -> Vec<Step<'p>>
     where
@@ -232,7 +247,6 @@ impl Gathering<'_> {
     {
         let gpu = self.gpu;
         let (tiles_x, tiles_y) = self.tiles();
-        let blocked = !gpu.bins_flat();
         let (tile_grid, block_grid) =
             (grid(tiles_x as u64 * tiles_y as u64), grid(super::blocks(self.width, self.height)));
         let mut steps: Vec<Step> = Vec::new();
