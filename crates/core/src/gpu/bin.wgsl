@@ -226,6 +226,33 @@ fn scan_scratch(li: u32) {
     workgroupBarrier();
 }
 
+// The sum of every thread's `c`, by a tree in `scratch`, in uniform control flow: thread 0's
+// result (the others' is 0).
+fn sum_to_first(li: u32, c: u32) -> u32 {
+    scratch[li] = c;
+    for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
+        workgroupBarrier();
+        if (li < h) {
+            scratch[li] += scratch[li + h];
+        }
+    }
+    if (li == 0u) {
+        return scratch[0];
+    }
+    return 0u;
+}
+
+// A scatter's step, in uniform control flow: this thread's `hits` (a bit for each of its
+// PER_THREAD candidates) placed among the workgroup's: where its first goes from the step's
+// first, and the step's hits in all.
+fn place_hits(li: u32, hits: u32) -> vec2<u32> {
+    let mine = countOneBits(hits);
+    workgroupBarrier();
+    scratch[li] = mine;
+    scan_scratch(li);
+    return vec2<u32>(scratch[li] - mine, scratch[THREADS - 1u]);
+}
+
 @compute @workgroup_size(256, 1, 1)
 fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
          @builtin(local_invocation_index) li: u32) {
@@ -239,15 +266,9 @@ fn count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         for (var i = range.x + li; i < range.y; i += THREADS) {
             c += select(0u, 1u, covers(candidate(i), tile));
         }
-        scratch[li] = c;
-        for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
-            workgroupBarrier();
-            if (li < h) {
-                scratch[li] += scratch[li + h];
-            }
-        }
+        let total = sum_to_first(li, c);
         if (li == 0u) {
-            tile_counts[tile * params.segments + s] = scratch[0];
+            tile_counts[tile * params.segments + s] = total;
         }
         workgroupBarrier();
     }
@@ -345,11 +366,8 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
                 hits |= 1u << k;
             }
         }
-        let mine = countOneBits(hits);
-        workgroupBarrier();
-        scratch[li] = mine;
-        scan_scratch(li);
-        var at = base + written + scratch[li] - mine;
+        let placed = place_hits(li, hits);
+        var at = base + written + placed.x;
         for (var k = 0u; k < PER_THREAD; k++) {
             if ((hits & (1u << k)) != 0u) {
                 let plane = candidate(i0 + k);
@@ -358,7 +376,7 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
                 at++;
             }
         }
-        written += scratch[THREADS - 1u];
+        written += placed.y;
     }
 }
 
@@ -376,15 +394,9 @@ fn block_count(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) n
         for (var i = seg_first(s) + li; i < end; i += THREADS) {
             c += select(0u, 1u, reaches_block(params.first + i, block));
         }
-        scratch[li] = c;
-        for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
-            workgroupBarrier();
-            if (li < h) {
-                scratch[li] += scratch[li + h];
-            }
-        }
+        let total = sum_to_first(li, c);
         if (li == 0u) {
-            blocks[block * params.segments + s] = scratch[0];
+            blocks[block * params.segments + s] = total;
         }
         workgroupBarrier();
     }
@@ -435,17 +447,14 @@ fn block_scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups)
                 hits |= 1u << k;
             }
         }
-        let mine = countOneBits(hits);
-        workgroupBarrier();
-        scratch[li] = mine;
-        scan_scratch(li);
-        var at = base + written + scratch[li] - mine;
+        let placed = place_hits(li, hits);
+        var at = base + written + placed.x;
         for (var k = 0u; k < PER_THREAD; k++) {
             if ((hits & (1u << k)) != 0u) {
                 blocks[at] = params.first + i0 + k;
                 at++;
             }
         }
-        written += scratch[THREADS - 1u];
+        written += placed.y;
     }
 }
