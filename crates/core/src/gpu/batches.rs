@@ -153,6 +153,18 @@ pub(super) fn rounds(batches: &[Batch], bounds: &Bounds) -> Result<Vec<Round>, S
     Ok(rounds)
 }
 
+/// The words of the binning's first tier (`bin.wgsl`'s `blocks`) for `batches` in an image of
+/// `blocks` blocks, one batch's at a time: an offset per block and segment, the batch's end,
+/// then its blocks' lists, which hold at most its (tile, plane) pairs (a plane that reaches a
+/// block reaches one of its tiles). `None` where they would pass `max_binding` bytes (a batch
+/// cut near that bound by its pairs): the batches are then binned in one tier.
+pub(super) fn block_words(batches: &[Batch], blocks: u64, max_binding: u64) -> Option<u64> {
+    let max_pairs = batches.iter().map(|b| b.pairs).max().unwrap_or(0);
+    let max_segments = batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
+    let words = blocks * max_segments + 1 + max_pairs;
+    (words * 4 <= max_binding).then_some(words)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -240,5 +252,25 @@ mod tests {
         for r in &rs {
             assert!(big[r.batches.clone()].iter().map(|b| b.count as u64).sum::<u64>() <= ROUND_PLANES);
         }
+    }
+
+    /// The first tier's words: a batch's offsets and lists, the largest batch's; none past a
+    /// binding, where a batch's pairs fill it (their lists fit it, their offsets do not).
+    #[test]
+    fn the_blocks_take_a_batch_at_a_time_within_a_binding() {
+        let batch = |pairs: u64, segments: u32| Batch {
+            first: 0,
+            count: 100,
+            pairs,
+            segments: (0..segments).map(|s| (s, 0)).collect(),
+        };
+        let one = [batch(1_000, 1), batch(3_000, 1)];
+        assert_eq!(block_words(&one, 60, 1 << 20), Some(60 + 1 + 3_000));
+        let joined = [batch(2_000, 16), batch(500, 32)];
+        assert_eq!(block_words(&joined, 60, 1 << 20), Some(60 * 32 + 1 + 2_000));
+        // A binding of 1 MiB: lists of 262,144 words fill it, and their offsets pass it.
+        let full = [batch(262_144, 16)];
+        assert_eq!(block_words(&full, 60, 1 << 20), None);
+        assert_eq!(block_words(&[batch(262_144 - 60 * 16 - 1, 16)], 60, 1 << 20), Some(262_144));
     }
 }

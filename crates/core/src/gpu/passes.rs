@@ -4,7 +4,7 @@
 //! and per round of batches (gpu/batches.rs) the gather and its reduction (`gather.wgsl`),
 //! timed by the GPU's timestamps where it has them.
 
-use super::batches::{Batch, Round};
+use super::batches::{Batch, Round, block_words};
 use super::device::{GatherPipelines, Gpu, entry, grid};
 use super::plane_buffers::PlaneBuffers;
 use super::rays::GpuRays;
@@ -182,15 +182,9 @@ impl Gathering<'_> {
     /// near the binding's bound by its pairs, with an offset per block and segment more). The
     /// tiles' lists are the same either way.
     fn block_words(&self) -> Option<u64> {
-        if self.gpu.bins_flat() {
-            return None;
-        }
-        let max_pairs = self.batches.iter().map(|b| b.pairs).max().unwrap_or(0);
-        let max_segments = self.batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
-        // A batch's blocks' lists hold at most its (tile, plane) pairs (a plane that reaches a
-        // block reaches one of its tiles), after an offset per block and segment.
-        let words = super::blocks(self.width, self.height) * max_segments + 1 + max_pairs;
-        (words * 4 <= self.gpu.max_binding()).then_some(words)
+        let blocks = super::blocks(self.width, self.height);
+        let words = block_words(self.batches, blocks, self.gpu.max_binding());
+        words.filter(|_| !self.gpu.bins_flat())
     }
 
     /// The scratch buffers this gathering needs, with `orients` (plane, orientation) rows of the
