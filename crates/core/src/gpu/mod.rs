@@ -1,9 +1,10 @@
 //! The GPU: one more structure beside [`crate::raster`] and [`crate::bvh`], whose gather runs in
 //! WGSL compute shaders through wgpu (Vulkan, Metal, DX12): the design is in `docs/gpu.md`.
 //!
-//! The planes are sampled and prepared on the CPU as for every structure ([`GatherContext`]);
-//! what crosses is defined once, beside the CPU's prepared plane: [`PlaneRecord`] per plane,
-//! the [`crate::occlusion::Occluder`]s as they are, and per plane its screen polygon
+//! The planes are sampled and prepared on the CPU as for every structure
+//! ([`crate::gather::GatherContext`]); what crosses is defined once, beside the CPU's prepared
+//! plane: [`crate::gather::PlaneRecord`] per plane, the [`crate::occlusion::Occluder`]s as they
+//! are, and per plane its screen polygon
 //! ([`ScreenReach`]). On the GPU, `reach.wgsl` finds the tiles and pixels each polygon comes
 //! near (the specification: [`tile_reach`]), `bin.wgsl` bins the planes to blocks of
 //! [`BLOCK_TILES`] x [`BLOCK_TILES`] tiles and from each block's list to its 16 x 16 tiles

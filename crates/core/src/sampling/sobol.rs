@@ -248,8 +248,8 @@ impl SobolSampler {
     /// depends on the seed only, not on the dimension, so the dimensions keep
     /// their joint net structure: the first `2^m` indices form a scrambled
     /// (t,m,D)-net, and different seeds give decorrelated sequences.
-    /// (What [`shuffle_index`] and [`owen_sobol`] compute, their seeds derived
-    /// once.)
+    /// (What the tests' `shuffle_index` and `owen_sobol` compute, their seeds
+    /// derived once.)
     pub fn point<const D: usize>(&self, index: u32) -> [f64; D] {
         const { assert!(D <= MAX_DIMENSIONS, "SobolSampler::point supports at most 16 dimensions") };
         let shuffled = nested_uniform_scramble(index, self.shuffle);
