@@ -58,12 +58,12 @@ fi
 grep -h "^gpu [0-9]* again: smis-exact:" "$out/gpu_check.log" "$out"/base/gpu_check.log 2>/dev/null |
     sed 's/gather .*; GPU time/GPU time/' | cut -c1-300
 # And this build's GPU time by setting (gpu/mod.rs `Tuning`), the second round's.
-grep -h "^gpu tuned .* round 2 \|^gpu orientations .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).*/ \1: \2/' | sed 's/^gpu tuned //'
+grep -h "^gpu tuned .* round 2 \|^gpu orientations .* round 2 \|^gpu k .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).*/ \1: \2/' | sed 's/^gpu tuned //'
 grep -h "^gpu pieces .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).* \([0-9]* gather dispatches\).*total \([0-9.]* s\).*/ \1: GPU \2, \3, total \4/'
 grep -h "^agreement pieces" "$out/gpu_check.log" 2>/dev/null
 grep -h "^gpu binning .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\) (the reach and the binning \([0-9.]* s\).*total \([0-9.]* s\).*/ \1: GPU \2, binning \3, total \4/'
 grep -h "^agreement binning" "$out/gpu_check.log" 2>/dev/null
-grep -h "^agreement orientations" "$out/gpu_check.log" 2>/dev/null
+grep -h "^agreement orientations\|^agreement k " "$out/gpu_check.log" 2>/dev/null
 tail -5 "$out/cores_check.log" 2>/dev/null
 tail -2 "$out/gpu_tests.log" 2>/dev/null
 grep -h "a GPU render's\|wall.*for the GPU" "$out/prepare_planes.log" 2>/dev/null

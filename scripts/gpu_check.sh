@@ -136,6 +136,9 @@ if [ -n "$P_TUNED" ]; then
     # K orientations made at each hit (the default) or once a gathering into a table
     # (FOGPLANES_GPU_ORIENTATIONS=table), with K = 8.
     ab orientations FOGPLANES_GPU_ORIENTATIONS per-hit table --orientations 8
+    # K read from the gather's parameters (the default) or a constant of its pipeline, which a
+    # driver can unroll the loop over (FOGPLANES_GPU_K=constant), with K = 8: the same bits.
+    ab k FOGPLANES_GPU_K uniform constant --orientations 8
     # A chunk's pieces joined into one gathering, their work items in one dispatch a round (the
     # default), or gathered apart, a piece's own dispatches each (FOGPLANES_GPU_PIECES=apart):
     # the benchmark's 18 pieces (at 655,360 planes a piece is about a chunk); the end to end

@@ -42,13 +42,14 @@ fn text(o: &Output) -> (String, String) {
 }
 
 /// The variables of gpu/mod.rs `Tuning`, the choices fixed for measuring on a device.
-const TUNING: [&str; 6] = [
+const TUNING: [&str; 7] = [
     "FOGPLANES_GPU_MATH",
     "FOGPLANES_GPU_CHECKS",
     "FOGPLANES_GPU_ITEM_PLANES",
     "FOGPLANES_GPU_ORIENTATIONS",
     "FOGPLANES_GPU_PIECES",
     "FOGPLANES_GPU_BINNING",
+    "FOGPLANES_GPU_K",
 ];
 
 /// A GPU render of the scene to `d/name.exr` with `args`, the tuning variables of `env` set and
@@ -305,6 +306,16 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
             vec![("FOGPLANES_GPU_ORIENTATIONS", "once")],
             "--device: FOGPLANES_GPU_ORIENTATIONS=\"once\": expected per-hit (the default) or table".to_string(),
         ),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU_BINNING", "tiles")],
+            "--device: FOGPLANES_GPU_BINNING=\"tiles\": expected blocks (the default) or flat".to_string(),
+        ),
+        (
+            "gpu".to_string(),
+            vec![("FOGPLANES_GPU_K", "8")],
+            "--device: FOGPLANES_GPU_K=\"8\": expected uniform (the default) or constant".to_string(),
+        ),
     ] {
         let o = render(&device, &d.join("no.exr"), &env);
         let (_, err) = text(&o);
@@ -321,8 +332,9 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
 /// an image within 1e-8 relative MSE of the polynomials' (cmis-exact, which calls all four
 /// functions; the bound that holds the GPU to the CPU elsewhere); K orientations made once a
 /// gathering (`FOGPLANES_GPU_ORIENTATIONS=table`) the same pixels as made at each hit
-/// (smis-exact and smis-cosine with K = 5: the same operations); and each image names its
-/// setting after the adapter, the default none.
+/// (smis-exact and smis-cosine with K = 5: the same operations), as K a constant of the
+/// pipeline (`FOGPLANES_GPU_K=constant`); and each image names its setting after the adapter,
+/// the default none.
 #[test]
 fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
     if !have_gpu("tuned_gpu_renders_keep_the_image_and_say_how_they_were_made") {
@@ -343,6 +355,9 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
             render_with(&format!("{estimator} table"), &k, &[("FOGPLANES_GPU_ORIENTATIONS", "table")]);
         assert!(devices.ends_with("tuned: orientations made once a gathering)"), "{devices}");
         assert!(table == per_hit, "{estimator}: the orientations made once a gathering changed the image");
+        let (constant, devices) = render_with(&format!("{estimator} constant"), &k, &[("FOGPLANES_GPU_K", "constant")]);
+        assert!(devices.ends_with("tuned: K a pipeline constant)"), "{devices}");
+        assert!(constant == per_hit, "{estimator}: K a pipeline constant changed the image");
     }
     let (base, base_devices) = render("default", &[]);
     assert!(!base_devices.contains("tuned"), "{base_devices}");

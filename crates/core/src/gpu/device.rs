@@ -34,8 +34,9 @@ pub struct Gpu {
     pub(super) reach: wgpu::ComputePipeline,
     gather_module: wgpu::ShaderModule,
     gather_pipeline_layout: wgpu::PipelineLayout,
-    /// Per estimator (`gather.wgsl`'s ESTIMATOR): its pipelines ([`GatherPipelines`]).
-    gather: Mutex<HashMap<u32, Arc<GatherPipelines>>>,
+    /// Per estimator and constant K, 0 where K is read from the parameters (`gather.wgsl`'s
+    /// ESTIMATOR and ORIENTATIONS): its pipelines ([`GatherPipelines`]).
+    gather: Mutex<HashMap<(u32, u32), Arc<GatherPipelines>>>,
     /// Errors the device reported outside every error scope ([`Gpu::checked`]: each call's own
     /// errors are caught on its thread), taken after each wait.
     errors: Arc<Mutex<Vec<String>>>,
@@ -301,21 +302,25 @@ impl Gpu {
     /// H200, 100 to 200 ms where the driver's cache does not hold them yet).
     pub fn compile_gather(&self, weighting: crate::weights::Weighting) -> Result<()> {
         self.checked(|| {
-            self.gather_pipelines(super::estimator_id(weighting));
+            self.gather_pipelines(weighting);
         })
     }
 
-    /// The gather's pipelines for estimator `id`, made on first use.
-    pub(super) fn gather_pipelines(&self, id: u32) -> Arc<GatherPipelines> {
+    /// The gather's pipelines for `weighting`, made on first use: per estimator, and per K
+    /// where K is a pipeline constant ([`super::Tuning::k_constant`]).
+    pub(super) fn gather_pipelines(&self, weighting: crate::weights::Weighting) -> Arc<GatherPipelines> {
+        let id = super::estimator_id(weighting);
+        let k = if self.tuning.k_constant && matches!(id, 5 | 6) { weighting.orientations.max(1) } else { 0 };
         let mut cache = self.gather.lock().unwrap_or_else(|p| p.into_inner());
         cache
-            .entry(id)
+            .entry((id, k))
             .or_insert_with(|| {
                 let flag = |on: bool| if on { 1.0 } else { 0.0 };
                 let constants = [
                     ("ESTIMATOR", id as f64),
                     ("NATIVE_MATH", flag(self.tuning.native_math)),
                     ("ORIENTATION_TABLE", flag(self.tuning.orientation_table)),
+                    ("ORIENTATIONS", k as f64),
                 ];
                 let options =
                     wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };

@@ -23,6 +23,10 @@ override NATIVE_MATH: bool = false;
 // at each hit (gpu/mod.rs `Tuning::orientation_table`, for measuring it on a device): the same
 // operations, the same bits.
 override ORIENTATION_TABLE: bool = false;
+// K of smis-cosine and smis-exact with K orientations (ESTIMATOR 5 and 6) made a pipeline's own
+// constant (gpu/mod.rs `Tuning::k_constant`, for measuring it on a device: a driver can unroll
+// the loop over the orientations), or 0: K read from `params` (the default). The same bits.
+override ORIENTATIONS: u32 = 0u;
 
 // gather.rs `PlaneRecord`, 144 bytes (nine rows of 16).
 struct Plane {
@@ -285,7 +289,8 @@ fn stratified(pl: Plane, det: f32, det_perp: f32, a: f32, exact: bool, at: u32) 
     let uv = a_uv(pl, det, det_perp);
     let pq = vertex(pl, a);
     var sum = select(abs(det), pl.width * abs(det), exact);
-    for (var k = 0u; k + 1u < params.orientations; k++) {
+    let orientations = select(params.orientations, ORIENTATIONS, ORIENTATIONS > 0u);
+    for (var k = 0u; k + 1u < orientations; k++) {
         var o: vec4<f32>;
         if (ORIENTATION_TABLE) {
             o = orients[at + k];

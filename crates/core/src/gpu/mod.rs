@@ -226,9 +226,14 @@ pub const PIECES_VARIABLE: &str = "FOGPLANES_GPU_PIECES";
 /// tier of the binning.
 pub const BINNING_VARIABLE: &str = "FOGPLANES_GPU_BINNING";
 
+/// The variable that makes K of K orientations a constant of the gather's pipeline
+/// (`constant`), not a parameter read at each hit (`uniform`, the default), for measuring it.
+pub const K_VARIABLE: &str = "FOGPLANES_GPU_K";
+
 /// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
 /// transcendental functions, wgpu's runtime checks in the shaders, where K orientations are
-/// made, whether a chunk's pieces are gathered in one dispatch, the binning's tiers), fixed by variables so that `scripts/gpu_check.sh` can time each against the
+/// made, whether a chunk's pieces are gathered in one dispatch, the binning's tiers, K a
+/// pipeline constant), fixed by variables so that `scripts/gpu_check.sh` can time each against the
 /// defaults in one process per setting. Read once where an adapter is resolved
 /// ([`adapter_at`]), which every front end's settings do once; a device is made with them and
 /// kept for the process. Any setting but the defaults is named after the adapter in the
@@ -280,6 +285,14 @@ pub struct Tuning {
     /// a fifth to a quarter of the flat one's time; a GPU's passes are not bound by their work
     /// alone: for a device to say).
     pub flat_binning: bool,
+    /// K of smis-cosine and smis-exact with K orientations a constant of the gather's pipeline
+    /// ([`K_VARIABLE`]` = constant`, `gather.wgsl`'s `ORIENTATIONS`), one pipeline a K, rather
+    /// than read from the parameters: a driver can unroll the loop over the orientations. The
+    /// same operations, so the same bits (tested on lavapipe); on lavapipe the gather took a
+    /// little longer with it (smis-exact, K = 8, 160x90, 8,192 planes, three runs each
+    /// alternated: 1.80, 1.79 and 1.86 s against 1.73, 1.74 and 1.72), so what it does on a GPU
+    /// is for a device to say.
+    pub k_constant: bool,
 }
 
 impl Tuning {
@@ -309,7 +322,8 @@ impl Tuning {
         let orientation_table = choice(ORIENTATIONS_VARIABLE, "per-hit", "table")?;
         let pieces_apart = choice(PIECES_VARIABLE, "joined", "apart")?;
         let flat_binning = choice(BINNING_VARIABLE, "blocks", "flat")?;
-        Ok(Tuning { item_planes, native_math, unchecked, orientation_table, pieces_apart, flat_binning })
+        let k_constant = choice(K_VARIABLE, "uniform", "constant")?;
+        Ok(Tuning { item_planes, native_math, unchecked, orientation_table, pieces_apart, flat_binning, k_constant })
     }
 
     /// What a device made with these settings adds to its adapter's name, `None` for the
@@ -333,6 +347,9 @@ impl Tuning {
         }
         if self.flat_binning {
             parts.push("flat binning".to_string());
+        }
+        if self.k_constant {
+            parts.push("K a pipeline constant".to_string());
         }
         (!parts.is_empty()).then(|| parts.join(", "))
     }
@@ -384,11 +401,12 @@ mod tests {
             orientation_table: true,
             pieces_apart: true,
             flat_binning: true,
+            k_constant: true,
         };
         let label = all.label().unwrap();
         assert_eq!(
             label,
-            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart, flat binning"
+            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart, flat binning, K a pipeline constant"
         );
         let name = format!("gpu: {} (Vulkan, discrete GPU, tuned: {label})", "x".repeat(100));
         assert!(crate::options::Devices::from_names(vec![name]).is_ok());

@@ -10,7 +10,7 @@ use super::plane_buffers::{PlaneBuffers, PlaneData};
 use super::polygons::Polygons;
 use super::rays::GpuRays;
 use super::sums::GpuSums;
-use super::{ScreenReach, TILE, estimator_id};
+use super::{ScreenReach, TILE};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::control::Control;
 use crate::error::{Error, Result};
@@ -284,7 +284,7 @@ impl GpuPlanes {
             return Ok(Recorded::default());
         }
         // Compiled on first use, before the scratch buffers are held.
-        let pipelines = gpu.checked(|| gpu.gather_pipelines(estimator_id(weighting)))?;
+        let pipelines = gpu.checked(|| gpu.gather_pipelines(weighting))?;
         let (planes, upload_ns, bytes_crossed) = {
             let _s = crate::trace::span("planes uploaded");
             self.buffers()?
