@@ -268,7 +268,10 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
     let render = |device: &str, out: &Path, env: &[(&str, &str)]| {
         let args =
             ["render", SCENE, "--resolution", "16x9", "--planes", "64", "-q", "--device", device, "-o", path(out)];
-        run_with(&args, env, &[])
+        // The tuning variables not given removed (their defaults, whatever this process was
+        // given), so that each refusal is the one given's.
+        let unset: Vec<&str> = TUNING.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
+        run_with(&args, env, &unset)
     };
     let (by_name, by_index) = (d.join("gpu.exr"), d.join("gpu_n.exr"));
     assert!(render("gpu", &by_name, &[]).status.success());

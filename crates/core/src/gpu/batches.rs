@@ -159,9 +159,7 @@ pub(super) fn rounds(batches: &[Batch], bounds: &Bounds) -> Result<Vec<Round>, S
 /// block reaches one of its tiles). `None` where they would pass `max_binding` bytes (a batch
 /// cut near that bound by its pairs): the batches are then binned in one tier.
 pub(super) fn block_words(batches: &[Batch], blocks: u64, max_binding: u64) -> Option<u64> {
-    let max_pairs = batches.iter().map(|b| b.pairs).max().unwrap_or(0);
-    let max_segments = batches.iter().map(|b| b.segments.len() as u64).max().unwrap_or(0);
-    let words = blocks * max_segments + 1 + max_pairs;
+    let words = batches.iter().map(|b| blocks * b.segments.len() as u64 + 1 + b.pairs).max().unwrap_or(1);
     (words * 4 <= max_binding).then_some(words)
 }
 
@@ -254,8 +252,9 @@ mod tests {
         }
     }
 
-    /// The first tier's words: a batch's offsets and lists, the largest batch's; none past a
-    /// binding, where a batch's pairs fill it (their lists fit it, their offsets do not).
+    /// The first tier's words: a batch's offsets and lists, the largest batch's (its segments'
+    /// offsets with its pairs); none past a binding, where a batch's pairs fill it (their lists
+    /// fit it, their offsets do not).
     #[test]
     fn the_blocks_take_a_batch_at_a_time_within_a_binding() {
         let batch = |pairs: u64, segments: u32| Batch {
@@ -267,7 +266,7 @@ mod tests {
         let one = [batch(1_000, 1), batch(3_000, 1)];
         assert_eq!(block_words(&one, 60, 1 << 20), Some(60 + 1 + 3_000));
         let joined = [batch(2_000, 16), batch(500, 32)];
-        assert_eq!(block_words(&joined, 60, 1 << 20), Some(60 * 32 + 1 + 2_000));
+        assert_eq!(block_words(&joined, 60, 1 << 20), Some(60 * 16 + 1 + 2_000));
         // A binding of 1 MiB: lists of 262,144 words fill it, and their offsets pass it.
         let full = [batch(262_144, 16)];
         assert_eq!(block_words(&full, 60, 1 << 20), None);

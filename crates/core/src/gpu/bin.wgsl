@@ -227,7 +227,8 @@ fn scan_scratch(li: u32) {
 }
 
 // The sum of every thread's `c`, by a tree in `scratch`, in uniform control flow: thread 0's
-// result (the others' is 0).
+// result (the others' is 0). Its caller barriers before `scratch` is written again (thread 0
+// reads it last).
 fn sum_to_first(li: u32, c: u32) -> u32 {
     scratch[li] = c;
     for (var h = THREADS / 2u; h > 0u; h >>= 1u) {
