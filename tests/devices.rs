@@ -280,7 +280,7 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
     let load = |p: &Path| fogplanes::film::Film::load_exr(p).unwrap().pixels;
     assert!(load(&by_name) == load(&by_index), "gpu:{} is not gpu's default", defaults[0]);
     let count = if n == 1 { "there is 1 adapter, gpu:0".to_string() } else { format!("there are {n} adapters") };
-    for (device, env, says) in [
+    let mut cases = vec![
         (format!("gpu:{n}"), vec![], format!("--device: gpu:{n}: {count}")),
         ("gpu".to_string(), vec![("FOGPLANES_GPU", "99")], format!("--device: FOGPLANES_GPU=99: {count}")),
         (
@@ -294,32 +294,20 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
             vec![("FOGPLANES_GPU_ITEM_PLANES", "0")],
             "--device: FOGPLANES_GPU_ITEM_PLANES=\"0\": expected the planes of a GPU work item".to_string(),
         ),
-        (
-            "gpu".to_string(),
-            vec![("FOGPLANES_GPU_MATH", "fast")],
-            "--device: FOGPLANES_GPU_MATH=\"fast\": expected polynomials (the default) or native".to_string(),
-        ),
-        (
-            "gpu".to_string(),
-            vec![("FOGPLANES_GPU_CHECKS", "no")],
-            "--device: FOGPLANES_GPU_CHECKS=\"no\": expected on (the default) or off".to_string(),
-        ),
-        (
-            "gpu".to_string(),
-            vec![("FOGPLANES_GPU_ORIENTATIONS", "once")],
-            "--device: FOGPLANES_GPU_ORIENTATIONS=\"once\": expected per-hit (the default) or table".to_string(),
-        ),
-        (
-            "gpu".to_string(),
-            vec![("FOGPLANES_GPU_BINNING", "tiles")],
-            "--device: FOGPLANES_GPU_BINNING=\"tiles\": expected blocks (the default) or flat".to_string(),
-        ),
-        (
-            "gpu".to_string(),
-            vec![("FOGPLANES_GPU_K", "8")],
-            "--device: FOGPLANES_GPU_K=\"8\": expected uniform (the default) or constant".to_string(),
-        ),
+    ];
+    // The tuning's two-way choices: a value that names neither, refused with both named.
+    for (variable, bad, default, other) in [
+        ("FOGPLANES_GPU_MATH", "fast", "polynomials", "native"),
+        ("FOGPLANES_GPU_CHECKS", "no", "on", "off"),
+        ("FOGPLANES_GPU_ORIENTATIONS", "once", "per-hit", "table"),
+        ("FOGPLANES_GPU_PIECES", "all", "joined", "apart"),
+        ("FOGPLANES_GPU_BINNING", "tiles", "blocks", "flat"),
+        ("FOGPLANES_GPU_K", "8", "uniform", "constant"),
     ] {
+        let says = format!("--device: {variable}=\"{bad}\": expected {default} (the default) or {other}");
+        cases.push(("gpu".to_string(), vec![(variable, bad)], says));
+    }
+    for (device, env, says) in cases {
         let o = render(&device, &d.join("no.exr"), &env);
         let (_, err) = text(&o);
         assert_eq!(o.status.code(), Some(2), "{device} {env:?}: {err}");

@@ -106,7 +106,7 @@ impl Gathering<'_> {
         // with the first round.
         let reach_first = !self.reach_found.load(Ordering::Acquire)
             && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, self.reach_found));
-        // The first pass's start is the first round's (`starts` in `encode_round`).
+        // The first pass's start is the first round's (`timed_from_first` in `encode_round`).
         let first_pass = |first: bool| {
             queries.as_ref().filter(|_| first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
                 query_set: set,
@@ -128,10 +128,10 @@ impl Gathering<'_> {
         }
         let timed_before = reach_first || orients > 0;
         let mut bytes_up = std::mem::size_of_val(rotations.as_slice()) as u64;
+        let blocked = block_words.is_some();
         for (r, (round, gather_group)) in self.rounds.iter().zip(&groups).enumerate() {
             control.check()?;
             bytes_up += std::mem::size_of::<GatherParams>() as u64;
-            let blocked = block_words.is_some();
             let steps = self.round_steps(round, (pipelines, gather_group), &s, (rays_at, blocked), &mut bytes_up);
             let timed_from_first = !(r == 0 && timed_before);
             encode_round(&mut encoder, steps, queries.as_ref(), r as u32, timed_from_first, &s);
