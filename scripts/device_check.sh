@@ -61,8 +61,8 @@ grep -h "^gpu [0-9]* again: smis-exact:" "$out/gpu_check.log" "$out"/base/gpu_ch
 grep -h "^gpu tuned .* round 2 \|^gpu orientations .* round 2 \|^gpu k .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).*/ \1: \2/' | sed 's/^gpu tuned //'
 grep -h "^gpu pieces .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\).* \([0-9]* gather dispatches\).*total \([0-9.]* s\).*/ \1: GPU \2, \3, total \4/'
 grep -h "^agreement pieces" "$out/gpu_check.log" 2>/dev/null
-grep -h "^gpu binning .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\) (the reach and the binning \([0-9.]* s\).*total \([0-9.]* s\).*/ \1: GPU \2, binning \3, total \4/'
-grep -h "^agreement binning" "$out/gpu_check.log" 2>/dev/null
+grep -h "^gpu binning .* round 2 \|^gpu lanes .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\) (the reach and the binning \([0-9.]* s\).*total \([0-9.]* s\).*/ \1: GPU \2, binning \3, total \4/'
+grep -h "^agreement binning\|^agreement lanes" "$out/gpu_check.log" 2>/dev/null
 grep -h "^agreement orientations\|^agreement k " "$out/gpu_check.log" 2>/dev/null
 tail -5 "$out/cores_check.log" 2>/dev/null
 tail -2 "$out/gpu_tests.log" 2>/dev/null

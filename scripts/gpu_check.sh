@@ -150,6 +150,9 @@ if [ -n "$P_TUNED" ]; then
     # the same lists, the same bits; the lines split the GPU time into the reach and the
     # binning, and the gather.
     ab binning FOGPLANES_GPU_BINNING blocks flat
+    # A tile's pixels taken by a warp of 32 in blocks of 8 x 4 (the default), or two rows of 16
+    # (FOGPLANES_GPU_LANES=rows), as before: the same bits; the lines split the GPU time.
+    ab lanes FOGPLANES_GPU_LANES blocks rows
 fi
 # The CPU renderer on 1, 2, 4, 8 and all threads (smis-exact, 40,960 planes).
 for t in 1 2 4 8 all; do

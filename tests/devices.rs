@@ -42,7 +42,7 @@ fn text(o: &Output) -> (String, String) {
 }
 
 /// The variables of gpu/mod.rs `Tuning`, the choices fixed for measuring on a device.
-const TUNING: [&str; 7] = [
+const TUNING: [&str; 8] = [
     "FOGPLANES_GPU_MATH",
     "FOGPLANES_GPU_CHECKS",
     "FOGPLANES_GPU_ITEM_PLANES",
@@ -50,6 +50,7 @@ const TUNING: [&str; 7] = [
     "FOGPLANES_GPU_PIECES",
     "FOGPLANES_GPU_BINNING",
     "FOGPLANES_GPU_K",
+    "FOGPLANES_GPU_LANES",
 ];
 
 /// A GPU render of the scene to `d/name.exr` with `args`, the tuning variables of `env` set and
@@ -303,6 +304,7 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
         ("FOGPLANES_GPU_PIECES", "all", "joined", "apart"),
         ("FOGPLANES_GPU_BINNING", "tiles", "blocks", "flat"),
         ("FOGPLANES_GPU_K", "8", "uniform", "constant"),
+        ("FOGPLANES_GPU_LANES", "warps", "blocks", "rows"),
     ] {
         let says = format!("--device: {variable}=\"{bad}\": expected {default} (the default) or {other}");
         cases.push(("gpu".to_string(), vec![(variable, bad)], says));
@@ -324,8 +326,10 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
 /// functions; the bound that holds the GPU to the CPU elsewhere); K orientations made once a
 /// gathering (`FOGPLANES_GPU_ORIENTATIONS=table`) the same pixels as made at each hit
 /// (smis-exact and smis-cosine with K = 5: the same operations), as K a constant of the
-/// pipeline (`FOGPLANES_GPU_K=constant`); and each image names its setting after the adapter,
-/// the default none.
+/// pipeline (`FOGPLANES_GPU_K=constant`); a tile's pixels taken by the invocations in row order
+/// (`FOGPLANES_GPU_LANES=rows`) the same pixels as in blocks of 8 x 4 (cmis-exact and smis-exact
+/// with K = 5, at 40x20, whose tiles the image's edges cut in both directions); and each image
+/// names its setting after the adapter, the default none.
 #[test]
 fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
     if !have_gpu("tuned_gpu_renders_keep_the_image_and_say_how_they_were_made") {
@@ -349,6 +353,16 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
         let (constant, devices) = render_with(&format!("{estimator} constant"), &k, &[("FOGPLANES_GPU_K", "constant")]);
         assert!(devices.ends_with("tuned: K a pipeline constant)"), "{devices}");
         assert!(constant == per_hit, "{estimator}: K a pipeline constant changed the image");
+    }
+    for estimator in [&["cmis-exact"][..], &["smis-exact", "--orientations", "5"]] {
+        let name = estimator[0];
+        let mut args = vec!["--resolution", "40x20", "--planes", "2048", "-q", "-e"];
+        args.extend(estimator);
+        let (blocks, _) = tuned_render(&d, &format!("{name} blocks"), &args, &[]);
+        let (rows, _) = tuned_render(&d, &format!("{name} rows"), &args, &[("FOGPLANES_GPU_LANES", "rows")]);
+        let devices = devices_of(&d.join(format!("{name} rows.exr")));
+        assert!(devices.ends_with("tuned: lanes by rows)"), "{devices}");
+        assert!(rows == blocks, "{name}: the pixels taken in row order changed the image");
     }
     let (base, base_devices) = render("default", &[]);
     assert!(!base_devices.contains("tuned"), "{base_devices}");

@@ -2,7 +2,8 @@
 //! the CPU"): per plane, the CPU's time to project and clip its screen polygon, to find its reach
 //! on the CPU (`gpu::tile_reach`, the specification) and to make what crosses for the GPU to find
 //! it there (`gpu::screen_reach`); the rows of tiles, (tile, plane) pairs and tested pixels of the
-//! reach, the bound on the pairs that sizes the binning's buffers, and the vertices that cross.
+//! reach, the bound on the pairs that sizes the binning's buffers, the gather's warps that test a
+//! plane and the share of their lanes that its columns fill, and the vertices that cross.
 //!
 //! ```text
 //! cargo run --release -p fogplanes-bench --example screen_reach -- SCENE [PLANES]
@@ -42,6 +43,8 @@ fn main() -> Result<(), String> {
     let pairs: u64 = reach.iter().map(|r| r.tiles()).sum();
     let tests: u64 = reach.iter().map(|r| r.tests(cam.height)).sum();
     let bound: u64 = crossing.iter().map(|c| c.pairs).sum();
+    let warps = |blocks: bool| reach.iter().map(|r| r.warps(cam.width, cam.height, blocks)).sum::<u64>();
+    let (by_rows, by_blocks) = (warps(false), warps(true));
     let vertices: usize = crossing.iter().filter(|c| c.rows > 0).map(|c| c.polygon.len).sum();
     println!("{path} at {}x{}, {n} planes (one thread):", cam.width, cam.height);
     println!(
@@ -51,6 +54,12 @@ fn main() -> Result<(), String> {
         "  {rows} rows of tiles ({:.1} a plane), {pairs} pairs, bound {bound} ({:.2} times), {tests} pixels tested",
         rows as f64 / n.max(1) as f64,
         bound as f64 / pairs.max(1) as f64
+    );
+    let filled = |warps: u64| tests as f64 / (32 * warps.max(1)) as f64;
+    println!(
+        "  the gather's warps of 32 lanes that test a plane: {by_rows} by rows, {:.1}% of their lanes in its columns; {by_blocks} by blocks of 8 x 4, {:.1}%",
+        100.0 * filled(by_rows),
+        100.0 * filled(by_blocks)
     );
     println!(
         "  {vertices} vertices cross ({:.2} a plane, {} bytes) instead of the rows ({} bytes)",

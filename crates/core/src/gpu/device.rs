@@ -321,6 +321,7 @@ impl Gpu {
                     ("NATIVE_MATH", flag(self.tuning.native_math)),
                     ("ORIENTATION_TABLE", flag(self.tuning.orientation_table)),
                     ("ORIENTATIONS", k as f64),
+                    ("LANE_BLOCKS", flag(!self.tuning.row_lanes)),
                 ];
                 let options =
                     wgpu::PipelineCompilationOptions { constants: &constants, zero_initialize_workgroup_memory: false };

@@ -27,6 +27,13 @@ override ORIENTATION_TABLE: bool = false;
 // constant (gpu/mod.rs `Tuning::k_constant`, for measuring it on a device: a driver can unroll
 // the loop over the orientations), or 0: K read from `params` (the default). The same bits.
 override ORIENTATIONS: u32 = 0u;
+// A tile's pixels taken by a workgroup's invocations in blocks of 8 columns by 4 rows, each
+// block 32 consecutive invocations (a warp of 32 lanes, half a wave of 64), so that a warp lies
+// within one group of rows of a plane's column ranges and within one half of the tile's
+// columns: `pixel_of` (gpu/mod.rs `Tuning::row_lanes`). Or false: invocation i takes the
+// tile's pixel i in row order, a warp two whole rows. The same pixels, each added to in the same
+// order: the same bits either way.
+override LANE_BLOCKS: bool = true;
 
 // gather.rs `PlaneRecord`, 144 bytes (nine rows of 16).
 struct Plane {
@@ -527,9 +534,25 @@ fn plane_at(base: u32) -> Plane {
 var<workgroup> wg_item: vec4<u32>;
 var<workgroup> wg_total: u32;
 
+// The pixel of the tile that invocation `li` takes, in `gather` and `reduce` alike (`partial`
+// holds a work item's sums by invocation). With LANE_BLOCKS, li's bits 0-2 are the column
+// within a block of 8, bits 3-4 the row within a group of 4 (GROUP_ROWS, which the bits
+// follow), bit 5 the block's
+// half of the tile, bits 6-7 the group: a warp of 32 consecutive invocations is 8 x 4 pixels.
+// A warp takes a plane's hit path if any of its pixels is in the plane's columns, and every
+// lane waits for it; counted on the benchmark's 40,960 planes (gpu::tile_reach's ranges), the
+// pixels in range are 79% of the lanes of warps that test a plane when a warp is two rows of
+// 16, and 89% in blocks of 8 x 4.
+fn pixel_of(li: u32) -> vec2<u32> {
+    if (LANE_BLOCKS) {
+        return vec2<u32>((li & 7u) | ((li >> 2u) & 8u), ((li >> 3u) & 3u) | ((li >> 4u) & 12u));
+    }
+    return vec2<u32>(li % TILE, li / TILE);
+}
+
 @compute @workgroup_size(16, 16, 1)
 fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
-          @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+          @builtin(local_invocation_index) li: u32) {
     let index = wid.y * nwg.x + wid.x;
     if (li == 0u) {
         wg_total = item_offsets[3];
@@ -541,8 +564,9 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     }
     let item = workgroupUniformLoad(&wg_item);
     let tile = item.x;
-    let px = (tile % params.tiles_x) * TILE + lid.x;
-    let py = (tile / params.tiles_x) * TILE + lid.y;
+    let local = pixel_of(li);
+    let px = (tile % params.tiles_x) * TILE + local.x;
+    let py = (tile / params.tiles_x) * TILE + local.y;
     let valid = px < params.width && py < params.height;
     let at = item.w + (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
     let dir = vec3<f32>(rays[at], rays[at + 1u], rays[at + 2u]);
@@ -550,9 +574,9 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     // A pixel outside the image has an empty segment, and is tested at no plane: column 16 is
     // in no range (the CPU's count of tests leaves it out).
     let t1 = select(-1.0, rays[at + 4u], valid);
-    let col = select(TILE, lid.x, valid);
+    let col = select(TILE, local.x, valid);
     // Where this pixel's group's byte is in a list entry's ranges.
-    let shift = lid.y / GROUP_ROWS * 8u;
+    let shift = local.y / GROUP_ROWS * 8u;
     var sum = vec3<f32>(0.0);
     // The planes tested at this pixel and those hit (each at most the item's planes, 512).
     var tests = 0u;
@@ -639,15 +663,15 @@ var<workgroup> tile_tests: atomic<u32>;
 // by one (each one's sum added to the pixel's as it would be alone: the same bits however a
 // gathering's pieces are cut into batches and rounds, given the work items' size), and the tile's hits and tests (integer sums: the same in any order) to its counts.
 @compute @workgroup_size(16, 16, 1)
-fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>,
-          @builtin(local_invocation_index) li: u32) {
+fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     if (li == 0u) {
         atomicStore(&tile_hits, 0u);
         atomicStore(&tile_tests, 0u);
     }
     workgroupBarrier();
-    let px = wid.x * TILE + lid.x;
-    let py = wid.y * TILE + lid.y;
+    let local = pixel_of(li);
+    let px = wid.x * TILE + local.x;
+    let py = wid.y * TILE + local.y;
     let tile = wid.y * params.tiles_x + wid.x;
     // No early return: every invocation reaches the barrier below.
     if (px < params.width && py < params.height) {

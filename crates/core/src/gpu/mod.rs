@@ -230,10 +230,14 @@ pub const BINNING_VARIABLE: &str = "FOGPLANES_GPU_BINNING";
 /// (`constant`), not a parameter read at each hit (`uniform`, the default), for measuring it.
 pub const K_VARIABLE: &str = "FOGPLANES_GPU_K";
 
+/// The variable that has a workgroup's invocations take a tile's pixels in row order (`rows`, a
+/// warp of 32 two rows of 16), not in blocks of 8 x 4 (`blocks`, the default), for measuring it.
+pub const LANES_VARIABLE: &str = "FOGPLANES_GPU_LANES";
+
 /// The choices that only a device can decide (issue 45: the work items' size, the GPU's own
 /// transcendental functions, wgpu's runtime checks in the shaders, where K orientations are
 /// made, whether a chunk's pieces are gathered in one dispatch, the binning's tiers, K a
-/// pipeline constant), fixed by variables so that `scripts/gpu_check.sh` can time each against the
+/// pipeline constant, the pixels a warp takes), fixed by variables so that `scripts/gpu_check.sh` can time each against the
 /// defaults in one process per setting. Read once where an adapter is resolved
 /// ([`adapter_at`]), which every front end's settings do once; a device is made with them and
 /// kept for the process. Any setting but the defaults is named after the adapter in the
@@ -293,6 +297,17 @@ pub struct Tuning {
     /// alternated: 1.80, 1.79 and 1.86 s against 1.73, 1.74 and 1.72), so what it does on a GPU
     /// is for a device to say.
     pub k_constant: bool,
+    /// A tile's pixels taken by the gather's invocations in row order ([`LANES_VARIABLE`]` =
+    /// rows`), invocation i the tile's pixel i, as before the blocks: a warp of 32 lanes is two
+    /// rows of 16 pixels. By default a warp is a block of 8 columns by 4 rows (`gather.wgsl`'s
+    /// `pixel_of`), within one group of rows of a plane's column ranges and one half of the
+    /// tile, so that fewer of the lanes that wait for a hit's arithmetic are out of the plane's
+    /// columns: of the lanes of the warps that test a plane, 79% are in its columns by rows
+    /// and 89% by blocks (the benchmark's 40,960 planes, `gpu::tile_reach`'s ranges). A wave of
+    /// 64 is four rows of 16 either way, and lavapipe's lanes 8 of a row. The same pixels, each
+    /// summed in the same order: the same bits (tested on lavapipe); what the blocks save is
+    /// for a device to say.
+    pub row_lanes: bool,
 }
 
 impl Tuning {
@@ -323,7 +338,17 @@ impl Tuning {
         let pieces_apart = choice(PIECES_VARIABLE, "joined", "apart")?;
         let flat_binning = choice(BINNING_VARIABLE, "blocks", "flat")?;
         let k_constant = choice(K_VARIABLE, "uniform", "constant")?;
-        Ok(Tuning { item_planes, native_math, unchecked, orientation_table, pieces_apart, flat_binning, k_constant })
+        let row_lanes = choice(LANES_VARIABLE, "blocks", "rows")?;
+        Ok(Tuning {
+            item_planes,
+            native_math,
+            unchecked,
+            orientation_table,
+            pieces_apart,
+            flat_binning,
+            k_constant,
+            row_lanes,
+        })
     }
 
     /// What a device made with these settings adds to its adapter's name, `None` for the
@@ -350,6 +375,9 @@ impl Tuning {
         }
         if self.k_constant {
             parts.push("K a pipeline constant".to_string());
+        }
+        if self.row_lanes {
+            parts.push("lanes by rows".to_string());
         }
         (!parts.is_empty()).then(|| parts.join(", "))
     }
@@ -402,11 +430,12 @@ mod tests {
             pieces_apart: true,
             flat_binning: true,
             k_constant: true,
+            row_lanes: true,
         };
         let label = all.label().unwrap();
         assert_eq!(
             label,
-            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart, flat binning, K a pipeline constant"
+            "work items of 64 planes, the driver's exp, log and atan, no shader runtime checks, orientations made once a gathering, pieces gathered apart, flat binning, K a pipeline constant, lanes by rows"
         );
         let name = format!("gpu: {} (Vulkan, discrete GPU, tuned: {label})", "x".repeat(100));
         assert!(crate::options::Devices::from_names(vec![name]).is_ok());

@@ -61,6 +61,40 @@ impl TileReach {
         }
         tests
     }
+
+    /// The warps of 32 lanes that test the plane in an image of `width` x `height` pixels: a
+    /// warp takes a plane's test, and its hit's arithmetic, if any of its pixels is in the
+    /// plane's columns, and its other lanes wait (`gather.wgsl`'s `pixel_of`). By rows a warp is
+    /// two pixel rows of a tile's 16 columns, by `blocks` 8 columns of a group of 4 rows. The
+    /// share of their lanes that the plane's columns fill is [`TileReach::tests`] over 32 times
+    /// this (`cargo run --release -p fogplanes-bench --example screen_reach`).
+    pub fn warps(&self, width: u32, height: u32, blocks: bool) -> u64 {
+        let mut warps = 0;
+        for (j, (&[a, b], groups)) in self.spans.iter().zip(&self.groups).enumerate() {
+            for (k, &packed) in groups.iter().enumerate() {
+                let (first, last) = unpack(packed);
+                let top = (self.first_row + j as u32) * TILE + k as u32 * GROUP_ROWS;
+                let rows = height.saturating_sub(top).min(GROUP_ROWS);
+                if rows == 0 || first > last {
+                    continue;
+                }
+                for tile in a..=b {
+                    let (x0, x1) =
+                        (first.max(tile * TILE), last.min(tile * TILE + TILE - 1).min(width.saturating_sub(1)));
+                    if x0 > x1 {
+                        continue;
+                    }
+                    warps += if blocks {
+                        let half = tile * TILE + TILE / 2;
+                        (x0 < half) as u64 + (x1 >= half) as u64
+                    } else {
+                        rows.div_ceil(2) as u64
+                    };
+                }
+            }
+        }
+        warps
+    }
 }
 
 /// Per strip `first + k` of `lo.len()`, strips of `rows` pixel rows (a row of tiles, or a group
@@ -300,6 +334,24 @@ mod tests {
             };
             let tested = (0..h).flat_map(|py| (0..w).map(move |px| (px, py))).filter(|&(x, y)| covered(x, y));
             assert_eq!(reach.tests(h), tested.count() as u64, "case {case}: the pixels tested");
+            // The warps that test it, by rows (two rows of a tile) and by blocks (8 x 4), each
+            // counted once if any of its pixels is tested.
+            for blocks in [false, true] {
+                let warp = |px: u32, py: u32| {
+                    let (tx, ty) = (px / TILE, py / TILE);
+                    let (lx, ly) = (px % TILE, py % TILE);
+                    let within = if blocks { (ly / 4) * 2 + lx / 8 } else { ly / 2 };
+                    (tx, ty, within)
+                };
+                let mut seen: Vec<_> = (0..h)
+                    .flat_map(|py| (0..w).map(move |px| (px, py)))
+                    .filter(|&(x, y)| covered(x, y))
+                    .map(|(x, y)| warp(x, y))
+                    .collect();
+                seen.sort_unstable();
+                seen.dedup();
+                assert_eq!(reach.warps(w, h, blocks), seen.len() as u64, "case {case}: the warps, blocks {blocks}");
+            }
             // Points of the polygon: along each edge, and where it crosses y = integer.
             let mut near = Vec::new();
             for i in 0..k {
