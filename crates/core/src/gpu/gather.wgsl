@@ -537,12 +537,11 @@ var<workgroup> wg_total: u32;
 // The pixel of the tile that invocation `li` takes, in `gather` and `reduce` alike (`partial`
 // holds a work item's sums by invocation). With LANE_BLOCKS, li's bits 0-2 are the column
 // within a block of 8, bits 3-4 the row within a group of 4 (GROUP_ROWS, which the bits
-// follow), bit 5 the block's
-// half of the tile, bits 6-7 the group: a warp of 32 consecutive invocations is 8 x 4 pixels.
-// A warp takes a plane's hit path if any of its pixels is in the plane's columns, and every
-// lane waits for it; counted on the benchmark's 40,960 planes (gpu::tile_reach's ranges), the
-// pixels in range are 79% of the lanes of warps that test a plane when a warp is two rows of
-// 16, and 89% in blocks of 8 x 4.
+// follow), bit 5 the block's half of the tile and bits 6-7 the group: a warp of 32
+// consecutive invocations is 8 x 4 pixels. A warp takes a plane's hit path if any of its
+// pixels is in the plane's columns, and every lane waits for it; counted on the benchmark's
+// 40,960 planes (gpu::TileReach::warps), the pixels in range are 79% of the lanes of the warps
+// that test a plane when a warp is two rows of 16, and 89% in blocks of 8 x 4.
 fn pixel_of(li: u32) -> vec2<u32> {
     if (LANE_BLOCKS) {
         return vec2<u32>((li & 7u) | ((li >> 2u) & 8u), ((li >> 3u) & 3u) | ((li >> 4u) & 12u));
