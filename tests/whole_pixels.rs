@@ -211,6 +211,49 @@ sigma_a = 0.0
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
+/// A light projected into less than a billionth of a pixel keeps its emission: in a medium that
+/// neither scatters nor absorbs, the pixels hold its radiance times its projected area, whole
+/// in one pixel and split between two when it straddles their edge (exact: one panel's
+/// coverage is computed, nothing sampled). A bound of a billionth of the pixel alone dropped
+/// it, all of its emission.
+#[test]
+fn a_light_smaller_than_a_billionth_of_a_pixel_keeps_its_emission() {
+    let camera = "[camera]\nposition = [0.0, 0.0, 5.0]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\nvfov_deg = 40.0\nresolution = [8, 8]\n\n[medium]\nmin = [-10.0, -10.0, -10.0]\nmax = [10.0, 10.0, 10.0]\nsigma_s = 0.0\nsigma_a = 0.0\n";
+    let probe = Scene::parse(&format!("{camera}{}", light_at(DVec3::ZERO, 1.0, 1.0)), "t.toml", "t").unwrap();
+    let cam = &probe.camera;
+    // A pixel's side on the plane z = 0 (directions have forward component 1), and the light's:
+    // a 1e-5 of it, 1e-10 of the pixel's area.
+    let pixel = 5.0 * (cam.direction(1.0, 0.0) - cam.direction(0.0, 0.0)).length();
+    let side = 1e-5 * pixel;
+    let le = 1e10;
+    let want = le * (side / pixel).powi(2);
+    for (name, x, pixels) in
+        [("inside pixel (3, 4)", 3.5, vec![(3, 4)]), ("across pixels (3, 4) and (4, 4)", 4.0, vec![(3, 4), (4, 4)])]
+    {
+        let centre = cam.position + 5.0 * cam.direction(x, 4.5);
+        let corner = centre - DVec3::new(0.5 * side, 0.5 * side, 0.0);
+        let scene = Scene::parse(&format!("{camera}{}", light_at(corner, side, le)), "t.toml", "t").unwrap();
+        let opts = options(&scene, Overrides { planes: Some(16), seed: Some(1), ..Overrides::default() });
+        let (film, _) = render(&scene, &opts, Control::none()).unwrap();
+        let total: f64 = film.pixels.iter().map(|p| p.x as f64).sum();
+        let held: f64 = pixels.iter().map(|&(i, j)| film.get(i, j).x as f64).sum();
+        println!("{name}: {want:.6e} wanted, {total:.6e} in the image, {held:.6e} in its pixels");
+        assert!((total - want).abs() <= 1e-5 * want, "{name}: {total:e} in the image, {want:e} wanted");
+        assert!((held - total).abs() <= 1e-6 * want, "{name}: {held:e} in its pixels of {total:e}");
+        for &(i, j) in &pixels {
+            assert!(film.get(i, j).x > 0.0, "{name}: pixel ({i}, {j}) lost its part");
+        }
+    }
+}
+
+/// A square light facing the camera (down +z, towards it) with its corner at `corner`.
+fn light_at(corner: DVec3, side: f64, radiance: f64) -> String {
+    format!(
+        "[[light]]\ncorner = [{:e}, {:e}, {:e}]\nedge_u = [{side:e}, 0.0, 0.0]\nedge_v = [0.0, {side:e}, 0.0]\nradiance = {radiance:e}\n",
+        corner.x, corner.y, corner.z
+    )
+}
+
 /// The image mean and the means of blocks of pixels over `seeds` plane sets, against the
 /// reference's (its standard errors from its replicates): every |z| within 4.5. Returns the
 /// lines printed.
