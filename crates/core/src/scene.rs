@@ -55,6 +55,38 @@ impl<'de> Deserialize<'de> for Rgb {
     }
 }
 
+/// An array of exactly `N` elements: serde's arrays take the first `N` of a longer one and
+/// ignore the rest, so that `position = [0, 0, 4, 9]` would render. (Asked for as a tuple, as
+/// serde's arrays are: the TOML reader hands over every element either way.)
+fn exactly<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    struct Visitor<T, const N: usize>(std::marker::PhantomData<T>);
+    impl<'de, T: Deserialize<'de>, const N: usize> serde::de::Visitor<'de> for Visitor<T, N> {
+        type Value = [T; N];
+        fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+            write!(f, "an array of exactly {N} numbers")
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<[T; N], A::Error> {
+            let mut out = Vec::with_capacity(N);
+            for i in 0..N {
+                out.push(seq.next_element()?.ok_or_else(|| serde::de::Error::invalid_length(i, &self))?);
+            }
+            let mut extra = 0;
+            while seq.next_element::<serde::de::IgnoredAny>()?.is_some() {
+                extra += 1;
+            }
+            if extra > 0 {
+                return Err(serde::de::Error::invalid_length(N + extra, &self));
+            }
+            Ok(out.try_into().unwrap_or_else(|_| unreachable!("N elements were pushed")))
+        }
+    }
+    d.deserialize_tuple(N, Visitor(std::marker::PhantomData))
+}
+
 /// The file schema. Unknown keys are errors.
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
@@ -70,17 +102,23 @@ pub struct SceneFile {
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDesc {
+    #[serde(deserialize_with = "exactly")]
     pub position: [f64; 3],
+    #[serde(deserialize_with = "exactly")]
     pub look_at: [f64; 3],
+    #[serde(deserialize_with = "exactly")]
     pub up: [f64; 3],
     pub vfov_deg: f64,
+    #[serde(deserialize_with = "exactly")]
     pub resolution: [u32; 2],
 }
 
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
 pub struct MediumDesc {
+    #[serde(deserialize_with = "exactly")]
     pub min: [f64; 3],
+    #[serde(deserialize_with = "exactly")]
     pub max: [f64; 3],
     pub sigma_s: Rgb,
     pub sigma_a: Rgb,
@@ -93,8 +131,11 @@ pub struct MediumDesc {
 #[serde(deny_unknown_fields)]
 pub struct LightDesc {
     pub name: Option<String>,
+    #[serde(deserialize_with = "exactly")]
     pub corner: [f64; 3],
+    #[serde(deserialize_with = "exactly")]
     pub edge_u: [f64; 3],
+    #[serde(deserialize_with = "exactly")]
     pub edge_v: [f64; 3],
     pub radiance: Rgb,
 }
@@ -252,6 +293,15 @@ impl Scene {
             },
         };
         let scale = medium.diagonal();
+        if !(scale <= crate::limits::MAX_BOX_DIAGONAL) {
+            return Err(err(
+                "medium".into(),
+                format!(
+                    "the box's diagonal is {scale:e}; at most {:e} is supported (positions are held in f32)",
+                    crate::limits::MAX_BOX_DIAGONAL
+                ),
+            ));
+        }
 
         // Camera.
         let c = &desc.camera;
@@ -268,10 +318,21 @@ impl Scene {
                 format!("must not be zero or parallel to the view direction, got {:?}", c.up),
             ));
         }
-        if !(c.vfov_deg > 0.0 && c.vfov_deg < 180.0) {
+        if !(c.vfov_deg > 0.0 && c.vfov_deg <= crate::limits::MAX_VFOV_DEG) {
             return Err(err(
                 "camera.vfov_deg".into(),
-                format!("must lie strictly between 0 and 180 degrees, got {}", c.vfov_deg),
+                format!("must lie above 0 and at most {} degrees, got {}", crate::limits::MAX_VFOV_DEG, c.vfov_deg),
+            ));
+        }
+        // The camera's distance to the box (0 inside it), in box diagonals.
+        let away = (min - position).max(position - max).max(DVec3::ZERO).length() / scale;
+        if !(away <= crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS) {
+            return Err(err(
+                "camera.position".into(),
+                format!(
+                    "the camera is {away:.3e} box diagonals from the fog box; at most {:e} are supported (planes are held in f32 relative to the camera, which keeps the box's detail to about 6e-8 times that distance over its size): move the camera closer and widen vfov_deg",
+                    crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS
+                ),
             ));
         }
         check_resolution(c.resolution[0], c.resolution[1]).map_err(|m| err("camera.resolution".into(), m))?;
@@ -299,7 +360,13 @@ impl Scene {
             let radiance = non_negative(&field("radiance"), l.radiance)?;
             for (name, e) in [("edge_u", eu), ("edge_v", ev)] {
                 if !(e.length() > 1e-9 * scale) {
-                    return Err(err(field(name), format!("has zero length (|{name}| = {:e})", e.length())));
+                    return Err(err(
+                        field(name),
+                        format!(
+                            "is too short: |{name}| = {:e}, where an edge must be longer than 1e-9 of the box's diagonal ({scale:e})",
+                            e.length()
+                        ),
+                    ));
                 }
             }
             let cos = eu.normalize().dot(ev.normalize());
@@ -333,6 +400,25 @@ impl Scene {
                     crate::limits::MAX_TOTAL_POWER
                 ),
             ));
+        }
+
+        // What each plane of a light carries (photon_plane.rs `power`: sigma_s rho pi Le A / P_l,
+        // P_l its share of the power), in f32 with the same headroom: beyond it a plane's power
+        // is no finite f32, and its hits' sums no number.
+        for (i, l) in lights.iter().enumerate() {
+            if l.power() > 0.0 {
+                let carried = medium.sigma_s * l.radiance * (0.25 * l.area() * power / l.power());
+                if !(carried.max_element() <= crate::limits::MAX_TOTAL_POWER) {
+                    return Err(err(
+                        "medium.sigma_s".into(),
+                        format!(
+                            "the planes of light[{i}] carry sigma_s x radiance x area / 4 over its share of the power, {:e}, above the {:e} an f32 image can sum",
+                            carried.max_element(),
+                            crate::limits::MAX_TOTAL_POWER
+                        ),
+                    ));
+                }
+            }
         }
 
         // Render defaults.
@@ -527,7 +613,17 @@ radiance = 4
         expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\nzoom = 2"), "camera", "unknown field");
         expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = \"wide\""), "camera.vfov_deg", "invalid type");
         expect_error(&MINIMAL.replace("vfov_deg = 40.0\n", ""), "camera", "missing field");
-        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"), "camera.vfov_deg", "between 0 and 180");
+        expect_error(
+            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"),
+            "camera.vfov_deg",
+            "above 0 and at most 179",
+        );
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 179.5"), "camera.vfov_deg", "at most 179");
+        assert!(parse(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 179.0")).is_ok());
+        // The camera at most 1000 box diagonals (6,000 units here) from the box, a box at most 1e30 across.
+        expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 6003.0]"), "camera.position", "box diagonals");
+        assert!(parse(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 5900.0]")).is_ok());
+        expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 2.0, 1e31]"), "medium", "diagonal");
         expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, inf, 5.0]"), "camera.position", "finite");
         expect_error(
             &MINIMAL.replace("look_at = [0.0, 1.0, 0.0]", "look_at = [0.0, 1.0, 5.0]"),
@@ -554,8 +650,26 @@ radiance = 4
         expect_error(
             &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [0.0, 0.0, 0.0]"),
             "light[0] (top).edge_u",
-            "zero length",
+            "too short",
         );
+        // Arrays of exactly their length: one more element (of any type) is refused, as one less.
+        for (from, to, field) in [
+            ("position = [0.0, 1.0, 5.0]", "position = [0.0, 1.0, 5.0, 9.0]", "camera.position"),
+            ("up = [0.0, 1.0, 0.0]", "up = [0.0, 1.0, 0.0, \"junk\", [1]]", "camera.up"),
+            ("resolution = [32, 16]", "resolution = [32, 16, 1]", "camera.resolution"),
+            ("resolution = [32, 16]", "resolution = [32]", "camera.resolution"),
+            ("max = [2.0, 2.0, 2.0]", "max = [2.0, 2.0, 2.0, nan]", "medium.max"),
+            ("edge_u = [1.0, 0.0, 0.0]", "edge_u = [1.0, 0.0, 0.0, 1e300]", "light[0].edge_u"),
+        ] {
+            expect_error(&MINIMAL.replace(from, to), field, "invalid length");
+        }
+        // A scattering coefficient whose planes' power no f32 holds (3e38 made every sum NaN).
+        expect_error(
+            &MINIMAL.replace("sigma_s = [0.1, 0.2, 0.3]", "sigma_s = 3e38"),
+            "medium.sigma_s",
+            "above the 1e30",
+        );
+        assert!(parse(&MINIMAL.replace("sigma_s = [0.1, 0.2, 0.3]", "sigma_s = 1e29")).is_ok());
         expect_error(
             &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [1.0, 0.0, 0.3]"),
             "light[0] (top).edge_v",
