@@ -34,10 +34,10 @@ const MARGIN: f64 = 1e-3;
 const SAMPLES_GRID: u32 = 4;
 
 /// Below this fraction of a pixel, or of the panel's whole projection where that is smaller, a
-/// panel's projection is taken not to meet the pixel (section 8.2): a bias of at most `1e-9 Le`
-/// times the smaller of the pixel and the projection, so that a panel projected into less than
-/// a billionth of a pixel keeps its emission (a bright one lost all of it to a bound of a
-/// billionth of the pixel alone).
+/// panel's projection is taken not to meet the pixel (section 8.2): a bias of at most `1e-9 max
+/// Le` times the smaller of the pixel and the projection (the panel behind it may be the
+/// brighter), so that a panel projected into less than a billionth of a pixel keeps its
+/// emission (a bright one lost all of it to a bound of a billionth of the pixel alone).
 const TINY_AREA: f64 = 1e-9;
 
 /// The direct emission of every pixel: the mean of `E` over the pixel (section 8.2), or `E` at
@@ -235,7 +235,8 @@ fn meeting(projected: &[Option<Polygon<DVec2>>], lights: impl Iterator<Item = us
             return Meeting::Several;
         };
         let region = region_in_pixel(polygon, i, j);
-        if area(&region) > TINY_AREA * area(polygon).min(1.0) {
+        // `area` is at most 1: the smaller of the pixel and the projection.
+        if area(&region) > TINY_AREA * area(polygon) {
             if !matches!(found, Meeting::None) {
                 return Meeting::Several;
             }

@@ -330,7 +330,7 @@ impl Scene {
             return Err(err(
                 "camera.position".into(),
                 format!(
-                    "the camera is {away:.3e} box diagonals from the fog box; at most {:e} are supported (planes are held in f32 relative to the camera, which keeps the box's detail to about 6e-8 times that distance over its size): move the camera closer and widen vfov_deg",
+                    "the camera is {away:.6e} box diagonals from the fog box; at most {:e} are supported (planes are held in f32 relative to the camera, which keeps the box's detail to about 6e-8 times that distance over its size): move the camera closer and widen vfov_deg",
                     crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS
                 ),
             ));
@@ -405,14 +405,21 @@ impl Scene {
         // What each plane of a light carries (photon_plane.rs `power`: sigma_s rho pi Le A / P_l,
         // P_l its share of the power), in f32 with the same headroom: beyond it a plane's power
         // is no finite f32, and its hits' sums no number.
-        for (i, l) in lights.iter().enumerate() {
-            if l.power() > 0.0 {
-                let carried = medium.sigma_s * l.radiance * (0.25 * l.area() * power / l.power());
+        // Le A / (A luminance(Le) / power) = (Le / luminance(Le)) power: the area cancels, and a
+        // dim light beside a bright one divides no tiny power.
+        for (i, (l, desc)) in lights.iter().zip(&desc.lights).enumerate() {
+            let luminance = crate::light::luminance(l.radiance);
+            if luminance > 0.0 {
+                let carried = medium.sigma_s * (l.radiance / luminance) * (0.25 * power);
                 if !(carried.max_element() <= crate::limits::MAX_TOTAL_POWER) {
+                    let light = match &desc.name {
+                        Some(n) => format!("light[{i}] ({n})"),
+                        None => format!("light[{i}]"),
+                    };
                     return Err(err(
                         "medium.sigma_s".into(),
                         format!(
-                            "the planes of light[{i}] carry sigma_s x radiance x area / 4 over its share of the power, {:e}, above the {:e} an f32 image can sum",
+                            "the planes of {light} carry sigma_s x radiance x area / 4 over its share of the power, {:e}, above the {:e} an f32 image can sum",
                             carried.max_element(),
                             crate::limits::MAX_TOTAL_POWER
                         ),
@@ -670,6 +677,9 @@ radiance = 4
             "above the 1e30",
         );
         assert!(parse(&MINIMAL.replace("sigma_s = [0.1, 0.2, 0.3]", "sigma_s = 1e29")).is_ok());
+        // A dim light beside a bright one carries little: no overflow from its tiny power.
+        let dim = "\n[[light]]\ncorner = [-0.5, 0.5, -0.5]\nedge_u = [1.0, 0.0, 0.0]\nedge_v = [0.0, 0.0, 1.0]\nradiance = 1e-290\n";
+        assert!(parse(&format!("{}{dim}", MINIMAL.replace("radiance = 4", "radiance = 1e20"))).is_ok());
         expect_error(
             &MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [1.0, 0.0, 0.3]"),
             "light[0] (top).edge_v",
