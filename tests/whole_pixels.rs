@@ -237,8 +237,11 @@ fn a_light_smaller_than_a_billionth_of_a_pixel_keeps_its_emission() {
         let (film, _) = render(&scene, &opts, Control::none()).unwrap();
         let total: f64 = film.pixels.iter().map(|p| p.x as f64).sum();
         let held: f64 = pixels.iter().map(|&(i, j)| film.get(i, j).x as f64).sum();
-        println!("{name}: {want:.6e} wanted, {total:.6e} in the image, {held:.6e} in its pixels");
-        assert!((total - want).abs() <= 1e-5 * want, "{name}: {total:e} in the image, {want:e} wanted");
+        println!("{name}: {want:.9e} wanted, {total:.9e} in the image, {held:.9e} in its pixels");
+        // Each pixel is an f32 (a rounding of 6e-8 relative) of Le a computed in f64; before
+        // the areas about a region's first vertex it was 1.8e-5 off, and before the bound
+        // relative to the projection, 0.
+        assert!((total - want).abs() <= 2e-7 * want, "{name}: {total:e} in the image, {want:e} wanted");
         assert!((held - total).abs() <= 1e-6 * want, "{name}: {held:e} in its pixels of {total:e}");
         for &(i, j) in &pixels {
             assert!(film.get(i, j).x > 0.0, "{name}: pixel ({i}, {j}) lost its part");

@@ -402,11 +402,12 @@ impl Scene {
             ));
         }
 
-        // What each plane of a light carries (photon_plane.rs `power`: sigma_s rho pi Le A / P_l,
-        // P_l its share of the power), in f32 with the same headroom: beyond it a plane's power
-        // is no finite f32, and its hits' sums no number.
-        // Le A / (A luminance(Le) / power) = (Le / luminance(Le)) power: the area cancels, and a
-        // dim light beside a bright one divides no tiny power.
+        // What each plane of a light carries, in f32 with the lights' power's headroom: beyond it
+        // a plane's power is no finite f32, and its hits' sums no number. That is
+        // photon_plane.rs `power`, sigma_s rho pi Le A / P_l (docs/mathematics.md section 2.3,
+        // rho the isotropic 1/(4 pi), so rho pi = 1/4: with g != 0 the phase value divides D), P_l = A
+        // luminance(Le) / power: (Le / luminance(Le)) power sigma_s / 4, the area cancelled, so
+        // that a dim light beside a bright one divides no tiny power.
         for (i, (l, desc)) in lights.iter().zip(&desc.lights).enumerate() {
             let luminance = crate::light::luminance(l.radiance);
             if luminance > 0.0 {
