@@ -64,6 +64,8 @@ grep -h "^agreement pieces" "$out/gpu_check.log" 2>/dev/null
 grep -h "^gpu binning .* round 2 \|^gpu lanes .* round 2 " "$out/gpu_check.log" 2>/dev/null | sed 's/: \([a-z0-9-]*\): [0-9]* planes.*GPU time \([0-9.]* s\) (the reach and the binning \([0-9.]* s\).*total \([0-9.]* s\).*/ \1: GPU \2, binning \3, total \4/'
 grep -h "^agreement binning\|^agreement lanes" "$out/gpu_check.log" 2>/dev/null
 grep -h "^agreement orientations\|^agreement k " "$out/gpu_check.log" 2>/dev/null
+# The GPU's time pass by pass (FOGPLANES_TRACE=1), this build's timeline renders.
+grep -h "^== \|^GPU passes\|^  [a-z:_ ]* [0-9]* *[0-9.]* *[0-9.]* *[0-9.]*%$" "$out/gpu_timeline.log" 2>/dev/null | tr -s ' ' | cut -c1-90
 tail -5 "$out/cores_check.log" 2>/dev/null
 tail -2 "$out/gpu_tests.log" 2>/dev/null
 grep -h "a GPU render's\|wall.*for the GPU" "$out/prepare_planes.log" 2>/dev/null

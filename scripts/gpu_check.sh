@@ -5,8 +5,9 @@
 # the CPU's image (relative MSE, `fogplanes compare`), the GPU time by the work items' size and
 # with the driver's transcendental functions and without wgpu's shader runtime checks, then
 # the CPU renderer's wall time on 1, 2, 4, 8 and all threads, and the machine's threads per core;
-# then the timeline of smis-exact's renders (`FOGPLANES_TRACE=1`: each step's start, end and
-# thread, crates/core/src/trace.rs) into a log of its own, gpu_timeline.log.
+# then the timeline of smis-exact's renders and cmis-exact's first (`FOGPLANES_TRACE=1`: each
+# step's start, end and thread, then each GPU pass's time by its own timestamps,
+# crates/core/src/trace.rs) into a log of its own, gpu_timeline.log.
 #
 #   scripts/gpu_check.sh --fetch   # here, once, with a network: the Vulkan loader and libglvnd
 #                                  # as Debian packages into .gl/ (the device machine has none)
@@ -162,13 +163,15 @@ for t in 1 2 4 8 all; do
     TIMEFORMAT="cpu threads $t: wall %R s, user %U s, sys %S s"
     { time "$B" render "$S" --resolution "$R" --planes 40960 -q "${threads[@]}" -o "$work/t.exr" 2>&1 | grep -v '^wrote' | sed "s/^/  /"; } 2>&1
 done
-# The timeline: where each end to end goes, step by step (a second process each, the first
-# planes count and the last), into a log of its own (here, in the Vulkan set-up above).
+# The timeline: where each end to end goes, step by step, and the GPU's time pass by pass (a
+# second process each: smis-exact at the first planes count and the last, cmis-exact at the
+# first), into a log of its own (here, in the Vulkan set-up above).
 {
 date -u
-for planes in "$first" "$last"; do
-    echo "== smis-exact, $planes planes, --device gpu, FOGPLANES_TRACE=1"
-    FOGPLANES_TRACE=1 render --planes "$planes" -e smis-exact --device gpu -o "$work/trace.exr"
+for run in "smis-exact $first" "smis-exact $last" "cmis-exact $first"; do
+    e=${run% *} planes=${run#* }
+    echo "== $e, $planes planes, --device gpu, FOGPLANES_TRACE=1"
+    FOGPLANES_TRACE=1 render --planes "$planes" -e "$e" --device gpu -o "$work/trace.exr"
 done
 } >"${OUT:-$work}/gpu_timeline.log" 2>&1
 date -u

@@ -469,3 +469,91 @@ fn the_binnings_blocks_give_each_tile_its_planes() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// With the trace on (`FOGPLANES_TRACE=1`, for a device session's timeline), every GPU pass is
+/// timed by its own timestamps and the trace ends with a table of them: each pass of the
+/// binning's tiers, the gather and its reduction as often as the render ran them (a round's
+/// reduction after each gather dispatch, a batch's six binning passes, or three when flat), the
+/// rays' passes and the orientations' table where they ran; the passes of the rounds within
+/// the summary's GPU time, which also holds the time between them. The image is the same bits
+/// as without the trace. It fails where a round's time is taken from the wrong queries
+/// (checked: the gather's start read as the round's), where a pass is left out of the table, or
+/// where one tier's passes carry the other's names.
+#[test]
+fn the_trace_times_each_gpu_pass_and_keeps_the_image() {
+    if !have_gpu("the_trace_times_each_gpu_pass_and_keeps_the_image") {
+        return;
+    }
+    let d = dir("trace");
+    let render = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
+        let out = d.join(format!("{name}.exr"));
+        let mut args = vec!["render", SCENE, "--device", "gpu", "--resolution", "40x24", "--planes", "2048"];
+        args.extend(extra);
+        args.extend(["-o", path(&out)]);
+        let unset: Vec<&str> =
+            TUNING.into_iter().chain(["FOGPLANES_TRACE"]).filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
+        let o = run_with(&args, env, &unset);
+        let (printed, err) = text(&o);
+        assert!(o.status.success(), "{name}: {err}");
+        (fogplanes::film::Film::load_exr(&out).unwrap().pixels, printed, err)
+    };
+    // The number before `word` in the summary.
+    let before = |printed: &str, word: &str| -> f64 {
+        let head = printed.split(word).next().unwrap_or_default();
+        head.rsplit(' ').next().and_then(|n| n.parse().ok()).unwrap_or_else(|| panic!("no {word} in {printed}"))
+    };
+    for (extra, env, binning, orient) in [
+        (&["-e", "smis-exact"][..], &[][..], 6, false),
+        (
+            &["-e", "smis-exact", "--orientations", "3"][..],
+            &[("FOGPLANES_GPU_BINNING", "flat"), ("FOGPLANES_GPU_ORIENTATIONS", "table")][..],
+            3,
+            true,
+        ),
+    ] {
+        let (plain, printed, _) = render("plain", extra, env);
+        let traced_env: Vec<(&str, &str)> = env.iter().copied().chain([("FOGPLANES_TRACE", "1")]).collect();
+        let (traced, traced_printed, err) = render("traced", extra, &traced_env);
+        assert!(plain.iter().any(|p| p.x > 0.0), "{extra:?}: a black image says nothing");
+        assert!(plain == traced, "{extra:?}: the trace changed the image");
+        assert!(!printed.contains("GPU passes"), "{printed}");
+        // The table: (pass, runs, ms) per row after its heading.
+        let table: Vec<(String, u64, f64)> = err
+            .lines()
+            .skip_while(|l| !l.starts_with("GPU passes by their timestamps"))
+            .skip(1)
+            .map(|l| {
+                let cells: Vec<&str> = l.split_whitespace().collect();
+                let n = cells.len();
+                assert!(n >= 5 && cells[n - 1].ends_with('%'), "a row of the table: {l}");
+                (cells[..n - 4].join(" "), cells[n - 4].parse().unwrap(), cells[n - 3].parse().unwrap())
+            })
+            .collect();
+        let runs = |pass: &str| table.iter().find(|r| r.0 == pass).map_or(0, |r| r.1);
+        let dispatches = before(&traced_printed, " gather dispatches") as u64;
+        let batches = runs("bin: scan");
+        assert!(dispatches >= 1 && batches >= dispatches, "{extra:?}: {err}");
+        assert_eq!((runs("gather"), runs("reduce")), (dispatches, dispatches), "{extra:?}: {err}");
+        let bin =
+            ["block_count", "block_scan", "block_scatter", "count", "scan", "scatter"].map(|p| format!("bin: {p}"));
+        for (k, pass) in bin.iter().enumerate() {
+            let expected = if k >= 6 - binning { batches } else { 0 };
+            assert_eq!(runs(pass), expected, "{extra:?}: {pass}: {err}");
+        }
+        assert!(runs("reach") >= 1 && runs("rays") >= 1, "{extra:?}: {err}");
+        assert_eq!(runs("orient") >= 1, orient, "{extra:?}: {err}");
+        let named = bin.len() + ["gather", "reduce", "reach", "rays", "orient", "between passes"].len();
+        assert!(table.len() <= named && table.iter().all(|r| r.1 >= 1), "{extra:?}: {err}");
+        // The rounds' passes (the rays are not the gather's) within the GPU time, which holds
+        // them and what lies between them, to the summary's 0.1 ms and the table's 1 us a row.
+        let ms = |pass: &str| table.iter().find(|r| r.0 == pass).map_or(0.0, |r| r.2);
+        let passes: f64 = table.iter().map(|r| r.2).sum::<f64>() - ms("rays") - ms("between passes");
+        let gpu_ms = 1e3 * before(&traced_printed, " s (the reach and the binning");
+        let slack = 0.05 + 0.001 * table.len() as f64;
+        assert!(
+            passes <= gpu_ms + slack && gpu_ms <= passes + ms("between passes") + slack,
+            "{extra:?}: the passes' {passes} ms and the GPU time's {gpu_ms} ms: {err}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

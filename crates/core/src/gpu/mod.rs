@@ -27,6 +27,8 @@ mod adapter;
 #[cfg(feature = "gpu")]
 mod batches;
 #[cfg(feature = "gpu")]
+mod clock;
+#[cfg(feature = "gpu")]
 mod device;
 #[cfg(feature = "gpu")]
 mod passes;
@@ -199,8 +201,8 @@ pub fn item_planes(cpu_adapter: bool, pairs: u64, fixed: Option<u32>) -> u32 {
 }
 
 /// The timestamps of a round of a gathering, where the adapter has them: its first pass's
-/// start, its gather's start, its last pass's end (written by `passes.rs`, read in threes by
-/// `sums.rs`).
+/// start, its gather's start, its last pass's end (`clock.rs`; with the trace on, every pass's
+/// start and end instead, the rounds' among them).
 pub const TIMESTAMPS: u32 = 3;
 
 /// The variable that fixes the planes of a work item, for measuring the item size on a device

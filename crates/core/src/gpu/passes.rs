@@ -5,13 +5,14 @@
 //! timed by the GPU's timestamps where it has them.
 
 use super::batches::{Batch, Round, block_words};
+use super::clock::{Clock, Mark, Timestamps};
 use super::device::{GatherPipelines, Gpu, entry, grid};
 use super::plane_buffers::PlaneBuffers;
 use super::rays::GpuRays;
 use super::records::{BinParams, GatherParams};
 use super::scratch::{Need, ScratchBuffers};
 use super::sums::GpuSums;
-use super::{BATCH_SEGMENTS, TILE, TIMESTAMPS};
+use super::{BATCH_SEGMENTS, TILE};
 use crate::control::Control;
 use crate::error::{Error, Result};
 use crate::gather::{GatherStats, Phase};
@@ -43,8 +44,8 @@ pub(super) struct Gathering<'a> {
 #[derive(Default)]
 pub struct Recorded {
     pub(super) commands: Option<wgpu::CommandBuffer>,
-    /// Its timestamps' read-back, where the adapter has them.
-    pub(super) timestamps: Option<wgpu::Buffer>,
+    /// Its timestamps, where the adapter has them.
+    pub(super) timestamps: Option<Timestamps>,
     /// The flag its reach pass sets once submitted, where it records one.
     pub(super) reach: Option<Arc<AtomicBool>>,
     /// Bytes of its parameters, uploaded.
@@ -53,12 +54,13 @@ pub struct Recorded {
     pub(super) stats: GatherStats,
 }
 
-/// A pass of a round: its pipeline, its bindings, and its grid of workgroups (`None`: the
-/// gather's, as `bin.wgsl`'s `scan` counted the round's work items).
-type Step<'a> = (&'a wgpu::ComputePipeline, wgpu::BindGroup, Option<(u32, u32)>);
+/// A pass of a round: its name (the trace's), its pipeline, its bindings, and its grid of
+/// workgroups (`None`: the gather's, as `bin.wgsl`'s `scan` counted the round's work items).
+type Step<'a> = (&'static str, &'a wgpu::ComputePipeline, wgpu::BindGroup, Option<(u32, u32)>);
 
-/// A timestamp query set with its resolve and read-back buffers.
-type Queries = (wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer);
+/// The names of `bin.wgsl`'s passes, in [`Gpu`]'s order: the blocks' tier, then the tiles'.
+const BIN_PASSES: [&str; 6] =
+    ["bin: block_count", "bin: block_scan", "bin: block_scatter", "bin: count", "bin: scan", "bin: scatter"];
 
 impl Gathering<'_> {
     /// The gathering along the ray set that begins `rays_at` floats into `rays` (a join's
@@ -98,28 +100,31 @@ impl Gathering<'_> {
                 gather_group(gpu, &params, self.planes, rays, &rotations_buf, &s, &into.image)
             })
             .collect();
-        let queries = timestamp_queries(gpu, self.rounds.len());
-        // Every round in one command buffer (the passes run in order, the scratch buffers
-        // reused from round to round).
-        let mut encoder = gpu.device.create_command_encoder(&Default::default());
         // The planes' reach, until a submission has found it (once for `into`'s work), timed
         // with the first round.
         let reach_first = !self.reach_found.load(Ordering::Acquire)
             && !into.on_submit.iter().any(|f| Arc::ptr_eq(f, self.reach_found));
+        let orient = pipelines.orient.as_ref().filter(|_| orients > 0);
+        let blocked = block_words.is_some();
+        // Every pass, for the clock: the reach, the orientations, and each round's.
+        let bin_passes = if blocked { 6 } else { 3 };
+        let passes = reach_first as usize
+            + orient.is_some() as usize
+            + self.rounds.iter().map(|r| r.batches.len() * bin_passes + 2).sum::<usize>();
+        let mut clock = Clock::new(gpu, self.rounds.len(), passes);
+        // Every round in one command buffer (the passes run in order, the scratch buffers
+        // reused from round to round).
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
         // The first pass's start is the first round's (`timed_from_first` in `encode_round`).
-        let first_pass = |first: bool| {
-            queries.as_ref().filter(|_| first).map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
-                query_set: set,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: None,
-            })
-        };
+        let first_pass = Mark { starts: Some(0), ..Mark::default() };
         if reach_first {
-            self.planes.polygons.encode(gpu, &mut encoder, first_pass(true));
+            let timestamp_writes = clock.as_mut().and_then(|c| c.pass("reach", first_pass));
+            self.planes.polygons.encode(gpu, &mut encoder, timestamp_writes);
         }
         // The planes' orientations, timed with the first round too.
-        if let Some(orient) = pipelines.orient.as_ref().filter(|_| orients > 0) {
-            let timestamp_writes = first_pass(!reach_first);
+        if let Some(orient) = orient {
+            let mark = if reach_first { Mark::default() } else { first_pass };
+            let timestamp_writes = clock.as_mut().and_then(|c| c.pass("orient", mark));
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
             pass.set_pipeline(orient);
             pass.set_bind_group(0, &groups[0], &[]);
@@ -128,22 +133,17 @@ impl Gathering<'_> {
         }
         let timed_before = reach_first || orients > 0;
         let mut bytes_up = std::mem::size_of_val(rotations.as_slice()) as u64;
-        let blocked = block_words.is_some();
         for (r, (round, gather_group)) in self.rounds.iter().zip(&groups).enumerate() {
             control.check()?;
             bytes_up += std::mem::size_of::<GatherParams>() as u64;
             let steps = self.round_steps(round, (pipelines, gather_group), &s, (rays_at, blocked), &mut bytes_up);
             let timed_from_first = !(r == 0 && timed_before);
-            encode_round(&mut encoder, steps, queries.as_ref(), r as u32, timed_from_first, &s);
+            encode_round(&mut encoder, steps, clock.as_mut(), r as u32, timed_from_first, &s);
         }
-        if let Some((set, resolve, readback)) = queries.as_ref() {
-            let queries = TIMESTAMPS * self.rounds.len() as u32;
-            encoder.resolve_query_set(set, 0..queries, resolve, 0);
-            encoder.copy_buffer_to_buffer(resolve, 0, readback, 0, 8 * queries as u64);
-        }
+        let timestamps = clock.map(|c| c.finish(&mut encoder));
         Ok(Recorded {
             commands: Some(encoder.finish()),
-            timestamps: queries.map(|(_, _, readback)| readback),
+            timestamps,
             reach: reach_first.then(|| self.reach_found.clone()),
             bytes_up,
             stats: GatherStats::default(),
@@ -267,16 +267,16 @@ impl Gathering<'_> {
             *bytes_up += std::mem::size_of::<BinParams>() as u64;
             let bin_group = bin_group(gpu, &bin_params, self.planes, s);
             // The blocks' lists first (count, scan, scatter), then the tiles' from them.
-            let tiers = [(&gpu.bin[..3], block_grid), (&gpu.bin[3..], tile_grid)];
+            let tiers = [(0..3, block_grid), (3..6, tile_grid)];
             for (passes, size) in tiers.into_iter().skip(!blocked as usize) {
-                for (pass, size) in passes.iter().zip([size, (1, 1), size]) {
-                    steps.push((pass, bin_group.clone(), Some(size)));
+                for (k, size) in passes.zip([size, (1, 1), size]) {
+                    steps.push((BIN_PASSES[k], &gpu.bin[k], bin_group.clone(), Some(size)));
                 }
             }
         }
         // The gather's work items as many as the last `scan` counts (`bin.wgsl` writes the grid).
-        steps.push((&pipelines.gather, gather_group.clone(), None));
-        steps.push((&pipelines.reduce, gather_group.clone(), Some((tiles_x, tiles_y))));
+        steps.push(("gather", &pipelines.gather, gather_group.clone(), None));
+        steps.push(("reduce", &pipelines.reduce, gather_group.clone(), Some((tiles_x, tiles_y))));
         steps
     }
 }
@@ -284,28 +284,24 @@ impl Gathering<'_> {
 /// Round `r`'s passes encoded: timed from its first (unless `timed_from_first` is false: round
 /// 0's from the reach or the orientations before it) to its last, and its gather from its
 /// start, so that the summary splits the GPU's time into the reach and the binning, and the
-/// gather and its reduction.
+/// gather and its reduction; with the trace on, each pass by its own timestamps.
 fn encode_round(
     encoder: &mut wgpu::CommandEncoder,
     steps: Vec<Step>,
-    queries: Option<&Queries>,
+    mut clock: Option<&mut Clock>,
     r: u32,
     timed_from_first: bool,
     s: &ScratchBuffers,
 ) {
     let last = steps.len() - 1;
     let gather_at = steps.len() - 2;
-    for (k, (pipeline, group, size)) in steps.into_iter().enumerate() {
-        let at = TIMESTAMPS * r;
-        let begins = if k == gather_at { Some(at + 1) } else { (k == 0 && timed_from_first).then_some(at) };
-        let ends = (k == last).then_some(at + 2);
-        let timestamp_writes = queries.filter(|_| begins.is_some() || ends.is_some()).map(|(set, _, _)| {
-            wgpu::ComputePassTimestampWrites {
-                query_set: set,
-                beginning_of_pass_write_index: begins,
-                end_of_pass_write_index: ends,
-            }
-        });
+    for (k, (name, pipeline, group, size)) in steps.into_iter().enumerate() {
+        let mark = Mark {
+            starts: (k == 0 && timed_from_first).then_some(r),
+            gather: (k == gather_at).then_some(r),
+            ends: (k == last).then_some(r),
+        };
+        let timestamp_writes = clock.as_deref_mut().and_then(|c| c.pass(name, mark));
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &group, &[]);
@@ -364,25 +360,5 @@ fn bin_group(gpu: &Gpu, params: &wgpu::Buffer, planes: &PlaneBuffers, s: &Scratc
             entry(9, &planes.polygons.groups),
             entry(10, &s.blocks),
         ],
-    })
-}
-
-/// [`TIMESTAMPS`] a round, where the adapter has them, read when the sums are; else (or for a
-/// gathering of more rounds than a query set of wgpu's 4,096 queries takes) the sums are timed
-/// by the wall time from their first submission to their reading back.
-fn timestamp_queries(gpu: &Gpu, rounds: usize) -> Option<Queries> {
-    let count = TIMESTAMPS as usize * rounds;
-    (gpu.has_timestamps() && count <= 4096).then(|| {
-        let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-            label: Some("gather time"),
-            ty: wgpu::QueryType::Timestamp,
-            count: count as u32,
-        });
-        let bytes = 8 * count as u64;
-        let copy_src = wgpu::BufferUsages::COPY_SRC;
-        let resolve = gpu.scratch("timestamps", bytes, wgpu::BufferUsages::QUERY_RESOLVE | copy_src);
-        let readback =
-            gpu.scratch("timestamps read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
-        (set, resolve, readback)
     })
 }

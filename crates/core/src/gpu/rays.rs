@@ -2,6 +2,7 @@
 //! straight into a mapped buffer, or made on the GPU by `rays.wgsl`; kept there for every piece
 //! gathered along them.
 
+use super::clock::{Clock, Mark, Timestamps};
 use super::device::{Gpu, entry};
 use crate::camera::{CameraRay, RayRowFn};
 use crate::error::{Error, Result};
@@ -23,8 +24,8 @@ pub struct GpuRays {
     stride: u64,
     gpu: Arc<Gpu>,
     /// The pass that makes them, submitted with the first gathering along them (or when they
-    /// are read back).
-    pending: Mutex<Option<wgpu::CommandBuffer>>,
+    /// are read back), and with the trace on its timestamps.
+    pending: Mutex<(Option<wgpu::CommandBuffer>, Option<Timestamps>)>,
     upload_ns: u64,
     /// Bytes that crossed to the GPU to make them.
     bytes_up: u64,
@@ -62,7 +63,7 @@ impl GpuRays {
             sets: 1,
             stride: bytes,
             gpu: gpu.clone(),
-            pending: Mutex::new(None),
+            pending: Mutex::new((None, None)),
             upload_ns: t.elapsed().as_nanos() as u64,
             bytes_up: bytes,
             made_on_gpu: false,
@@ -94,10 +95,12 @@ impl GpuRays {
             )));
         }
         let t = Instant::now();
-        let (buffer, commands) = gpu.checked(|| {
+        let (buffer, commands, timestamps) = gpu.checked(|| {
             let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
             let buffer = gpu.scratch("rays", stride * (sets.len() as u64 - 1) + bytes, usage);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            // No round (the rays are not in the gather's time): timed only with the trace on.
+            let mut clock = Clock::new(gpu, 0, sets.len());
             for (k, (set, panels)) in sets.iter().enumerate() {
                 let record = gpu.upload("ray set", bytemuck::bytes_of(*set), wgpu::BufferUsages::UNIFORM);
                 let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
@@ -115,12 +118,15 @@ impl GpuRays {
                         wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Buffer(rays) },
                     ],
                 });
-                let mut pass = encoder.begin_compute_pass(&Default::default());
+                let timestamp_writes = clock.as_mut().and_then(|c| c.pass("rays", Mark::default()));
+                let mut pass =
+                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
                 pass.set_pipeline(&gpu.rays);
                 pass.set_bind_group(0, &group, &[]);
                 pass.dispatch_workgroups(groups.0, groups.1, 1);
             }
-            (buffer, encoder.finish())
+            let timestamps = clock.map(|c| c.finish(&mut encoder));
+            (buffer, encoder.finish(), timestamps)
         })?;
         let crossed: usize = sets.iter().map(|(s, p)| std::mem::size_of_val(*s) + std::mem::size_of_val(*p)).sum();
         Ok(GpuRays {
@@ -129,7 +135,7 @@ impl GpuRays {
             sets: sets.len() as u32,
             stride,
             gpu: gpu.clone(),
-            pending: Mutex::new(Some(commands)),
+            pending: Mutex::new((Some(commands), timestamps)),
             upload_ns: t.elapsed().as_nanos() as u64,
             bytes_up: crossed as u64,
             made_on_gpu: true,
@@ -215,7 +221,7 @@ impl GpuRays {
             sets: 1,
             stride: bytes,
             gpu: gpu.clone(),
-            pending: Mutex::new(None),
+            pending: Mutex::new((None, None)),
             upload_ns,
             bytes_up: bytes,
             made_on_gpu: false,
@@ -238,9 +244,9 @@ impl GpuRays {
     }
 
     /// The pass that makes them, if it is not submitted yet: to submit before the work that
-    /// reads them.
-    pub(super) fn take_pending(&self) -> Option<wgpu::CommandBuffer> {
-        self.pending.lock().unwrap_or_else(|p| p.into_inner()).take()
+    /// reads them, and its timestamps (with the trace on) to read with that work's.
+    pub(super) fn take_pending(&self) -> (Option<wgpu::CommandBuffer>, Option<Timestamps>) {
+        std::mem::take(&mut *self.pending.lock().unwrap_or_else(|p| p.into_inner()))
     }
 
     /// Whether the GPU makes them (the work along them is then kept to be submitted with the
@@ -269,7 +275,7 @@ impl GpuRays {
                 gpu.scratch("rays read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             encoder.copy_buffer_to_buffer(&self.buffer, 0, &readback, 0, bytes);
-            gpu.queue.submit(self.take_pending().into_iter().chain([encoder.finish()]));
+            gpu.queue.submit(self.take_pending().0.into_iter().chain([encoder.finish()]));
             readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             readback
         })?;

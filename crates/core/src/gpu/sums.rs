@@ -1,6 +1,7 @@
 //! An image's sums on the GPU ([`GpuSums`]): what every gathering into it adds to, the work
 //! not submitted yet, and their one reading back.
 
+use super::clock::Timestamps;
 use super::device::Gpu;
 use crate::error::{Error, Result};
 use crate::gather::GatherStats;
@@ -22,7 +23,7 @@ pub struct GpuSums {
     /// The bytes of `image`: the pixels' sums and the tiles' hits ([`sums_bytes`]).
     bytes: u64,
     /// The gatherings' timestamps, resolved on the GPU, to read with the sums.
-    pub(super) timestamps: Vec<wgpu::Buffer>,
+    pub(super) timestamps: Vec<Timestamps>,
     /// When the first gathering into these sums was submitted (the GPU's time where the adapter
     /// has no timestamps).
     first_submission: Option<Instant>,
@@ -52,7 +53,7 @@ pub struct GpuSums {
 /// timestamps, both asked to be mapped.
 struct Reading {
     readback: wgpu::Buffer,
-    timestamps: Vec<wgpu::Buffer>,
+    timestamps: Vec<Timestamps>,
     /// The submission that copies the sums: the reading waits for it alone, so that the GPU
     /// goes on with a window's later chunks while the CPU reads one back.
     index: Option<wgpu::SubmissionIndex>,
@@ -130,7 +131,9 @@ impl GpuSums {
         let Some(commands) = recorded.commands else {
             return recorded.stats;
         };
-        self.pending.extend(rays.take_pending());
+        let (made, made_timestamps) = rays.take_pending();
+        self.pending.extend(made);
+        self.timestamps.extend(made_timestamps);
         self.pending.push(commands);
         self.on_submit.extend(recorded.reach);
         if self.last_rays.as_ref() != Some(&rays.buffer) {
@@ -142,7 +145,7 @@ impl GpuSums {
             *rays.last_use.lock().unwrap_or_else(|p| p.into_inner()) = self.submit();
         }
         match recorded.timestamps {
-            Some(readback) => self.timestamps.push(readback),
+            Some(t) => self.timestamps.push(t),
             None => self.untimed = true,
         }
         recorded.stats
@@ -184,7 +187,7 @@ impl GpuSums {
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             encoder.copy_buffer_to_buffer(&self.image, 0, &readback, 0, bytes);
             let index = self.submit_with(Some(encoder.finish()));
-            for b in timestamps.iter().chain([&readback]) {
+            for b in timestamps.iter().map(|t| &t.readback).chain([&readback]) {
                 b.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             }
             Reading { readback, timestamps, index }
@@ -214,7 +217,7 @@ impl GpuSums {
         let mapped = |b: &wgpu::Buffer| {
             b.slice(..).get_mapped_range().map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))
         };
-        let timestamp_bytes: u64 = timestamps.iter().map(|b| b.size()).sum();
+        let timestamp_bytes: u64 = timestamps.iter().map(|t| t.readback.size()).sum();
         let mut stats = GatherStats {
             device_ns: waited,
             wait_ns,
@@ -225,16 +228,11 @@ impl GpuSums {
         if !untimed && !timestamps.is_empty() {
             let period = gpu.queue.get_timestamp_period() as f64;
             stats.device_ns = 0;
-            // A driver's timestamps out of order count 0, not 2^64 ticks.
-            let ns = |from: u64, to: u64| (to.saturating_sub(from) as f64 * period) as u64;
-            for b in &timestamps {
-                let view = mapped(b)?;
-                let ts: &[u64] = bytemuck::cast_slice(&view);
-                for batch in ts.chunks_exact(super::TIMESTAMPS as usize) {
-                    let [start, gather, end] = [batch[0], batch[1], batch[2]];
-                    stats.device_ns += ns(start, end);
-                    stats.device_gather_ns += ns(gather, end);
-                }
+            for t in &timestamps {
+                let view = mapped(&t.readback)?;
+                let (all, gather) = t.read(bytemuck::cast_slice(&view), period);
+                stats.device_ns += all;
+                stats.device_gather_ns += gather;
             }
         }
         drop(waiting);
