@@ -474,7 +474,8 @@ impl<'a> ChunkRenderer<'a> {
 
     /// [`ChunkRenderer::render_with`] resumed from `held`, the nodes an earlier render of the
     /// same planes held after its first chunks (what its `observer` was last given; empty to
-    /// start afresh), telling `observer` the nodes held after each further chunk. The chunks
+    /// start afresh), telling `observer` the nodes held after each further chunk (with an error
+    /// image, after each window of chunks, whose end alone the spread agrees with). The chunks
     /// go in order and each node is added as soon as its right child is (the canonical tree's
     /// post-order, [`frontier`]), so wherever the render was resumed the result is the bits
     /// of one uninterrupted render. `beside_last` runs beside the last window's gathering, on
@@ -591,7 +592,13 @@ impl<'a> ChunkRenderer<'a> {
                     // Its buffer is a later chunk's (fresh pages cost their faults again).
                     spare.1.push(right.sums);
                 }
-                observer(&held, self.gatherer.spread.as_ref())?;
+                // With an error image the nodes are told at the window's end alone: its
+                // gathering added every chunk's groups to the spread, which only then is the
+                // nodes' (told after each chunk, a checkpoint saved a spread a window ahead of
+                // its nodes, and a kill between two chunks' files left one the resume refused).
+                if self.gatherer.spread.is_none() || c + 1 == window.end {
+                    observer(&held, self.gatherer.spread.as_ref())?;
+                }
             }
             // The next window's preparation failed (cancelled) only now that this one's chunks
             // are told.
@@ -662,7 +669,8 @@ pub fn render(scene: &Scene, opts: &RenderOptions, control: Control) -> Result<(
 }
 
 /// [`render`] resumed from `resume` (nothing: from the start), telling `observer` the nodes it
-/// holds after each further chunk and the spread of its plane groups (a checkpoint,
+/// holds after each further chunk (with an error image, after each window of chunks gathered
+/// at once, where the spread is theirs) and the spread of its plane groups (a checkpoint,
 /// [`crate::partial::checkpoint`]; a live view). The image is [`render`]'s bit for bit,
 /// wherever it was resumed, and so is the error image when the spread was kept; the
 /// statistics count this call's planes and work. Refuses held nodes that are not what this

@@ -6,7 +6,7 @@
 //! | file | holds | written |
 //! |---|---|---|
 //! | `planes_A-B.npz` | a render's sums over planes `A:B`, a node of the canonical tree | as the node is held ([`super::frontier`]) |
-//! | `spread_B.groups` | with an error image, its plane groups' spread after planes `0:B` (an `.npz` by another name, so that `CK/*.npz` names the parts alone) | before the nodes of the chunk ending at `B`; the older one removed after them |
+//! | `spread_B.groups` | with an error image, its plane groups' spread after planes `0:B` (an `.npz` by another name, so that `CK/*.npz` names the parts alone) | before the nodes of the window of chunks ending at `B` (the spread agrees with its nodes at a window's end alone); the older one removed after them |
 //! | `pilot.npz` | an adaptive reference's pilot pass, every row | once the pass is finished |
 //! | `rows_J0-J1.npz` | a band of a reference's final pass | as the band is finished |
 //! | `.lock` | nothing: locked while a process uses the directory | at opening |
