@@ -428,9 +428,13 @@ pub struct RaySetRecord {
     pub scramble: [u32; 2],
     pub sobol: [u32; 2],
     pub pixel_center: u32,
-    /// The light panels that follow ([`PanelRecord`]).
+    /// Its light panels ([`PanelRecord`]): how many, and where the first is among the panels
+    /// of the sets made together (`gpu/rays.rs` sets it; 0 for a set alone).
     pub panels: u32,
-    pub pad: [u32; 2],
+    pub first_panel: u32,
+    /// Where its rays begin in the buffer of the sets made together, in floats (`gpu/rays.rs`
+    /// sets it; 0 for a set alone).
+    pub first_float: u32,
 }
 
 /// A light panel as `gpu/rays.wgsl` tests it ([`PanelTest`] relative to the camera, in f32).
@@ -488,7 +492,8 @@ pub fn ray_set_record(scene: &Scene, seed: u64, k: u32, pixel_center: bool) -> (
         sobol: r.sobol,
         pixel_center: pixel_center as u32,
         panels: panels.len() as u32,
-        pad: [0; 2],
+        first_panel: 0,
+        first_float: 0,
     };
     (record, panels)
 }

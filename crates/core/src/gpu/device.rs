@@ -180,7 +180,7 @@ impl Gpu {
         let (r, w) = (true, false);
         let bin_layout = layout("bin", &[r, w, w, w, w, w, r, w, r, w]);
         let gather_layout = layout("gather", &[r, r, r, r, r, r, r, w, w, r, w]);
-        let rays_layout = layout("rays", &[r, w]);
+        let rays_layout = layout("rays", &[r, r, w]);
         let reach_layout = layout("reach", &[r, r, w, w]);
         let (bin_module, bin_pipeline_layout) = (shader("bin.wgsl", BIN_WGSL), pipeline_layout(&bin_layout));
         let _s = crate::trace::span("pipelines made: bin, rays, reach");

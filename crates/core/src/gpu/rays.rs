@@ -4,6 +4,7 @@
 
 use super::clock::{Clock, Mark, Timestamps};
 use super::device::{Gpu, entry};
+use super::records::RaysDispatch;
 use crate::camera::{CameraRay, RayRowFn};
 use crate::error::{Error, Result};
 use crate::pixel::{PanelRecord, RaySetRecord};
@@ -36,6 +37,9 @@ pub struct GpuRays {
     /// The last submission that gathers along them.
     pub(super) last_use: Mutex<Option<wgpu::SubmissionIndex>>,
 }
+
+/// The most sets one dispatch makes: a workgroup's z, at most wgpu's default 65,535 a side.
+const MAX_SETS_A_DISPATCH: u32 = 65_535;
 
 impl GpuRays {
     /// Refused in one line where the rays of `len` pixels exceed one binding.
@@ -79,8 +83,9 @@ impl GpuRays {
     }
 
     /// The ray sets `sets` (each with its light panels) made on `gpu` into one buffer, set `k`
-    /// at [`GpuRays::floats_at`]`(k)`: one pass a set, recorded together, submitted with the
-    /// first gathering along them. Refused in one line where a set exceeds one binding; `sets`
+    /// at [`GpuRays::floats_at`]`(k)`: their records and panels in two uploads and one dispatch
+    /// (a workgroup's z its set; 65,535 sets a dispatch), submitted with the first gathering
+    /// along them. Refused in one line where a set exceeds one binding; `sets`
     /// must fit one binding together ([`GpuRays::sets_fitting`]).
     pub fn sets_on_gpu(gpu: &Arc<Gpu>, sets: &[(&RaySetRecord, &[PanelRecord])]) -> Result<Self> {
         let (w, h) = (sets[0].0.width, sets[0].0.height);
@@ -95,35 +100,43 @@ impl GpuRays {
             )));
         }
         let t = Instant::now();
+        // Every set's record, where its panels and its rays begin in the buffers of all of
+        // them, and their panels one after another: two uploads, one dispatch.
+        let mut records = Vec::with_capacity(sets.len());
+        let mut all_panels = Vec::new();
+        for (k, (set, panels)) in sets.iter().enumerate() {
+            let first_float = u32::try_from(stride / 4 * k as u64).expect("the sets fit one binding, u32 floats");
+            records.push(RaySetRecord { first_panel: all_panels.len() as u32, first_float, ..**set });
+            all_panels.extend_from_slice(panels);
+        }
+        // A buffer is never empty: a scene without a panel binds one panel that no set reads.
+        if all_panels.is_empty() {
+            all_panels.push(PanelRecord::default());
+        }
         let (buffer, commands, timestamps) = gpu.checked(|| {
             let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
             let buffer = gpu.scratch("rays", stride * (sets.len() as u64 - 1) + bytes, usage);
+            let records = gpu.upload("ray sets", bytemuck::cast_slice(&records), wgpu::BufferUsages::STORAGE);
+            let panels = gpu.upload("panels", bytemuck::cast_slice(&all_panels), wgpu::BufferUsages::STORAGE);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
             // No round (the rays are not in the gather's time): timed only with the trace on.
-            let mut clock = Clock::new(gpu, 0, sets.len());
-            for (k, (set, panels)) in sets.iter().enumerate() {
-                let record = gpu.upload("ray set", bytemuck::bytes_of(*set), wgpu::BufferUsages::UNIFORM);
-                let panels = gpu.upload("panels", bytemuck::cast_slice(panels), wgpu::BufferUsages::STORAGE);
-                let rays = wgpu::BufferBinding {
-                    buffer: &buffer,
-                    offset: stride * k as u64,
-                    size: wgpu::BufferSize::new(bytes),
-                };
+            let dispatches = sets.len().div_ceil(MAX_SETS_A_DISPATCH as usize);
+            let mut clock = Clock::new(gpu, 0, dispatches);
+            for first in (0..sets.len() as u32).step_by(MAX_SETS_A_DISPATCH as usize) {
+                let count = (sets.len() as u32 - first).min(MAX_SETS_A_DISPATCH);
+                let dispatch = RaysDispatch { first_set: first, pad: [0; 3] };
+                let dispatch = gpu.upload("rays dispatch", bytemuck::bytes_of(&dispatch), wgpu::BufferUsages::UNIFORM);
                 let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("rays"),
                     layout: &gpu.rays_layout,
-                    entries: &[
-                        entry(0, &record),
-                        entry(1, &panels),
-                        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Buffer(rays) },
-                    ],
+                    entries: &[entry(0, &dispatch), entry(1, &records), entry(2, &panels), entry(3, &buffer)],
                 });
                 let timestamp_writes = clock.as_mut().and_then(|c| c.pass("rays", Mark::default()));
                 let mut pass =
                     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes });
                 pass.set_pipeline(&gpu.rays);
                 pass.set_bind_group(0, &group, &[]);
-                pass.dispatch_workgroups(groups.0, groups.1, 1);
+                pass.dispatch_workgroups(groups.0, groups.1, count);
             }
             let timestamps = clock.map(|c| c.finish(&mut encoder));
             (buffer, encoder.finish(), timestamps)

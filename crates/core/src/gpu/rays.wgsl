@@ -1,5 +1,6 @@
-// The camera rays of one ray set, made on the GPU where they are gathered (docs/mathematics.md
-// section 8.1): `pixel::RayRow::block`'s operations in f32, a thread a pixel. The CPU's rays are
+// The camera rays of ray sets, made on the GPU where they are gathered (docs/mathematics.md
+// section 8.1): `pixel::RayRow::block`'s operations in f32, a thread a pixel, a gathering's sets
+// in one dispatch (a workgroup's z its set). The CPU's rays are
 // the specification; tests/gpu.rs holds these to them ray by ray. What differs:
 //
 // - the pixel's jitter is the same integer hash, bit for bit (splitmix64 on pairs of u32 words,
@@ -33,8 +34,11 @@ struct RaySet {
     // The set's 2D Sobol point before its per-pixel scramble.
     sobol: vec2<u32>,
     pixel_center: u32,
+    // Its panels: how many, and where the first is in `panels`.
     panels: u32,
-    pad: vec2<u32>,
+    first_panel: u32,
+    // Where its rays begin in `rays`, in floats.
+    first_float: u32,
 }
 
 // `pixel::PanelRecord`: a light panel's rectangle relative to the camera.
@@ -51,9 +55,20 @@ struct Panel {
     footprint: vec4<i32>,
 }
 
-@group(0) @binding(0) var<uniform> ray_set: RaySet;
-@group(0) @binding(1) var<storage, read> panels: array<Panel>;
-@group(0) @binding(2) var<storage, read_write> rays: array<f32>;
+// gpu/rays.rs `Dispatch`: the dispatch's first set in `sets` (a workgroup's z its set from there).
+struct Dispatch {
+    first_set: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> dispatch: Dispatch;
+// The sets made together, one dispatch for (up to 65,535 of) them, their panels one after
+// another, and the buffer that holds all their rays.
+@group(0) @binding(1) var<storage, read> sets: array<RaySet>;
+@group(0) @binding(2) var<storage, read> panels: array<Panel>;
+@group(0) @binding(3) var<storage, read_write> rays: array<f32>;
 
 // --- 64-bit integers as (low, high) words ---
 
@@ -111,6 +126,7 @@ fn coordinate(x: u32) -> f32 {
 
 @compute @workgroup_size(16, 16)
 fn rays_main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let ray_set = sets[dispatch.first_set + id.z];
     let i = id.x;
     let j = id.y;
     if i >= ray_set.width || j >= ray_set.height {
@@ -156,7 +172,7 @@ fn rays_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let column = i32(i);
     let row = i32(j);
     for (var k = 0u; k < ray_set.panels; k++) {
-        let r = panels[k];
+        let r = panels[ray_set.first_panel + k];
         let b = r.footprint;
         if column < b.x || column > b.y || row < b.z || row > b.w {
             continue;
@@ -176,7 +192,7 @@ fn rays_main(@builtin(global_invocation_id) id: vec3<u32>) {
     // `Scene::segment_before`: the segment in the box before the panel, or an empty one.
     let end = min(surface, t1);
     let any = inside && t0 <= t1 && t0 < end;
-    let at = p * RAY_FLOATS;
+    let at = ray_set.first_float + p * RAY_FLOATS;
     rays[at] = d.x;
     rays[at + 1u] = d.y;
     rays[at + 2u] = d.z;

@@ -13,6 +13,15 @@ pub(super) const REACH_WGSL: &str = include_str!("reach.wgsl");
 /// Bytes of one work item's partial sums: 256 pixels of (r, g, b, hits) in f32.
 pub(super) const ITEM_BYTES: u64 = (TILE * TILE) as u64 * 16;
 
+/// `rays.wgsl`'s `Dispatch`: the first of the ray sets that one dispatch makes (a workgroup's
+/// z its set from there).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(super) struct RaysDispatch {
+    pub(super) first_set: u32,
+    pub(super) pad: [u32; 3],
+}
+
 /// `gather.wgsl`'s `Params`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -156,8 +165,9 @@ mod tests {
                 RAYS_WGSL,
                 "RaySet",
                 fields!(RaySetRecord: forward, tan_x, right, tan_y, up, width, lo, height, hi, outside, scramble,
-                    sobol, pixel_center, panels, pad),
+                    sobol, pixel_center, panels, first_panel, first_float),
             ),
+            (RAYS_WGSL, "Dispatch", fields!(RaysDispatch: first_set, pad)),
             (RAYS_WGSL, "Panel", fields!(PanelRecord: corner, to_plane, n, width, u, height, v, pad, footprint)),
         ];
         // A camera ray is `RAY_FLOATS` f32 where it is made and where it is read, its fields in
