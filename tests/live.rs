@@ -485,6 +485,84 @@ fn the_spread_told_with_the_nodes_is_theirs_and_resumes_to_the_bits() {
     }
 }
 
+/// A kill between the files of one save: with an error image a window of chunks saves its
+/// spread, then a file for each node it completed, so that a kill between two node files leaves
+/// the nodes of a chunk inside the window, which has no spread, beside the window before's
+/// nodes and spread. The next opening resumes from those (it took the newer nodes, deleted the
+/// others, and refused: "holds 131072 planes of this render but not the spread"), and the
+/// render ends with the uninterrupted bits and error image. Made here in the library: a
+/// checkpoint saved as the command line saves it, and copied at each save as a kill after the
+/// save's first node file would leave it; the tiles cut as for 2 workers, so that a window is
+/// 3 chunks (64 x 36 pixels are 3 bands of rows) and its save writes two node files (the image
+/// is the same bits however its work is cut, so other tests are not moved).
+#[test]
+fn a_kill_between_a_windows_files_resumes_from_the_window_before() {
+    use fogplanes::partial::checkpoint::Checkpoint;
+    let dir = scratch("kill-window");
+    let (ck_dir, killed) = (dir.join("ck"), dir.join("killed"));
+    let scene = Scene::load(Path::new(SCENE)).unwrap().with_resolution(64, 36).unwrap();
+    let opts =
+        options(&scene, Overrides { planes: Some(9 * CHUNK_PLANES as u64), stderr: true, ..Overrides::default() });
+    let files = |d: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.starts_with('.'))
+            .collect();
+        v.sort();
+        v
+    };
+    fogplanes::schedule::cut_for(Some(2));
+    let (mut ck, held) = Checkpoint::render(&ck_dir, &scene, &opts).unwrap();
+    assert!(held.is_empty());
+    // The kills made: the nodes' end the state before each save held.
+    let mut made = Vec::new();
+    let rendered = render_from(&scene, &opts, Control::none(), Resume::default(), &mut |held, spread| {
+        let done = held.last().map_or(0, |p| p.end);
+        let before = files(&ck_dir);
+        // The files before the save, which it may remove.
+        let pre = dir.join("pre");
+        let _ = std::fs::remove_dir_all(&pre);
+        std::fs::create_dir_all(&pre).unwrap();
+        for name in &before {
+            std::fs::copy(ck_dir.join(name), pre.join(name)).unwrap();
+        }
+        ck.save_spread(&scene, &opts, done, spread.unwrap())?;
+        ck.save_render(&scene, &opts, held)?;
+        // The node files this save wrote, in the order it wrote them (held's).
+        let new: Vec<String> =
+            held.iter().map(|p| format!("planes_{}-{}.npz", p.start, p.end)).filter(|n| !before.contains(n)).collect();
+        if new.len() >= 2 && !before.is_empty() && made.is_empty() {
+            let _ = std::fs::remove_dir_all(&killed);
+            std::fs::create_dir_all(&killed).unwrap();
+            let spread = format!("spread_{done}.groups");
+            for name in &before {
+                std::fs::copy(pre.join(name), killed.join(name)).unwrap();
+            }
+            for name in [&spread, &new[0]] {
+                std::fs::copy(ck_dir.join(name), killed.join(name)).unwrap();
+            }
+            made.push(before.iter().filter_map(|n| n.strip_prefix("spread_")).map(String::from).collect::<Vec<_>>());
+        }
+        ck.keep_spread(done)?;
+        Ok(())
+    });
+    fogplanes::schedule::cut_for(None);
+    let (whole, stats) = rendered.unwrap();
+    assert!(!made.is_empty(), "no save wrote two node files: the windows were not of 3 chunks");
+    drop(ck);
+    // The kill's checkpoint opened: the state before the window, its spread's, resumed.
+    let (ck, held) = Checkpoint::render(&killed, &scene, &opts).unwrap();
+    let resume = ck.resume(&scene, &opts, held).unwrap();
+    let done = resume.held.last().map_or(0, |p| p.end);
+    assert!(done > 0 && made[0] == [format!("{done}.groups")], "resumed after {done} planes: {made:?}");
+    let (resumed, resumed_stats) = render_from(&scene, &opts, Control::none(), resume, &mut |_, _| Ok(())).unwrap();
+    assert!(same_bits(&resumed, &whole), "the image resumed differs");
+    assert!(same_bits(&resumed_stats.stderr.unwrap(), &stats.stderr.unwrap()), "the error image resumed differs");
+    drop(ck);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// The same for an adaptive reference: killed after its pilot pass, resumed, its mean and
 /// standard error are the uninterrupted run's.
 #[test]

@@ -648,7 +648,8 @@ impl<'a> ChunkRenderer<'a> {
 /// ([`ChunkRenderer::render_from`]).
 type Beside<'b> = Option<&'b mut (dyn FnMut(Control) + Send)>;
 
-/// What a render tells its caller after each finished chunk: the nodes it holds then
+/// What a render tells its caller after each finished chunk (with an error image, after each
+/// window of chunks gathered at once, where the spread is the nodes'): the nodes it holds then
 /// ([`frontier`]: consecutive partials from its first plane), for a checkpoint to save or a
 /// running image to add up ([`crate::partial::RunningImage`]), and the spread of its plane
 /// groups so far when it makes an error image. An error stops the render.

@@ -12,8 +12,11 @@
 //! | `.lock` | nothing: locked while a process uses the directory | at opening |
 //!
 //! A render saves, after each chunk, the nodes it holds that are not saved yet (one file: the
-//! node the chunk completed), then removes the files of the nodes it added into it; a kill
-//! between the two leaves those as well, which the next opening removes. Every file is a part
+//! node the chunk completed; with an error image, after each window of chunks gathered at once,
+//! the spread first, then a file for each node the window completed), then removes the files of
+//! the nodes it added into them; a kill between the two leaves those as well, which the next
+//! opening removes, and a kill between a window's files leaves the window before's nodes and
+//! spread, which the next opening resumes from. Every file is a part
 //! of the job's image (`fogplanes merge CK/*.npz` reads a finished one), read back through
 //! [`read_part`] and trusted no more than any part: its kind, its fingerprint (the scene and
 //! every setting that changes the image) and its shape are checked, and a directory holding
@@ -71,15 +74,29 @@ impl Checkpoint {
             parts.push((m.start..m.end, path, part));
         }
         // The most chunks whose nodes are all there (all of them, unless a file was removed
-        // by hand); the rest are nodes already added into those.
+        // by hand); the rest are nodes already added into those. With an error image, the
+        // most whose spread is there too, where any spread is: a window of chunks saves its
+        // nodes after its spread, one file after another, so that a kill between two of them
+        // can leave the nodes of a chunk inside the window, which has no spread, beside the
+        // window before's nodes and spread, which are kept. (Where there is no spread at all,
+        // the render was begun without an error image, and the resume says so.)
         let n = opts.planes().div_ceil(CHUNK_PLANES);
         let mut ends: Vec<usize> = parts.iter().map(|(r, ..)| r.end.div_ceil(CHUNK_PLANES).min(n)).collect();
         ends.sort_unstable_by(|a, b| b.cmp(a));
-        let wanted = ends
+        let complete: Vec<Vec<Range<usize>>> = ends
             .into_iter()
             .map(|done| frontier(0..n, done).iter().map(|c| chunk_planes(opts.planes(), c)).collect::<Vec<_>>())
-            .find(|nodes| nodes.iter().all(|r| parts.iter().any(|(p, ..)| p == r)))
-            .unwrap_or_default();
+            .filter(|nodes| nodes.iter().all(|r| parts.iter().any(|(p, ..)| p == r)))
+            .collect();
+        let spread_of =
+            |nodes: &Vec<Range<usize>>| nodes.last().is_some_and(|r| ck.spreads.iter().any(|(e, _)| *e == r.end));
+        let wanted = match opts.stderr() && !ck.spreads.is_empty() {
+            // None: a kill within the first window's files; the render starts again.
+            true => complete.iter().find(|nodes| spread_of(nodes)),
+            false => complete.first(),
+        }
+        .cloned()
+        .unwrap_or_default();
         let mut held = Vec::with_capacity(wanted.len());
         for node in &wanted {
             let i = parts.iter().position(|(r, ..)| r == node).expect("found above");
