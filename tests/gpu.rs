@@ -261,6 +261,23 @@ fn gpu_rays_are_the_cpus_within_f32_rounding() {
         return;
     }
     let gpu = fogplanes::gpu::adapter().unwrap();
+    // Sets made together (one dispatch, each record saying where its panels and rays are; here
+    // of two scenes of one image size, whose panels differ: the second set's, six_lights', end
+    // some of its rays and follow forward_fog's: read from the first, they fail it) are each the set made alone, bit for bit.
+    let two =
+        [scene("media_scenes/six_lights.toml", 80, 45), scene("media_scenes/hard/camera_inside_box.toml", 80, 45)];
+    let records: Vec<_> = [(1, 0u32, false), (0, 5, false), (0, 9, true)]
+        .map(|(s, k, centre)| ray_set_record(&two[s], 7, k, centre))
+        .into();
+    assert_ne!(records[0].1, records[1].1, "the scenes' panels differ");
+    let sets: Vec<_> = records.iter().map(|(r, p)| (r, p.as_slice())).collect();
+    let together = fogplanes::gpu::GpuRays::sets_on_gpu(&gpu, &sets).unwrap();
+    let bits = |r: &CameraRay| [r.dir.x, r.dir.y, r.dir.z, r.t0, r.t1].map(f32::to_bits);
+    for (i, (record, panels)) in records.iter().enumerate() {
+        let alone = fogplanes::gpu::GpuRays::on_gpu(&gpu, record, panels).unwrap().read().unwrap();
+        let made = together.read_set(i as u32).unwrap();
+        assert!(alone.iter().map(bits).eq(made.iter().map(bits)), "set {i} made together");
+    }
     let (mut rays, mut grazing, mut same) = (0usize, 0usize, 0usize);
     for (file, (w, h)) in
         [("media_scenes/six_lights.toml", (160, 90)), ("media_scenes/hard/camera_inside_box.toml", (80, 45))]

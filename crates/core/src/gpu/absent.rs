@@ -103,6 +103,9 @@ impl GpuRays {
     pub fn on_gpu(gpu: &Arc<Gpu>, _: &RaySetRecord, _: &[PanelRecord]) -> Result<Self> {
         match **gpu {}
     }
+    pub fn sets_on_gpu(gpu: &Arc<Gpu>, _: &[(&RaySetRecord, &[PanelRecord])]) -> Result<Self> {
+        match **gpu {}
+    }
     pub fn made_on_gpu(&self) -> bool {
         match *self {}
     }
@@ -113,6 +116,9 @@ impl GpuRays {
         match *self {}
     }
     pub fn read(&self) -> Result<Vec<CameraRay>> {
+        match *self {}
+    }
+    pub fn read_set(&self, _: u32) -> Result<Vec<CameraRay>> {
         match *self {}
     }
     pub fn bytes_up(&self) -> u64 {

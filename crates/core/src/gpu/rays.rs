@@ -281,13 +281,19 @@ impl GpuRays {
 
     /// The rays, read back from the GPU (for holding the GPU's rays to the CPU's).
     pub fn read(&self) -> Result<Vec<CameraRay>> {
+        self.read_set(0)
+    }
+
+    /// The rays of set `k` of those made together, read back (for tests).
+    pub fn read_set(&self, k: u32) -> Result<Vec<CameraRay>> {
         let gpu = &*self.gpu;
         let bytes = (self.len * std::mem::size_of::<CameraRay>()) as u64;
+        let from = 4 * self.floats_at(k) as u64;
         let readback = gpu.checked(|| {
             let readback =
                 gpu.scratch("rays read back", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
             let mut encoder = gpu.device.create_command_encoder(&Default::default());
-            encoder.copy_buffer_to_buffer(&self.buffer, 0, &readback, 0, bytes);
+            encoder.copy_buffer_to_buffer(&self.buffer, from, &readback, 0, bytes);
             gpu.queue.submit(self.take_pending().0.into_iter().chain([encoder.finish()]));
             readback.slice(..).map_async(wgpu::MapMode::Read, |_| ());
             readback
