@@ -263,7 +263,8 @@ fn gpu_rays_are_the_cpus_within_f32_rounding() {
     let gpu = fogplanes::gpu::adapter().unwrap();
     // Sets made together (one dispatch, each record saying where its panels and rays are; here
     // of two scenes of one image size, whose panels differ: the second set's, six_lights', end
-    // some of its rays and follow forward_fog's: read from the first, they fail it) are each the set made alone, bit for bit.
+    // some of its rays and follow forward_fog's, and read from the first they fail this) are
+    // each the set made alone, bit for bit.
     let two =
         [scene("media_scenes/six_lights.toml", 80, 45), scene("media_scenes/hard/camera_inside_box.toml", 80, 45)];
     let records: Vec<_> = [(1, 0u32, false), (0, 5, false), (0, 9, true)]
