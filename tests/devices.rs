@@ -57,15 +57,23 @@ const TUNING: [&str; 8] = [
 /// the others removed (their defaults, whatever this process was given): its pixels and what it
 /// printed.
 fn tuned_render(d: &Path, name: &str, args: &[&str], env: &[(&str, &str)]) -> (Vec<glam::Vec3>, String) {
+    let (pixels, printed, _) = tuned_run(d, name, args, env);
+    (pixels, printed)
+}
+
+/// [`tuned_render`] with what it wrote on stderr too; the trace (`FOGPLANES_TRACE`) is off
+/// unless `env` sets it.
+fn tuned_run(d: &Path, name: &str, args: &[&str], env: &[(&str, &str)]) -> (Vec<glam::Vec3>, String, String) {
     let out = d.join(format!("{name}.exr"));
     let mut all = vec!["render", SCENE, "--device", "gpu"];
     all.extend(args);
     all.extend(["-o", path(&out)]);
-    let unset: Vec<&str> = TUNING.into_iter().filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
+    let unset: Vec<&str> =
+        TUNING.into_iter().chain(["FOGPLANES_TRACE"]).filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
     let o = run_with(&all, env, &unset);
     let (printed, err) = text(&o);
     assert!(o.status.success(), "{name}: {err}");
-    (fogplanes::film::Film::load_exr(&out).unwrap().pixels, printed)
+    (fogplanes::film::Film::load_exr(&out).unwrap().pixels, printed, err)
 }
 
 /// What `fogplanes info` prints of `image`'s devices.
@@ -486,16 +494,9 @@ fn the_trace_times_each_gpu_pass_and_keeps_the_image() {
     }
     let d = dir("trace");
     let render = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
-        let out = d.join(format!("{name}.exr"));
-        let mut args = vec!["render", SCENE, "--device", "gpu", "--resolution", "40x24", "--planes", "2048"];
+        let mut args = vec!["--resolution", "40x24", "--planes", "2048"];
         args.extend(extra);
-        args.extend(["-o", path(&out)]);
-        let unset: Vec<&str> =
-            TUNING.into_iter().chain(["FOGPLANES_TRACE"]).filter(|v| !env.iter().any(|(k, _)| k == v)).collect();
-        let o = run_with(&args, env, &unset);
-        let (printed, err) = text(&o);
-        assert!(o.status.success(), "{name}: {err}");
-        (fogplanes::film::Film::load_exr(&out).unwrap().pixels, printed, err)
+        tuned_run(&d, name, &args, env)
     };
     // The number before `word` in the summary.
     let before = |printed: &str, word: &str| -> f64 {

@@ -90,13 +90,13 @@ impl Checkpoint {
             .collect();
         let spread_of =
             |nodes: &Vec<Range<usize>>| nodes.last().is_some_and(|r| ck.spreads.iter().any(|(e, _)| *e == r.end));
-        let wanted = match opts.stderr() && !ck.spreads.is_empty() {
+        let wanted = if opts.stderr() && !ck.spreads.is_empty() {
             // None: a kill within the first window's files; the render starts again.
-            true => complete.iter().find(|nodes| spread_of(nodes)),
-            false => complete.first(),
-        }
-        .cloned()
-        .unwrap_or_default();
+            complete.iter().find(|nodes| spread_of(nodes))
+        } else {
+            complete.first()
+        };
+        let wanted = wanted.cloned().unwrap_or_default();
         let mut held = Vec::with_capacity(wanted.len());
         for node in &wanted {
             let i = parts.iter().position(|(r, ..)| r == node).expect("found above");
