@@ -664,6 +664,10 @@ pub(crate) fn cmd_devices() -> Result<(), Failure> {
             if a.default { "  [default: --device gpu]" } else { "" }
         );
     }
+    // FOGPLANES_GPU naming no adapter: the list stands, and `--device gpu` would refuse.
+    if let Err(why) = fogplanes::gpu::default_adapter() {
+        let _ = writeln!(std::io::stderr(), "warning: {why}: --device gpu refuses it");
+    }
     Ok(())
 }
 

@@ -251,7 +251,8 @@ fn info_tells_a_whole_exr_from_a_truncated_one() {
 /// `fogplanes devices` lists every adapter with its index, back end, kind and largest binding,
 /// one marked default; `--device gpu:N` gathers on adapter N (the default's image is
 /// `--device gpu`'s, bit for bit); an index out of range, or a `FOGPLANES_GPU` one, is one line
-/// naming the count, exit 2; a bad index is refused when parsed, and a work item's size that
+/// naming the count, exit 2 (under `auto` as under `gpu`), and the list then marks none and
+/// warns; a bad index (`gpu:x`, `gpu:+0`) is refused when parsed, and a work item's size that
 /// `FOGPLANES_GPU_ITEM_PLANES` cannot give, or a `FOGPLANES_GPU_MATH` or `FOGPLANES_GPU_CHECKS`
 /// that names no choice, in one line, exit 2.
 #[test]
@@ -298,6 +299,15 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
             "FOGPLANES_GPU=\"one\": not an adapter's index".to_string(),
         ),
         ("gpu:x".to_string(), vec![], "gpu:N takes an adapter's index".to_string()),
+        ("gpu:+0".to_string(), vec![], "gpu:N takes an adapter's index".to_string()),
+        ("gpu".to_string(), vec![("FOGPLANES_GPU", "+0")], "FOGPLANES_GPU=\"+0\": not an adapter's index".to_string()),
+        // `auto` falls back to the CPU where there is no GPU, not where a variable is wrong.
+        ("auto".to_string(), vec![("FOGPLANES_GPU", "99")], format!("--device: FOGPLANES_GPU=99: {count}")),
+        (
+            "auto".to_string(),
+            vec![("FOGPLANES_GPU_MATH", "fast")],
+            "--device: FOGPLANES_GPU_MATH=\"fast\": expected polynomials".to_string(),
+        ),
         (
             "gpu".to_string(),
             vec![("FOGPLANES_GPU_ITEM_PLANES", "0")],
@@ -322,8 +332,28 @@ fn devices_lists_the_adapters_and_gpu_n_picks_one() {
         let (_, err) = text(&o);
         assert_eq!(o.status.code(), Some(2), "{device} {env:?}: {err}");
         assert!(err.contains(&says), "{device} {env:?}: {err}");
-        assert!(err.trim_end().lines().count() == 1 || device == "gpu:x", "{err}");
+        assert!(err.trim_end().lines().count() == 1 || device.starts_with("gpu:"), "{err}");
     }
+    // The list marks the adapter FOGPLANES_GPU names, and none where it names none (with a
+    // warning that `--device gpu` refuses it).
+    let listed = |v: &str| {
+        let o = run_with(&["devices"], &[("FOGPLANES_GPU", v)], &[]);
+        let (out, err) = text(&o);
+        assert!(o.status.success(), "FOGPLANES_GPU={v}: {err}");
+        let marked: Vec<usize> =
+            out.lines().enumerate().filter(|(_, l)| l.ends_with("[default: --device gpu]")).map(|(i, _)| i).collect();
+        (marked, err)
+    };
+    let (marked, err) = listed(&(n - 1).to_string());
+    assert!(marked == [n - 1] && err.is_empty(), "FOGPLANES_GPU={}: {marked:?} {err}", n - 1);
+    let (marked, err) = listed(&n.to_string());
+    assert!(marked.is_empty(), "FOGPLANES_GPU={n}: {marked:?}");
+    assert!(
+        err.trim_end().lines().count() == 1
+            && err.contains(&format!("FOGPLANES_GPU={n}: {count}"))
+            && err.contains("--device gpu refuses it"),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 

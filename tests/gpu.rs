@@ -512,6 +512,35 @@ fn gpu_chunks_merges_and_a_resumed_render_give_the_render() {
     let (without, plain_stats) = render(&s, &plain, Control::none()).unwrap();
     assert!(without.pixels == whole.pixels, "the image without the error image differs");
     assert_eq!(plain_stats.hits, stats.hits);
+    // The render's rays: each of its 16 sets once, as on the CPU, though the GPU makes set 7
+    // (the first chunk's last and the second's first, gathered in windows apart) twice.
+    let (_, cpu_stats) = render(&s, &options(&s, on(&given, Device::Cpu)), Control::none()).unwrap();
+    assert_eq!((plain_stats.rays, stats.rays, cpu_stats.rays), (16 * 32 * 18, 16 * 32 * 18, 16 * 32 * 18));
+}
+
+/// A render in passes counts each ray set once on either device: two sets, three passes of one
+/// set each (sets 0, 1 and 0 again, which the CPU keeps and the GPU makes again).
+#[test]
+fn a_render_in_passes_counts_its_rays_as_the_cpu_does() {
+    if !have_gpu("a_render_in_passes_counts_its_rays_as_the_cpu_does") {
+        return;
+    }
+    let s = scene("media_scenes/six_lights.toml", 32, 18);
+    let given = Overrides { spp: Some(2), seed: Some(5), ..Overrides::default() };
+    let counted = |device| {
+        let mut passes = 0;
+        let mut next = |_: fogplanes::render::PassReport| {
+            passes += 1;
+            if passes <= 3 { 1024 } else { 0 }
+        };
+        let opts = options(&s, on(&given, device));
+        let (_, stats) = fogplanes::render::render_in_passes(&s, &opts, Control::none(), &mut next).unwrap();
+        (stats.plane_passes, stats.rays, stats.hits)
+    };
+    let (cpu, gpu) = (counted(Device::Cpu), counted(Device::GPU));
+    assert_eq!((cpu.0, cpu.1), (3, 2 * 32 * 18), "the CPU's passes and rays");
+    assert_eq!((gpu.0, gpu.1), (cpu.0, cpu.1), "the GPU's passes and rays against the CPU's");
+    assert!(gpu.2.abs_diff(cpu.2) * 100_000 <= cpu.2, "hits: GPU {} against the CPU's {}", gpu.2, cpu.2);
 }
 
 /// On the command line: a part gathered on the CPU and one on the GPU merge, and the merge says

@@ -247,6 +247,8 @@ pub struct RenderStats {
     pub planes: usize,
     /// Plane passes: 1, or more for a render on a time budget ([`crate::render::render_for`]).
     pub plane_passes: u32,
+    /// The camera rays of the ray sets gathered along, each set once (the same on every
+    /// device: a GPU render may make a set more than once, [`crate::pixel::RaySets`]).
     pub rays: u64,
     pub hits: u64,
     pub tests: u64,

@@ -522,8 +522,12 @@ pub struct RaySets {
     sets: Vec<(u32, Arc<Vec<CameraRay>>)>,
     /// Sets no longer kept, whose buffers serve the next sets once nothing holds them.
     retired: Vec<Arc<Vec<CameraRay>>>,
-    /// Rays made so far (a set made twice counts twice) and the seconds spent making them.
-    pub made: u64,
+    /// Which sets have been asked for (made at least once), by index.
+    asked: Vec<bool>,
+    /// The camera rays of the sets asked for, each set once however often it was made (a GPU
+    /// render makes a set again for each gathering along it): the render's rays, the same on
+    /// every device; and the seconds spent making sets, every making counted.
+    pub camera_rays: u64,
     pub seconds: f64,
 }
 
@@ -531,7 +535,26 @@ impl RaySets {
     /// `ray_sets` sets of rays under `seed` (one at pixel centres), none made yet.
     pub fn new(seed: u64, ray_sets: u32, pixel_center: bool, keep: Keep) -> Self {
         let count = if pixel_center { 1 } else { ray_sets.max(1) };
-        RaySets { seed, pixel_center, count, keep, sets: Vec::new(), retired: Vec::new(), made: 0, seconds: 0.0 }
+        let asked = vec![false; count as usize];
+        RaySets {
+            seed,
+            pixel_center,
+            count,
+            keep,
+            sets: Vec::new(),
+            retired: Vec::new(),
+            asked,
+            camera_rays: 0,
+            seconds: 0.0,
+        }
+    }
+
+    /// Counts set `k`'s rays the first time it is asked for (`k` already taken modulo the set
+    /// count).
+    fn count(&mut self, scene: &Scene, k: u32) {
+        if !std::mem::replace(&mut self.asked[k as usize], true) {
+            self.camera_rays += scene.camera.width as u64 * scene.camera.height as u64;
+        }
     }
 
     /// The rays of ray set `k` (taken modulo the set count), made if need be (their rows
@@ -555,7 +578,7 @@ impl RaySets {
         }
         ray_set_rays_in(scene, self.seed, k, self.pixel_center, &mut rays, control);
         self.seconds += t.elapsed().as_secs_f64();
-        self.made += rays.len() as u64;
+        self.count(scene, k);
         let rays = Arc::new(rays);
         self.sets.push((k, rays.clone()));
         rays
@@ -563,23 +586,23 @@ impl RaySets {
 
     /// The rays of ray set `k` (modulo the set count), not kept: `with` is given the function
     /// that writes a row of them ([`with_ray_rows`]), for the GPU's upload buffer, written
-    /// once, in place ([`crate::accel::OnGpu`]). Counted as made (all of them) and timed.
+    /// once, in place ([`crate::accel::OnGpu`]). Counted ([`RaySets::camera_rays`]) and timed.
     pub fn make_rows<R>(&mut self, scene: &Scene, k: u32, control: Control, with: impl FnOnce(RayRowFn) -> R) -> R {
-        let t = Instant::now();
-        let out = with_ray_rows(scene, self.seed, k % self.count, self.pixel_center, control, with);
+        let (t, k) = (Instant::now(), k % self.count);
+        let out = with_ray_rows(scene, self.seed, k, self.pixel_center, control, with);
         self.seconds += t.elapsed().as_secs_f64();
-        self.made += scene.camera.width as u64 * scene.camera.height as u64;
+        self.count(scene, k);
         out
     }
 
     /// Ray set `k` (modulo the set count) as the GPU makes it ([`ray_set_record`]): the rays are
-    /// made where they are gathered ([`crate::accel::OnGpu`]), counted as made here, and timed
-    /// (their record's making).
+    /// made where they are gathered ([`crate::accel::OnGpu`]), counted here ([`RaySets::camera_rays`]),
+    /// and timed (their record's making).
     pub fn gpu_record(&mut self, scene: &Scene, k: u32) -> (RaySetRecord, Vec<PanelRecord>) {
-        let t = Instant::now();
-        let out = ray_set_record(scene, self.seed, k % self.count, self.pixel_center);
+        let (t, k) = (Instant::now(), k % self.count);
+        let out = ray_set_record(scene, self.seed, k, self.pixel_center);
         self.seconds += t.elapsed().as_secs_f64();
-        self.made += scene.camera.width as u64 * scene.camera.height as u64;
+        self.count(scene, k);
         out
     }
 

@@ -390,9 +390,10 @@ impl<'a> Gatherer<'a> {
         Ok(())
     }
 
-    /// The rays made so far, and their time, into the statistics.
+    /// The rays of the sets asked for so far, and the time spent making sets, into the
+    /// statistics.
     fn count_rays(&mut self) {
-        (self.stats.rays, self.stats.seconds_rays) = (self.rays.made, self.rays.seconds);
+        (self.stats.rays, self.stats.seconds_rays) = (self.rays.camera_rays, self.rays.seconds);
     }
 }
 

@@ -137,6 +137,10 @@ fn find_device(wanted: Device) -> Result<Device> {
         Device::Cpu => Ok(Device::Cpu),
         Device::Auto => match crate::gpu::adapter_at(None) {
             Ok((i, g)) if !g.is_cpu_adapter() => Ok(Device::Gpu(Some(i))),
+            // A variable the caller set (FOGPLANES_GPU naming no adapter, a tuning variable's
+            // value) is refused as under `gpu`, not passed over for the CPU: no adapter at all,
+            // or an emulated one, is what `auto` falls back from.
+            Err(why) if why.starts_with(crate::gpu::GPU_VARIABLE) => Err(Error::option(Setting::Device, why)),
             _ => Ok(Device::Cpu),
         },
         Device::Gpu(index) => match crate::gpu::adapter_at(index) {

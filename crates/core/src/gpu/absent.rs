@@ -48,6 +48,11 @@ pub fn adapters() -> std::result::Result<Vec<AdapterInfo>, String> {
     Err(WITHOUT.into())
 }
 
+/// Why there is no adapter.
+pub fn default_adapter() -> std::result::Result<usize, String> {
+    Err(WITHOUT.into())
+}
+
 /// Never made: there is no [`Gpu`] to make it on.
 pub enum GpuPlanes {}
 

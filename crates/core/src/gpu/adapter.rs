@@ -105,11 +105,50 @@ fn default_index(all: &[wgpu::Adapter]) -> usize {
     (0..all.len()).min_by_key(|&i| (rank(all[i].get_info().device_type), i)).unwrap_or(0)
 }
 
-/// Every adapter wgpu finds (Vulkan, Metal, DX12), with its index; `Err` says in one line why
-/// there is none.
+/// The index `--device gpu` takes among `all`, and how the caller named it (for an error):
+/// `index` where given, else the one [`GPU_VARIABLE`] names where it is set, else
+/// [`default_index`]; `Err` in one line where that names no adapter (an index out of range
+/// names the count, a variable that is not an index names itself).
+fn chosen_index(all: &[wgpu::Adapter], index: Option<usize>) -> Result<usize, String> {
+    let set = std::env::var(GPU_VARIABLE).ok().filter(|v| !v.is_empty());
+    let (index, named) = match (index, set) {
+        (None, Some(v)) => {
+            // Surrounding spaces are a launcher's (`FOGPLANES_GPU=" 1"`); the index itself is
+            // digits alone, as in gpu:N.
+            let i = super::adapter_index(v.trim()).ok_or_else(|| {
+                format!("{GPU_VARIABLE}={v:?}: not an adapter's index (0, 1, ...: `fogplanes devices` lists them)")
+            })?;
+            (Some(i), format!("{GPU_VARIABLE}={i}"))
+        }
+        (index, _) => (index, format!("gpu:{}", index.unwrap_or_default())),
+    };
+    match index {
+        None => Ok(default_index(all)),
+        Some(i) if i < all.len() => Ok(i),
+        Some(_) => {
+            let n = all.len();
+            let which = if n == 1 {
+                "is 1 adapter, gpu:0".to_string()
+            } else {
+                format!("are {n} adapters, gpu:0 to gpu:{}", n - 1)
+            };
+            Err(format!("{named}: there {which} (`fogplanes devices` lists them)"))
+        }
+    }
+}
+
+/// The index `--device gpu` takes, no device made: `Err` says in one line why there is none
+/// (no adapter, or a [`GPU_VARIABLE`] that names none).
+pub fn default_adapter() -> Result<usize, String> {
+    chosen_index(found()?, None)
+}
+
+/// Every adapter wgpu finds (Vulkan, Metal, DX12), with its index, the one `--device gpu`
+/// takes marked (none where [`GPU_VARIABLE`] names no adapter: [`default_adapter`] says why);
+/// `Err` says in one line why there is none.
 pub fn adapters() -> Result<Vec<AdapterInfo>, String> {
     let all = found()?;
-    let default = default_index(all);
+    let default = chosen_index(all, None).ok();
     Ok(all
         .iter()
         .enumerate()
@@ -121,7 +160,7 @@ pub fn adapters() -> Result<Vec<AdapterInfo>, String> {
                 backend: format!("{:?}", info.backend),
                 kind: kind_name(info.device_type),
                 max_binding: limits.max_storage_buffer_binding_size.min(limits.max_buffer_size),
-                default: index == default,
+                default: Some(index) == default,
             }
         })
         .collect())
@@ -138,30 +177,8 @@ type Made = Result<Arc<Gpu>, String>;
 pub fn adapter_at(index: Option<usize>) -> Result<(usize, Arc<Gpu>), String> {
     static GPUS: Mutex<Vec<(usize, Made)>> = Mutex::new(Vec::new());
     let all = found()?;
-    let set = std::env::var(GPU_VARIABLE).ok().filter(|v| !v.is_empty());
     let tuning = Tuning::from_env()?;
-    let (index, named) = match (index, set) {
-        (None, Some(v)) => {
-            let i = v.trim().parse::<usize>().map_err(|_| {
-                format!("{GPU_VARIABLE}={v:?}: not an adapter's index (0, 1, ...: `fogplanes devices` lists them)")
-            })?;
-            (Some(i), format!("{GPU_VARIABLE}={i}"))
-        }
-        (index, _) => (index, format!("gpu:{}", index.unwrap_or_default())),
-    };
-    let i = match index {
-        None => default_index(all),
-        Some(i) if i < all.len() => i,
-        Some(_) => {
-            let n = all.len();
-            let which = if n == 1 {
-                "is 1 adapter, gpu:0".to_string()
-            } else {
-                format!("are {n} adapters, gpu:0 to gpu:{}", n - 1)
-            };
-            return Err(format!("{named}: there {which} (`fogplanes devices` lists them)"));
-        }
-    };
+    let i = chosen_index(all, index)?;
     // Held while the device is made: two threads asking for one adapter make it once.
     let mut gpus = GPUS.lock().unwrap_or_else(|p| p.into_inner());
     if let Some((_, g)) = gpus.iter().find(|(k, _)| *k == i) {

@@ -47,7 +47,7 @@ mod scratch;
 #[cfg(feature = "gpu")]
 mod sums;
 #[cfg(feature = "gpu")]
-pub use adapter::{adapter, adapter_at, adapters};
+pub use adapter::{adapter, adapter_at, adapters, default_adapter};
 #[cfg(feature = "gpu")]
 pub use device::Gpu;
 #[cfg(feature = "gpu")]
@@ -64,7 +64,7 @@ pub use sums::GpuSums;
 #[cfg(not(feature = "gpu"))]
 mod absent;
 #[cfg(not(feature = "gpu"))]
-pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, Recorded, adapter, adapter_at, adapters};
+pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, Recorded, adapter, adapter_at, adapters, default_adapter};
 
 /// An adapter as `fogplanes devices` lists it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -78,7 +78,8 @@ pub struct AdapterInfo {
     pub kind: &'static str,
     /// The most bytes one storage buffer binding holds (the rays of an image must fit one).
     pub max_binding: u64,
-    /// Whether `--device gpu` takes it (the first real GPU, else the first adapter).
+    /// Whether `--device gpu` takes it: the one [`GPU_VARIABLE`] names where it is set (none
+    /// where that names no adapter), else the first real GPU, else the first adapter.
     pub default: bool,
 }
 
@@ -86,6 +87,15 @@ pub struct AdapterInfo {
 /// `CUDA_VISIBLE_DEVICES` per worker): `--device gpu` (Python's `device="gpu"`) then takes
 /// adapter `FOGPLANES_GPU` of [`adapters`].
 pub const GPU_VARIABLE: &str = "FOGPLANES_GPU";
+
+/// An adapter's index as `gpu:N` and [`GPU_VARIABLE`] write it: decimal digits alone (no sign,
+/// no space), within a `usize`.
+pub fn adapter_index(s: &str) -> Option<usize> {
+    if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    s.parse().ok()
+}
 
 /// Which processor gathers (`--device`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -135,7 +145,7 @@ impl std::str::FromStr for Device {
     /// A name of [`Device::ALL`], or `gpu:N` with N an adapter's index.
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         match s.strip_prefix("gpu:") {
-            Some(n) => n.parse::<usize>().map(|i| Device::Gpu(Some(i))).map_err(|_| {
+            Some(n) => adapter_index(n).map(|i| Device::Gpu(Some(i))).ok_or_else(|| {
                 format!(
                     "unknown device {s:?}; gpu:N takes an adapter's index N (0, 1, ...: `fogplanes devices` lists them)"
                 )
@@ -450,7 +460,7 @@ mod tests {
         for d in Device::ALL.into_iter().chain([Device::Gpu(Some(0)), Device::Gpu(Some(12))]) {
             assert_eq!(d.to_string().parse::<Device>().unwrap(), d);
         }
-        for bad in ["gpu:", "gpu:x", "gpu:-1", "tpu"] {
+        for bad in ["gpu:", "gpu:x", "gpu:-1", "gpu:+0", "gpu: 1", "gpu:1 ", "gpu:99999999999999999999999", "tpu"] {
             assert!(bad.parse::<Device>().is_err(), "{bad}");
         }
     }
