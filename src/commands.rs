@@ -212,11 +212,19 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     };
     let cpu = cpu.zip(system::cpu_seconds()).map(|(a, b)| b - a);
     bar.finish_and_clear();
-    let info = opts.image_info(scene, stats.planes, &stats.devices);
-    film.save_with_info(&output, r.exposure, Some(&info))?;
-    if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
-        se.save_with_info(path, r.exposure, Some(&info.clone().with(ImageInfo::IMAGE, "render standard error")))?;
-    }
+    // The image's planes: a render in passes chose its count; a render of a count holds all
+    // of them, those a checkpoint held included (the statistics count this process's).
+    let planes = if r.in_passes() { stats.planes } else { opts.planes() };
+    let info = opts.image_info(scene, planes, &stats.devices);
+    // The image and its error image moved into place together: an interruption finds both or
+    // neither.
+    fogplanes::film::written_together(|| {
+        film.save_with_info(&output, r.exposure, Some(&info))?;
+        if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
+            se.save_with_info(path, r.exposure, Some(&info.clone().with(ImageInfo::IMAGE, "render standard error")))?;
+        }
+        Ok(())
+    })?;
     watch.finish(&film, stats.stderr.as_ref());
     let mut summary = stats.summary();
     if r.in_passes() {
@@ -342,10 +350,13 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             check_outputs(&outputs, &parts)?;
             let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
             settings::check_exposure_applies(a.exposure, &images)?;
-            mean.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, false)))?;
-            if let Some(p) = &a.stderr_image {
-                stderr.save_with_info(p, exposure, Some(&options.image_info(&scene, true)))?;
-            }
+            fogplanes::film::written_together(|| {
+                mean.save_with_info(&a.output, exposure, Some(&options.image_info(&scene, false)))?;
+                if let Some(p) = &a.stderr_image {
+                    stderr.save_with_info(p, exposure, Some(&options.image_info(&scene, true)))?;
+                }
+                Ok(())
+            })?;
             if !a.quiet {
                 say!("merged {} reference bands ({:.3} s of rendering)", a.parts.len(), seconds);
                 say!("wrote {}", a.output.display());
@@ -457,10 +468,13 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
         fogplanes::film::write_file_atomically(path, record.to_string().as_bytes())?;
     }
     bar.finish_and_clear();
-    reference.mean.save_with_info(&output, r.exposure, Some(&r.options.image_info(scene, false)))?;
-    if let Some(p) = &a.stderr_image {
-        reference.stderr.save_with_info(p, r.exposure, Some(&r.options.image_info(scene, true)))?;
-    }
+    fogplanes::film::written_together(|| {
+        reference.mean.save_with_info(&output, r.exposure, Some(&r.options.image_info(scene, false)))?;
+        if let Some(p) = &a.stderr_image {
+            reference.stderr.save_with_info(p, r.exposure, Some(&r.options.image_info(scene, true)))?;
+        }
+        Ok(())
+    })?;
     watch.finish(&reference);
     say!(
         "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",

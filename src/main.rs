@@ -24,10 +24,12 @@ fn main() -> ExitCode {
     STARTED.get_or_init(std::time::Instant::now);
     let cli = Cli::parse();
     // Ctrl-C, SIGTERM or SIGHUP: remove any half-written output before leaving, so no truncated
-    // file remains (a checkpoint's file under way is finished first: the note tells what it holds).
+    // file remains (a checkpoint's file under way is finished first: the note tells what it
+    // holds), and say which outputs were written whole before it, if any.
     let _ = ctrlc::set_handler(|| {
-        let note = watch::interrupted_note();
-        fogplanes::film::remove_unfinished_files();
+        let left = watch::checkpoint_left();
+        let written = fogplanes::film::remove_unfinished_files();
+        let note = watch::interrupted_note(left, &written);
         let _ = writeln!(std::io::stderr(), "\ninterrupted: {note}");
         std::process::exit(130);
     });

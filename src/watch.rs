@@ -13,6 +13,7 @@ use fogplanes::reference::{ReferenceDone, ReferenceImage, ReferenceOptions, Refe
 use fogplanes::scene::Scene;
 use fogplanes::spread::GroupSpread;
 use indicatif::ProgressBar;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -21,10 +22,37 @@ use std::time::Instant;
 /// on disk).
 static LEFT: Mutex<Option<String>> = Mutex::new(None);
 
-/// What an interrupted command leaves, once any checkpoint file under way is written.
-pub(crate) fn interrupted_note() -> String {
-    let left = LEFT.lock().unwrap_or_else(|e| e.into_inner());
-    left.clone().unwrap_or_else(|| "nothing was written".into())
+/// The open checkpoint's directory, whose files an interruption's note leaves to [`LEFT`].
+static CHECKPOINT: Mutex<Option<PathBuf>> = Mutex::new(None);
+
+/// What a checkpoint holds, once any checkpoint file under way is written, and its directory:
+/// read first by an interruption, before it stops every write (a checkpoint's write holds
+/// [`LEFT`] until its file is in place).
+pub(crate) fn checkpoint_left() -> (Option<String>, Option<PathBuf>) {
+    let left = LEFT.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    (left, CHECKPOINT.lock().unwrap_or_else(|e| e.into_inner()).clone())
+}
+
+/// What an interrupted command leaves: the outputs it wrote whole before the interruption
+/// (`written`, the checkpoint's files aside), and what its checkpoint holds; else nothing.
+pub(crate) fn interrupted_note((left, checkpoint): (Option<String>, Option<PathBuf>), written: &[PathBuf]) -> String {
+    let outputs: Vec<String> = written
+        .iter()
+        .filter(|p| !checkpoint.as_ref().is_some_and(|dir| p.parent().is_some_and(|d| same_dir(d, dir))))
+        .map(|p| p.display().to_string())
+        .collect();
+    match (outputs.is_empty(), left) {
+        (true, None) => "nothing was written".into(),
+        (true, Some(left)) => left,
+        (false, left) => {
+            let left = left.map(|l| format!("; {l}")).unwrap_or_default();
+            format!("{} written whole before it{left}", outputs.join(", "))
+        }
+    }
+}
+
+fn same_dir(a: &Path, b: &Path) -> bool {
+    a == b || std::fs::canonicalize(a).ok().is_some_and(|a| std::fs::canonicalize(b).is_ok_and(|b| a == b))
 }
 
 /// Runs `save` (a checkpoint write) under the lock of [`LEFT`], then records what the
@@ -67,6 +95,7 @@ impl<'a> RenderWatch<'a> {
         let (mut checkpoint, mut resumed) = (None, Resume::default());
         if let Some(dir) = &a.checkpoint {
             let (ck, held) = Checkpoint::render(dir, scene, opts)?;
+            *CHECKPOINT.lock().unwrap_or_else(|e| e.into_inner()) = Some(ck.path().to_path_buf());
             let done = held.last().map_or(0, |p| p.end);
             let resume = ck.resume(scene, opts, held)?;
             *LEFT.lock().unwrap_or_else(|e| e.into_inner()) =
@@ -203,6 +232,7 @@ impl<'a> ReferenceWatch<'a> {
         };
         if let Some(dir) = &a.checkpoint {
             let (ck, done) = Checkpoint::reference(dir, scene, opts)?;
+            *CHECKPOINT.lock().unwrap_or_else(|e| e.into_inner()) = Some(ck.path().to_path_buf());
             watch.pilot = done.pilot.is_some();
             for b in &done.bands {
                 watch.place(b.rows.start, &b.mean, &b.stderr);
@@ -291,5 +321,26 @@ impl<'a> ReferenceWatch<'a> {
             view.show(vec![reference.mean.clone(), reference.stderr.clone()], 0..reference.mean.height);
             view.finish();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An interruption names the outputs written whole before it, leaves the checkpoint's own
+    /// files to its note, and says nothing was written only where nothing was.
+    #[test]
+    fn an_interruption_says_what_was_written() {
+        let ck = PathBuf::from("/tmp/ck");
+        let note = "the checkpoint /tmp/ck holds 3 of 9 planes".to_string();
+        assert_eq!(interrupted_note((None, None), &[]), "nothing was written");
+        assert_eq!(interrupted_note((Some(note.clone()), Some(ck.clone())), &[ck.join("c0.npz")]), note);
+        let written = [PathBuf::from("a.exr"), PathBuf::from("se.exr"), ck.join("c0.npz")];
+        assert_eq!(interrupted_note((None, None), &written[..2]), "a.exr, se.exr written whole before it");
+        assert_eq!(
+            interrupted_note((Some(note.clone()), Some(ck)), &written),
+            format!("a.exr, se.exr written whole before it; {note}")
+        );
     }
 }

@@ -414,6 +414,13 @@ fn killed_render_resumes(stderr: bool, seed: u64) {
     if stderr {
         assert!(same_files(&se(&out), &se(&whole)), "the error image resumed differs");
     }
+    // The image records the render's planes, those the checkpoint held included (it recorded
+    // the last run's alone).
+    let recorded = |p: &Path| {
+        let (info, _) = fogplanes::film::read_image_info(p).unwrap();
+        info.unwrap().get("planes").map(str::to_string)
+    };
+    assert_eq!(recorded(&out), Some(planes_arg.clone()));
     // A finished checkpoint holds one part of all the planes (and their spread), and a run
     // again just writes the image.
     let mut names: Vec<String> =
@@ -429,6 +436,7 @@ fn killed_render_resumes(stderr: bool, seed: u64) {
     let stdout = succeeded(&fogplanes(&strs(&args(&again, Some(&ck)))), "a run of a finished checkpoint");
     assert_eq!(resumed_from(&stdout), Some(planes as u64));
     assert!(same_files(&again, &out));
+    assert_eq!(recorded(&again), Some(planes_arg.clone()));
     if stderr {
         assert!(same_files(&se(&again), &se(&out)));
         // A spread file that is not one is refused like any part, naming it.

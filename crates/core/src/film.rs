@@ -327,8 +327,14 @@ pub fn check_image_output(path: &Path) -> Result<()> {
 }
 
 /// Checks before any work that `path` can be written: an existing, writable directory (probed
-/// by creating and removing a temporary file), and not a directory itself.
+/// by creating and removing a temporary file), and not a directory itself. Through a symbolic
+/// link, the link's target is checked ([`destination`]); a device or a pipe is written into as
+/// it is, not probed (opening a pipe for writing waits for its reader).
 pub fn check_writable(path: &Path) -> Result<()> {
+    let path = &destination(path);
+    if is_special(path) {
+        return Ok(());
+    }
     let dir = parent_dir(path);
     if !dir.is_dir() {
         return Err(Error::bad_input(path, format!("the output directory {} does not exist", dir.display())));
@@ -361,34 +367,119 @@ pub fn temporary_path(path: &Path) -> PathBuf {
     parent_dir(path).join(format!(".{name}.{}.{n}.tmp", std::process::id()))
 }
 
-/// Temporary files being written now, for [`remove_unfinished_files`]. A temporary file is
-/// created and registered, and renamed and unregistered, under this lock, which the removal
-/// keeps until the process ends: a file is either registered (and removed) or never made.
-static UNFINISHED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+/// The files of this process's writes: those being written now (temporary), for
+/// [`remove_unfinished_files`], and those moved into place. A temporary file is created and
+/// registered, and renamed and unregistered, under this lock, which the removal keeps until the
+/// process ends: a file is either registered (and removed) or never made, and the files moved
+/// into place are all there are.
+struct Files {
+    unfinished: Vec<PathBuf>,
+    written: Vec<PathBuf>,
+}
 
-fn unfinished() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
-    UNFINISHED.lock().unwrap_or_else(|e| e.into_inner())
+impl Files {
+    /// Records a file moved into place: each once, and at most a thousand (what an
+    /// interruption's note names; a long job writes its checkpoint's files again and again).
+    fn wrote(&mut self, path: &Path) {
+        if self.written.len() < 1000 && !self.written.iter().any(|p| p == path) {
+            self.written.push(path.to_path_buf());
+        }
+    }
+}
+
+static FILES: std::sync::Mutex<Files> = std::sync::Mutex::new(Files { unfinished: Vec::new(), written: Vec::new() });
+
+fn unfinished() -> std::sync::MutexGuard<'static, Files> {
+    FILES.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// Removes every temporary file still being written, for a process about to exit on an
 /// interruption (Ctrl-C, SIGTERM): the destinations keep their old contents, and no write can
-/// start or finish after this (they wait for a lock that is never released).
-pub fn remove_unfinished_files() {
-    let list = unfinished();
-    for p in list.iter() {
+/// start or finish after this (they wait for a lock that is never released). Gives the files
+/// this process wrote whole before it, in order, so that the interruption can say so.
+pub fn remove_unfinished_files() -> Vec<PathBuf> {
+    let files = unfinished();
+    for p in &files.unfinished {
         let _ = std::fs::remove_file(p);
     }
-    std::mem::forget(list);
+    let written = files.written.clone();
+    std::mem::forget(files);
+    written
 }
 
-/// Writes through `write` to a new temporary file, then renames it to `path`; on any failure
-/// the temporary file is removed and `path` is untouched.
+/// Where a write to `path` goes: through symbolic links to the file they name (a link is
+/// written through, not replaced by a file), else `path` itself. A device or a pipe is opened
+/// as named (`/dev/stdout` is a link to a link whose target is no path).
+fn destination(path: &Path) -> PathBuf {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+        Ok(_) => path.to_path_buf(),
+        // A link to nothing yet: its target, made by the write (one step: a chain of such links,
+        // or a loop, is left to the write to refuse).
+        Err(_) => match std::fs::read_link(path) {
+            Ok(target) => parent_dir(path).join(target),
+            Err(_) => path.to_path_buf(),
+        },
+    }
+}
+
+/// Whether `path` exists and is neither a file nor a directory: a device, a pipe or a socket,
+/// written into as it is (a temporary file renamed over it would replace it).
+fn is_special(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
+/// The writes of [`written_together`] on this thread, renamed into place together at its end.
+type Staged = Vec<(PathBuf, PathBuf)>;
+
+thread_local! {
+    static TOGETHER: std::cell::RefCell<Option<Staged>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `writes`, whose [`write_atomically`] calls on this thread each write their temporary
+/// file, and moves them all into place at the end, under one hold of the lock an interruption
+/// takes: a command's outputs (an image and its error image) are then all written or none of
+/// them, and where one fails, none is moved.
+pub fn written_together<T>(writes: impl FnOnce() -> Result<T>) -> Result<T> {
+    let outer = TOGETHER.with(|t| t.borrow_mut().replace(Vec::new()));
+    assert!(outer.is_none(), "written_together does not nest");
+    let result = writes();
+    let staged = TOGETHER.with(|t| t.borrow_mut().take()).unwrap_or_default();
+    let mut files = unfinished();
+    let mut result = result;
+    for (tmp, path) in &staged {
+        if result.is_ok() {
+            match std::fs::rename(tmp, path) {
+                Ok(()) => files.wrote(path),
+                Err(e) => result = Err(Error::write(path, format!("cannot move the finished file into place: {e}"))),
+            }
+        }
+        if result.is_err() {
+            let _ = std::fs::remove_file(tmp);
+        }
+        files.unfinished.retain(|p| p != tmp);
+    }
+    result
+}
+
+/// Writes through `write` to a new temporary file, then renames it to `path` (inside
+/// [`written_together`], at its end with the others); on any failure the temporary file is
+/// removed and `path` is untouched. Through a symbolic link the link's target is written; a
+/// device or a pipe ([`is_special`]) is written into directly, having no contents to keep.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
+    let target = destination(path);
+    if is_special(&target) {
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(&target)
+            .map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
+        return write(&mut file);
+    }
     let (tmp, mut file) = {
-        let mut list = unfinished();
-        let tmp = temporary_path(path);
+        let mut files = unfinished();
+        let tmp = temporary_path(&target);
         let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
-        list.push(tmp.clone());
+        files.unfinished.push(tmp.clone());
         (tmp, file)
     };
     let result = write(&mut file).and_then(|()| {
@@ -396,15 +487,24 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> R
         file.sync_all().map_err(|e| Error::write(path, format!("cannot write: {e}")))
     });
     drop(file);
-    let mut list = unfinished();
+    if result.is_ok() {
+        let deferred =
+            TOGETHER.with(|t| t.borrow_mut().as_mut().map(|staged| staged.push((tmp.clone(), target.clone()))));
+        if deferred.is_some() {
+            return Ok(());
+        }
+    }
+    let mut files = unfinished();
     let result = result.and_then(|()| {
-        std::fs::rename(&tmp, path)
+        std::fs::rename(&tmp, &target)
             .map_err(|e| Error::write(path, format!("cannot move the finished file into place: {e}")))
     });
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
+    } else {
+        files.wrote(&target);
     }
-    list.retain(|p| p != &tmp);
+    files.unfinished.retain(|p| p != &tmp);
     result
 }
 
@@ -647,6 +747,55 @@ pub fn save_rgb8_png(img: &image::RgbImage, path: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Files written together are moved into place together, or none where one fails; a link
+    /// is written through (its target replaced, the link kept), a dangling one makes its
+    /// target; a device is written into, not replaced by a file.
+    #[cfg(unix)]
+    #[test]
+    fn outputs_written_together_links_written_through_and_devices_into() {
+        let dir = std::env::temp_dir().join(format!("fogplanes-together-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a.txt"), dir.join("b.txt"));
+        for p in [&a, &b] {
+            std::fs::write(p, "old").unwrap();
+        }
+        let read = |p: &Path| std::fs::read_to_string(p).unwrap();
+        // The second write fails: neither file changes, and no temporary file is left.
+        let e = written_together(|| {
+            write_file_atomically(&a, b"new")?;
+            assert_eq!(read(&a), "old", "moved before the end of the group");
+            write_atomically(&b, |_| Err(Error::write(&b, "refused")))
+        });
+        assert!(e.is_err());
+        assert_eq!((read(&a), read(&b)), ("old".to_string(), "old".to_string()));
+        written_together(|| {
+            write_file_atomically(&a, b"new")?;
+            write_file_atomically(&b, b"new")
+        })
+        .unwrap();
+        assert_eq!((read(&a), read(&b)), ("new".to_string(), "new".to_string()));
+        // Through a link, and through a link to a file not yet there.
+        let (link, dangling, target) = (dir.join("link.txt"), dir.join("dangling.txt"), dir.join("target.txt"));
+        std::os::unix::fs::symlink("a.txt", &link).unwrap();
+        std::os::unix::fs::symlink("target.txt", &dangling).unwrap();
+        write_file_atomically(&link, b"through").unwrap();
+        write_file_atomically(&dangling, b"made").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+        assert!(std::fs::symlink_metadata(&dangling).unwrap().file_type().is_symlink());
+        assert_eq!((read(&a), read(&target)), ("through".to_string(), "made".to_string()));
+        check_writable(&link).unwrap();
+        // A device: written into (/dev/null takes anything), still a device.
+        write_file_atomically(Path::new("/dev/null"), b"gone").unwrap();
+        check_writable(Path::new("/dev/null")).unwrap();
+        assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
+        let mut left: Vec<String> =
+            std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        left.sort();
+        assert_eq!(left, ["a.txt", "b.txt", "dangling.txt", "link.txt", "target.txt"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn exr_round_trips_and_leaves_no_temporary_file() {

@@ -384,6 +384,12 @@ pub fn resolve_reference(scene: &Scene, given: &ReferenceOverrides) -> Result<Re
     let scene = scene_at(scene, given.resolution)?;
     let spp = given.spp.unwrap_or(REFERENCE_SPP);
     check_spp(spp).map_err(from_caller(Setting::Spp))?;
+    if spp < 2 {
+        // One sample is one replicate, whose spread is no standard error (it read 0, and a
+        // comparison against it found every difference infinitely significant).
+        let why = "a reference's standard error is the spread of its samples' replicates (up to 16 a pixel): give --spp 2 or more";
+        return Err(Error::option(Setting::Spp, why));
+    }
     // The reference holds no planes, only its pixels.
     check_fits(&scene, 0, origin(&given.resolution), (Setting::Resolution, Origin::Scene))?;
     Ok(ResolvedReference {
@@ -840,6 +846,7 @@ mod tests {
         assert_eq!((r.options.spp, r.options.seed, r.options.uniform, r.options.pixel_center), (1024, 1, false, false));
         for (given, setting) in [
             (ReferenceOverrides { spp: Some(0), ..Default::default() }, Setting::Spp),
+            (ReferenceOverrides { spp: Some(1), ..Default::default() }, Setting::Spp),
             (ReferenceOverrides { exposure: Some(f32::NAN), ..Default::default() }, Setting::Exposure),
             (ReferenceOverrides { resolution: Some((32_000, 32_000)), ..Default::default() }, Setting::Resolution),
         ] {

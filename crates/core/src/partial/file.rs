@@ -410,6 +410,11 @@ impl<R: std::io::Read + std::io::Seek> Npz<R> {
                     "{name}: compressed entries are not supported (numpy.savez, not savez_compressed)"
                 ));
             }
+            // Two entries of one name are read as different arrays by different readers (the
+            // first here, the last by numpy): refused, as no writer of a part makes them.
+            if entries.iter().any(|e: &Entry| e.name == name) {
+                return Err(format!("{name}: two entries of that name (a crafted or damaged archive)"));
+            }
             entries.push(Entry { name, local, size: size as u64, crc });
         }
         Ok(Npz { source, len, entries })
@@ -565,6 +570,11 @@ mod tests {
         bytes[n / 2] ^= 1;
         assert!(parse_npz(&bytes, 1 << 20).is_err());
         assert!(parse_npz(&bytes[..n - 30], 1 << 20).is_err() && parse_npz(b"", 1 << 20).is_err());
+        // Two entries of one name (numpy reads the last, this reader the first): refused.
+        let twice = dir.join("twice.npz");
+        write_npz(&twice, &[Array::text("meta", "{}"), Array::text("meta", "{\"x\": 1}")]).unwrap();
+        let e = parse_npz(&std::fs::read(&twice).unwrap(), 1 << 20).unwrap_err();
+        assert!(e.contains("meta.npy: two entries of that name"), "{e}");
         // Not a regular file: refused before anything is read.
         #[cfg(unix)]
         assert!(Npz::open(Path::new("/dev/zero")).err().unwrap().to_string().contains("not a regular file"));
