@@ -361,10 +361,15 @@ fn parent_dir(path: &Path) -> PathBuf {
 /// A hidden temporary name beside `path`, unique to this process and this call (two threads
 /// writing the same destination, as Python may, never share one).
 pub fn temporary_path(path: &Path) -> PathBuf {
+    temporary_in(&parent_dir(path), path)
+}
+
+/// [`temporary_path`]'s name for `path`, in `dir`.
+fn temporary_in(dir: &Path, path: &Path) -> PathBuf {
     static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    parent_dir(path).join(format!(".{name}.{}.{n}.tmp", std::process::id()))
+    dir.join(format!(".{name}.{}.{n}.tmp", std::process::id()))
 }
 
 /// The files of this process's writes: those being written now (temporary), for
@@ -378,12 +383,15 @@ struct Files {
 }
 
 impl Files {
-    /// Records a file moved into place: each once, and at most a thousand (what an
-    /// interruption's note names; a long job writes its checkpoint's files again and again).
+    /// Records a file moved into place, as its writer named it: each once, the latest thousand
+    /// (what an interruption's note names: a command's outputs come after the files of its
+    /// checkpoint, of which a long job writes more than that).
     fn wrote(&mut self, path: &Path) {
-        if self.written.len() < 1000 && !self.written.iter().any(|p| p == path) {
-            self.written.push(path.to_path_buf());
+        self.written.retain(|p| p != path);
+        if self.written.len() == 1000 {
+            self.written.remove(0);
         }
+        self.written.push(path.to_path_buf());
     }
 }
 
@@ -429,8 +437,9 @@ fn is_special(path: &Path) -> bool {
     std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
-/// The writes of [`written_together`] on this thread, renamed into place together at its end.
-type Staged = Vec<(PathBuf, PathBuf)>;
+/// The writes of [`written_together`] on this thread, renamed into place together at its end:
+/// each one's temporary file, its destination and the path its writer named.
+type Staged = Vec<(PathBuf, PathBuf, PathBuf)>;
 
 thread_local! {
     static TOGETHER: std::cell::RefCell<Option<Staged>> = const { std::cell::RefCell::new(None) };
@@ -441,15 +450,31 @@ thread_local! {
 /// takes: a command's outputs (an image and its error image) are then all written or none of
 /// them, and where one fails, none is moved.
 pub fn written_together<T>(writes: impl FnOnce() -> Result<T>) -> Result<T> {
+    /// Should `writes` panic: its temporary files removed, and this thread's writes immediate
+    /// again.
+    struct Unwound;
+    impl Drop for Unwound {
+        fn drop(&mut self) {
+            if let Some(staged) = TOGETHER.with(|t| t.borrow_mut().take()) {
+                let mut files = unfinished();
+                for (tmp, _, _) in staged {
+                    let _ = std::fs::remove_file(&tmp);
+                    files.unfinished.retain(|p| p != &tmp);
+                }
+            }
+        }
+    }
     let outer = TOGETHER.with(|t| t.borrow_mut().replace(Vec::new()));
     assert!(outer.is_none(), "written_together does not nest");
+    let unwound = Unwound;
     let result = writes();
     let staged = TOGETHER.with(|t| t.borrow_mut().take()).unwrap_or_default();
+    drop(unwound);
     let mut files = unfinished();
     let mut result = result;
-    for (tmp, path) in &staged {
+    for (tmp, target, path) in &staged {
         if result.is_ok() {
-            match std::fs::rename(tmp, path) {
+            match std::fs::rename(tmp, target) {
                 Ok(()) => files.wrote(path),
                 Err(e) => result = Err(Error::write(path, format!("cannot move the finished file into place: {e}"))),
             }
@@ -465,19 +490,14 @@ pub fn written_together<T>(writes: impl FnOnce() -> Result<T>) -> Result<T> {
 /// Writes through `write` to a new temporary file, then renames it to `path` (inside
 /// [`written_together`], at its end with the others); on any failure the temporary file is
 /// removed and `path` is untouched. Through a symbolic link the link's target is written; a
-/// device or a pipe ([`is_special`]) is written into directly, having no contents to keep.
+/// device or a pipe ([`is_special`]) is sent the finished file, written first to a temporary
+/// file of the system's (an EXR is written with seeks, which a pipe has not).
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
     let target = destination(path);
-    if is_special(&target) {
-        let mut file = std::fs::OpenOptions::new()
-            .write(true)
-            .open(&target)
-            .map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
-        return write(&mut file);
-    }
+    let special = is_special(&target);
     let (tmp, mut file) = {
         let mut files = unfinished();
-        let tmp = temporary_path(&target);
+        let tmp = if special { temporary_in(&std::env::temp_dir(), path) } else { temporary_path(&target) };
         let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
         files.unfinished.push(tmp.clone());
         (tmp, file)
@@ -487,9 +507,29 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> R
         file.sync_all().map_err(|e| Error::write(path, format!("cannot write: {e}")))
     });
     drop(file);
+    if special {
+        // Sent whole once finished; a device has no old contents to keep, so it takes no part
+        // in written_together.
+        let result = result.and_then(|()| {
+            let mut from = std::fs::File::open(&tmp).map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
+            let mut to = std::fs::OpenOptions::new()
+                .write(true)
+                .open(&target)
+                .map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
+            std::io::copy(&mut from, &mut to).map(drop).map_err(|e| Error::write(path, format!("cannot write: {e}")))
+        });
+        let mut files = unfinished();
+        let _ = std::fs::remove_file(&tmp);
+        files.unfinished.retain(|p| p != &tmp);
+        if result.is_ok() {
+            files.wrote(path);
+        }
+        return result;
+    }
     if result.is_ok() {
-        let deferred =
-            TOGETHER.with(|t| t.borrow_mut().as_mut().map(|staged| staged.push((tmp.clone(), target.clone()))));
+        let deferred = TOGETHER.with(|t| {
+            t.borrow_mut().as_mut().map(|staged| staged.push((tmp.clone(), target.clone(), path.to_path_buf())))
+        });
         if deferred.is_some() {
             return Ok(());
         }
@@ -502,7 +542,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> R
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     } else {
-        files.wrote(&target);
+        files.wrote(path);
     }
     files.unfinished.retain(|p| p != &tmp);
     result
@@ -790,6 +830,22 @@ mod tests {
         write_file_atomically(Path::new("/dev/null"), b"gone").unwrap();
         check_writable(Path::new("/dev/null")).unwrap();
         assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
+        // A pipe: sent the whole EXR (written with seeks), which reads back as the image.
+        let fifo = dir.join("pipe.exr");
+        assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(&fifo).unwrap())
+        };
+        let film = Film { width: 3, height: 2, pixels: (0..6).map(|i| Vec3::splat(i as f32)).collect() };
+        film.save_exr(&fifo).unwrap();
+        let (got, copy) = (reader.join().unwrap(), dir.join("copy.exr"));
+        std::fs::write(&copy, got).unwrap();
+        assert_eq!(Film::load_exr(&copy).unwrap().pixels, film.pixels);
+        assert!(!std::fs::metadata(&fifo).unwrap().is_file());
+        for f in [&fifo, &copy] {
+            std::fs::remove_file(f).unwrap();
+        }
         let mut left: Vec<String> =
             std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
         left.sort();
