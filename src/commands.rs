@@ -477,8 +477,10 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     })?;
     watch.finish(&reference);
     say!(
-        "reference: {} spp on average, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
+        "reference: {} spp asked, {:.1} taken on average{}, {:.3} s, relative standard error {:.3e} (RMS over pixels / mean), noise MSE {:.3e} (x10^4: {:.3e})",
         r.options.spp,
+        reference.samples,
+        if r.options.uniform { "" } else { " (the pilot pass's included)" },
         reference.seconds,
         reference.relative_stderr(),
         reference.noise_mse(),

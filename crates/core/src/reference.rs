@@ -49,6 +49,10 @@ pub struct ReferenceImage {
     pub mean: Film,
     pub stderr: Film,
     pub seconds: f64,
+    /// The samples a pixel took on average, the pilot pass's included: what the asked `spp`
+    /// became once each pixel's count was rounded up to its replicates (and, adaptive, after
+    /// the pilot and the floor of [`reference_counts`]).
+    pub samples: f64,
 }
 
 impl ReferenceImage {
@@ -215,7 +219,26 @@ pub fn render_reference_from(
         observer(ReferenceStep::Band(&ReferenceBand { rows: j..end, mean: m, stderr: e }))?;
         j = end;
     }
-    Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64() })
+    let pixels = (w as usize * h as usize).max(1) as f64;
+    let samples = match &counts {
+        Some(c) => taken(pilot_spp(opts)) as f64 + c.iter().map(|&n| taken(n) as f64).sum::<f64>() / pixels,
+        None => taken(opts.spp) as f64,
+    };
+    Ok(ReferenceImage { mean, stderr, seconds: start.elapsed().as_secs_f64(), samples })
+}
+
+/// A pixel's replicates and samples in each, for a count of `count` ([`pixel_estimate`]): as
+/// many replicates as samples below [`REPLICATES`], and each of the same count, so the count is
+/// rounded up to a multiple of them.
+fn replicates(count: u32) -> (u32, u32) {
+    let replicates = REPLICATES.min(count).max(1);
+    (replicates, count.div_ceil(replicates))
+}
+
+/// The samples a pixel asked for `count` takes ([`replicates`]).
+fn taken(count: u32) -> u64 {
+    let (r, each) = replicates(count);
+    r as u64 * each as u64
 }
 
 /// Copies `band` into `film` from row `row` on.
@@ -394,8 +417,8 @@ fn pixel_estimate(
     let cam = &scene.camera;
     let pixel = (j * cam.width as usize + i) as u64;
     let mut rng = rng_for(seed, REFERENCE_STREAM, pixel);
-    let replicates = REPLICATES.min(count).max(1);
-    let per_replicate = count.div_ceil(replicates) as u64;
+    let (replicates, per_replicate) = replicates(count);
+    let per_replicate = per_replicate as u64;
     let centre_dir = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
     let centre = scene.camera_segment(cam.position, centre_dir);
     let (mut sum, mut sum_sq) = (DVec3::ZERO, DVec3::ZERO);
@@ -431,6 +454,23 @@ mod tests {
     use super::*;
     use crate::error::Error;
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+    /// A reference reports the samples it took: each pixel's count rounded up to its
+    /// replicates, and an adaptive one's pilot and floor of 16 (below 32 spp it takes 32).
+    #[test]
+    fn a_reference_reports_the_samples_it_took() {
+        let scene =
+            Scene::parse(crate::scene::tests::MINIMAL, "test.toml", "test").unwrap().with_resolution(6, 4).unwrap();
+        let taken = |spp, uniform| {
+            let opts = ReferenceOptions { spp, uniform, seed: 3, pixel_center: false };
+            render_reference(&scene, &opts, Control::none()).unwrap().samples
+        };
+        assert_eq!((taken(5, true), taken(16, true), taken(17, true)), (5.0, 16.0, 32.0));
+        assert_eq!((taken(2, false), taken(20, false), taken(32, false)), (32.0, 32.0, 32.0));
+        // 256: a pilot of 32, then 224 a pixel on average, each pixel's rounded up to 16s.
+        let adaptive = taken(256, false);
+        assert!((256.0..256.0 + 16.0).contains(&adaptive), "{adaptive}");
+    }
 
     /// Resumed from its pilot pass and any bands, in any order, the reference is the bits of
     /// one uninterrupted run; the observer sees the pilot, then each band, covering every row.
