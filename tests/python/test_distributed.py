@@ -281,6 +281,10 @@ BAD_TABLE = BAD_COMMON + [
     (dict(seeds=[1, -1]), ValueError, "seed"),
     (dict(reference=np.zeros((6, 9, 3), np.float32)), ValueError, "reference"),
     (dict(reference="missing.exr"), FileNotFoundError, "missing.exr"),
+    # Refused by every task, three times each with the workers' tracebacks, before these.
+    (dict(reference=np.full((6, 8, 3), np.nan, np.float32)), ValueError, "reference: pixel (x 0, y 0) channel R"),
+    (dict(reference=np.full((6, 8, 3), 1e39)), ValueError, "not a finite number (as float32)"),
+    (dict(reference=np.ones((6, 8, 3), complex)), TypeError, "reference: expected an array of a real dtype"),
     (dict(pixel_center="no"), TypeError, "pixel_center"),
     (dict(kernel=3), TypeError, "kernel"),
 ]

@@ -3,8 +3,10 @@ caller"): arguments of the wrong type named as given, bools refused where counts
 row pairs checked before any conversion, unpickled partials and given-back arrays (pilots, sample
 counts) held to what the library can make. Each raised, or returned NaN, before the fix."""
 
+import os
 import pickle
 import subprocess
+import sys
 import threading
 
 import numpy as np
@@ -172,3 +174,65 @@ def test_a_part_numpy_wrote_still_merges(tmp_path):
         subprocess.run([str(exe), "merge", str(tmp_path / first), str(tmp_path / "b.npz"), "-o", str(tmp_path / image), "-q"],
                        check=True, capture_output=True)
     assert np.array_equal(fogplanes.load_image(tmp_path / "ab.exr"), fogplanes.load_image(tmp_path / "cb.exr"))
+
+
+def test_a_scene_path_that_is_no_regular_file_is_refused(tmp_path):
+    """A pipe given as a scene path held the interpreter's lock while the open waited for a
+    writer: every thread froze and Ctrl-C did nothing. It is refused before it is opened (in a
+    subprocess, so that a regression fails here rather than hanging the tests)."""
+    fifo = tmp_path / "scene.toml"
+    os.mkfifo(fifo)
+    code = ("import fogplanes\n"
+            f"try:\n    fogplanes.load_scene({str(fifo)!r})\nexcept ValueError as e:\n    print(e)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert "not a regular file" in done.stdout and "Scene.from_toml" in done.stdout, done
+
+
+@pytest.mark.parametrize(
+    "image, error, says",
+    [
+        # Each side within the limit, the whole not: it was converted until the process was
+        # killed for its memory (23 GB), the interpreter's lock held.
+        (np.broadcast_to(np.float32(1), (32768, 32768, 3)), ValueError,
+         r"^image: an image of 32768x32768 pixels would take about 24\.0 GiB to read; the limit is 16 GiB$"),
+        # numpy dropped the imaginary part with a warning; an object array was converted.
+        (np.ones((2, 3, 3), dtype=complex), TypeError, r"^image: expected an array of a real dtype, got dtype complex128$"),
+        (np.ones((2, 3, 3), dtype=object), TypeError, r"^image: expected an array of a real dtype, got dtype object$"),
+    ],
+)
+def test_an_image_argument_is_checked_before_it_is_converted(image, error, says):
+    with pytest.raises(error, match=says):
+        fogplanes.compare(image, np.ones((2, 3, 3), dtype=np.float32))
+
+
+def test_save_image_and_load_image_refuse_a_value_that_is_no_number(tmp_path):
+    """save_image wrote NaN into an EXR and load_image handed it back, unchecked."""
+    image = np.ones((2, 3, 3), dtype=np.float32)
+    image[1, 2, 1] = np.nan
+    with pytest.raises(ValueError, match=r"pixel \(x 2, y 1\) channel G"):
+        fogplanes.save_image(tmp_path / "nan.exr", image)
+    assert not (tmp_path / "nan.exr").exists()
+    # An EXR holding NaN, written by another program (Mitsuba 3's Bitmap).
+    mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 writes the EXR holding NaN")
+    mi.set_variant("scalar_rgb")
+    mi.Bitmap(image).write(str(tmp_path / "other.exr"))
+    with pytest.raises(ValueError, match=r"other\.exr: the image holds a value that is not a finite number: pixel \(x 2, y 1\) channel G"):
+        fogplanes.load_image(tmp_path / "other.exr")
+
+
+def test_the_signatures_shown_are_the_ones_taken(scene):
+    """inspect.signature showed every argument of render and reference as positional (they are
+    keyword-only: `render(S, "unweighted", 2048)` raised), and reference_rows's fourth as seed
+    (it is counts)."""
+    import inspect
+
+    keyword_only = inspect.Parameter.KEYWORD_ONLY
+    for f, positional in [(fogplanes.render, ["scene", "estimator"]), (fogplanes.reference, ["scene", "spp"]),
+                          (fogplanes.reference_rows, ["scene", "rows", "spp", "counts"]),
+                          (fogplanes.reference_pilot_rows, ["scene", "rows", "spp"]),
+                          (fogplanes.reference_counts, ["scene", "pilot", "spp"])]:
+        params = list(inspect.signature(f).parameters.values())
+        assert [p.name for p in params if p.kind != keyword_only] == positional, f.__name__
+    mean, _ = fogplanes.reference_rows(scene, (0, 1), 16, None, uniform=True, **SMALL)
+    assert mean.shape == (1, 8, 3)
+    assert inspect.signature(fogplanes.save_image).parameters["exposure"].default is None

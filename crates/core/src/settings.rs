@@ -120,7 +120,7 @@ fn wanted_device(given: Option<Device>, cpu_options: bool) -> Result<Device> {
     match given.unwrap_or_default() {
         d @ Device::Gpu(_) if cpu_options => Err(Error::option(
             Setting::Device,
-            format!("{d}: the accelerator and the kernel choose how the CPU gathers; give them with --device cpu"),
+            format!("{d}: the accelerator and the kernel choose how the CPU gathers, and apply to the CPU alone"),
         )),
         // `auto` wants speed, and the caller chose how the CPU gathers.
         Device::Auto if cpu_options => Ok(Device::Cpu),
@@ -303,7 +303,7 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
     let ray_sets = if given.pixel_center { 1 } else { spp };
     if stderr && ray_sets < 2 {
         // The error is the spread of the ray sets' plane groups (section 10).
-        let why = "an error image (and a target error) needs two ray sets or more, whose plane groups it compares: give --spp 2 or more, without --pixel-center";
+        let why = "an error image (and a target error) needs two ray sets or more, whose plane groups it compares: 2 samples a pixel or more, over whole pixels (not their centres)";
         return Err(Error::option(Setting::Spp, why));
     }
     // A render holds one chunk's planes at a time, so what can exceed the memory is the image:
@@ -387,7 +387,7 @@ pub fn resolve_reference(scene: &Scene, given: &ReferenceOverrides) -> Result<Re
     if spp < 2 {
         // One sample is one replicate, whose spread is no standard error (it read 0, and a
         // comparison against it found every difference infinitely significant).
-        let why = "a reference's standard error is the spread of its samples' replicates (up to 16 a pixel): give --spp 2 or more";
+        let why = "a reference's standard error is the spread of its samples' replicates (up to 16 a pixel): 2 samples a pixel or more";
         return Err(Error::option(Setting::Spp, why));
     }
     // The reference holds no planes, only its pixels.

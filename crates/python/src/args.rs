@@ -10,7 +10,15 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict};
 use std::path::{Path, PathBuf};
 
+/// The scene file at `path`: a regular file (a pipe would block the interpreter, which holds
+/// its lock while it reads, until a writer came; its text goes to `Scene.from_toml`).
 pub(crate) fn load(path: &Path) -> PyResult<Scene> {
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return Err(PyValueError::new_err(format!(
+            "{}: not a regular file (a pipe or a device): read its text and give it to Scene.from_toml",
+            path.display()
+        )));
+    }
     Scene::load(path).map_err(|e| file_error(path, e.to_string()))
 }
 

@@ -45,6 +45,23 @@ pub(crate) fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> 
     };
     let side = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
     fogplanes::limits::check_resolution(side(w), side(h)).map_err(|m| PyValueError::new_err(format!("{what}: {m}")))?;
+    // Converted, it is held twice (the float32 array and the image): within the memory budget.
+    let bytes = (w as u64 * h as u64).saturating_mul(2 * 12);
+    if bytes > fogplanes::limits::MEMORY_BUDGET_BYTES {
+        return Err(PyValueError::new_err(format!(
+            "{what}: an image of {w}x{h} pixels would take about {:.1} GiB to read; the limit is {} GiB",
+            bytes as f64 / (1u64 << 30) as f64,
+            fogplanes::limits::MEMORY_BUDGET_BYTES >> 30
+        )));
+    }
+    // A real dtype: numpy would drop a complex value's imaginary part (with only a warning) and
+    // convert an object array element by element.
+    if let Ok(kind) = array.getattr("dtype").and_then(|d| d.getattr("kind")).and_then(|k| k.extract::<String>())
+        && !matches!(kind.as_str(), "b" | "i" | "u" | "f")
+    {
+        let dtype = array.getattr("dtype")?.str()?.to_string();
+        return Err(PyTypeError::new_err(format!("{what}: expected an array of a real dtype, got dtype {dtype}")));
+    }
     let array: PyArrayLike3<'_, f32, AllowTypeChange> = array.extract()?;
     let view = array.as_array();
     let mut film = Film::new(w as u32, h as u32);

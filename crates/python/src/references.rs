@@ -63,7 +63,7 @@ fn counts_arg(counts: &Bound<'_, PyAny>, (w, h): (usize, usize)) -> PyResult<Vec
 /// `reference_counts` (uint32 (height, width)).
 #[pyfunction]
 #[pyo3(signature = (scene, rows, spp = None, counts = None, **kwargs))]
-#[pyo3(text_signature = "(scene, rows, spp=None, seed=None, pixel_center=False, uniform=False, counts=None, \
+#[pyo3(text_signature = "(scene, rows, spp=None, counts=None, *, seed=None, pixel_center=False, uniform=False, \
     resolution=None, threads=None)")]
 pub(crate) fn reference_rows<'py>(
     py: Python<'py>,
@@ -102,7 +102,7 @@ pub(crate) fn reference_rows<'py>(
 /// float32 (j1 - j0, width, 3). The whole pilot (the rows stacked) goes to `reference_counts`.
 #[pyfunction]
 #[pyo3(signature = (scene, rows, spp = None, **kwargs))]
-#[pyo3(text_signature = "(scene, rows, spp=None, seed=None, pixel_center=False, resolution=None, threads=None)")]
+#[pyo3(text_signature = "(scene, rows, spp=None, *, seed=None, pixel_center=False, resolution=None, threads=None)")]
 pub(crate) fn reference_pilot_rows<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
@@ -124,7 +124,7 @@ pub(crate) fn reference_pilot_rows<'py>(
 /// core code `reference` uses.
 #[pyfunction]
 #[pyo3(signature = (scene, pilot, spp = None, **kwargs))]
-#[pyo3(text_signature = "(scene, pilot, spp=None, seed=None, pixel_center=False, resolution=None)")]
+#[pyo3(text_signature = "(scene, pilot, spp=None, *, seed=None, pixel_center=False, resolution=None)")]
 pub(crate) fn reference_counts<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,

@@ -15,6 +15,7 @@ use fogplanes::reference::render_reference;
 use fogplanes::render::{Until, progress_units, render_until};
 use fogplanes::settings::{self, Setting};
 use fogplanes::weights::Estimator;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::path::PathBuf;
@@ -58,7 +59,7 @@ pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
 /// on Ctrl-C. The GIL is released while rendering.
 #[pyfunction]
 #[pyo3(signature = (scene, estimator = None, **kwargs))]
-#[pyo3(text_signature = "(scene, estimator=None, planes=None, seed=None, spp=None, pixel_center=False, \
+#[pyo3(text_signature = "(scene, estimator=None, *, planes=None, seed=None, spp=None, pixel_center=False, \
     resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', device='cpu', \
     return_stats=False, sampler=None, time_budget=None, target_error=None, return_stderr=False, progress=False)")]
 pub(crate) fn render<'py>(
@@ -119,7 +120,9 @@ pub(crate) fn render<'py>(
 /// KeyboardInterrupt.
 #[pyfunction]
 #[pyo3(signature = (scene, spp = None, **kwargs))]
-#[pyo3(text_signature = "(scene, spp=1024, pixel_center=False, resolution=None, seed=1, uniform=False, threads=None)")]
+#[pyo3(
+    text_signature = "(scene, spp=1024, *, pixel_center=False, resolution=None, seed=1, uniform=False, threads=None)"
+)]
 pub(crate) fn reference<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
@@ -160,6 +163,8 @@ pub(crate) fn compare<'py>(
 #[pyfunction]
 pub(crate) fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<'py>> {
     let film = Film::load_exr(&path).map_err(|e| file_error(&path, e.to_string()))?;
+    // As every image read is checked: a NaN or an infinity is named, not handed on.
+    film.check_finite("image").map_err(|e| PyValueError::new_err(format!("{}: {e}", path.display())))?;
     Ok(film_to_array(py, &film))
 }
 
@@ -168,7 +173,7 @@ pub(crate) fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<
 /// with an .exr path is refused, as on the command line.
 #[pyfunction]
 #[pyo3(signature = (path, image, exposure = None))]
-#[pyo3(text_signature = "(path, image, exposure=0.0)")]
+#[pyo3(text_signature = "(path, image, exposure=None)")]
 pub(crate) fn save_image(
     py: Python<'_>,
     path: PathBuf,
@@ -179,6 +184,7 @@ pub(crate) fn save_image(
     let stops = given.float(Setting::Exposure, exposure)?.map(|e| e as f32);
     let exposure = settings::exposure(stops).map_err(|e| given.error(e))?;
     let film = image_arg(image, "image")?;
+    film.check_finite("image").map_err(py_error)?;
     fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)], &[]).map_err(py_error)?;
     settings::check_exposure_applies(stops, &[&path]).map_err(|e| given.error(e))?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)

@@ -219,6 +219,7 @@ def load_scene(path: PathLike) -> Scene:
 def render(
     scene: Scene | PathLike,
     estimator: str | None = None,
+    *,
     planes: int | None = None,
     seed: int | None = None,
     spp: int | None = None,
@@ -272,6 +273,7 @@ def render(
 def render(
     scene: Scene | PathLike,
     estimator: str | None = None,
+    *,
     planes: int | None = None,
     seed: int | None = None,
     spp: int | None = None,
@@ -282,7 +284,6 @@ def render(
     accelerator: str = "raster",
     kernel: str = "auto",
     device: str = "cpu",
-    *,
     return_stats: Literal[True],
     sampler: str | None = None,
     time_budget: float | None = None,
@@ -295,6 +296,7 @@ def render(
 def render(
     scene: Scene | PathLike,
     estimator: str | None = None,
+    *,
     planes: int | None = None,
     seed: int | None = None,
     spp: int | None = None,
@@ -309,7 +311,6 @@ def render(
     sampler: str | None = None,
     time_budget: float | None = None,
     target_error: float | None = None,
-    *,
     return_stderr: Literal[True],
     progress: bool = False,
 ) -> tuple[Image, Image]: ...
@@ -318,6 +319,7 @@ def render(
 def render(
     scene: Scene | PathLike,
     estimator: str | None = None,
+    *,
     planes: int | None = None,
     seed: int | None = None,
     spp: int | None = None,
@@ -328,7 +330,6 @@ def render(
     accelerator: str = "raster",
     kernel: str = "auto",
     device: str = "cpu",
-    *,
     return_stats: Literal[True],
     sampler: str | None = None,
     time_budget: float | None = None,
@@ -340,6 +341,7 @@ def render(
 def reference(
     scene: Scene | PathLike,
     spp: int = 1024,
+    *,
     pixel_center: bool = False,
     resolution: tuple[int, int] | None = None,
     seed: int = 1,
@@ -363,7 +365,7 @@ def compare(image: npt.ArrayLike, reference: npt.ArrayLike) -> Metrics:
 def load_image(path: PathLike) -> Image:
     """Reads the first RGB(A) layer of an EXR file: shape (height, width, 3), float32."""
 
-def save_image(path: PathLike, image: npt.ArrayLike, exposure: float = 0.0) -> None:
+def save_image(path: PathLike, image: npt.ArrayLike, exposure: float | None = None) -> None:
     """Writes an image (height, width, 3) as .exr (linear float32) or .png (sRGB, tone-mapped
     by `exposure` stops), whole or not at all. The shape is checked before any conversion; an
     `exposure` with an .exr path is a ValueError (an EXR holds linear radiance)."""
@@ -486,10 +488,11 @@ def reference_rows(
     scene: Scene | PathLike,
     rows: tuple[int, int],
     spp: int | None = None,
+    counts: npt.ArrayLike | None = None,
+    *,
     seed: int | None = None,
     pixel_center: bool = False,
     uniform: bool = False,
-    counts: npt.ArrayLike | None = None,
     resolution: tuple[int, int] | None = None,
     threads: int | None = None,
 ) -> tuple[Image, Image]:
@@ -500,6 +503,7 @@ def reference_pilot_rows(
     scene: Scene | PathLike,
     rows: tuple[int, int],
     spp: int | None = None,
+    *,
     seed: int | None = None,
     pixel_center: bool = False,
     resolution: tuple[int, int] | None = None,
@@ -511,6 +515,7 @@ def reference_counts(
     scene: Scene | PathLike,
     pilot: npt.ArrayLike,
     spp: int | None = None,
+    *,
     seed: int | None = None,
     pixel_center: bool = False,
     resolution: tuple[int, int] | None = None,

@@ -534,6 +534,19 @@ def _listed(value: Any, default: Iterable[Any]) -> list[Any]:
     return list(value)
 
 
+def _check_image(image: np.ndarray, what: str) -> None:
+    """Refuses, before any cluster starts, an image its workers would refuse: a dtype that is
+    not real, or a value that is not a finite float32 (named by its pixel and channel)."""
+    if image.dtype.kind not in "biuf":
+        raise TypeError(f"{what}: expected an array of a real dtype, got dtype {image.dtype}")
+    with np.errstate(over="ignore"):
+        finite = np.isfinite(image.astype(np.float32))
+    if not finite.all():
+        y, x, c = (int(i) for i in np.argwhere(~finite)[0])
+        raise ValueError(f"{what}: pixel (x {x}, y {y}) channel {'RGB'[c]} is {image[y, x, c]!r}, "
+                         "not a finite number (as float32)")
+
+
 def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | None = None,
           planes: int | Iterable[int] | None = None, seeds: int | Iterable[int] | None = None, *,
           client: Client | None = None, workers: int = 1, threads: int | None = None,
@@ -565,6 +578,7 @@ def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | Non
         if ref.shape != shape:
             raise ValueError(f"reference: expected an image of the renders' shape {shape}, "
                              f"got shape {ref.shape}")
+    _check_image(ref, "reference")
     stem = f"{tokenize(scene, ref, kwargs)}-{_call_id()}"
     with _session(client, workers, threads) as (c, per_task, _):
         shared_ref = c.scatter(ref, broadcast=True, hash=True)
