@@ -241,11 +241,15 @@ impl ImageInfo {
             return Err(Error::NotComparable(format!("the reference is {b} pixels, the image {a}")));
         }
         Ok(match (image.get(Self::SCENE), reference.get(Self::SCENE)) {
-            (Some(a), Some(b)) if a != b => Some(format!(
-                "the image and the reference record different scenes ({} and {})",
-                image.get("scene_name").unwrap_or("?"),
-                reference.get("scene_name").unwrap_or("?")
-            )),
+            (Some(a), Some(b)) if a != b => {
+                let (name_a, name_b) =
+                    (image.get("scene_name").unwrap_or("?"), reference.get("scene_name").unwrap_or("?"));
+                // Where the names agree, what tells the scenes apart that the record holds: the
+                // medium's g (recorded where it is not 0).
+                let (g_a, g_b) = (image.get("medium_g").unwrap_or("0"), reference.get("medium_g").unwrap_or("0"));
+                let g = if g_a != g_b { format!(", of medium g {g_a} and {g_b}") } else { String::new() };
+                Some(format!("the image and the reference record different scenes ({name_a} and {name_b}{g})"))
+            }
             _ => None,
         })
     }
@@ -902,6 +906,10 @@ mod tests {
         let other = ImageInfo::new("reference", "other", "ffff".into(), (3, 2), false);
         let warning = ImageInfo::check_reference(Some(&info), Some(&other)).unwrap().unwrap();
         assert!(warning.contains("different scenes (brouillard é and other)"), "{warning}");
+        // Two files of one name that differ in g: the warning says so.
+        let forward = ImageInfo::new("reference", "brouillard é", "ffff".into(), (3, 2), false).with_medium_g(0.5);
+        let warning = ImageInfo::check_reference(Some(&info), Some(&forward)).unwrap().unwrap();
+        assert!(warning.ends_with("(brouillard é and brouillard é, of medium g 0 and 0.5)"), "{warning}");
         assert_eq!(ImageInfo::check_reference(Some(&info), None).unwrap(), None);
         assert_eq!(ImageInfo::check_reference(None, Some(&centre)).unwrap(), None);
         std::fs::remove_dir_all(&dir).unwrap();

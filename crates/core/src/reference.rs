@@ -70,8 +70,14 @@ impl ReferenceImage {
 }
 
 /// One sample of single scattering along the ray `o + t we`, `t` in `[t0, t1]`, from uniforms
-/// `u` (light, point p, point q, distance). Equiangular sampling makes pdf(t) proportional to
-/// 1 / |x - y|^2, so the estimate is cos(theta_y) (theta_b - theta_a) / D times the rest.
+/// `u` (strategy and light, point p or the phase's cosine, point q or its azimuth, distance):
+/// docs/mathematics.md section 4. In isotropic fog, a point `y` on a light chosen by power and
+/// an equiangular distance toward it, whose pdf in `t` is proportional to 1 / |x - y|^2, so
+/// that the estimate is cos(theta_y) (theta_b - theta_a) / D times the rest. In fog that
+/// scatters forward or back (`g != 0`), one sample of two strategies weighted by the balance
+/// heuristic: that one with probability `1 - c`, or (probability `c = |g| / 2`) a uniform
+/// distance and a direction from the Henyey-Greenstein lobe, followed to the light it meets,
+/// which finds the lobe's peak where the light's point misses it.
 pub fn scattering_sample(
     scene: &Scene,
     lights: &Discrete,
@@ -81,16 +87,69 @@ pub fn scattering_sample(
     t1: f64,
     u: [f64; 4],
 ) -> DVec3 {
+    let c = phase_strategy_share(scene.medium.g);
+    if u[0] < c {
+        phase_sample(scene, lights, o, we, (t0, t1), c, [u[1], u[2], u[3]])
+    } else {
+        light_sample(scene, lights, o, we, (t0, t1), c, [(u[0] - c) / (1.0 - c), u[1], u[2], u[3]])
+    }
+}
+
+/// The share of the reference's scattering samples drawn from the phase function's lobe: none in
+/// isotropic fog (or nearly: the lobe is then the sphere, which the lights' points serve
+/// better), `|g| / 2` otherwise.
+fn phase_strategy_share(g: f64) -> f64 {
+    if g.abs() < 1e-3 { 0.0 } else { g.abs() / 2.0 }
+}
+
+/// The equiangular sampling of the distance along the ray toward a point `y`: the angles
+/// `theta_a`, `theta_b` the segment's ends make at `y`, its distance `dist` from the ray's line
+/// and the foot `delta` of the perpendicular.
+struct Equiangular {
+    theta_a: f64,
+    theta_b: f64,
+    dist: f64,
+    delta: f64,
+}
+
+impl Equiangular {
+    /// `None` where the ray passes through `y` (probability zero).
+    fn toward(y: DVec3, o: DVec3, we: DVec3, (t0, t1): (f64, f64)) -> Option<Self> {
+        let delta = (y - o).dot(we);
+        let dist = (o + delta * we - y).length();
+        if !(dist > 0.0) {
+            return None;
+        }
+        Some(Equiangular { theta_a: (t0 - delta).atan2(dist), theta_b: (t1 - delta).atan2(dist), dist, delta })
+    }
+
+    /// `pdf_phase / pdf_light` at a sample `(t, y)` with phase value `phase` and light cosine
+    /// `cos`, on a light of area over choice probability `area_over_p`: the lobe's pdf (a uniform
+    /// distance, the lobe's solid angle made area at `y`, `phase cos / |x - y|^2 / (t1 - t0)`)
+    /// over the light's (`P(k) / A_k` times the equiangular `dist / ((theta_b - theta_a) |x -
+    /// y|^2)`); the `|x - y|^2` cancel.
+    fn pdf_ratio(&self, phase: f64, cos: f64, (t0, t1): (f64, f64), area_over_p: f64) -> f64 {
+        phase * cos * (self.theta_b - self.theta_a) * area_over_p / ((t1 - t0) * self.dist)
+    }
+}
+
+/// The lights' strategy: a point on a light chosen by power, an equiangular distance toward it;
+/// weighted against the lobe's strategy (share `c`) by the balance heuristic.
+fn light_sample(
+    scene: &Scene,
+    lights: &Discrete,
+    o: DVec3,
+    we: DVec3,
+    segment: (f64, f64),
+    c: f64,
+    u: [f64; 4],
+) -> DVec3 {
+    let (t0, t1) = segment;
     let k = lights.sample(u[0]);
     let light = &scene.lights[k];
     let y = light.point(u[1] * light.width, u[2] * light.height);
-    let delta = (y - o).dot(we);
-    let dist = (o + delta * we - y).length();
-    if !(dist > 0.0) {
-        return DVec3::ZERO; // the ray passes through y: probability zero
-    }
-    let (theta_a, theta_b) = ((t0 - delta).atan2(dist), (t1 - delta).atan2(dist));
-    let t = (delta + dist * (theta_a + u[3] * (theta_b - theta_a)).tan()).clamp(t0, t1);
+    let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
+    let t = (e.delta + e.dist * (e.theta_a + u[3] * (e.theta_b - e.theta_a)).tan()).clamp(t0, t1);
     let x = o + t * we;
     let to_x = x - y;
     let d = to_x.length();
@@ -100,11 +159,66 @@ pub fn scattering_sample(
     }
     let medium = &scene.medium;
     let tr = medium.transmittance((t - t0) + d);
-    let weight = cos * (theta_b - theta_a) / dist * light.area() / lights.probability(k);
+    let weight = cos * (e.theta_b - e.theta_a) / e.dist * light.area() / lights.probability(k);
     // The phase function at the angle between the light's travel (y to x) and the way to the
     // eye (-we), section 1.1: PHASE itself when g = 0.
     let phase = medium.phase(to_x / d, -we);
-    medium.sigma_s * phase * light.radiance * tr * weight
+    // f / pdf_light, over the balance heuristic's (1 - c) + c pdf_phase / pdf_light.
+    let area_over_p = light.area() / lights.probability(k);
+    let mis = if c > 0.0 { (1.0 - c) + c * e.pdf_ratio(phase, cos, segment, area_over_p) } else { 1.0 };
+    medium.sigma_s * phase * light.radiance * tr * weight / mis
+}
+
+/// The lobe's strategy: a uniform distance in `[t0, t1]`, then the light's travel drawn from the
+/// Henyey-Greenstein lobe around the way to the eye (its cosine `mu` by inversion, section 1.1),
+/// followed back from `x` to the first panel it meets; weighted against the lights' strategy
+/// (share `1 - c`) by the balance heuristic. `f / pdf_phase` is `sigma_s L T (t1 - t0)`: the
+/// phase function and the geometry cancel.
+fn phase_sample(
+    scene: &Scene,
+    lights: &Discrete,
+    o: DVec3,
+    we: DVec3,
+    segment: (f64, f64),
+    c: f64,
+    u: [f64; 3],
+) -> DVec3 {
+    let (t0, t1) = segment;
+    let medium = &scene.medium;
+    let g = medium.g;
+    let t = (t0 + u[2] * (t1 - t0)).clamp(t0, t1);
+    let x = o + t * we;
+    // p(mu) = (1 - g^2) / (2 (1 + g^2 - 2 g mu)^(3/2)) on [-1, 1]; its inverse CDF.
+    let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u[0]);
+    let mu = ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0);
+    let (b1, b2) = (-we).any_orthonormal_pair();
+    let phi = std::f64::consts::TAU * u[1];
+    let sin = (1.0 - mu * mu).max(0.0).sqrt();
+    let travel = mu * -we + sin * (phi.cos() * b1 + phi.sin() * b2);
+    // The light the travel came from: the nearest panel behind x along -travel (a panel's back,
+    // or another panel, in front of it blocks it, as `Scene::blocked` has it).
+    let toward = -travel;
+    let mut nearest: Option<(f64, usize)> = None;
+    for (k, light) in scene.lights.iter().enumerate() {
+        if let Some(d) = light.intersect(x, toward, 0.0, f64::INFINITY)
+            && nearest.is_none_or(|(best, _)| d < best)
+        {
+            nearest = Some((d, k));
+        }
+    }
+    let Some((d, k)) = nearest else { return DVec3::ZERO };
+    let light = &scene.lights[k];
+    let y = x + d * toward;
+    let cos = light.n.dot(travel);
+    if !(cos > 0.0 && d > 0.0) {
+        return DVec3::ZERO;
+    }
+    let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
+    let phase = medium.phase(travel, -we);
+    let ratio = e.pdf_ratio(phase, cos, segment, light.area() / lights.probability(k));
+    let tr = medium.transmittance((t - t0) + d);
+    // f / pdf_phase over c + (1 - c) pdf_light / pdf_phase.
+    medium.sigma_s * light.radiance * tr * ((t1 - t0) * ratio / (c * ratio + (1.0 - c)))
 }
 
 /// Independent replicates per pixel: the standard error comes from their spread.
