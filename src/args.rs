@@ -59,6 +59,8 @@ pub(crate) enum Command {
     ///
     /// Renders over a grid of plane counts and resolutions and writes scaling.md, scaling.json
     /// and seconds_vs_hits.png (and .svg) to --out.
+    // Its sizes are --resolutions: the shared --resolution, refused there, is not offered.
+    #[command(mut_arg("resolution", |a| a.hide(true)))]
     Scaling(ScalingArgs),
     /// Print what an image records of how it was made (fogplanes writes it into the header of
     /// every EXR of a render or reference: estimator, planes, seed, sampler, ray sets, pixel

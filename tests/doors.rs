@@ -301,6 +301,8 @@ fn images_record_the_phase_functions_g() {
         String::from_utf8_lossy(&o.stderr).into_owned()
     };
     assert!(!warning(&forward_ref).contains("different scenes"));
-    assert!(warning(&iso_ref).contains("record different scenes (forward_fog and forward_fog)"));
+    assert!(
+        warning(&iso_ref).contains("record different scenes (forward_fog and forward_fog, of medium g 0.85 and 0)")
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
