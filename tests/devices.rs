@@ -422,8 +422,9 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
 /// A chunk's pieces (a ray set's share of its planes each) are joined into one structure on the
 /// GPU, and their work items gathered in one dispatch along their sets made into one buffer
 /// (gpu/planes.rs `GpuPlanes::join`): 2,048 planes in 16 ray sets, one chunk, are one gather
-/// dispatch, not 16 (`FOGPLANES_GPU_PIECES=apart`), and with the work items' size fixed the
-/// same pixels, bit for bit (each piece's sums added to a pixel as they were alone); with
+/// dispatch, not 32 (`FOGPLANES_GPU_PIECES=apart`: each group's two halves), and with the work
+/// items' size fixed the same pixels, bit for bit (each piece's sums added to a pixel as they
+/// were alone, the two halves of a group too, side by side along one ray set); with
 /// smis-exact at K = 5 and the orientations' table too, whose rows are the joined planes', and
 /// with 48 ray sets, whose pieces are binned in two batches of a round (a batch's items were
 /// once bounded by its tiles, not its tiles' segments, and 48 sets lost a tenth of the hits).
@@ -447,11 +448,12 @@ fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {
             .unwrap_or_else(|| panic!("{name}: no dispatches in {out_text}"));
         (pixels, dispatches)
     };
-    // 48 ray sets: 48 pieces, binned in two batches of one round (at most 32 segments a batch).
+    // Each group in two halves: 16 ray sets, 32 pieces; 48 ray sets, 96 pieces, binned in three
+    // batches of one round (at most 32 segments a batch).
     for (extra, env, pieces) in [
-        (&["-e", "smis-exact"][..], &[][..], 16),
-        (&["-e", "smis-exact", "--orientations", "5"][..], &[("FOGPLANES_GPU_ORIENTATIONS", "table")][..], 16),
-        (&["-e", "smis-exact", "--spp", "48"][..], &[][..], 48),
+        (&["-e", "smis-exact"][..], &[][..], 32),
+        (&["-e", "smis-exact", "--orientations", "5"][..], &[("FOGPLANES_GPU_ORIENTATIONS", "table")][..], 32),
+        (&["-e", "smis-exact", "--spp", "48"][..], &[][..], 96),
     ] {
         let (joined, one) = render("joined", extra, env);
         let apart_env: Vec<(&str, &str)> = env.iter().copied().chain([("FOGPLANES_GPU_PIECES", "apart")]).collect();

@@ -102,7 +102,9 @@ def test_an_unpickled_partial_holding_sums_no_render_makes_is_refused(scene, val
         (dict(start=1), "not a union of the render's chunks"),
         (dict(devices=[]), "0 devices named"),
         (dict(devices=["cpu\nerror: forged"]), "is not a device's name"),
-        (dict(devices="cpu"), "expected"),
+        (dict(devices="cpu"), r"devices='cpu': expected a list of str, got str$"),
+        # Accepted: a device no render names.
+        (dict(devices=["tpu"]), "\"tpu\" is not a device's name \\(cpu, gpu, or gpu: and the adapter's name"),
     ],
 )
 def test_an_unpickled_partial_claiming_counts_no_render_has_is_refused(scene, changes, says):

@@ -694,6 +694,16 @@ fn read_exr_headers(path: &Path) -> Result<exr::meta::MetaData> {
     if !file.is_file() {
         return Err(Error::bad_input(path, "not a regular file"));
     }
+    // A PNG is the tone-mapped picture, not the radiance: say what to give instead.
+    let mut magic = [0u8; 8];
+    if std::fs::File::open(path).and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic)).is_ok()
+        && magic == *b"\x89PNG\r\n\x1a\n"
+    {
+        return Err(Error::bad_input(
+            path,
+            "a PNG, which holds a tone-mapped picture: images are read and measured as EXR (linear radiance), as `-o NAME.exr` writes them",
+        ));
+    }
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad(&e))?;
     exr::meta::MetaData::validate(&meta.headers, false).map_err(|e| bad(&e))?;
     check_exr_headers(&meta.headers, file.len()).map_err(|m| bad(&m))?;
@@ -871,6 +881,9 @@ mod tests {
         film.save(&dir.join("a.png"), 0.0).unwrap();
         let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(names.len(), 2, "{names:?}");
+        // A PNG where an EXR is read is named as one ("file identifier missing" before).
+        let e = Film::load_exr(&dir.join("a.png")).unwrap_err().to_string();
+        assert!(e.contains("a.png: a PNG, which holds a tone-mapped picture"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -175,9 +175,11 @@ impl Devices {
             return Err(format!("{} devices named, not 1 to {}", self.0.len(), Self::MOST));
         }
         for n in &self.0 {
-            if n.is_empty() || n.len() > Self::MOST_BYTES || n.chars().any(char::is_control) || n.contains("; ") {
+            // What `RenderOptions::device_label` makes: cpu, gpu, or gpu: and the adapter.
+            let a_device = n == "cpu" || n == "gpu" || n.strip_prefix("gpu: ").is_some_and(|a| !a.is_empty());
+            if !a_device || n.len() > Self::MOST_BYTES || n.chars().any(char::is_control) || n.contains("; ") {
                 return Err(format!(
-                    "{n:?} is not a device's name (1 to {} bytes of text on one line, without \"; \")",
+                    "{n:?} is not a device's name (cpu, gpu, or gpu: and the adapter's name, at most {} bytes of text on one line, without \"; \")",
                     Self::MOST_BYTES
                 ));
             }

@@ -20,7 +20,9 @@ use crate::film::Film;
 use crate::gather::GatherStats;
 use crate::limits::{BYTES_PER_PLANE, CHUNK_PLANES, MAX_PLANES, check_memory};
 use crate::options::{Devices, RenderOptions, RenderStats};
-use crate::partial::{Partial, Resume, chunk_indices, chunk_planes, chunks, combine_in, fingerprint, frontier, pieces};
+use crate::partial::{
+    Partial, Resume, chunk_indices, chunk_planes, chunks, combine_in, fingerprint, frontier, halves, pieces,
+};
 use crate::pixel::{Keep, RaySets, plane_group};
 use crate::raster::Tiling;
 use crate::scene::Scene;
@@ -43,9 +45,9 @@ struct Gatherer<'a> {
     spread: Option<GroupSpread>,
 }
 
-/// A piece of planes `(k, planes, quarter, whole)`: gathered along ray set `k`, in `quarter` of
-/// the render for the error image (`whole`: the piece is its whole group).
-type PieceSpec = (u32, Range<usize>, usize, bool);
+/// A piece of planes `(k, planes, quarter, half)`: gathered along ray set `k`, in `quarter` of
+/// the render and `half` (0 or 1) of its group, for the error image.
+type PieceSpec = (u32, Range<usize>, usize, usize);
 
 /// A window's pieces, chunk by chunk, with the seconds spent sampling their planes and building
 /// their structures.
@@ -91,7 +93,7 @@ impl<'g> Preparer<'g> {
     }
 
     /// The pieces of `specs`, two halves at a time (the two sides of a join: a chunk's pieces
-    /// are small, about 2,300 planes on the benchmark, and each one's parallel loops leave most
+    /// are small, about 1,200 planes on the benchmark (a group's half), and each one's parallel loops leave most
     /// of a many-core machine idle between them), with the seconds spent sampling and building.
     fn side_by_side(&self, specs: &[PieceSpec], control: Control) -> (Result<Vec<Piece>>, (f64, f64)) {
         match specs {
@@ -221,8 +223,8 @@ impl GatherSide<'_> {
             };
             if let Some(spread) = self.spread.as_mut() {
                 for (b, &(c, piece)) in before.iter().zip(group) {
-                    let (k, ref planes, quarter, whole) = piece.spec;
-                    spread.add(k, quarter, planes.len(), whole, b, sums[c]);
+                    let (k, ref planes, quarter, half) = piece.spec;
+                    spread.add(k, quarter, half, planes.len(), b, sums[c]);
                 }
             }
             for (f, e) in found.iter_mut().zip(each) {
@@ -451,9 +453,7 @@ impl<'a> ChunkRenderer<'a> {
     fn chunk_pieces(&self, range: Range<usize>) -> Vec<PieceSpec> {
         let opts = self.gatherer.opts;
         let sets = opts.ray_sets();
-        pieces(opts.planes, sets, range)
-            .map(|(k, p)| (k, p.clone(), quarter_of(k, sets), p == plane_group(k, opts.planes, sets)))
-            .collect()
+        pieces(opts.planes, sets, range).map(|(k, half, p)| (k, p, quarter_of(k, sets), half)).collect()
     }
 
     /// The planes of canonical chunk `c`.
@@ -953,10 +953,14 @@ pub fn render_in_passes(
         if let Some(spread) = &mut gatherer.spread {
             spread.next_pass();
         }
-        let pass = (0..used).map(|g| {
+        let pass = (0..used).flat_map(|g| {
             let group = plane_group(g, next, used);
             let quarter = if 2 * g < used { 2 } else { 3 };
-            ((next_set + g) % ray_sets, done + group.start..done + group.end, quarter, true)
+            let set = (next_set + g) % ray_sets;
+            halves(done + group.start..done + group.end)
+                .into_iter()
+                .filter(|(_, planes)| !planes.is_empty())
+                .map(move |(half, planes)| (set, planes, quarter, half))
         });
         let mut sums = vec![Vec3::ZERO; pixels];
         gatherer.gather(pass, &mut sums)?;
@@ -1140,9 +1144,10 @@ mod tests {
         };
         let e = render_in_passes(&scene, &opts, Control::new(&count, &cancel), &mut next).unwrap_err();
         assert!(matches!(e, Error::Cancelled));
+        // The first pass's one group, in its two halves: two gatherings.
         assert_eq!(
             units.into_inner() as u64,
-            Accelerator::Raster.units_per_gathering(scene.camera.width, scene.camera.height)
+            2 * Accelerator::Raster.units_per_gathering(scene.camera.width, scene.camera.height)
         );
         // On a budget of an hour: the first tile ends it.
         let (cancel, units) = (AtomicBool::new(false), AtomicUsize::new(0));

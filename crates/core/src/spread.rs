@@ -16,67 +16,62 @@ use glam::{DVec3, Vec3};
 
 /// The groups of a render so far, per pixel: what the error image is made from. A group is a
 /// run of consecutive pieces gathered along the same ray set, in the same quarter of the
-/// render ([`GroupSpread::add`]); the groups come in plane order, each once.
+/// render, in two halves ([`crate::partial::halves`]; [`GroupSpread::add`]); the groups come
+/// in plane order, each once.
 #[derive(Clone, Debug)]
 pub struct GroupSpread {
     /// Sum over the closed groups of `G^2 / n` (`G` a group's sum of planes weighted 1, `n`
     /// its planes), per channel.
     pub(crate) squares: Vec<DVec3>,
+    /// Sum over the closed groups with two halves of `(A / n_A - B / n_B)^2 / (1 / n_A + 1 /
+    /// n_B)`, the halves' sums `A`, `B` of `n_A`, `n_B` planes: each an estimate of one plane's
+    /// variance along the group's ray, free of how the pixel varies from ray set to ray set.
+    pub(crate) within: Vec<DVec3>,
     /// Sums of the closed groups of each quarter.
     pub(crate) quarters: [Vec<DVec3>; 4],
-    /// The open group's sum so far.
-    pub(crate) open: Vec<DVec3>,
-    /// The open group's ray set and quarter, and its planes so far.
+    /// The open group's sums so far, each half's.
+    pub(crate) open: [Vec<DVec3>; 2],
+    /// The open group's ray set and quarter, and each half's planes so far.
     pub(crate) open_key: Option<(u32, usize)>,
-    pub(crate) open_planes: usize,
+    pub(crate) open_planes: [usize; 2],
     /// Planes of each quarter's closed groups.
     pub(crate) planes: [usize; 4],
     pub(crate) groups: usize,
+    /// Closed groups that had two halves (the terms of `within`).
+    pub(crate) halved: usize,
 }
 
 impl GroupSpread {
     pub fn new(pixels: usize) -> Self {
         GroupSpread {
             squares: vec![DVec3::ZERO; pixels],
+            within: vec![DVec3::ZERO; pixels],
             quarters: std::array::from_fn(|_| vec![DVec3::ZERO; pixels]),
-            open: vec![DVec3::ZERO; pixels],
+            open: std::array::from_fn(|_| vec![DVec3::ZERO; pixels]),
             open_key: None,
-            open_planes: 0,
+            open_planes: [0; 2],
             planes: [0; 4],
             groups: 0,
+            halved: 0,
         }
     }
 
     /// Memory per pixel, in bytes (for the memory rule).
-    pub const BYTES_PER_PIXEL: u64 = 6 * 24;
+    pub const BYTES_PER_PIXEL: u64 = 8 * 24;
 
     /// Adds a piece of `planes` planes gathered along ray set `k` in `quarter` (0 to 3) of the
-    /// render, whose sums per pixel were `after - before` (the gather's buffer after it and
-    /// before: the render's own sums stay bit for bit what they are without an error image). A
-    /// piece of another ray set or quarter than the open group's closes it first.
-    ///
-    /// A piece that is a `whole` group (every piece of a render in passes, most of a render in
-    /// chunks) is closed at once, without going through the open group's buffer.
-    pub fn add(&mut self, k: u32, quarter: usize, planes: usize, whole: bool, before: &[Vec3], after: &[Vec3]) {
-        let quarter = quarter.min(3);
+    /// render and `half` (0 or 1) of its group, whose sums per pixel were `after - before` (the
+    /// gather's buffer after it and before: the render's own sums stay bit for bit what they are
+    /// without an error image). A piece of another ray set or quarter than the open group's
+    /// closes it first.
+    pub fn add(&mut self, k: u32, quarter: usize, half: usize, planes: usize, before: &[Vec3], after: &[Vec3]) {
+        let (quarter, half) = (quarter.min(3), half.min(1));
         if self.open_key != Some((k, quarter)) {
             self.close();
-            if whole && planes > 0 {
-                let n = planes as f64;
-                for (((s, q), b), a) in self.squares.iter_mut().zip(&mut self.quarters[quarter]).zip(before).zip(after)
-                {
-                    let g = a.as_dvec3() - b.as_dvec3();
-                    *s += g * g / n;
-                    *q += g;
-                }
-                self.groups += 1;
-                self.planes[quarter] += planes;
-                return;
-            }
             self.open_key = Some((k, quarter));
         }
-        self.open_planes += planes;
-        for ((o, b), a) in self.open.iter_mut().zip(before).zip(after) {
+        self.open_planes[half] += planes;
+        for ((o, b), a) in self.open[half].iter_mut().zip(before).zip(after) {
             *o += a.as_dvec3() - b.as_dvec3();
         }
     }
@@ -84,16 +79,28 @@ impl GroupSpread {
     /// Closes the open group, if any: the next piece starts another.
     pub fn close(&mut self) {
         let Some((_, quarter)) = self.open_key.take() else { return };
-        let n = std::mem::take(&mut self.open_planes);
+        let [na, nb] = std::mem::take(&mut self.open_planes);
+        let n = na + nb;
         if n == 0 {
             return;
         }
-        for ((s, q), o) in self.squares.iter_mut().zip(&mut self.quarters[quarter]).zip(&mut self.open) {
-            *s += *o * *o / n as f64;
-            *q += *o;
-            *o = DVec3::ZERO;
+        let halved = na > 0 && nb > 0;
+        // Reciprocals taken once: the loop is over every pixel, for every group.
+        let (ia, ib, i_n) = (1.0 / na.max(1) as f64, 1.0 / nb.max(1) as f64, 1.0 / n as f64);
+        let i_pair = if halved { 1.0 / (ia + ib) } else { 0.0 };
+        let [first, second] = &mut self.open;
+        for ((((s, w), q), a), b) in
+            self.squares.iter_mut().zip(&mut self.within).zip(&mut self.quarters[quarter]).zip(first).zip(second)
+        {
+            let g = *a + *b;
+            *s += g * g * i_n;
+            *q += g;
+            let d = *a * ia - *b * ib;
+            *w += d * d * i_pair;
+            (*a, *b) = (DVec3::ZERO, DVec3::ZERO);
         }
         self.groups += 1;
+        self.halved += halved as usize;
         self.planes[quarter] += n;
     }
 
@@ -122,16 +129,18 @@ impl GroupSpread {
     /// after `planes` planes (one read back from a checkpoint): the buffers' sizes, finite
     /// values, non-negative squares, the counts adding up.
     pub fn check(&self, pixels: usize, ray_sets: u32, planes: usize) -> std::result::Result<(), String> {
-        let buffers = std::iter::once(&self.squares).chain(&self.quarters).chain(std::iter::once(&self.open));
+        let buffers = [&self.squares, &self.within].into_iter().chain(&self.quarters).chain(&self.open);
         if buffers.clone().any(|b| b.len() != pixels) {
             return Err(format!("its buffers do not hold the image's {pixels} pixels"));
         }
-        if buffers.flatten().any(|v| !v.is_finite()) || self.squares.iter().any(|v| v.min_element() < 0.0) {
+        let negative = |b: &[DVec3]| b.iter().any(|v| v.min_element() < 0.0);
+        if buffers.flatten().any(|v| !v.is_finite()) || negative(&self.squares) || negative(&self.within) {
             return Err("it holds sums that are not finite, or negative squares".into());
         }
         // Counts read from a file may be anything: added without wrapping.
-        let total = self.planes.iter().chain([&self.open_planes]).try_fold(0usize, |a, &b| a.checked_add(b));
-        if total != Some(planes) || self.groups > planes || self.open_key.is_some_and(|(k, q)| k >= ray_sets || q > 3) {
+        let total = self.planes.iter().chain(&self.open_planes).try_fold(0usize, |a, &b| a.checked_add(b));
+        let counts_fit = self.groups <= planes && self.halved <= self.groups;
+        if total != Some(planes) || !counts_fit || self.open_key.is_some_and(|(k, q)| k >= ray_sets || q > 3) {
             return Err(format!(
                 "its counts ({} planes in {} groups) are not those of {planes} planes",
                 total.map_or("more than 2^64".into(), |t| t.to_string()),
@@ -161,8 +170,19 @@ impl GroupSpread {
         let both_halves = h1 > 0.0 && h2 > 0.0;
         // The closed groups' sums per pixel (every plane weighted 1).
         let sums: Vec<DVec3> = (0..self.squares.len()).map(|p| self.quarters.iter().map(|q| q[p]).sum()).collect();
+        // One plane's variance in each pixel: from the groups' halves, which differ by the
+        // planes alone, where two groups or more had two; else from the groups' spread (10.1),
+        // which also holds how the pixel varies from ray set to ray set (section 10.2, "A light
+        // in view").
         let dof = (self.groups - 1) as f64;
-        let sigma2 = |p: usize| ((self.squares[p] - sums[p] * sums[p] / total) / dof).max(DVec3::ZERO);
+        let halved = self.halved as f64;
+        let sigma2 = |p: usize| {
+            if self.halved >= 2 {
+                self.within[p] / halved
+            } else {
+                ((self.squares[p] - sums[p] * sums[p] / total) / dof).max(DVec3::ZERO)
+            }
+        };
         // The spreads of the halves and of the quarters within them, measured against what
         // the groups predict for them if they were independent (eqs. 10.2, 10.3).
         let quartered = n.iter().all(|&q| q > 0.0);
@@ -264,12 +284,12 @@ mod tests {
                 // A group's sum of `size` planes of mean 1 and deviation sigma, in two pieces.
                 let quarter = g / 2;
                 let mut before = vec![Vec3::ZERO; pixels];
-                for piece in [size / 2, size - size / 2] {
+                for (half, piece) in [size / 2, size - size / 2].into_iter().enumerate() {
                     let after: Vec<Vec3> = before
                         .iter()
                         .map(|b| *b + Vec3::splat((piece as f64 + sigma * (piece as f64).sqrt() * gauss()) as f32))
                         .collect();
-                    spread.add(g as u32, quarter, piece, false, &before, &after);
+                    spread.add(g as u32, quarter, half, piece, &before, &after);
                     before = after;
                 }
             }
@@ -289,12 +309,12 @@ mod tests {
     #[test]
     fn too_few_groups_give_no_estimate() {
         let mut spread = GroupSpread::new(1);
-        spread.add(0, 0, 10, true, &[Vec3::ZERO], &[Vec3::ONE]);
+        spread.add(0, 0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
         spread.close();
         assert!(spread.variance(&[Vec3::ZERO]).is_none());
         let mut spread = GroupSpread::new(1);
-        spread.add(0, 0, 10, true, &[Vec3::ZERO], &[Vec3::ONE]);
-        spread.add(1, 1, 10, true, &[Vec3::ZERO], &[Vec3::splat(3.0)]);
+        spread.add(0, 0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
+        spread.add(1, 1, 0, 10, &[Vec3::ZERO], &[Vec3::splat(3.0)]);
         spread.close();
         // Two groups of the first half: taken as independent. Means 0.1 and 0.3 of 20 planes:
         // sigma^2 = (10 0.01 + 10 0.01) / 1 = 0.2, over 20 planes.
@@ -307,9 +327,9 @@ mod tests {
     #[test]
     fn a_spread_read_back_is_checked() {
         let mut spread = GroupSpread::new(2);
-        spread.add(3, 1, 10, false, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        spread.add(3, 1, 0, 10, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
         spread.close();
-        spread.add(4, 2, 5, false, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        spread.add(4, 2, 1, 5, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
         assert_eq!(spread.check(2, 16, 15), Ok(()));
         assert!(spread.check(3, 16, 15).is_err(), "another image size");
         assert!(spread.check(2, 16, 16).is_err(), "other planes");

@@ -129,7 +129,13 @@ impl PyPartial {
                 let (repr, type_name) = (v.repr()?, v.get_type().name()?);
                 Ok(PyValueError::new_err(format!(
                     "not the state of a fogplanes.Partial: {name}={repr}: expected {}, got {type_name}",
-                    std::any::type_name::<T>().rsplit("::").next().unwrap_or("a value")
+                    // The Rust type as Python names it (the state's fields are these four kinds).
+                    match std::any::type_name::<T>() {
+                        t if t.contains("Vec<") => "a list of str",
+                        t if t.ends_with("String") => "str",
+                        t if t.ends_with("f64") => "float",
+                        _ => "int",
+                    }
                 )))
             };
             if v.is_instance_of::<pyo3::types::PyBool>() {

@@ -342,7 +342,10 @@ fn scatter(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: 
     for (var s = 0u; s < params.segments; s++) {
         let n = tile_counts[tile * params.segments + s];
         let n_items = (n + params.item_planes - 1u) / params.item_planes;
-        let rays = seg_rays(s);
+        // Where its ray set begins (in floats, below 2^30: a binding holds under 2^32 bytes),
+        // with the segment's index modulo 4 in the top two bits, so that `reduce` tells two
+        // segments along one ray set apart (a group's two halves, side by side in a join).
+        let rays = seg_rays(s) | ((s & 3u) << 30u);
         for (var k = li; k < n_items; k += THREADS) {
             let st = list_at + k * params.item_planes;
             items[item_at + k] = vec4<u32>(tile, st, min(st + params.item_planes, list_at + n), rays);

@@ -567,7 +567,8 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
     let px = (tile % params.tiles_x) * TILE + local.x;
     let py = (tile / params.tiles_x) * TILE + local.y;
     let valid = px < params.width && py < params.height;
-    let at = item.w + (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
+    // The item's ray set's first float, less the segment's mark in the top two bits (bin.wgsl).
+    let at = (item.w & 0x3fffffffu) + (min(py, params.height - 1u) * params.width + min(px, params.width - 1u)) * RAY_FLOATS;
     let dir = vec3<f32>(rays[at], rays[at + 1u], rays[at + 2u]);
     let t0 = rays[at + 3u];
     // A pixel outside the image has an empty segment, and is tested at no plane: column 16 is
@@ -684,7 +685,7 @@ fn reduce(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index
             let hi = item_offsets[region + 1u];
             var sum = vec3<f32>(0.0);
             // A batch's segments (a join's pieces, each along its ray set) added one by one,
-            // each as it would be alone: its items' ray set tells where the next begins.
+            // each as it would be alone: its items' ray set and mark tell where the next begins.
             var rays = 0u;
             if (lo < hi) {
                 rays = items[lo].w;

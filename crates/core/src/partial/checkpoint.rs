@@ -171,14 +171,17 @@ impl Checkpoint {
             Ok(values.chunks_exact(3).map(DVec3::from_slice).collect())
         };
         let quarters = vectors("quarters", &[4, pixels, 3])?;
+        let open = vectors("open", &[2, pixels, 3])?;
         let spread = GroupSpread {
             squares: vectors("squares", &[pixels, 3])?,
+            within: vectors("within", &[pixels, 3])?,
             quarters: std::array::from_fn(|q| quarters[q * pixels..(q + 1) * pixels].to_vec()),
-            open: vectors("open", &[pixels, 3])?,
+            open: std::array::from_fn(|h| open[h * pixels..(h + 1) * pixels].to_vec()),
             open_key: meta.open_key,
             open_planes: meta.open_planes,
             planes: meta.quarter_planes,
             groups: meta.groups,
+            halved: meta.halved,
         };
         spread.check(pixels, opts.ray_sets(), planes).map_err(|m| bad(format!("not a spread of this render: {m}")))?;
         Ok(Some(spread))
@@ -204,6 +207,7 @@ impl Checkpoint {
             quarter_planes: spread.planes,
             open_key: spread.open_key,
             open_planes: spread.open_planes,
+            halved: spread.halved,
         };
         let flat = |v: &[DVec3]| v.iter().flat_map(|d| d.to_array()).collect::<Vec<f64>>();
         let arrays = [
@@ -214,7 +218,12 @@ impl Checkpoint {
                 vec![4, pixels, 3],
                 spread.quarters.iter().flat_map(|q| flat(q)).collect::<Vec<_>>().into_iter(),
             ),
-            Array::f64s("open", vec![pixels, 3], flat(&spread.open).into_iter()),
+            Array::f64s("within", vec![pixels, 3], flat(&spread.within).into_iter()),
+            Array::f64s(
+                "open",
+                vec![2, pixels, 3],
+                spread.open.iter().flat_map(|h| flat(h)).collect::<Vec<_>>().into_iter(),
+            ),
         ];
         let path = self.dir.join(format!("spread_{planes}.groups"));
         write_npz(&path, &arrays)?;
@@ -385,7 +394,10 @@ struct SpreadMeta {
     groups: usize,
     quarter_planes: [usize; 4],
     open_key: Option<(u32, usize)>,
-    open_planes: usize,
+    /// Each half's planes in the open group.
+    open_planes: [usize; 2],
+    /// Closed groups with two halves.
+    halved: usize,
 }
 
 /// The planes a spread file's name says it follows (`spread_B.groups`), if it is one.

@@ -289,14 +289,25 @@ fn merge_node(parts: &mut [Option<Partial>], range: Range<usize>) -> Result<Part
 }
 
 /// The pieces a set of `planes` splits into for gathering: the canonical chunks cut further
-/// where a group of planes with its own ray set ends ([`crate::pixel::plane_group`]), in plane
-/// order, each with its ray set. Each is one gathering over the image.
-pub fn pieces(planes: usize, ray_sets: u32, range: Range<usize>) -> impl Iterator<Item = (u32, Range<usize>)> {
-    (0..ray_sets).filter_map(move |k| {
-        let group = plane_group(k, planes, ray_sets);
-        let share = group.start.max(range.start)..group.end.min(range.end);
-        (!share.is_empty()).then_some((k, share))
+/// where a group of planes with its own ray set ends ([`crate::pixel::plane_group`]) and at
+/// each group's middle ([`halves`]), in plane order, each with its ray set and its half of the
+/// group. Each is one gathering over the image.
+pub fn pieces(planes: usize, ray_sets: u32, range: Range<usize>) -> impl Iterator<Item = (u32, usize, Range<usize>)> {
+    (0..ray_sets).flat_map(move |k| {
+        let range = range.clone();
+        halves(plane_group(k, planes, ray_sets)).into_iter().filter_map(move |(half, planes)| {
+            let share = planes.start.max(range.start)..planes.end.min(range.end);
+            (!share.is_empty()).then_some((k, half, share))
+        })
     })
+}
+
+/// A group's planes in two halves (the first `n / 2`, then the rest), gathered apart so that
+/// the error image can compare them: along the same ray, they differ by the planes alone
+/// (docs/mathematics.md section 10.2). Empty halves are the caller's to skip.
+pub fn halves(group: Range<usize>) -> [(usize, Range<usize>); 2] {
+    let middle = group.start + (group.end - group.start) / 2;
+    [(0, group.start..middle), (1, middle..group.end)]
 }
 
 /// Gatherings over the image that planes `range` of a render of `planes` planes with
