@@ -88,11 +88,24 @@ pub fn scattering_sample(
     u: [f64; 4],
 ) -> DVec3 {
     let c = phase_strategy_share(scene.medium.g);
+    let ray = ScatteringRay { scene, lights, o, we, segment: (t0, t1), c };
     if u[0] < c {
-        phase_sample(scene, lights, o, we, (t0, t1), c, [u[1], u[2], u[3]])
+        ray.phase_sample([u[1], u[2], u[3]])
     } else {
-        light_sample(scene, lights, o, we, (t0, t1), c, [(u[0] - c) / (1.0 - c), u[1], u[2], u[3]])
+        ray.light_sample([(u[0] - c) / (1.0 - c), u[1], u[2], u[3]])
     }
+}
+
+/// What both strategies of [`scattering_sample`] share: the scene, its lights' choice, the ray
+/// `o + t we` over `segment` `[t0, t1]`, and the lobe's share `c` of the samples.
+#[derive(Clone, Copy)]
+struct ScatteringRay<'a> {
+    scene: &'a Scene,
+    lights: &'a Discrete,
+    o: DVec3,
+    we: DVec3,
+    segment: (f64, f64),
+    c: f64,
 }
 
 /// The share of the reference's scattering samples drawn from the phase function's lobe: none in
@@ -133,92 +146,80 @@ impl Equiangular {
     }
 }
 
-/// The lights' strategy: a point on a light chosen by power, an equiangular distance toward it;
-/// weighted against the lobe's strategy (share `c`) by the balance heuristic.
-fn light_sample(
-    scene: &Scene,
-    lights: &Discrete,
-    o: DVec3,
-    we: DVec3,
-    segment: (f64, f64),
-    c: f64,
-    u: [f64; 4],
-) -> DVec3 {
-    let (t0, t1) = segment;
-    let k = lights.sample(u[0]);
-    let light = &scene.lights[k];
-    let y = light.point(u[1] * light.width, u[2] * light.height);
-    let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
-    let t = (e.delta + e.dist * (e.theta_a + u[3] * (e.theta_b - e.theta_a)).tan()).clamp(t0, t1);
-    let x = o + t * we;
-    let to_x = x - y;
-    let d = to_x.length();
-    let cos = light.n.dot(to_x) / d;
-    if !(cos > 0.0) || scene.blocked(y, x, k) {
-        return DVec3::ZERO;
-    }
-    let medium = &scene.medium;
-    let tr = medium.transmittance((t - t0) + d);
-    let weight = cos * (e.theta_b - e.theta_a) / e.dist * light.area() / lights.probability(k);
-    // The phase function at the angle between the light's travel (y to x) and the way to the
-    // eye (-we), section 1.1: PHASE itself when g = 0.
-    let phase = medium.phase(to_x / d, -we);
-    // f / pdf_light, over the balance heuristic's (1 - c) + c pdf_phase / pdf_light.
-    let area_over_p = light.area() / lights.probability(k);
-    let mis = if c > 0.0 { (1.0 - c) + c * e.pdf_ratio(phase, cos, segment, area_over_p) } else { 1.0 };
-    medium.sigma_s * phase * light.radiance * tr * weight / mis
-}
-
-/// The lobe's strategy: a uniform distance in `[t0, t1]`, then the light's travel drawn from the
-/// Henyey-Greenstein lobe around the way to the eye (its cosine `mu` by inversion, section 1.1),
-/// followed back from `x` to the first panel it meets; weighted against the lights' strategy
-/// (share `1 - c`) by the balance heuristic. `f / pdf_phase` is `sigma_s L T (t1 - t0)`: the
-/// phase function and the geometry cancel.
-fn phase_sample(
-    scene: &Scene,
-    lights: &Discrete,
-    o: DVec3,
-    we: DVec3,
-    segment: (f64, f64),
-    c: f64,
-    u: [f64; 3],
-) -> DVec3 {
-    let (t0, t1) = segment;
-    let medium = &scene.medium;
-    let g = medium.g;
-    let t = (t0 + u[2] * (t1 - t0)).clamp(t0, t1);
-    let x = o + t * we;
-    // p(mu) = (1 - g^2) / (2 (1 + g^2 - 2 g mu)^(3/2)) on [-1, 1]; its inverse CDF.
-    let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u[0]);
-    let mu = ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0);
-    let (b1, b2) = (-we).any_orthonormal_pair();
-    let phi = std::f64::consts::TAU * u[1];
-    let sin = (1.0 - mu * mu).max(0.0).sqrt();
-    let travel = mu * -we + sin * (phi.cos() * b1 + phi.sin() * b2);
-    // The light the travel came from: the nearest panel behind x along -travel (a panel's back,
-    // or another panel, in front of it blocks it, as `Scene::blocked` has it).
-    let toward = -travel;
-    let mut nearest: Option<(f64, usize)> = None;
-    for (k, light) in scene.lights.iter().enumerate() {
-        if let Some(d) = light.intersect(x, toward, 0.0, f64::INFINITY)
-            && nearest.is_none_or(|(best, _)| d < best)
-        {
-            nearest = Some((d, k));
+impl ScatteringRay<'_> {
+    /// The lights' strategy: a point on a light chosen by power, an equiangular distance toward it;
+    /// weighted against the lobe's strategy (share `c`) by the balance heuristic.
+    fn light_sample(&self, u: [f64; 4]) -> DVec3 {
+        let ScatteringRay { scene, lights, o, we, segment, c } = *self;
+        let (t0, t1) = segment;
+        let k = lights.sample(u[0]);
+        let light = &scene.lights[k];
+        let y = light.point(u[1] * light.width, u[2] * light.height);
+        let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
+        let t = (e.delta + e.dist * (e.theta_a + u[3] * (e.theta_b - e.theta_a)).tan()).clamp(t0, t1);
+        let x = o + t * we;
+        let to_x = x - y;
+        let d = to_x.length();
+        let cos = light.n.dot(to_x) / d;
+        if !(cos > 0.0) || scene.blocked(y, x, k) {
+            return DVec3::ZERO;
         }
+        let medium = &scene.medium;
+        let tr = medium.transmittance((t - t0) + d);
+        let weight = cos * (e.theta_b - e.theta_a) / e.dist * light.area() / lights.probability(k);
+        // The phase function at the angle between the light's travel (y to x) and the way to the
+        // eye (-we), section 1.1: PHASE itself when g = 0.
+        let phase = medium.phase(to_x / d, -we);
+        // f / pdf_light, over the balance heuristic's (1 - c) + c pdf_phase / pdf_light.
+        let area_over_p = light.area() / lights.probability(k);
+        let mis = if c > 0.0 { (1.0 - c) + c * e.pdf_ratio(phase, cos, segment, area_over_p) } else { 1.0 };
+        medium.sigma_s * phase * light.radiance * tr * weight / mis
     }
-    let Some((d, k)) = nearest else { return DVec3::ZERO };
-    let light = &scene.lights[k];
-    let y = x + d * toward;
-    let cos = light.n.dot(travel);
-    if !(cos > 0.0 && d > 0.0) {
-        return DVec3::ZERO;
+
+    /// The lobe's strategy: a uniform distance in `[t0, t1]`, then the light's travel drawn from the
+    /// Henyey-Greenstein lobe around the way to the eye (its cosine `mu` by inversion, section 1.1),
+    /// followed back from `x` to the first panel it meets; weighted against the lights' strategy
+    /// (share `1 - c`) by the balance heuristic. `f / pdf_phase` is `sigma_s L T (t1 - t0)`: the
+    /// phase function and the geometry cancel.
+    fn phase_sample(&self, u: [f64; 3]) -> DVec3 {
+        let ScatteringRay { scene, lights, o, we, segment, c } = *self;
+        let (t0, t1) = segment;
+        let medium = &scene.medium;
+        let g = medium.g;
+        let t = (t0 + u[2] * (t1 - t0)).clamp(t0, t1);
+        let x = o + t * we;
+        // p(mu) = (1 - g^2) / (2 (1 + g^2 - 2 g mu)^(3/2)) on [-1, 1]; its inverse CDF.
+        let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u[0]);
+        let mu = ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0);
+        let (b1, b2) = (-we).any_orthonormal_pair();
+        let phi = std::f64::consts::TAU * u[1];
+        let sin = (1.0 - mu * mu).max(0.0).sqrt();
+        let travel = mu * -we + sin * (phi.cos() * b1 + phi.sin() * b2);
+        // The light the travel came from: the nearest panel behind x along -travel (a panel's back,
+        // or another panel, in front of it blocks it, as `Scene::blocked` has it).
+        let toward = -travel;
+        let mut nearest: Option<(f64, usize)> = None;
+        for (k, light) in scene.lights.iter().enumerate() {
+            if let Some(d) = light.intersect(x, toward, 0.0, f64::INFINITY)
+                && nearest.is_none_or(|(best, _)| d < best)
+            {
+                nearest = Some((d, k));
+            }
+        }
+        let Some((d, k)) = nearest else { return DVec3::ZERO };
+        let light = &scene.lights[k];
+        let y = x + d * toward;
+        let cos = light.n.dot(travel);
+        if !(cos > 0.0 && d > 0.0) {
+            return DVec3::ZERO;
+        }
+        let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
+        let phase = medium.phase(travel, -we);
+        let ratio = e.pdf_ratio(phase, cos, segment, light.area() / lights.probability(k));
+        let tr = medium.transmittance((t - t0) + d);
+        // f / pdf_phase over c + (1 - c) pdf_light / pdf_phase.
+        medium.sigma_s * light.radiance * tr * ((t1 - t0) * ratio / (c * ratio + (1.0 - c)))
     }
-    let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
-    let phase = medium.phase(travel, -we);
-    let ratio = e.pdf_ratio(phase, cos, segment, light.area() / lights.probability(k));
-    let tr = medium.transmittance((t - t0) + d);
-    // f / pdf_phase over c + (1 - c) pdf_light / pdf_phase.
-    medium.sigma_s * light.radiance * tr * ((t1 - t0) * ratio / (c * ratio + (1.0 - c)))
 }
 
 /// Independent replicates per pixel: the standard error comes from their spread.
