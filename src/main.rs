@@ -12,17 +12,28 @@ mod system;
 mod watch;
 
 use args::{Cli, Command};
-use clap::Parser;
 use commands::*;
 use std::io::Write;
 use std::process::ExitCode;
+
+/// The arguments, every value of every subcommand allowed to start with `-` and a digit: `--seed
+/// -1` is then refused for what it is (not a whole number of the setting's range), where clap took
+/// `-1` for an unknown flag and advised `-- -1`, which a value cannot be.
+fn parse() -> Cli {
+    fn negatives(c: clap::Command) -> clap::Command {
+        c.mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
+            .mut_subcommands(negatives)
+    }
+    let matches = negatives(<Cli as clap::CommandFactory>::command()).get_matches();
+    <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
 
 fn main() -> ExitCode {
     system::keep_freed_memory();
     // The zero of the timeline `FOGPLANES_TRACE=1` prints (fogplanes::trace).
     drop(fogplanes::trace::span("process started"));
     STARTED.get_or_init(std::time::Instant::now);
-    let cli = Cli::parse();
+    let cli = parse();
     // Ctrl-C, SIGTERM or SIGHUP: remove any half-written output before leaving, so no truncated
     // file remains (a checkpoint's file under way is finished first: the note tells what it
     // holds), and say which outputs were written whole before it, if any.

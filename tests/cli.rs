@@ -114,6 +114,14 @@ fn bad_arguments_exit_2() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
+    // A negative count is a bad value of its setting, not an unknown flag: clap took `-1` for one
+    // and advised `-- -1`, which a value cannot be.
+    for (flag, value) in [("--seed", "-1"), ("--planes", "-5"), ("--spp", "-2"), ("--threads", "-3")] {
+        let o = fogplanes(&["render", "media_scenes/six_lights.toml", flag, value]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(&format!("invalid value '{value}' for '{flag} ")) && !err.contains("tip"), "{err}");
+    }
 }
 
 /// Every file in tests/bad_scenes gives one error line naming the file, exit code 2, no
