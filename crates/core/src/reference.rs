@@ -136,13 +136,13 @@ impl Equiangular {
         Some(Equiangular { theta_a: (t0 - delta).atan2(dist), theta_b: (t1 - delta).atan2(dist), dist, delta })
     }
 
-    /// `pdf_phase / pdf_light` at a sample `(t, y)` with phase value `phase` and light cosine
-    /// `cos`, on a light of area over choice probability `area_over_p`: the lobe's pdf (a uniform
-    /// distance, the lobe's solid angle made area at `y`, `phase cos / |x - y|^2 / (t1 - t0)`)
-    /// over the light's (`P(k) / A_k` times the equiangular `dist / ((theta_b - theta_a) |x -
-    /// y|^2)`); the `|x - y|^2` cancel.
-    fn pdf_ratio(&self, phase: f64, cos: f64, (t0, t1): (f64, f64), area_over_p: f64) -> f64 {
-        phase * cos * (self.theta_b - self.theta_a) * area_over_p / ((t1 - t0) * self.dist)
+    /// `(t1 - t0) pdf_phase / pdf_light` at a sample `(t, y)` with phase value `phase` and light
+    /// cosine `cos`, on a light of area over choice probability `area_over_p`: the lobe's pdf (a
+    /// uniform distance, the lobe's solid angle made area at `y`, `phase cos / |x - y|^2 / (t1 -
+    /// t0)`) over the light's (`P(k) / A_k` times the equiangular `dist / ((theta_b - theta_a)
+    /// |x - y|^2)`), times the segment's length, which the callers cancel: the `|x - y|^2` cancel.
+    fn pdf_ratio_times_length(&self, phase: f64, cos: f64, area_over_p: f64) -> f64 {
+        phase * cos * (self.theta_b - self.theta_a) * area_over_p / self.dist
     }
 }
 
@@ -172,7 +172,12 @@ impl ScatteringRay<'_> {
         let phase = medium.phase(to_x / d, -we);
         // f / pdf_light, over the balance heuristic's (1 - c) + c pdf_phase / pdf_light.
         let area_over_p = light.area() / lights.probability(k);
-        let mis = if c > 0.0 { (1.0 - c) + c * e.pdf_ratio(phase, cos, segment, area_over_p) } else { 1.0 };
+        let mis =
+            if c > 0.0 { (1.0 - c) + c * e.pdf_ratio_times_length(phase, cos, area_over_p) / (t1 - t0) } else { 1.0 };
+        // A weight past f64 (a light point all but on the ray's line) has probability zero.
+        if !weight.is_finite() {
+            return DVec3::ZERO;
+        }
         medium.sigma_s * phase * light.radiance * tr * weight / mis
     }
 
@@ -215,10 +220,16 @@ impl ScatteringRay<'_> {
         }
         let Some(e) = Equiangular::toward(y, o, we, segment) else { return DVec3::ZERO };
         let phase = medium.phase(travel, -we);
-        let ratio = e.pdf_ratio(phase, cos, segment, light.area() / lights.probability(k));
+        let q = e.pdf_ratio_times_length(phase, cos, light.area() / lights.probability(k));
+        if !q.is_finite() {
+            return DVec3::ZERO; // y all but on the ray's line: probability zero
+        }
         let tr = medium.transmittance((t - t0) + d);
-        // f / pdf_phase over c + (1 - c) pdf_light / pdf_phase.
-        medium.sigma_s * light.radiance * tr * ((t1 - t0) * ratio / (c * ratio + (1.0 - c)))
+        // f / pdf_phase = sigma_s L T (t1 - t0), over c + (1 - c) pdf_light / pdf_phase, with
+        // pdf_phase / pdf_light = q / (t1 - t0): the segment's length cancels, and no quotient
+        // overflows where it is short.
+        let len = t1 - t0;
+        medium.sigma_s * light.radiance * tr * (len * q / (c * q + (1.0 - c) * len))
     }
 }
 
