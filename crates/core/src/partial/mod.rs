@@ -65,8 +65,11 @@ pub fn chunk_indices(planes: usize, range: &Range<usize>) -> Result<Range<usize>
 /// file do not change the image), every setting that changes the image (not the kernel, which
 /// gives bit-identical images, nor the thread count), and the library's version.
 pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
+    // How the planes are cut into pieces moves an image's f32 sums: a part or a checkpoint cut
+    // as before 2026-12-02 (each group whole) is another image, refused rather than mixed in.
+    const PIECES: &str = "pieces: each group in two halves";
     let description = format!(
-        "fogplanes {} | {:?} | {:?} | {:?} | planes {} | {} | seed {} | sampler {} | spp {} | centre {} | {}",
+        "fogplanes {} | {PIECES} | {:?} | {:?} | {:?} | planes {} | {} | seed {} | sampler {} | spp {} | centre {} | {}",
         env!("CARGO_PKG_VERSION"),
         scene.camera,
         scene.medium,
@@ -304,7 +307,7 @@ pub fn pieces(planes: usize, ray_sets: u32, range: Range<usize>) -> impl Iterato
 
 /// A group's planes in two halves (the first `n / 2`, then the rest), gathered apart so that
 /// the error image can compare them: along the same ray, they differ by the planes alone
-/// (docs/mathematics.md section 10.2). Empty halves are the caller's to skip.
+/// (docs/mathematics.md section 10.1, eq. 10.1b). Empty halves are the caller's to skip.
 pub fn halves(group: Range<usize>) -> [(usize, Range<usize>); 2] {
     let middle = group.start + (group.end - group.start) / 2;
     [(0, group.start..middle), (1, middle..group.end)]
