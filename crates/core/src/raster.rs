@@ -478,7 +478,7 @@ impl ScreenRaster {
         with: Gathering<D>,
         prepared: &[D::Plane],
         (tile, skip): (usize, u32),
-        rays: &[CameraRay],
+        soa: &PaddedRays,
         sums: &mut [&mut [Vec3]],
         control: Control,
     ) -> GatherStats {
@@ -486,7 +486,6 @@ impl ScreenRaster {
         let (tile_rows, cols) = self.tiling.tile(tile);
         let row_range = tile_rows.start + skip..tile_rows.start + skip + sums.len() as u32;
         let first_row = row_range.start;
-        let soa = PaddedRays::new(rays, self.width as usize, row_range.clone(), cols.clone());
         let stride = soa.stride;
         let mut acc = PaddedSums::new(soa.x.len());
         let mut folded = PaddedSums::new(soa.x.len());
@@ -703,16 +702,26 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
         .map(|(target, tile, skip, _, mut rows)| {
             let stats = section.unit(|| {
                 let mut stats = GatherStats::default();
+                // The part's rays, laid out once for the consecutive pieces along one ray set (a
+                // group's two halves): the same data, made once.
+                let mut padded: Option<(*const CameraRay, PaddedRays)> = None;
                 for (piece, prepared) in pieces.iter().zip(&prepared).filter(|(p, _)| p.target == target) {
                     if control.is_cancelled() {
                         break;
                     }
+                    if padded.as_ref().is_none_or(|(along, _)| *along != piece.rays.as_ptr()) {
+                        let (tile_rows, cols) = tiling.tile(tile);
+                        let part = tile_rows.start + skip..tile_rows.start + skip + rows.len() as u32;
+                        let soa = PaddedRays::new(piece.rays, piece.raster.width as usize, part, cols);
+                        padded = Some((piece.rays.as_ptr(), soa));
+                    }
+                    let soa = &padded.as_ref().expect("made above").1;
                     let with = Gathering { ctx: piece.ctx, weights, kernel };
                     stats += piece.raster.gather_tile::<D, CONTRIBUTE>(
                         with,
                         prepared,
                         (tile, skip),
-                        piece.rays,
+                        soa,
                         &mut rows,
                         control,
                     );
