@@ -18,7 +18,7 @@ use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::raster::{RasterPiece, ScreenRaster, Tiling, box_polygon, screen_polygon_of};
 use crate::scene::Scene;
 use crate::weights::{Denominator, Weighting, WithDenominator};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use std::ops::Range;
 use std::sync::Arc;
 use std::time::Instant;
@@ -324,18 +324,19 @@ impl PreparedPlanes {
         if let Structure::Gpu(g) = &self.structure {
             return g.gather(weighting, rays, sums, control);
         }
-        let piece = GatherPiece { planes: self, rays, target: 0 };
-        Ok(gather_pieces(&[piece], weighting, kernel, &mut [sums], control)?[0])
+        let piece = GatherPiece { planes: self, rays, target: 0, tap: None };
+        Ok(gather_pieces(&[piece], weighting, kernel, &mut [sums], &mut [], control)?[0])
     }
 }
 
-/// A piece of planes for [`gather_pieces`]: its planes, the rays it is gathered along and the
-/// sums (of several) it adds to.
+/// A piece of planes for [`gather_pieces`]: its planes, the rays it is gathered along, the
+/// sums (of several) it adds to and the tap (of several), if any, that its own sums also go to.
 #[derive(Clone, Copy)]
 pub struct GatherPiece<'a> {
     pub planes: &'a PreparedPlanes,
     pub rays: &'a [CameraRay],
     pub target: usize,
+    pub tap: Option<usize>,
 }
 
 /// A piece of planes on the GPU for [`gather_pieces_on_gpu`]: its planes, the ray set it is
@@ -599,13 +600,16 @@ fn record_side_by_side(
 /// each piece in turn, the same bits; returns what each target's pieces found. On the raster,
 /// one parallel loop over the tiles of every target, each tile taking its target's pieces in
 /// turn ([`crate::raster::gather_pieces`]: no barrier between pieces, nor between targets); on
-/// the other structures, piece after piece. Progress and cancelling as for
-/// [`PreparedPlanes::gather`].
+/// the other structures, piece after piece. A piece with a tap also adds what it added to
+/// each pixel, `after - before` in f64, to `taps[tap]` (the error image's sums of a group's half,
+/// [`crate::spread::GroupSpread::open_group`]), in piece order; a tap takes the pieces of one
+/// target. Progress and cancelling as for [`PreparedPlanes::gather`].
 pub fn gather_pieces(
     pieces: &[GatherPiece],
     weighting: Weighting,
     kernel: Kernel,
     sums: &mut [&mut [Vec3]],
+    taps: &mut [&mut [DVec3]],
     control: Control,
 ) -> Result<Vec<GatherStats>> {
     // The GPU's pieces go one after another, each in its own submissions and read back (a
@@ -613,17 +617,22 @@ pub fn gather_pieces(
     if pieces.iter().any(|p| matches!(p.planes.structure, Structure::Gpu(_))) {
         let mut found = vec![GatherStats::default(); sums.len()];
         for p in pieces {
+            let before = p.tap.map(|_| sums[p.target].to_vec());
             found[p.target] += p.planes.gather(weighting, kernel, p.rays, sums[p.target], control)?;
+            if let (Some(t), Some(before)) = (p.tap, before) {
+                add_difference(taps[t], &before, sums[p.target]);
+            }
         }
         return Ok(found);
     }
-    struct Run<'a, 'p, 's> {
+    struct Run<'a, 'p, 's, 't> {
         pieces: &'p [GatherPiece<'a>],
         kernel: Kernel,
         sums: &'p mut [&'s mut [Vec3]],
+        taps: &'p mut [&'t mut [DVec3]],
         control: Control<'p>,
     }
-    impl WithDenominator for Run<'_, '_, '_> {
+    impl WithDenominator for Run<'_, '_, '_, '_> {
         type Output = Vec<GatherStats>;
         fn run<D: Denominator>(self, weights: &D) -> Vec<GatherStats> {
             let rasters: Option<Vec<RasterPiece>> = self
@@ -635,6 +644,7 @@ pub fn gather_pieces(
                         ctx: &p.planes.context,
                         rays: p.rays,
                         target: p.target,
+                        tap: p.tap,
                     })
                 })
                 .collect();
@@ -644,6 +654,7 @@ pub fn gather_pieces(
                     weights,
                     self.kernel,
                     self.sums,
+                    self.taps,
                     self.control,
                 );
             }
@@ -655,15 +666,26 @@ pub fn gather_pieces(
                 // Every piece is the CPU's here: the GPU's were gathered above.
                 if let Structure::Cpu(cpu) = &p.planes.structure {
                     let with = Gathering { ctx: &p.planes.context, weights, kernel: self.kernel };
+                    let before = p.tap.map(|_| self.sums[p.target].to_vec());
                     found[p.target] += cpu.gather(with, p.rays, self.sums[p.target], self.control);
+                    if let (Some(t), Some(before)) = (p.tap, before) {
+                        add_difference(self.taps[t], &before, self.sums[p.target]);
+                    }
                 }
             }
             found
         }
     }
-    let found = weighting.dispatch(Run { pieces, kernel, sums, control });
+    let found = weighting.dispatch(Run { pieces, kernel, sums, taps, control });
     control.check()?;
     Ok(found)
+}
+
+/// Adds `after - before` to `tap`, pixel by pixel, in f64 (exact: both are f32).
+fn add_difference(tap: &mut [DVec3], before: &[Vec3], after: &[Vec3]) {
+    for ((t, b), a) in tap.iter_mut().zip(before).zip(after) {
+        *t += a.as_dvec3() - b.as_dvec3();
+    }
 }
 
 #[cfg(test)]
@@ -697,6 +719,48 @@ mod tests {
                 self.cancel.store(true, Ordering::Relaxed);
             }
             Unweighted.denominators(p, h, out)
+        }
+    }
+
+    /// A piece's tap holds what the piece added to each pixel, `after - before` of its target's
+    /// sums as a gathering of the pieces one by one leaves them, and the taps change nothing of
+    /// the sums: two pieces along two ray sets into one target, each with its tap, and a third
+    /// into another target, on every CPU structure (the raster's tiles and the others' copies).
+    #[test]
+    fn a_pieces_tap_holds_its_own_sums() {
+        let scene = small_scene();
+        let sets = [0, 1, 0].map(|k| crate::pixel::ray_set_rays(&scene, 2, k, false));
+        let pixels = sets[0].len();
+        for accelerator in Accelerator::ALL {
+            let set = PlaneSet { sampler: Sampler::default(), seed: 3 };
+            let prepared: Vec<PreparedPlanes> = [0..700, 700..1500, 1500..1900]
+                .into_iter()
+                .map(|r| PreparedPlanes::new(&scene, set, r, accelerator, Control::none()).unwrap())
+                .collect();
+            let (targets, taps_of) = ([0, 0, 1], [Some(0), Some(1), Some(2)]);
+            // One by one, each piece's sums before and after.
+            let mut alone = vec![vec![Vec3::ZERO; pixels]; 2];
+            let mut expected = vec![vec![DVec3::ZERO; pixels]; 3];
+            for (i, p) in prepared.iter().enumerate() {
+                let before = alone[targets[i]].clone();
+                p.gather(Weighting::default(), Kernel::Portable, &sets[i], &mut alone[targets[i]], Control::none())
+                    .unwrap();
+                add_difference(&mut expected[i], &before, &alone[targets[i]]);
+            }
+            let pieces: Vec<GatherPiece> = (0..3)
+                .map(|i| GatherPiece { planes: &prepared[i], rays: &sets[i], target: targets[i], tap: taps_of[i] })
+                .collect();
+            let mut sums = vec![vec![Vec3::ZERO; pixels]; 2];
+            let mut taps = vec![vec![DVec3::ZERO; pixels]; 3];
+            {
+                let mut sums: Vec<&mut [Vec3]> = sums.iter_mut().map(|s| s.as_mut_slice()).collect();
+                let mut taps: Vec<&mut [DVec3]> = taps.iter_mut().map(|t| t.as_mut_slice()).collect();
+                gather_pieces(&pieces, Weighting::default(), Kernel::Portable, &mut sums, &mut taps, Control::none())
+                    .unwrap();
+            }
+            assert_eq!(sums, alone, "{accelerator}: the sums as without taps");
+            assert_eq!(taps, expected, "{accelerator}: each tap its piece's sums");
+            assert!(taps.iter().all(|t| t.iter().any(|v| v.max_element() > 0.0)), "{accelerator}: every piece adds");
         }
     }
 

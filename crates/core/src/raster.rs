@@ -145,8 +145,8 @@ impl Aggregate for ScreenRaster {
         sums: &mut [Vec3],
         control: Control,
     ) -> GatherStats {
-        let piece = RasterPiece { raster: self, ctx: with.ctx, rays, target: 0 };
-        gather_pieces::<D, true>(&[piece], with.weights, with.kernel, &mut [sums], control)[0]
+        let piece = RasterPiece { raster: self, ctx: with.ctx, rays, target: 0, tap: None };
+        gather_pieces::<D, true>(&[piece], with.weights, with.kernel, &mut [sums], &mut [], control)[0]
     }
 }
 
@@ -463,15 +463,17 @@ impl ScreenRaster {
 
     pub fn count_hits(&self, ctx: &GatherContext, kernel: Kernel, rays: &[CameraRay]) -> GatherStats {
         let mut out = vec![Vec3::ZERO; rays.len()];
-        let piece = RasterPiece { raster: self, ctx, rays, target: 0 };
-        gather_pieces::<Unweighted, false>(&[piece], &Unweighted, kernel, &mut [&mut out], Control::none())[0]
+        let piece = RasterPiece { raster: self, ctx, rays, target: 0, tap: None };
+        gather_pieces::<Unweighted, false>(&[piece], &Unweighted, kernel, &mut [&mut out], &mut [], Control::none())[0]
     }
 
     /// One piece's planes in one tile (its rows from `skip` on, as many as `sums` holds: a part
     /// of a heavy tile): its planes light by light, each against its spans
     /// (clipped to the tile's columns), each light's sums folded into the tile's totals when its
-    /// planes end ([`kernel::fold`]), the totals added to `sums` (the tile's rows) at the end.
-    /// The cancel flag is read before each plane (a relaxed load, nothing beside a plane's
+    /// planes end ([`kernel::fold`]), the totals added to `sums` (the tile's rows) at the end,
+    /// and what that added to each pixel, `after - before` in f64 (exact: both are f32), to
+    /// `tap`'s rows where there is one: the piece's own sums, as the render's error image needs
+    /// them (section 10.1), with no copy of the image. The cancel flag is read before each plane (a relaxed load, nothing beside a plane's
     /// work), so that even a tile of millions of planes stops within milliseconds.
     fn gather_tile<D: Denominator, const CONTRIBUTE: bool>(
         &self,
@@ -480,6 +482,7 @@ impl ScreenRaster {
         (tile, skip): (usize, u32),
         soa: &PaddedRays,
         sums: &mut [&mut [Vec3]],
+        tap: Option<&mut [&mut [DVec3]]>,
         control: Control,
     ) -> GatherStats {
         let Gathering { ctx, weights, kernel } = with;
@@ -584,10 +587,23 @@ impl ScreenRaster {
         if let Some(done) = light {
             fold(&mut kernel_band.sums, &mut totals, done);
         }
-        for (row, sums) in sums.iter_mut().enumerate() {
-            let i = row * stride;
-            for (k, s) in sums.iter_mut().enumerate() {
-                *s += Vec3::new(totals.r[i + k], totals.g[i + k], totals.b[i + k]);
+        let total = |i: usize| Vec3::new(totals.r[i], totals.g[i], totals.b[i]);
+        match tap {
+            None => {
+                for (row, sums) in sums.iter_mut().enumerate() {
+                    for (k, s) in sums.iter_mut().enumerate() {
+                        *s += total(row * stride + k);
+                    }
+                }
+            }
+            Some(tap) => {
+                for (row, (sums, tap)) in sums.iter_mut().zip(tap.iter_mut()).enumerate() {
+                    for (k, (s, t)) in sums.iter_mut().zip(tap.iter_mut()).enumerate() {
+                        let before = *s;
+                        *s += total(row * stride + k);
+                        *t += s.as_dvec3() - before.as_dvec3();
+                    }
+                }
             }
         }
         stats
@@ -595,13 +611,32 @@ impl ScreenRaster {
 }
 
 /// One piece of planes for [`gather_pieces`]: its raster, its planes' constants, the ray set it
-/// is gathered along (one ray per pixel, row-major) and the sums it adds to.
+/// is gathered along (one ray per pixel, row-major), the sums it adds to and the tap, if any,
+/// that its own sums also go to.
 #[derive(Clone, Copy)]
 pub struct RasterPiece<'a> {
     pub raster: &'a ScreenRaster,
     pub ctx: &'a GatherContext,
     pub rays: &'a [CameraRay],
     pub target: usize,
+    pub tap: Option<usize>,
+}
+
+/// Each tile's rows of an image `buf` (row-major), tile by tile: the tiles cut every row into
+/// disjoint runs.
+fn tiles_rows<T>(buf: &mut [T], tiling: Tiling) -> Vec<Vec<&mut [T]>> {
+    let (w, across) = (tiling.width as usize, tiling.across() as usize);
+    let mut tiles: Vec<Vec<&mut [T]>> = (0..tiling.count()).map(|_| Vec::new()).collect();
+    for (j, mut row) in buf.chunks_mut(w).enumerate() {
+        let down = j / tiling.rows as usize;
+        for a in 0..across {
+            let take = (tiling.cols as usize).min(row.len());
+            let (run, rest) = row.split_at_mut(take);
+            tiles[down * across + a].push(run);
+            row = rest;
+        }
+    }
+    tiles
 }
 
 /// Gathers `pieces` with `weights`, adding each ray's estimate of each piece to `sums[target]`
@@ -612,11 +647,16 @@ pub struct RasterPiece<'a> {
 /// several chunks at once, each into its own sums). A pixel of a target lies in one tile, which
 /// adds each piece to it as a whole-image gathering of that piece alone would: the same bits.
 /// One progress report per tile and piece; cancelled, each tile stops before its next plane.
+///
+/// A piece with a tap also adds what it added to each pixel to `taps[tap]` (f64, the image's
+/// size; [`ScreenRaster::gather_tile`]), in piece order. A tap takes the pieces of one target
+/// only: a pixel's tap is written by the tile that holds the pixel in that target.
 pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
     pieces: &[RasterPiece],
     weights: &D,
     kernel: Kernel,
     sums: &mut [&mut [Vec3]],
+    taps: &mut [&mut [DVec3]],
     control: Control,
 ) -> Vec<GatherStats> {
     // The kernels' target features are the CPU's: checked once here, for every plane and fold
@@ -633,6 +673,19 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
             && sums.iter().all(|s| s.len() == pixels),
         "the pieces of a gathering share one image and its tiles"
     );
+    // Each tap's target: the one of every piece that adds to it.
+    let tap_target: Vec<Option<usize>> = (0..taps.len())
+        .map(|t| {
+            let mut targets = pieces.iter().filter(|p| p.tap == Some(t)).map(|p| p.target);
+            let first = targets.next();
+            assert!(targets.all(|c| Some(c) == first), "a tap takes the pieces of one target");
+            first
+        })
+        .collect();
+    assert!(
+        taps.iter().all(|t| t.len() == pixels) && pieces.iter().all(|p| p.tap.is_none_or(|t| t < taps.len())),
+        "a gathering's taps are its image's size"
+    );
     // What the weights need of each plane, once per piece (a plane crosses many tiles); stopped,
     // like the gathering, by a cancel.
     let mut prepared: Vec<Vec<D::Plane>> = Vec::with_capacity(pieces.len());
@@ -646,21 +699,16 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
         }
         prepared.push(planes.into_iter().map(|p| p.expect("not cancelled")).collect());
     }
-    // Each target's tiles' rows of its sums (the tiles cut every row into disjoint runs).
-    let w = tiling.width as usize;
-    let across = tiling.across() as usize;
-    let mut tiles: Vec<(usize, usize, Vec<&mut [Vec3]>)> = Vec::with_capacity(sums.len() * tiling.count());
+    // Each target's tiles' rows of its sums, and of its taps (by tap).
+    let mut tiles: Vec<(usize, usize, Vec<&mut [Vec3]>, Vec<(usize, Vec<&mut [DVec3]>)>)> =
+        Vec::with_capacity(sums.len() * tiling.count());
     for (target, sums) in sums.iter_mut().enumerate() {
-        let first = tiles.len();
-        tiles.extend((0..tiling.count()).map(|t| (target, t, Vec::new())));
-        for (j, mut row) in sums.chunks_mut(w).enumerate() {
-            let down = j / tiling.rows as usize;
-            for a in 0..across {
-                let take = (tiling.cols as usize).min(row.len());
-                let (run, rest) = row.split_at_mut(take);
-                tiles[first + down * across + a].2.push(run);
-                row = rest;
-            }
+        tiles.extend(tiles_rows(sums, tiling).into_iter().enumerate().map(|(t, rows)| (target, t, rows, Vec::new())));
+    }
+    for (tap, buf) in taps.iter_mut().enumerate() {
+        let Some(target) = tap_target[tap] else { continue };
+        for (t, rows) in tiles_rows(buf, tiling).into_iter().enumerate() {
+            tiles[target * tiling.count() + t].3.push((tap, rows));
         }
     }
     // A tile with more work than its share is cut into parts of at least MIN_TILE_ROWS whole
@@ -675,31 +723,33 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
         pieces.iter().filter(|p| p.target == target).map(|p| p.raster.work[t] as usize).sum::<usize>()
     };
     let per_worker = if tiling.across() > 1 { SPLIT_PER_WORKER } else { 4 };
-    let share = (tiles.iter().map(|(target, t, _)| load(*target, *t)).sum::<usize>()
+    let share = (tiles.iter().map(|(target, t, _, _)| load(*target, *t)).sum::<usize>()
         / (per_worker * crate::schedule::workers()))
     .max(1);
     let mut parts = Vec::with_capacity(tiles.len());
-    for (target, tile, mut rows) in tiles {
+    for (target, tile, mut rows, mut tap_rows) in tiles {
         let load = load(target, tile);
         let n = load.div_ceil(share).clamp(1, rows.len().div_ceil(MIN_TILE_ROWS as usize).max(1));
         let per = rows.len().div_ceil(n).max(1);
         let mut skip = 0;
         while !rows.is_empty() {
-            let rest = rows.split_off(per.min(rows.len()));
-            parts.push((target, tile, skip as u32, load / n, rows));
+            let take = per.min(rows.len());
+            let rest = rows.split_off(take);
+            let taps_rest = tap_rows.iter_mut().map(|(tap, r)| (*tap, r.split_off(take))).collect();
+            parts.push((target, tile, skip as u32, load / n, rows, tap_rows));
             skip += per;
-            rows = rest;
+            (rows, tap_rows) = (rest, taps_rest);
         }
     }
     // The heaviest first: the last a worker takes are then small ones, and the workers finish
     // together (with 23 bands of rows for 2 workers, in image order one of them idled for 5% of
     // the gathering's wall time).
-    parts.sort_by_key(|&(target, tile, skip, load, _)| (std::cmp::Reverse(load), target, tile, skip));
+    parts.sort_by_key(|&(target, tile, skip, load, _, _)| (std::cmp::Reverse(load), target, tile, skip));
     let section = control.section("tiles");
     let each = parts
         .into_par_iter()
         .with_max_len(1)
-        .map(|(target, tile, skip, _, mut rows)| {
+        .map(|(target, tile, skip, _, mut rows, mut tap_rows)| {
             let stats = section.unit(|| {
                 let mut stats = GatherStats::default();
                 // The part's rays, laid out once for the consecutive pieces along one ray set (a
@@ -717,12 +767,16 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
                     }
                     let soa = &padded.as_ref().expect("made above").1;
                     let with = Gathering { ctx: piece.ctx, weights, kernel };
+                    let tap = piece.tap.map(|t| {
+                        tap_rows.iter_mut().find(|(tap, _)| *tap == t).expect("the target's tap").1.as_mut_slice()
+                    });
                     stats += piece.raster.gather_tile::<D, CONTRIBUTE>(
                         with,
                         prepared,
                         (tile, skip),
                         soa,
                         &mut rows,
+                        tap,
                         control,
                     );
                     // One report per tile (its first part) and piece, whatever the parts.

@@ -173,10 +173,16 @@ impl GatherSide<'_> {
         // their records and kept until the sums are read (up to a bound,
         // `gpu::PENDING_RAY_BYTES`), and the pieces of one gathering record side by side.
         let sets_at_once = if on_gpu.is_some() { usize::MAX } else { RAY_SETS_PER_GATHERING };
-        for group in gatherings(&all, sets_at_once, self.spread.is_some()) {
-            // With an error image, each piece is its chunk's only one in the gathering: its sums
-            // are its chunk's after less before, told to the spread in piece order.
-            if self.spread.is_some() {
+        let apart = match (&self.spread, &on_gpu) {
+            (None, _) => Apart::No,
+            (Some(_), Some(_)) => Apart::Pieces,
+            (Some(_), None) => Apart::Group,
+        };
+        for group in gatherings(&all, sets_at_once, apart) {
+            // With an error image on the GPU, each piece is its chunk's only one in the
+            // gathering: its sums are its chunk's after less before, told to the spread in piece
+            // order.
+            if apart == Apart::Pieces {
                 before.resize_with(group.len(), Vec::new);
                 for (b, &(c, _)) in before.iter_mut().zip(group) {
                     b.clear();
@@ -213,15 +219,36 @@ impl GatherSide<'_> {
                 None => {
                     let rays: Vec<Arc<Vec<CameraRay>>> =
                         group.iter().map(|(_, p)| self.rays.rays(self.scene, p.spec.0, control)).collect();
+                    // With an error image, the gathering's pieces are of one group: each adds its
+                    // own sums to its half's (the spread's open group, a tap).
+                    let tap = |p: &Piece| (apart == Apart::Group).then_some(p.spec.3.min(1));
                     let pieces: Vec<GatherPiece> = group
                         .iter()
                         .zip(&rays)
-                        .map(|(&(target, p), r)| GatherPiece { planes: &p.planes, rays: r.as_slice(), target })
+                        .map(|(&(target, p), r)| GatherPiece {
+                            planes: &p.planes,
+                            rays: r.as_slice(),
+                            target,
+                            tap: tap(p),
+                        })
                         .collect();
-                    gather_pieces(&pieces, weighting, kernel, sums, control)?
+                    match self.spread.as_mut() {
+                        Some(spread) => {
+                            let (k, _, quarter, _) = group[0].1.spec;
+                            let [a, b] = spread.open_group(k, quarter);
+                            let each = gather_pieces(&pieces, weighting, kernel, sums, &mut [a, b], control)?;
+                            let mut planes = [0; 2];
+                            for (_, p) in group {
+                                planes[p.spec.3.min(1)] += p.spec.1.len();
+                            }
+                            spread.add_planes(planes);
+                            each
+                        }
+                        None => gather_pieces(&pieces, weighting, kernel, sums, &mut [], control)?,
+                    }
                 }
             };
-            if let Some(spread) = self.spread.as_mut() {
+            if let (Apart::Pieces, Some(spread)) = (apart, self.spread.as_mut()) {
                 for (b, &(c, piece)) in before.iter().zip(group) {
                     let (k, ref planes, quarter, half) = piece.spec;
                     spread.add(k, quarter, half, planes.len(), b, sums[c]);
@@ -247,20 +274,40 @@ impl GatherSide<'_> {
     }
 }
 
+/// How the error image tells a gathering's pieces apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Apart {
+    /// Not at all: no error image.
+    No,
+    /// Each piece its chunk's only one in the gathering, its sums its chunk's after less before
+    /// (on the GPU, where the sums stay until read back).
+    Pieces,
+    /// The pieces of one group in one chunk, each adding its own sums to its half's as it adds
+    /// them to the chunk's (the taps of [`gather_pieces`]: on the CPU).
+    Group,
+}
+
 /// The gatherings of `pieces` (chunk, piece), in order: runs of consecutive pieces that hold at
-/// most `sets` ray sets; with an error image (`apart`), at most one piece of each chunk, so
-/// that each piece's sums are told apart (its chunk's sums before and after).
+/// most `sets` ray sets, told apart for the error image as `apart` says.
 fn gatherings<'p, 'q>(
     pieces: &'q [(usize, &'p Piece)],
     sets_at_once: usize,
-    apart: bool,
+    apart: Apart,
 ) -> Vec<&'q [(usize, &'p Piece)]> {
     let mut out = Vec::new();
     let mut start = 0;
     let (mut sets, mut chunks) = (Vec::new(), Vec::new());
     for (i, &(c, p)) in pieces.iter().enumerate() {
         let new_set = !sets.contains(&p.spec.0);
-        if (new_set && sets.len() == sets_at_once) || (apart && chunks.contains(&c)) {
+        let split = match apart {
+            Apart::No => false,
+            Apart::Pieces => chunks.contains(&c),
+            Apart::Group => {
+                let (first_chunk, first) = pieces[start];
+                (first_chunk, first.spec.0, first.spec.2) != (c, p.spec.0, p.spec.2)
+            }
+        };
+        if (new_set && sets.len() == sets_at_once) || split {
             out.push(&pieces[start..i]);
             start = i;
             sets.clear();
