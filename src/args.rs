@@ -11,6 +11,21 @@ use fogplanes::sampling::Sampler;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
 use fogplanes::weights::Estimator;
 use std::path::PathBuf;
+use std::sync::LazyLock;
+
+/// A list's default as it is typed, comma separated: clap shows a list of defaults with spaces,
+/// which no value of a comma-separated list can be.
+fn typed(list: &'static LazyLock<String>) -> &'static str {
+    list.as_str()
+}
+
+static SCALING_PLANES: LazyLock<String> = LazyLock::new(|| joined(settings::SCALING_PLANES));
+static TABLE_SWEEP: LazyLock<String> = LazyLock::new(|| joined(settings::TABLE_SWEEP));
+static TABLE_SAMPLERS: LazyLock<String> = LazyLock::new(|| joined(settings::TABLE_SAMPLERS.map(|s| s.name())));
+
+fn joined<T: std::fmt::Display>(list: impl IntoIterator<Item = T>) -> String {
+    list.into_iter().map(|v| v.to_string()).collect::<Vec<_>>().join(",")
+}
 
 /// Renders single scattering in fog lit by rectangular lights, with photon planes weighted by
 /// continuous and stochastic multiple importance sampling (West et al. 2020, Section 6), and
@@ -138,7 +153,7 @@ pub(crate) struct ScalingArgs {
     #[arg(long, short, default_value = Estimator::DEFAULT.name(), value_parser = estimator_parser())]
     pub(crate) estimator: Estimator,
     /// Plane counts, comma separated.
-    #[arg(long, value_delimiter = ',', default_values_t = settings::SCALING_PLANES)]
+    #[arg(long, value_delimiter = ',', default_value = typed(&SCALING_PLANES))]
     pub(crate) planes: Vec<u64>,
     /// Resolutions WxH, comma separated [default: 160x90,320x180,640x360,1280x720].
     #[arg(long, value_delimiter = ',', value_parser = parse_resolution)]
@@ -384,7 +399,7 @@ pub(crate) struct TableArgs {
     #[arg(long)]
     pub(crate) pixel_center: bool,
     /// Plane counts of the error-versus-time sweep, comma separated.
-    #[arg(long, value_delimiter = ',', default_values_t = settings::TABLE_SWEEP, conflicts_with = "no_sweep")]
+    #[arg(long, value_delimiter = ',', default_value = typed(&TABLE_SWEEP), conflicts_with = "no_sweep")]
     pub(crate) sweep: Vec<u64>,
     /// Skip the error-versus-time sweep (no plot).
     #[arg(long)]
@@ -396,7 +411,7 @@ pub(crate) struct TableArgs {
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub(crate) equal_time: Option<f64>,
     /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
-    #[arg(long, value_delimiter = ',', default_values = settings::TABLE_SAMPLERS.map(|s| s.name()), value_parser = sampler_parser())]
+    #[arg(long, value_delimiter = ',', default_value = typed(&TABLE_SAMPLERS), value_parser = sampler_parser())]
     pub(crate) samplers: Vec<Sampler>,
     /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
     #[arg(long, value_delimiter = ',', value_name = "K")]
@@ -580,5 +595,28 @@ impl From<&ScalingArgs> for ScalingOverrides {
             threads: a.common.threads,
             device: a.device.device,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    /// The lists' defaults, shown as they are typed, are parsed into the settings' lists.
+    #[test]
+    fn list_defaults_are_the_settings_lists() {
+        let Command::Table(t) =
+            Cli::try_parse_from(["fogplanes", "table", "s.toml", "--reference", "r.exr"]).unwrap().command
+        else {
+            panic!("table")
+        };
+        assert_eq!(t.sweep, settings::TABLE_SWEEP);
+        assert_eq!(t.samplers, settings::TABLE_SAMPLERS);
+        let Command::Scaling(s) = Cli::try_parse_from(["fogplanes", "scaling", "s.toml"]).unwrap().command else {
+            panic!("scaling")
+        };
+        assert_eq!(s.planes, settings::SCALING_PLANES);
+        assert_eq!(TABLE_SWEEP.as_str(), "5120,10240,20480,40960,81920,163840");
     }
 }
