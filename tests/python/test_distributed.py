@@ -333,6 +333,61 @@ def test_every_bad_argument_raises_naming_it_before_any_cluster_starts(scene, cl
                 pass
 
 
+@pytest.mark.parametrize(
+    "call, error, says",
+    [
+        # Was "'float' object is not iterable": neither the argument nor what it takes.
+        (lambda s, r: fd.table(s, r, planes=2048.0), TypeError,
+         r"^planes=2048\.0: expected an integer or a list of them, got float$"),
+        (lambda s, r: fd.table(s, r, seeds=1.0), TypeError,
+         r"^seeds=1\.0: expected an integer or a list of them, got float$"),
+        (lambda s, r: fd.table(s, r, planes="2048"), TypeError,
+         r"^planes='2048': expected an integer or a list of them, got str$"),
+        (lambda s, r: fd.table(s, r, planes=True), TypeError,
+         r"^planes=True: expected an integer or a list of them, got bool$"),
+        # Were named as the render's estimator= and planes=, not as the list's item.
+        (lambda s, r: fd.table(s, r, estimators=5), TypeError,
+         r"^estimators=5: expected a name \(a str\) or a list of them, got int$"),
+        (lambda s, r: fd.table(s, r, estimators=["smis-exact", 5]), TypeError,
+         r"^estimators\[1\]=5: expected a name \(a str\), got int$"),
+        (lambda s, r: fd.table(s, r, planes=[1000, 2.5]), TypeError,
+         r"^planes\[1\]=2\.5: expected an integer, got float$"),
+        # Was "plan_render() got multiple values for keyword argument 'seed'".
+        (lambda s, r: fd.table(s, r, seed=3), TypeError, r"^unexpected keyword argument 'seed': table sweeps seeds="),
+        # A scene path as bytes was refused ("scene: expected ... (str or os.PathLike), got bytes"):
+        # it is read, and the bad count named.
+        (lambda s, r: fd.table(os.fsencode(SIX_LIGHTS), r, spp=4.0), TypeError,
+         r"^spp=4\.0: expected an integer, got float$"),
+        # Were ValueError "expected an image of the renders' shape (6, 8, 3), got shape ()".
+        (lambda s, r: fd.table(s, 5), TypeError,
+         r"^reference: expected an image \(an array of shape \(height, width, 3\)\), "
+                                                 r"its path, or reference\(\)'s \(image, stderr\) pair, got int$"),
+        (lambda s, r: fd.table(s, None), TypeError, r"^reference: expected an image .* got NoneType$"),
+        # Was an IndexError.
+        (lambda s, r: fd.table(s, ()), ValueError,
+         r"^reference: expected an image of the renders' shape \(6, 8, 3\), got shape \(0,\)$"),
+        (lambda s, r: fd.table(s, [[1.0, 2.0], [3.0]]), ValueError,
+         r"^reference: setting an array element with a sequence"),
+        # Were "planes: expected an integer (TypeError: 'float' object cannot be interpreted as an integer)".
+        (lambda s, r: fd.render(s, planes=2048.0), TypeError, r"^planes=2048\.0: expected an integer, got float$"),
+        (lambda s, r: fd.render(s, seed=1.0), TypeError, r"^seed=1\.0: expected an integer, got float$"),
+        (lambda s, r: fd.reference(s, 16.0), TypeError, r"^spp=16\.0: expected an integer, got float$"),
+        (lambda s, r: fd.reference(s, 16, resolution=(8.0, 6)), TypeError,
+         r"^resolution=8\.0: expected an integer, got float$"),
+        (lambda s, r: fd.render(s, workers=2.0), TypeError, r"^workers=2\.0: expected an integer, got float$"),
+        (lambda s, r: fd.reference(s, 16, band_rows=2.0), TypeError,
+         r"^band_rows=2\.0: expected an integer, got float$"),
+    ],
+)
+def test_the_counts_and_the_reference_of_a_sweep_are_named_as_given(scene, monkeypatch, call, error, says):
+    def refuse(*args, **kwargs):
+        pytest.fail("a cluster was started for bad arguments")
+
+    monkeypatch.setattr(fd, "LocalCluster", refuse)
+    with pytest.raises(error, match=says):
+        call(scene.with_resolution(8, 6), np.zeros((6, 8, 3), np.float32))
+
+
 def test_a_client_whose_scheduler_is_gone_is_named(scene):
     cluster = LocalCluster(n_workers=0, processes=False, dashboard_address=":0")  # in-process, no worker
     gone = Client(cluster)

@@ -238,3 +238,148 @@ def test_the_signatures_shown_are_the_ones_taken(scene):
     mean, _ = fogplanes.reference_rows(scene, (0, 1), 16, None, uniform=True, **SMALL)
     assert mean.shape == (1, 8, 3)
     assert inspect.signature(fogplanes.save_image).parameters["exposure"].default is None
+
+
+class _FsPath:
+    """An os.PathLike whose __fspath__ gives `value` (str, bytes, or neither)."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def __fspath__(self):
+        return self.value
+
+
+def test_a_path_is_what_open_takes_and_anything_else_is_named(scene, tmp_path):
+    """A path given as bytes was "'bytes' object is not an instance of 'str'", and an int "expected
+    str, bytes or os.PathLike object, not int" (naming bytes, which it refused): neither named
+    the argument. Bytes are now decoded as os.fsdecode decodes them, as open() takes them."""
+    raw = os.fsencode(SIX_LIGHTS)
+    assert fogplanes.load_scene(raw).source == scene.source
+    assert fogplanes.load_scene(_FsPath(raw)).source == scene.source
+    assert fogplanes.render(raw, planes=10, **SMALL).shape == (6, 8, 3)
+    image = fogplanes.render(scene, planes=10, **SMALL)
+    fogplanes.save_image(os.fsencode(tmp_path / "a.exr"), image)
+    assert np.array_equal(fogplanes.load_image(os.fsencode(tmp_path / "a.exr")), image)
+    if os.name == "posix":  # a name that is no UTF-8: its bytes, as the file system holds them
+        odd = os.path.join(os.fsencode(tmp_path), b"scene-\xff.toml")
+        with open(odd, "w") as f:
+            f.write(scene.source)
+        assert fogplanes.load_scene(odd).source == scene.source
+        assert fogplanes.load_scene(os.fsdecode(odd)).source == scene.source
+    for call in (lambda v: fogplanes.load_scene(v), lambda v: fogplanes.load_image(v),
+                 lambda v: fogplanes.save_image(v, image)):
+        with pytest.raises(TypeError, match=r"^path: expected a path \(str, bytes or os\.PathLike\), got int$"):
+            call(5)
+        with pytest.raises(TypeError, match=r"^path: expected _FsPath\.__fspath__\(\) to return str or bytes, "
+                                            r"not int$"):
+            call(_FsPath(5))
+        # Python's open() refuses it too ("embedded null byte"); it was an OSError.
+        with pytest.raises(ValueError, match=r"^path='a\\x00b': a path cannot hold a NUL byte$"):
+            call("a\0b")
+    with pytest.raises(TypeError, match=r"^scene: expected a fogplanes\.Scene or the path of a scene file "
+                                        r"\(str, bytes or os\.PathLike\), got bytearray$"):
+        fogplanes.render(bytearray(raw))
+
+
+def test_merge_partials_and_the_partial_functions_name_their_arguments(scene):
+    """merge_partials(5) was "'int' object is not iterable", combine(p, 5) and finish_render(S, 5)
+    "'int' object is not an instance of 'Partial'", none naming the argument."""
+    p = fogplanes.render_chunk(scene, (0, 16384), **CHUNKED)
+    q = fogplanes.render_chunk(scene, (16384, 20000), **CHUNKED)
+    for parts, says in [(5, "got int"), (p, "got Partial"), ("ab", "got str"), (None, "got NoneType")]:
+        with pytest.raises(TypeError, match=rf"^parts: expected a list of fogplanes\.Partial, {says}$"):
+            fogplanes.merge_partials(parts)
+    with pytest.raises(TypeError, match=r"^parts\[1\]: expected a fogplanes\.Partial, got int$"):
+        fogplanes.merge_partials([p, 5])
+    with pytest.raises(ValueError, match=r"^parts: no partial renders to merge$"):
+        fogplanes.merge_partials([])
+    with pytest.raises(ValueError, match=r"^parts: planes 16384:20000 are missing$"):
+        fogplanes.merge_partials((p,))
+    whole = fogplanes.merge_partials(x for x in (q, p))  # any iterable
+    assert (whole.start, whole.end) == (0, 20000)
+    with pytest.raises(TypeError, match=r"^a: expected a fogplanes\.Partial, got int$"):
+        fogplanes.combine(5, q)
+    with pytest.raises(TypeError, match=r"^b: expected a fogplanes\.Partial, got NoneType$"):
+        fogplanes.combine(p, None)
+    with pytest.raises(TypeError, match=r"^unsupported operand type\(s\) for \+: 'fogplanes\.Partial' and 'int'$"):
+        p + 5
+    with pytest.raises(TypeError, match=r"^partial: expected a fogplanes\.Partial, got int$"):
+        fogplanes.finish_render(scene, 5, **CHUNKED)
+    with pytest.raises(TypeError, match=r"^return_stats=1: expected True or False, got int$"):
+        fogplanes.finish_render(scene, whole, return_stats=1, **CHUNKED)
+
+
+@pytest.mark.parametrize(
+    "call, error, says",
+    [
+        # Was "planes: expected an integer (TypeError: 'float' object cannot be interpreted as an
+        # integer)": the argument, not its value nor its type.
+        (lambda s: fogplanes.render(s, planes=2048.0, **SMALL), TypeError,
+         r"^planes=2048\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.render(s, seed=1.0, **SMALL), TypeError, r"^seed=1\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.render(s, spp="4", **SMALL), TypeError, r"^spp='4': expected an integer, got str$"),
+        (lambda s: fogplanes.render(s, orientations=2.0, **SMALL), TypeError,
+         r"^orientations=2\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.render(s, threads=np.float64(2), **SMALL), TypeError,
+         r"^threads=np\.float64\(2\.0\): expected an integer, got float64$"),
+        (lambda s: fogplanes.render(s, resolution=(8.0, 6)), TypeError,
+         r"^resolution=8\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.render(s, resolution=8), TypeError,
+         r"^resolution=8: expected \(width, height\), got int$"),
+        (lambda s: fogplanes.render(s, time_budget="soon", **SMALL), TypeError,
+         r"^time_budget='soon': expected a number, got str$"),
+        (lambda s: fogplanes.render(s, time_budget=10**400, **SMALL), ValueError,
+         r"^time_budget=1{1}0{76}\.\.\.: out of range$"),
+        (lambda s: fogplanes.plan_render(s, planes=2048.0), TypeError,
+         r"^planes=2048\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.render_chunk(s, (0, 16384), spp=1.5, **CHUNKED), TypeError,
+         r"^spp=1\.5: expected an integer"),
+        (lambda s: fogplanes.reference(s, 16.0, **SMALL), TypeError, r"^spp=16\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.reference(s, 16, seed=1.0, **SMALL), TypeError,
+         r"^seed=1\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.reference_pilot_rows(s, (0, 1), 16.0, **SMALL), TypeError,
+         r"^spp=16\.0: expected an integer"),
+        # Were "chunks: expected an integer, got float" and "block: out of range, got -1".
+        (lambda s: fogplanes.merge_plan(2.0, 1), TypeError, r"^chunks=2\.0: expected an integer, got float$"),
+        (lambda s: fogplanes.merge_plan(4, -1), ValueError,
+         r"^block=-1: out of range \(a non-negative integer below 2\*\*64\)$"),
+        (lambda s: s.with_resolution(8.0, 6), TypeError, r"^width=8\.0: expected an integer, got float$"),
+        (lambda s: s.with_resolution(8, "6"), TypeError, r"^height='6': expected an integer, got str$"),
+        (lambda s: fogplanes.save_image("never.png", np.ones((2, 3, 3)), exposure="+1"), TypeError,
+         r"^exposure='\+1': expected a number, got str$"),
+        # Were "'bytes' object is not an instance of 'str'" and "'int' object ...".
+        (lambda s: fogplanes.Scene.from_toml(s.source.encode()), TypeError,
+         r"^text: expected the scene's TOML text \(a str\), got bytes$"),
+        (lambda s: fogplanes.Scene.from_toml(s.source, name=5), TypeError, r"^name=5: expected a str, got int$"),
+        (lambda s: fogplanes.Scene.from_toml(s.source, file=b"x.toml"), TypeError,
+         r"^file=b'x\.toml': expected a str, got bytes$"),
+    ],
+)
+def test_a_count_or_number_of_the_wrong_type_is_named_with_its_value(scene, call, error, says):
+    with pytest.raises(error, match=says):
+        call(scene)
+
+
+@pytest.mark.parametrize(
+    "call, error, says",
+    [
+        # Were ValueError "expected an array of shape (height, width, 3), got ()": a number or a
+        # str is no array of the wrong shape.
+        (lambda s, im: fogplanes.compare(5, im), TypeError, r"^image: expected an array, got int$"),
+        (lambda s, im: fogplanes.compare(im, "ref.exr"), TypeError, r"^reference: expected an array, got str$"),
+        (lambda s, im: fogplanes.compare(None, im), TypeError, r"^image: expected an array, got NoneType$"),
+        (lambda s, im: fogplanes.save_image("never.exr", 5), TypeError, r"^image: expected an array, got int$"),
+        (lambda s, im: fogplanes.reference_counts(s, 5, spp=16, **SMALL), TypeError,
+         r"^pilot: expected an array, got int$"),
+        # Something with a shape numpy cannot read was numpy's "float() argument must be ...".
+        (lambda s, im: fogplanes.compare(fogplanes.render_chunk(s, (0, 16384), **CHUNKED), im), TypeError,
+         r"^image: expected an array, got Partial$"),
+        # A ragged list was numpy's ValueError, naming nothing.
+        (lambda s, im: fogplanes.compare([[1.0, 2.0], [3.0]], im), ValueError,
+         r"^image: setting an array element with a sequence"),
+    ],
+)
+def test_an_image_argument_that_is_no_array_is_named(scene, call, error, says):
+    with pytest.raises(error, match=says):
+        call(scene, np.ones((6, 8, 3), dtype=np.float32))

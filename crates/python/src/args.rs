@@ -7,7 +7,7 @@ use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, Setting};
 use pyo3::exceptions::{PyOverflowError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict};
+use pyo3::types::{PyBool, PyBytes, PyDict, PyString};
 use std::path::{Path, PathBuf};
 
 /// The scene file at `path`: a regular file (a pipe would block the interpreter, which holds
@@ -22,16 +22,47 @@ pub(crate) fn load(path: &Path) -> PyResult<Scene> {
     Scene::load(path).map_err(|e| file_error(path, e.to_string()))
 }
 
-/// The scene of a `scene` argument: a `Scene`, or the path of a scene file (str or
-/// os.PathLike).
+/// The path of argument `name`: a str, bytes or an os.PathLike, as `open()` takes them, bytes
+/// decoded as `os.fsdecode` decodes them (on POSIX the file system's bytes, unchanged); `None`
+/// for anything else (the caller words what it takes). A path holding a NUL byte is a
+/// `ValueError` naming the argument, as Python's own `open()` refuses it.
+pub(crate) fn path_or_none(value: &Bound<'_, PyAny>, name: &str) -> PyResult<Option<PathBuf>> {
+    let py = value.py();
+    let is_path = value.is_instance_of::<PyString>()
+        || value.is_instance_of::<PyBytes>()
+        || value.get_type().hasattr("__fspath__")?;
+    if !is_path {
+        return Ok(None);
+    }
+    // An os.PathLike whose __fspath__ gives neither str nor bytes is a TypeError of os.fspath's.
+    let text = py.import("os")?.call_method1("fsdecode", (value,)).map_err(|e| {
+        if e.is_instance_of::<PyTypeError>(py) { PyTypeError::new_err(format!("{name}: {}", e.value(py))) } else { e }
+    })?;
+    let path: PathBuf = text.extract()?;
+    if path.as_os_str().as_encoded_bytes().contains(&0) {
+        return Err(PyValueError::new_err(format!("{name}={}: a path cannot hold a NUL byte", short_repr(value))));
+    }
+    Ok(Some(path))
+}
+
+/// The path of argument `name` ([`path_or_none`]), a `TypeError` naming it for anything else.
+pub(crate) fn path_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<PathBuf> {
+    path_or_none(value, name)?.ok_or_else(|| {
+        let type_name = value.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        PyTypeError::new_err(format!("{name}: expected a path (str, bytes or os.PathLike), got {type_name}"))
+    })
+}
+
+/// The scene of a `scene` argument: a `Scene`, or the path of a scene file ([`path_arg`]: str,
+/// bytes or os.PathLike).
 pub(crate) fn scene_arg(scene: &Bound<'_, PyAny>) -> PyResult<Scene> {
     if let Ok(s) = scene.cast::<PyScene>() {
         Ok(s.get().inner.clone())
-    } else if let Ok(path) = scene.extract::<PathBuf>() {
+    } else if let Some(path) = path_or_none(scene, "scene")? {
         load(&path)
     } else {
         Err(PyTypeError::new_err(format!(
-            "scene: expected a fogplanes.Scene or the path of a scene file, got {}",
+            "scene: expected a fogplanes.Scene or the path of a scene file (str, bytes or os.PathLike), got {}",
             scene.get_type().name()?
         )))
     }
@@ -61,11 +92,7 @@ pub(crate) enum Front {
 /// naming it.
 pub(crate) fn flag(name: &str, value: &Option<Bound<'_, PyAny>>) -> PyResult<bool> {
     let Some(v) = value else { return Ok(false) };
-    v.extract().map_err(|_| {
-        let repr = v.repr().map(|r| r.to_string()).unwrap_or_default();
-        let type_name = v.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-        PyTypeError::new_err(format!("{name}={repr}: expected True or False, got {type_name}"))
-    })
+    v.extract().map_err(|_| wrong_type(name, v, "True or False"))
 }
 
 /// What `render` returns and shows besides the image (its own keywords).

@@ -29,13 +29,31 @@ pub(crate) fn shape_text(shape: &[usize]) -> String {
 /// huge shape costs nothing until converted to float32.
 pub(crate) fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> {
     let py = image.py();
-    // Arrays keep their own shape (no copy); nested lists become one to have one.
+    let not_an_array = || {
+        let type_name = image.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        PyTypeError::new_err(format!("{what}: expected an array, got {type_name}"))
+    };
+    // Arrays keep their own shape (no copy); nested lists become one to have one (a ragged one
+    // is numpy's ValueError, named), and anything else (a number, a str, None) is no array.
     let array = match image.getattr("shape") {
         Ok(_) => image.clone(),
-        Err(_) => py.import("numpy")?.call_method1("asarray", (image,))?,
+        Err(_) => {
+            let array = py.import("numpy")?.call_method1("asarray", (image,)).map_err(|e| {
+                let message = format!("{what}: {}", e.value(py));
+                if e.is_instance_of::<PyValueError>(py) {
+                    PyValueError::new_err(message)
+                } else {
+                    PyTypeError::new_err(message)
+                }
+            })?;
+            if array.getattr("ndim")?.extract::<usize>()? == 0 {
+                return Err(not_an_array());
+            }
+            array
+        }
     };
-    let Ok(shape) = array.getattr("shape")?.extract::<Vec<usize>>() else {
-        return Err(PyTypeError::new_err(format!("{what}: expected an array, got {}", image.get_type().name()?)));
+    let Ok(shape) = array.getattr("shape").and_then(|s| s.extract::<Vec<usize>>()) else {
+        return Err(not_an_array());
     };
     let [h, w, 3] = shape[..] else {
         return Err(PyValueError::new_err(format!(
@@ -62,7 +80,10 @@ pub(crate) fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> 
         let dtype = array.getattr("dtype")?.str()?.to_string();
         return Err(PyTypeError::new_err(format!("{what}: expected an array of a real dtype, got dtype {dtype}")));
     }
-    let array: PyArrayLike3<'_, f32, AllowTypeChange> = array.extract()?;
+    // Something with a shape that numpy cannot read (a Partial has one) is no array either.
+    let array = array.extract::<PyArrayLike3<'_, f32, AllowTypeChange>>().map_err(|e: PyErr| {
+        if e.is_instance_of::<PyTypeError>(py) || e.is_instance_of::<PyValueError>(py) { not_an_array() } else { e }
+    })?;
     let view = array.as_array();
     let mut film = Film::new(w as u32, h as u32);
     for ((y, x), p) in (0..h).flat_map(|y| (0..w).map(move |x| (y, x))).zip(film.pixels.iter_mut()) {

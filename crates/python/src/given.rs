@@ -33,24 +33,19 @@ impl Given {
     }
 
     pub(crate) fn note(&mut self, setting: Setting, value: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.reprs.push((setting, value.repr()?.to_string()));
+        self.reprs.push((setting, short_repr(value)));
         Ok(())
     }
 
     /// A non-negative integer: a Python int out of range is a `ValueError` naming the setting,
-    /// anything but an int (a bool too: `spp=True` is no count) a `TypeError`.
+    /// anything but an int (a bool too: `spp=True` is no count; a float too: `planes=2048.0`)
+    /// a `TypeError` naming it.
     pub(crate) fn uint(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<u64>> {
         let Some(v) = value else { return Ok(None) };
         self.note(setting, v)?;
-        if v.is_instance_of::<PyBool>() {
-            return Err(not_a_bool(setting.keyword(), v, "an integer"));
-        }
-        match v.extract::<u64>() {
-            Ok(n) => Ok(Some(n)),
-            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => {
-                Err(self.invalid(setting, "out of range (a non-negative integer below 2**64)"))
-            }
-            Err(e) => Err(PyTypeError::new_err(format!("{}: expected an integer ({e})", setting.keyword()))),
+        match integer(setting.keyword(), v)? {
+            Some(n) => Ok(Some(n)),
+            None => Err(self.invalid(setting, "out of range (a non-negative integer below 2**64)")),
         }
     }
 
@@ -61,16 +56,19 @@ impl Given {
             .transpose()
     }
 
-    /// A number of seconds or stops (a float, or an int; not a bool).
+    /// A number of seconds or stops (a float, or an int; not a bool): anything else a
+    /// `TypeError` naming the setting, an int past a float's range a `ValueError`.
     pub(crate) fn float(&mut self, setting: Setting, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<f64>> {
         let Some(v) = value else { return Ok(None) };
         self.note(setting, v)?;
         if v.is_instance_of::<PyBool>() {
-            return Err(not_a_bool(setting.keyword(), v, "a number"));
+            return Err(wrong_type(setting.keyword(), v, "a number"));
         }
-        v.extract::<f64>()
-            .map(Some)
-            .map_err(|e| PyTypeError::new_err(format!("{}: expected a number ({e})", setting.keyword())))
+        match v.extract::<f64>() {
+            Ok(x) => Ok(Some(x)),
+            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => Err(self.invalid(setting, "out of range")),
+            Err(_) => Err(wrong_type(setting.keyword(), v, "a number")),
+        }
     }
 
     /// A name from a closed list (estimator, sampler, ...): a `str`, else a `TypeError` naming
@@ -82,12 +80,7 @@ impl Given {
     ) -> PyResult<Option<T>> {
         let Some(v) = value else { return Ok(None) };
         let Ok(v) = v.extract::<String>() else {
-            return Err(PyTypeError::new_err(format!(
-                "{}={}: expected a name (a str), got {}",
-                setting.keyword(),
-                v.repr()?,
-                v.get_type().name()?
-            )));
+            return Err(wrong_type(setting.keyword(), v, "a name (a str)"));
         };
         self.reprs.push((setting, py_str(&v)));
         v.parse().map(Some).map_err(|m| self.invalid(setting, m))
@@ -97,7 +90,7 @@ impl Given {
     pub(crate) fn resolution(&mut self, value: Option<&Bound<'_, PyAny>>) -> PyResult<Option<(u32, u32)>> {
         let Some(v) = value else { return Ok(None) };
         let (w, h): (Bound<PyAny>, Bound<PyAny>) =
-            v.extract().map_err(|_| PyTypeError::new_err(format!("resolution: expected (width, height), got {v}")))?;
+            v.extract().map_err(|_| wrong_type("resolution", v, "(width, height)"))?;
         let (w, h) = (self.uint32(Setting::Resolution, Some(&w))?, self.uint32(Setting::Resolution, Some(&h))?);
         self.note(Setting::Resolution, v)?;
         Ok(w.zip(h))
@@ -111,12 +104,31 @@ impl Given {
     }
 }
 
-/// A `TypeError` for a bool given as `what` (an integer, a number) to argument `name`.
-pub(crate) fn not_a_bool(name: &str, v: &Bound<'_, PyAny>, what: &str) -> PyErr {
-    PyTypeError::new_err(format!(
-        "{name}={}: expected {what}, got bool",
-        v.repr().map(|r| r.to_string()).unwrap_or_default()
-    ))
+/// An integer argument `name` (a Python int, or anything with `__index__`; not a bool): `None`
+/// for one below 0 or of 2**64 or more (its range is the caller's to word), a `TypeError`
+/// naming the argument for anything else (a float too: `planes=2048.0`).
+pub(crate) fn integer(name: &str, v: &Bound<'_, PyAny>) -> PyResult<Option<u64>> {
+    if v.is_instance_of::<PyBool>() {
+        return Err(wrong_type(name, v, "an integer"));
+    }
+    match v.extract::<u64>() {
+        Ok(n) => Ok(Some(n)),
+        Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => Ok(None),
+        Err(_) => Err(wrong_type(name, v, "an integer")),
+    }
+}
+
+/// The `TypeError` for argument `name` given `v` where `what` is asked: `name=repr: expected
+/// what, got type` (`spp=True: expected an integer, got bool`).
+pub(crate) fn wrong_type(name: &str, v: &Bound<'_, PyAny>, what: &str) -> PyErr {
+    let type_name = v.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+    PyTypeError::new_err(format!("{name}={}: expected {what}, got {type_name}", short_repr(v)))
+}
+
+/// `repr(v)`, cut to 80 characters (an error message names a value, it does not print it).
+pub(crate) fn short_repr(v: &Bound<'_, PyAny>) -> String {
+    let repr = v.repr().map(|r| r.to_string()).unwrap_or_else(|_| "<unprintable>".into());
+    if repr.chars().count() <= 80 { repr } else { format!("{}...", repr.chars().take(77).collect::<String>()) }
 }
 
 /// A string as Python's repr writes it (for names without quotes or escapes, which is all of them

@@ -4,11 +4,14 @@
 //!
 //! Everything a call can fail with is a Python exception: `ValueError` for bad input, with the
 //! command line's one-line message, a setting named as the caller gave it (`planes=0: ...`
-//! where the command line says `--planes: ...`); `OSError` (or its subclass
-//! `FileNotFoundError`, ...) for a file that cannot be read. The settings are resolved by the
-//! core (`fogplanes::settings`), as for the command line: the same defaults, the same checks. Renders run on a worker
-//! thread with the GIL released, while the calling thread watches for signals: Ctrl-C sets the
-//! core's cancel flag and raises `KeyboardInterrupt` once the work under way has stopped.
+//! where the command line says `--planes: ...`); `TypeError` for an argument of the wrong type,
+//! named as given (`planes=2048.0: expected an integer, got float`); `OSError` (or its subclass
+//! `FileNotFoundError`, ...) for a file that cannot be read. A path is what `open()` takes: a
+//! str, bytes (decoded as `os.fsdecode` decodes them) or an os.PathLike. The settings are
+//! resolved by the core (`fogplanes::settings`), as for the command line: the same defaults, the
+//! same checks. Renders run on a worker thread with the GIL released, while the calling thread
+//! watches for signals: Ctrl-C sets the core's cancel flag and raises `KeyboardInterrupt` once
+//! the work under way has stopped.
 
 mod args;
 mod arrays;

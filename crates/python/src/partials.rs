@@ -4,15 +4,16 @@
 use crate::args::*;
 use crate::arrays::*;
 use crate::errors::*;
+use crate::given::{integer, short_repr};
 use crate::interrupt::*;
 use fogplanes::control::Control;
 use fogplanes::options::RenderStats;
 use fogplanes::partial::{self, Partial};
 use numpy::PyArray3;
 use numpy::ndarray::Array3;
-use pyo3::exceptions::{PyOverflowError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyString, PyTuple};
 
 /// The plan of a render in chunks: its resolved settings (the keyword arguments of `render`),
 /// `planes` N, `chunk_planes` (a fixed power of two), `chunks` (the (start, end) plane ranges,
@@ -104,9 +105,9 @@ impl PyPartial {
         (self.inner.height, self.inner.width, 3)
     }
 
-    fn __add__(&self, other: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
-        let other =
-            other.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("can only add a Partial to a Partial"))?;
+    /// `self + other`; anything but a Partial is NotImplemented, so that Python raises its
+    /// own TypeError ("unsupported operand type(s) for +: 'fogplanes.Partial' and 'int'").
+    fn __add__(&self, other: &Bound<'_, PyPartial>) -> PyResult<PyPartial> {
         partial::combine(self.inner.clone(), &other.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
     }
 
@@ -222,17 +223,12 @@ pub(crate) fn render_chunk(
 #[pyfunction]
 pub(crate) fn merge_plan(chunks: &Bound<'_, PyAny>, block: &Bound<'_, PyAny>) -> PyResult<Vec<PlanTuple>> {
     let count = |v: &Bound<'_, PyAny>, name: &str| -> PyResult<usize> {
-        let type_error = || -> PyResult<PyErr> {
-            Ok(PyTypeError::new_err(format!("{name}: expected an integer, got {}", v.get_type().name()?)))
-        };
-        let n = match v.extract::<i128>() {
-            _ if v.is_instance_of::<pyo3::types::PyBool>() => return Err(type_error()?),
-            Ok(n) => n,
-            Err(e) if e.is_instance_of::<PyOverflowError>(v.py()) => i128::MAX,
-            Err(_) => return Err(type_error()?),
-        };
-        let repr = v.repr()?;
-        usize::try_from(n).map_err(|_| PyValueError::new_err(format!("{name}: out of range, got {repr}")))
+        integer(name, v)?.and_then(|n| usize::try_from(n).ok()).ok_or_else(|| {
+            PyValueError::new_err(format!(
+                "{name}={}: out of range (a non-negative integer below 2**64)",
+                short_repr(v)
+            ))
+        })
     };
     let (n, b) = (count(chunks, "chunks")?, count(block, "block")?);
     let plan = partial::merge_plan(n, b).map_err(py_error)?;
@@ -242,25 +238,45 @@ pub(crate) fn merge_plan(chunks: &Bound<'_, PyAny>, block: &Bound<'_, PyAny>) ->
 /// A step of [`merge_plan`] for Python: (start, end, left, right).
 pub(crate) type PlanTuple = (usize, usize, Option<usize>, Option<usize>);
 
+/// The `Partial` of argument `name`, a `TypeError` naming it for anything else.
+fn partial_arg<'a, 'py>(value: &'a Bound<'py, PyAny>, name: &str) -> PyResult<&'a Bound<'py, PyPartial>> {
+    value.cast::<PyPartial>().map_err(|_| {
+        let type_name = value.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        PyTypeError::new_err(format!("{name}: expected a fogplanes.Partial, got {type_name}"))
+    })
+}
+
 /// Adds two adjacent partials of one render (`a.end == b.start`): `a.sums + b.sums` in
-/// float64. ValueError for partials of different renders, overlapping or not adjacent.
+/// float64. ValueError for partials of different renders, overlapping or not adjacent;
+/// TypeError naming `a` or `b` for anything but a Partial.
 #[pyfunction]
-pub(crate) fn combine(a: &Bound<'_, PyPartial>, b: &Bound<'_, PyPartial>) -> PyResult<PyPartial> {
+pub(crate) fn combine(a: &Bound<'_, PyAny>, b: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+    let (a, b) = (partial_arg(a, "a")?, partial_arg(b, "b")?);
     partial::combine(a.get().inner.clone(), &b.get().inner).map(|inner| PyPartial { inner }).map_err(py_error)
 }
 
 /// Merges partials (any order) into one covering their union, added in the canonical order that
 /// `render` uses: with the plan's chunks, the bits of `render`. ValueError for partials of
-/// different renders, overlaps and gaps.
+/// different renders, overlaps and gaps; TypeError naming `parts` (or the item) for anything but
+/// an iterable of Partials (a list, a tuple, a generator).
 #[pyfunction]
 pub(crate) fn merge_partials(py: Python<'_>, parts: &Bound<'_, PyAny>) -> PyResult<PyPartial> {
+    let type_name = |v: &Bound<'_, PyAny>| v.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+    // A str is iterable, and a Partial is not: neither is a list of partials.
+    let items = (!parts.is_instance_of::<PyString>()).then(|| parts.try_iter().ok()).flatten().ok_or_else(|| {
+        PyTypeError::new_err(format!("parts: expected a list of fogplanes.Partial, got {}", type_name(parts)))
+    })?;
     let mut all = Vec::new();
-    for p in parts.try_iter()? {
+    for (i, p) in items.enumerate() {
         let p = p?;
-        let p = p.cast::<PyPartial>().map_err(|_| PyTypeError::new_err("parts: expected Partial objects"))?;
+        let p = partial_arg(&p, &format!("parts[{i}]"))?;
         all.push(p.get().inner.clone());
     }
-    py.detach(|| partial::merge_in_canonical_order(all)).map(|inner| PyPartial { inner }).map_err(py_error)
+    py.detach(|| partial::merge_in_canonical_order(all)).map(|inner| PyPartial { inner }).map_err(|e| match e {
+        // What is wrong is the list: named as `parts`.
+        e @ fogplanes::Error::Partial(_) => PyValueError::new_err(format!("parts: {e}")),
+        e => py_error(e),
+    })
 }
 
 /// The image (float32, (height, width, 3)) of a render from the partial of all its planes:
@@ -268,14 +284,17 @@ pub(crate) fn merge_partials(py: Python<'_>, parts: &Bound<'_, PyAny>) -> PyResu
 /// given to `plan_render`. ValueError if the partial is of another render or does not cover
 /// 0..N. With `return_stats=True`: (image, stats).
 #[pyfunction]
-#[pyo3(signature = (scene, partial, return_stats = false, **kwargs))]
+#[pyo3(signature = (scene, partial, return_stats = None, **kwargs))]
+#[pyo3(text_signature = "(scene, partial, return_stats=False, **kwargs)")]
 pub(crate) fn finish_render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
-    partial: &Bound<'py, PyPartial>,
-    return_stats: bool,
+    partial: &Bound<'py, PyAny>,
+    return_stats: Option<Bound<'py, PyAny>>,
     kwargs: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let partial = partial_arg(partial, "partial")?;
+    let return_stats = flag("return_stats", &return_stats)?;
     let (r, given) = resolve_chunked(scene, kwargs)?;
     let p = &partial.get().inner;
     let film = run_interruptible(py, pool(r.threads)?, |_| partial::finish(&r.scene, &r.options, p))?

@@ -18,16 +18,16 @@ use fogplanes::weights::Estimator;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use std::path::PathBuf;
 use std::time::Duration;
 
-/// Reads and validates a scene file (TOML).
+/// Reads and validates a scene file (TOML) at `path` (str, bytes or os.PathLike).
 ///
 /// Raises FileNotFoundError (an OSError) if the file cannot be opened, ValueError naming the
-/// file, line and field if its content is invalid.
+/// file, line and field if its content is invalid, TypeError naming `path` for anything but a
+/// path.
 #[pyfunction]
-pub(crate) fn load_scene(path: PathBuf) -> PyResult<PyScene> {
-    load(&path).map(|inner| PyScene { inner })
+pub(crate) fn load_scene(path: &Bound<'_, PyAny>) -> PyResult<PyScene> {
+    load(&path_arg(path, "path")?).map(|inner| PyScene { inner })
 }
 
 /// Renders a scene with photon planes: the image, shape (height, width, 3), float32.
@@ -159,9 +159,11 @@ pub(crate) fn compare<'py>(
     Ok(d)
 }
 
-/// Reads the first RGB(A) layer of an EXR file as an array (height, width, 3), float32.
+/// Reads the first RGB(A) layer of an EXR file (`path`: str, bytes or os.PathLike) as an
+/// array (height, width, 3), float32.
 #[pyfunction]
-pub(crate) fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<'py>> {
+pub(crate) fn load_image<'py>(py: Python<'py>, path: &Bound<'py, PyAny>) -> PyResult<Image<'py>> {
+    let path = path_arg(path, "path")?;
     let film = Film::load_exr(&path).map_err(|e| file_error(&path, e.to_string()))?;
     // As every image read is checked: a NaN or an infinity is named, not handed on.
     film.check_finite("image").map_err(|e| PyValueError::new_err(format!("{}: {e}", path.display())))?;
@@ -176,10 +178,11 @@ pub(crate) fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Image<
 #[pyo3(text_signature = "(path, image, exposure=None)")]
 pub(crate) fn save_image(
     py: Python<'_>,
-    path: PathBuf,
+    path: &Bound<'_, PyAny>,
     image: &Bound<'_, PyAny>,
     exposure: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<()> {
+    let path = path_arg(path, "path")?;
     let mut given = Given::default();
     let stops = given.float(Setting::Exposure, exposure)?.map(|e| e as f32);
     let exposure = settings::exposure(stops).map_err(|e| given.error(e))?;

@@ -6,7 +6,7 @@ use crate::*;
 use fogplanes::partial::stable_hash;
 use fogplanes::scene::Scene;
 use fogplanes::settings::Setting;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
 /// A validated scene: camera, fog box, rectangular lights and render defaults. Read-only.
@@ -142,11 +142,28 @@ impl PyScene {
     /// Parses and validates scene text (TOML, the schema of media_scenes/*.toml).
     ///
     /// `name` is the scene's name; `file` names the text in error messages. Raises ValueError
-    /// with the file, line, field and problem for anything invalid.
+    /// with the file, line, field and problem for anything invalid, TypeError naming the
+    /// argument for one that is not a str (bytes too: decode the text first).
     #[staticmethod]
-    #[pyo3(signature = (text, name = "scene", file = "<string>"))]
-    fn from_toml(text: &str, name: &str, file: &str) -> PyResult<Self> {
-        Scene::parse(text, file, name).map(|inner| PyScene { inner }).map_err(|e| PyValueError::new_err(e.to_string()))
+    #[pyo3(signature = (text, name = None, file = None))]
+    #[pyo3(text_signature = "(text, name='scene', file='<string>')")]
+    fn from_toml(
+        text: &Bound<'_, PyAny>,
+        name: Option<&Bound<'_, PyAny>>,
+        file: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let text: String = text.extract().map_err(|_| {
+            let type_name = text.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+            PyTypeError::new_err(format!("text: expected the scene's TOML text (a str), got {type_name}"))
+        })?;
+        let string = |v: Option<&Bound<'_, PyAny>>, arg: &str, default: &str| match v {
+            None => Ok(default.to_string()),
+            Some(v) => v.extract::<String>().map_err(|_| wrong_type(arg, v, "a str")),
+        };
+        let (name, file) = (string(name, "name", "scene")?, string(file, "file", "<string>")?);
+        Scene::parse(&text, &file, &name)
+            .map(|inner| PyScene { inner })
+            .map_err(|e| PyValueError::new_err(e.to_string()))
     }
 
     /// The scene made from its text, name, file and resolution: what a pickled scene is
@@ -189,6 +206,9 @@ impl PyScene {
 
     /// The same scene at another resolution.
     fn with_resolution(&self, width: &Bound<'_, PyAny>, height: &Bound<'_, PyAny>) -> PyResult<Self> {
+        // The types named by argument, the range as the resolution (`resolution=(0, 4): ...`).
+        integer("width", width)?;
+        integer("height", height)?;
         let mut given = Given::default();
         let w = given.uint32(Setting::Resolution, Some(width))?.unwrap_or_default();
         let h = given.uint32(Setting::Resolution, Some(height))?.unwrap_or_default();

@@ -11,8 +11,11 @@ Images are numpy arrays of shape (height, width, 3), float32, linear RGB.
     >>> fogplanes.compare(image, ref)["mse"]  # doctest: +SKIP
 
 Bad input raises ValueError with the command line's message, the setting named as given here
-(`planes=0: ...` where the command line says `--planes: ...`); a file that cannot be opened
-raises OSError (FileNotFoundError, ...). Ctrl-C stops a render with KeyboardInterrupt.
+(`planes=0: ...` where the command line says `--planes: ...`), and an argument of the wrong type
+TypeError, named the same way (`planes=2048.0: expected an integer, got float`); a file that
+cannot be opened raises OSError (FileNotFoundError, ...). A path is what `open()` takes: a str,
+bytes (decoded as `os.fsdecode` decodes them) or an os.PathLike. Ctrl-C stops a render with
+KeyboardInterrupt.
 """
 
 from ._fogplanes import (

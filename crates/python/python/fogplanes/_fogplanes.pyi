@@ -1,7 +1,7 @@
 """Type stubs of the native module fogplanes._fogplanes (crates/python/src/lib.rs)."""
 
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Final, Literal, TypeAlias, TypedDict, overload
 
 import numpy as np
@@ -27,7 +27,9 @@ ALLOCATOR_ENVIRONMENT: Final[Mapping[str, str]]
 Vec3: TypeAlias = tuple[float, float, float]
 Image: TypeAlias = npt.NDArray[np.float32]
 """An image: shape (height, width, 3), float32, linear RGB."""
-PathLike: TypeAlias = str | os.PathLike[str]
+PathLike: TypeAlias = str | bytes | os.PathLike[str] | os.PathLike[bytes]
+"""A path as `open()` takes it: bytes are decoded as `os.fsdecode` decodes them (on POSIX the
+file system's own bytes, unchanged). Anything else is a TypeError naming the argument."""
 
 class Camera:
     """The pinhole camera of a scene."""
@@ -116,7 +118,8 @@ class Scene:
         """Parses and validates scene text (TOML, the schema of media_scenes/*.toml).
 
         `name` is the scene's name; `file` names the text in error messages. Raises ValueError
-        with the file, line, field and problem for anything invalid.
+        with the file, line, field and problem for anything invalid, TypeError naming the
+        argument for one that is not a str (bytes too: decode the text first).
         """
     def with_resolution(self, width: int, height: int) -> Scene:
         """The same scene at another resolution."""
@@ -212,7 +215,8 @@ def load_scene(path: PathLike) -> Scene:
     """Reads and validates a scene file (TOML).
 
     Raises FileNotFoundError (an OSError) if the file cannot be opened, ValueError naming the
-    file, line and field if its content is invalid.
+    file, line and field if its content is invalid, TypeError naming `path` for anything but a
+    path.
     """
 
 @overload
@@ -467,9 +471,10 @@ def merge_plan(chunks: int, block: int) -> list[MergeStep]:
 def combine(a: Partial, b: Partial) -> Partial:
     """a + b for adjacent partials of one render (a.end == b.start)."""
 
-def merge_partials(parts: list[Partial]) -> Partial:
-    """Partials in any order merged in the canonical order: with the plan's chunks, the bits of
-    `render`. ValueError for different renders, overlaps and gaps."""
+def merge_partials(parts: Iterable[Partial]) -> Partial:
+    """Partials in any order (a list, a tuple, any iterable) merged in the canonical order: with
+    the plan's chunks, the bits of `render`. ValueError naming `parts` for different renders,
+    overlaps and gaps; TypeError naming `parts` (or `parts[i]`) for anything but Partials."""
 
 @overload
 def finish_render(

@@ -13,11 +13,12 @@ this machine (bound to 127.0.0.1) and closes it afterwards. Pass a
 (the documentation's "On a cluster") shows all three. `client` is a Client, not an address: a string is a
 TypeError (connect with `distributed.Client(address)`, which you then own and close).
 
-Every function takes its `scene` as a `fogplanes.Scene` or the path of a scene file (str or
-os.PathLike), read on this machine: the workers get the scene, not the path. Every argument is
-checked before any cluster starts or is asked anything: a bad one raises ValueError (a bad
-value) or TypeError (a bad type) naming it; a scene file that cannot be opened raises OSError; a
-client whose scheduler is gone (or that was closed) raises ValueError naming the client.
+Every function takes its `scene` as a `fogplanes.Scene` or the path of a scene file (str, bytes
+or os.PathLike, as `open()` takes them), read on this machine: the workers get the scene, not the
+path. Every argument is checked before any cluster starts or is asked anything: a bad one raises
+ValueError (a bad value) or TypeError (a bad type) naming it; a scene file that cannot be opened
+raises OSError; a client whose scheduler is gone (or that was closed) raises ValueError naming
+the client.
 
 How a render is spread (why the image does not depend on the cluster):
 
@@ -90,27 +91,27 @@ BAND_ROWS = 16
 #: How many leaf tasks per Dask thread the automatic block size aims at (load balance).
 TASKS_PER_SLOT = 8
 
-SceneArg = native.Scene | str | os.PathLike
+SceneArg = native.Scene | str | bytes | os.PathLike
 
 
 # -- Arguments: every one checked before any cluster starts ---------------------------------------
 
 
 def _scene(scene: SceneArg) -> native.Scene:
-    """The scene of a `scene` argument: a `fogplanes.Scene`, or the path of a scene file (str or
-    os.PathLike), read here (the workers get the scene: they need not see the file)."""
+    """The scene of a `scene` argument: a `fogplanes.Scene`, or the path of a scene file (str,
+    bytes or os.PathLike), read here (the workers get the scene: they need not see the file)."""
     if isinstance(scene, native.Scene):
         return scene
-    if isinstance(scene, (str, os.PathLike)):
+    if isinstance(scene, (str, bytes, os.PathLike)):
         return native.load_scene(scene)
-    raise TypeError(f"scene: expected a fogplanes.Scene or the path of a scene file (str or os.PathLike), "
+    raise TypeError(f"scene: expected a fogplanes.Scene or the path of a scene file (str, bytes or os.PathLike), "
                     f"got {type(scene).__name__}")
 
 
 def _int(name: str, value: Any, least: int) -> int:
     """An integer argument (not a bool) of at least `least`."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name}={value!r}: expected an integer")
+        raise TypeError(f"{name}={value!r}: expected an integer, got {type(value).__name__}")
     if value < least:
         raise ValueError(f"{name}={value!r}: must be an integer of at least {least}")
     return int(value)
@@ -118,7 +119,7 @@ def _int(name: str, value: Any, least: int) -> int:
 
 def _flag(name: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name}={value!r}: expected True or False")
+        raise TypeError(f"{name}={value!r}: expected True or False, got {type(value).__name__}")
     return bool(value)
 
 
@@ -127,7 +128,8 @@ def _block(chunks_per_task: Any) -> int | None:
     if chunks_per_task is None:
         return None
     if isinstance(chunks_per_task, bool) or not isinstance(chunks_per_task, numbers.Integral):
-        raise TypeError(f"chunks_per_task={chunks_per_task!r}: expected a power of two (an integer) or None")
+        raise TypeError(f"chunks_per_task={chunks_per_task!r}: expected a power of two (an integer) or None, "
+                        f"got {type(chunks_per_task).__name__}")
     n = int(chunks_per_task)
     if n < 1 or n & (n - 1):
         raise ValueError(f"chunks_per_task={chunks_per_task!r}: must be a power of two (1, 2, 4, ...) or None")
@@ -186,7 +188,7 @@ def _render_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
     kwargs = {k: v for k, v in kwargs.items() if v is not None}
     for name in _NAMED_SETTINGS:
         if name in kwargs and not isinstance(kwargs[name], str):
-            raise TypeError(f"{name}={kwargs[name]!r}: expected a name (a str)")
+            raise TypeError(f"{name}={kwargs[name]!r}: expected a name (a str), got {type(kwargs[name]).__name__}")
     if "pixel_center" in kwargs:
         _flag("pixel_center", kwargs["pixel_center"])
     return kwargs
@@ -483,7 +485,10 @@ def reference(scene: SceneArg, spp: int | None = None, *, pixel_center: bool = F
     # settings on one pixel (its pilot costs milliseconds), the threads.
     if resolution is not None:
         if not isinstance(resolution, tuple) or len(resolution) != 2:
-            raise TypeError(f"resolution={resolution!r}: expected (width, height)")
+            raise TypeError(f"resolution={resolution!r}: expected (width, height), got {type(resolution).__name__}")
+        for side in resolution:  # named as fogplanes.reference names them
+            if isinstance(side, bool) or not isinstance(side, numbers.Integral):
+                raise TypeError(f"resolution={side!r}: expected an integer, got {type(side).__name__}")
         scene_at = scene.with_resolution(*resolution)
     else:
         scene_at = scene
@@ -526,12 +531,21 @@ def _row(scene: native.Scene, ref: np.ndarray, estimator: str, planes: int | Non
     }
 
 
-def _listed(value: Any, default: Iterable[Any]) -> list[Any]:
+def _listed(name: str, value: Any, default: Iterable[Any], kind: type, what: str) -> list[Any]:
+    """A sweep's axis `name`: one value of `kind` (`what`: "a name (a str)", "an integer"), or
+    an iterable of them (a list, a tuple, a range, an array), each of its type (not a bool);
+    None: `default`. Their values are the core's to check."""
     if value is None:
         return list(default)
-    if isinstance(value, (str, numbers.Integral)):
+    if isinstance(value, kind) and not isinstance(value, bool):
         return [value]
-    return list(value)
+    if isinstance(value, (str, bytes, bool)) or not isinstance(value, Iterable):
+        raise TypeError(f"{name}={value!r}: expected {what} or a list of them, got {type(value).__name__}")
+    items = list(value)
+    for i, item in enumerate(items):
+        if isinstance(item, bool) or not isinstance(item, kind):
+            raise TypeError(f"{name}[{i}]={item!r}: expected {what}, got {type(item).__name__}")
+    return items
 
 
 def _check_image(image: np.ndarray, what: str) -> None:
@@ -561,19 +575,29 @@ def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | Non
     `render`; the reference must have the renders' shape (height, width, 3)."""
     scene = _scene(scene)
     _common(client, workers, threads, progress, retries)
+    for axis in ("estimator", "seed"):  # the sweep's own: a single one is a list of one
+        if axis in render_kwargs:
+            raise TypeError(f"unexpected keyword argument '{axis}': table sweeps {axis}s= (one or a list)")
     kwargs = _render_kwargs(render_kwargs)
-    runs = [(e, n, s) for e in _listed(estimators, native.ESTIMATORS)
-            for n in _listed(planes, [None]) for s in _listed(seeds, [None])]
+    runs = [(e, n, s) for e in _listed("estimators", estimators, native.ESTIMATORS, str, "a name (a str)")
+            for n in _listed("planes", planes, [None], numbers.Integral, "an integer")
+            for s in _listed("seeds", seeds, [None], numbers.Integral, "an integer")]
     shapes = set()
     for e, n, s in runs:  # every setting checked before any cluster
         run = _render_kwargs(dict(estimator=e, planes=n, seed=s))
         shapes.add(tuple(native.plan_render(scene, **run, **kwargs)["shape"]))
     _check_threads(scene, threads)
-    if isinstance(reference, tuple):
+    if isinstance(reference, tuple) and len(reference) == 2:  # reference()'s (image, stderr)
         reference = reference[0]
-    if isinstance(reference, (str, os.PathLike)):
+    if isinstance(reference, (str, bytes, os.PathLike)):
         reference = native.load_image(reference)
-    ref = np.asarray(reference)
+    try:
+        ref = np.asarray(reference)
+    except (TypeError, ValueError) as e:  # a ragged list
+        raise type(e)(f"reference: {e}") from e
+    if ref.ndim == 0:  # a number, None, ...: numpy makes an array of anything
+        raise TypeError(f"reference: expected an image (an array of shape (height, width, 3)), its path, or "
+                        f"reference()'s (image, stderr) pair, got {type(reference).__name__}")
     for shape in shapes:
         if ref.shape != shape:
             raise ValueError(f"reference: expected an image of the renders' shape {shape}, "
