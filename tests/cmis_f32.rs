@@ -1,6 +1,6 @@
 //! `cmis-exact` evaluates its closed form in f32 (vectorised); this measures it against the f64
 //! closed form on the benchmark scene's own hits: the relative error hit by hit, and its mean,
-//! which is the relative bias it adds to the image (a hit contributes K / (N P_l D), so a
+//! which is the relative bias it adds to the image (a hit contributes eta / (N P_l D), so a
 //! relative error e in D is one of -e in the contribution).
 
 use fogplanes::gather::GatherContext;

@@ -70,7 +70,7 @@ edge_v = [0.5, 0.0, 0.0]
 radiance = [2.0, 6.0, 2.0]
 "#;
 
-/// N planes in K groups (N not a multiple of K, so the groups differ in size and start off the
+/// N planes in J groups (N not a multiple of J, so the groups differ in size and start off the
 /// Sobol sequence's powers of two), group k gathered along ray k alone, every plane weighted
 /// 1/N: the expectation is sum_k |G_k|/N L(ray k), with L by quadrature.
 #[test]
@@ -385,7 +385,7 @@ fn a_render_in_passes_matches_the_reference() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// Each plane meets the ray set of its group (floor(i K / N)) in whatever chunk it is rendered:
+/// Each plane meets the ray set of its group (floor(i J / N)) in whatever chunk it is rendered:
 /// chunks that cut the groups anywhere, rendered apart and merged, give the render bit for bit,
 /// and their sums equal each group gathered alone along its own ray set (made here, apart from
 /// the chunks' code), up to f32 summation order.

@@ -1,5 +1,5 @@
 //! One camera ray against one photon plane: the hit test and the weighted contribution
-//! `C = K / (N P_l D)` of docs/mathematics.md section 2, summed without its factor `power / N`,
+//! `C = eta / (N P_l D)` of docs/mathematics.md section 2, summed without its factor `power / N`,
 //! which is the same for every plane of a light and is applied once per light. Everything here
 //! is f32 and relative to the ray origin, prepared once per plane so that a hit costs a few dot
 //! products and one exponential.

@@ -24,7 +24,7 @@
 //! | | [`scene`] | scene files: schema, validation, the validated [`scene::Scene`] and its light choice by power |
 //! | planes | [`photon_plane`] | photon-plane sampling (section 2), the plane set, the clipped plane polygon |
 //! | | [`weights`] | the estimators: their registry and dispatch (`mod.rs`), their denominators D (`denominators.rs`, section 2), the closed form of cmis-exact (`closed_form.rs`, section 3) |
-//! | one hit | [`gather`] | one ray against one plane: hit test and weighted contribution `C = K / (N P_l D)` (summed light by light, its factor `power / N` applied once per light), written once for every vector width |
+//! | one hit | [`gather`] | one ray against one plane: hit test and weighted contribution `C = eta / (N P_l D)` (summed light by light, its factor `power / N` applied once per light), written once for every vector width |
 //! | | [`occlusion`] | which other panels may shadow a plane, and the per-hit test (section 2.3) |
 //! | traversal | [`kernel`] | the span kernels (AVX-512, AVX2, portable, per-hit) and the choice between them; the [`kernel::Aggregate`] interface every structure answers |
 //! | | [`raster`] | planes rasterised in screen space: the fast structure for camera rays |

@@ -38,7 +38,7 @@ pub struct PhotonPlane {
     pub direction: DVec3,
     /// The factor of one plane's contribution that does not depend on the hit (RGB):
     /// sigma_s rho pi Le A / P_l, the same for every plane of a light. A hit adds
-    /// `power * Tr / D / N` (docs/mathematics.md section 2: K / (N P_l D)); the gathering sums
+    /// `power * Tr / D / N` (docs/mathematics.md section 2: eta / (N P_l D)); the gathering sums
     /// a light's `Tr / D` and multiplies by `power` once ([`crate::gather`]).
     pub power: DVec3,
 }

@@ -1,11 +1,11 @@
 //! The pixel: its area, the ray sets that sample it and the plane groups they gather
 //! (docs/mathematics.md section 8).
 //!
-//! A pixel's value is the mean of the radiance over its square (a box filter). With `K` ray
-//! sets (`--spp K`), ray set `k` crosses every pixel once, at point `k` of a per-pixel
-//! Owen-scrambled 2D Sobol sequence, and the `N` planes are split into `K` groups of consecutive
-//! indices: plane `i` is gathered only with ray set `floor(i K / N)`. Every plane is used once
-//! and still weighs `1/N`, so the pixel gets `K` stratified positions for the cost of one pass
+//! A pixel's value is the mean of the radiance over its square (a box filter). With `J` ray
+//! sets (`--spp J`), ray set `k` crosses every pixel once, at point `k` of a per-pixel
+//! Owen-scrambled 2D Sobol sequence, and the `N` planes are split into `J` groups of consecutive
+//! indices: plane `i` is gathered only with ray set `floor(i J / N)`. Every plane is used once
+//! and still weighs `1/N`, so the pixel gets `J` stratified positions for the cost of one pass
 //! ([`ray_set_of_plane`], [`plane_group`], [`ray_set_position`]). The direct emission is
 //! integrated over the pixel separately ([`crate::emission`]).
 
@@ -26,14 +26,14 @@ use std::time::Instant;
 const RAY_SET_STREAM: u64 = 0x91A5_E75D;
 
 /// The ray set that plane `i` of a set of `planes` is gathered with when pixels have
-/// `ray_sets` ray sets: `floor(i K / N)` (section 8.1). It depends on (i, N, K) alone, so a
+/// `ray_sets` ray sets: `floor(i J / N)` (section 8.1). It depends on (i, N, J) alone, so a
 /// plane meets the same rays in a render of the whole set and in a render of any range of it.
 pub fn ray_set_of_plane(i: usize, planes: usize, ray_sets: u32) -> u32 {
     (i as u128 * ray_sets as u128 / planes.max(1) as u128) as u32
 }
 
-/// The planes gathered with ray set `k`: the indices `i` with `floor(i K / N) = k`, that is
-/// `ceil(k N / K) .. ceil((k + 1) N / K)`: consecutive blocks, empty when `N < K` leaves a ray
+/// The planes gathered with ray set `k`: the indices `i` with `floor(i J / N) = k`, that is
+/// `ceil(k N / J) .. ceil((k + 1) N / J)`: consecutive blocks, empty when `N < J` leaves a ray
 /// set without planes.
 pub fn plane_group(k: u32, planes: usize, ray_sets: u32) -> Range<usize> {
     let start = |k: u32| (k as u128 * planes as u128).div_ceil(ray_sets.max(1) as u128) as usize;

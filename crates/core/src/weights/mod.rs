@@ -1,6 +1,6 @@
 //! The estimators: their registry, and the dispatch from a name to a monomorphised gathering
 //! loop. The estimators differ only in the denominator `D` of docs/mathematics.md section 2
-//! ([`Denominator`], in `denominators.rs`): a hit contributes `K / (N P_l D)`. The closed form of
+//! ([`Denominator`], in `denominators.rs`): a hit contributes `eta / (N P_l D)`. The closed form of
 //! `cmis-exact` (section 3) is in `closed_form.rs`.
 //!
 //! Notation (docs/mathematics.md section 2): `det(beta) = (d(beta) x wl) . we = cos(beta) a_u + sin(beta) a_v`,
@@ -44,7 +44,7 @@ pub struct EstimatorInfo {
     pub name: &'static str,
     /// Where the weighting comes from in the paper (West et al. 2020).
     pub source: &'static str,
-    /// The denominator D of a hit's contribution K / (N P_l D) (docs/mathematics.md section 2).
+    /// The denominator D of a hit's contribution eta / (N P_l D) (docs/mathematics.md section 2).
     pub denominator: &'static str,
     /// Whether `--orientations K` applies.
     pub orientations: bool,
