@@ -235,9 +235,9 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_parser = sampler_parser())]
     pub(crate) sampler: Option<Sampler>,
     /// Camera samples per pixel (ray sets), stratified over the pixel; each gathers its own
-    /// share of the N planes, so K of them cost about what one does (default: the scene's, else
+    /// share of the N planes, so J of them cost about what one does (default: the scene's, else
     /// 16).
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "J")]
     pub(crate) spp: Option<u32>,
     /// Render for this many seconds of wall time (the whole command) instead of a fixed plane
     /// count: planes in passes, each extending the set, until the budget is spent.
