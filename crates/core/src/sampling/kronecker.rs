@@ -20,8 +20,16 @@ impl<const D: usize> Kronecker<D> {
     /// Point `i` of the sequence rotated by `shift` (Cranley-Patterson): uniform in [0, 1)^D
     /// for a uniform shift, so each replicate is an unbiased estimate.
     pub fn point(&self, i: u64, shift: &[f64; D]) -> [f64; D] {
-        std::array::from_fn(|j| (shift[j] + (i as f64 * self.alpha[j]).fract()).fract())
+        std::array::from_fn(|j| fract(shift[j] + fract(i as f64 * self.alpha[j])))
     }
+}
+
+/// `x.fract()` for `0 <= x < 2^63`, the same bits: the cast truncates as `trunc` does, and the
+/// integer it gives is an f64 exactly. Inline, where `trunc` is a call into libm on x86-64
+/// without SSE4.1 (12 calls a reference sample, 5% of the reference's time).
+#[inline(always)]
+fn fract(x: f64) -> f64 {
+    x - (x as u64) as f64
 }
 
 impl<const D: usize> Default for Kronecker<D> {
@@ -47,6 +55,17 @@ mod tests {
         for i in [0u64, 1, 17, 1 << 40] {
             let p = k.point(i, &[0.999_999, 0.5, 0.0, 0.25, 0.75, 0.1]);
             assert!(p.iter().all(|x| (0.0..1.0).contains(x)), "{p:?}");
+        }
+    }
+
+    /// The inline fract is f64's, bit for bit, over the range the points give it.
+    #[test]
+    fn fract_is_f64s() {
+        let k = Kronecker::<6>::new();
+        let mut xs = vec![0.0, 0.5, 1.0, 1.0 - f64::EPSILON / 2.0, 2.0 - f64::EPSILON, 4503599627370495.5, 9.2e18];
+        xs.extend((0..10_000u64).flat_map(|i| k.alpha.map(|a| (i * 7_919 + (i << 40)) as f64 * a)));
+        for x in xs {
+            assert_eq!(fract(x).to_bits(), x.fract().to_bits(), "{x}");
         }
     }
 }
