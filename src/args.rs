@@ -13,12 +13,8 @@ use fogplanes::weights::Estimator;
 use std::path::PathBuf;
 use std::sync::LazyLock;
 
-/// A list's default as it is typed, comma separated: clap shows a list of defaults with spaces,
-/// which no value of a comma-separated list can be.
-fn typed(list: &'static LazyLock<String>) -> &'static str {
-    list.as_str()
-}
-
+// The lists' defaults as they are typed, comma separated: clap shows a list of defaults with
+// spaces, which no value of a comma-separated list can be.
 static SCALING_PLANES: LazyLock<String> = LazyLock::new(|| joined(settings::SCALING_PLANES));
 static TABLE_SWEEP: LazyLock<String> = LazyLock::new(|| joined(settings::TABLE_SWEEP));
 static TABLE_SAMPLERS: LazyLock<String> = LazyLock::new(|| joined(settings::TABLE_SAMPLERS.map(|s| s.name())));
@@ -153,7 +149,7 @@ pub(crate) struct ScalingArgs {
     #[arg(long, short, default_value = Estimator::DEFAULT.name(), value_parser = estimator_parser())]
     pub(crate) estimator: Estimator,
     /// Plane counts, comma separated.
-    #[arg(long, value_delimiter = ',', default_value = typed(&SCALING_PLANES))]
+    #[arg(long, value_delimiter = ',', default_value = SCALING_PLANES.as_str())]
     pub(crate) planes: Vec<u64>,
     /// Resolutions WxH, comma separated [default: 160x90,320x180,640x360,1280x720].
     #[arg(long, value_delimiter = ',', value_parser = parse_resolution)]
@@ -399,7 +395,7 @@ pub(crate) struct TableArgs {
     #[arg(long)]
     pub(crate) pixel_center: bool,
     /// Plane counts of the error-versus-time sweep, comma separated.
-    #[arg(long, value_delimiter = ',', default_value = typed(&TABLE_SWEEP), conflicts_with = "no_sweep")]
+    #[arg(long, value_delimiter = ',', default_value = TABLE_SWEEP.as_str(), conflicts_with = "no_sweep")]
     pub(crate) sweep: Vec<u64>,
     /// Skip the error-versus-time sweep (no plot).
     #[arg(long)]
@@ -411,7 +407,7 @@ pub(crate) struct TableArgs {
     #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
     pub(crate) equal_time: Option<f64>,
     /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
-    #[arg(long, value_delimiter = ',', default_value = typed(&TABLE_SAMPLERS), value_parser = sampler_parser())]
+    #[arg(long, value_delimiter = ',', default_value = TABLE_SAMPLERS.as_str(), value_parser = sampler_parser())]
     pub(crate) samplers: Vec<Sampler>,
     /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
     #[arg(long, value_delimiter = ',', value_name = "K")]
@@ -617,6 +613,15 @@ mod tests {
             panic!("scaling")
         };
         assert_eq!(s.planes, settings::SCALING_PLANES);
-        assert_eq!(TABLE_SWEEP.as_str(), "5120,10240,20480,40960,81920,163840");
+        // As `--help` shows them: one value, comma separated.
+        let cli = <Cli as clap::CommandFactory>::command();
+        let shown = |command: &str, arg: &str| -> Vec<String> {
+            let c = cli.find_subcommand(command).unwrap();
+            let a = c.get_arguments().find(|a| a.get_id() == arg).unwrap();
+            a.get_default_values().iter().map(|v| v.to_string_lossy().into_owned()).collect()
+        };
+        assert_eq!(shown("table", "sweep"), ["5120,10240,20480,40960,81920,163840"]);
+        assert_eq!(shown("table", "samplers"), ["sobol,independent"]);
+        assert_eq!(shown("scaling", "planes"), ["10000,40000,160000,640000"]);
     }
 }

@@ -681,7 +681,7 @@ pub fn gather_pieces(
     Ok(found)
 }
 
-/// Adds `after - before` to `tap`, pixel by pixel, in f64 (exact: both are f32).
+/// Adds `after - before` to `tap`, pixel by pixel, in f64 (as the raster's tiles add it).
 fn add_difference(tap: &mut [DVec3], before: &[Vec3], after: &[Vec3]) {
     for ((t, b), a) in tap.iter_mut().zip(before).zip(after) {
         *t += a.as_dvec3() - b.as_dvec3();
@@ -725,9 +725,14 @@ mod tests {
     /// A piece's tap holds what the piece added to each pixel, `after - before` of its target's
     /// sums as a gathering of the pieces one by one leaves them, and the taps change nothing of
     /// the sums: two pieces along two ray sets into one target, each with its tap, and a third
-    /// into another target, on every CPU structure (the raster's tiles and the others' copies).
+    /// into another target, on every CPU structure (the raster's tiles and the others' copies),
+    /// on 64 workers (the raster's heavy tiles cut into parts, each with its rows of the taps).
     #[test]
     fn a_pieces_tap_holds_its_own_sums() {
+        rayon::ThreadPoolBuilder::new().num_threads(64).build().unwrap().install(a_pieces_tap_holds_its_own_sums_here);
+    }
+
+    fn a_pieces_tap_holds_its_own_sums_here() {
         let scene = small_scene();
         let sets = [0, 1, 0].map(|k| crate::pixel::ray_set_rays(&scene, 2, k, false));
         let pixels = sets[0].len();

@@ -471,18 +471,19 @@ impl ScreenRaster {
     /// of a heavy tile): its planes light by light, each against its spans
     /// (clipped to the tile's columns), each light's sums folded into the tile's totals when its
     /// planes end ([`kernel::fold`]), the totals added to `sums` (the tile's rows) at the end,
-    /// and what that added to each pixel, `after - before` in f64 (exact: both are f32), to
-    /// `tap`'s rows where there is one: the piece's own sums, as the render's error image needs
-    /// them (section 10.1), with no copy of the image. The cancel flag is read before each plane (a relaxed load, nothing beside a plane's
-    /// work), so that even a tile of millions of planes stops within milliseconds.
+    /// and what that added to each pixel, `after - before` in f64 of the f32 sums (as
+    /// [`crate::spread::GroupSpread::add`] takes it from copies), to `tap`'s rows where there is
+    /// one: the piece's own sums, as the render's error image needs them (section 10.1), with no
+    /// copy of the image. The cancel flag is read before each plane (a relaxed load, nothing
+    /// beside a plane's work), so that even a tile of millions of planes stops within
+    /// milliseconds.
     fn gather_tile<D: Denominator, const CONTRIBUTE: bool>(
         &self,
         with: Gathering<D>,
         prepared: &[D::Plane],
         (tile, skip): (usize, u32),
         soa: &PaddedRays,
-        sums: &mut [&mut [Vec3]],
-        tap: Option<&mut [&mut [DVec3]]>,
+        (sums, tap): (&mut [&mut [Vec3]], Option<&mut [&mut [DVec3]]>),
         control: Control,
     ) -> GatherStats {
         let Gathering { ctx, weights, kernel } = with;
@@ -622,6 +623,27 @@ pub struct RasterPiece<'a> {
     pub tap: Option<usize>,
 }
 
+/// A tile's rows (or a part's: some of them) of a target's sums, and of its taps, by tap.
+struct PartRows<'s> {
+    sums: Vec<&'s mut [Vec3]>,
+    taps: Vec<(usize, Vec<&'s mut [DVec3]>)>,
+}
+
+impl<'s> PartRows<'s> {
+    /// The rows from `at` on, taken from these.
+    fn split_off(&mut self, at: usize) -> PartRows<'s> {
+        let taps = self.taps.iter_mut().map(|(tap, rows)| (*tap, rows.split_off(at))).collect();
+        PartRows { sums: self.sums.split_off(at), taps }
+    }
+
+    /// The rows a piece with `tap` adds to: the sums', and its tap's.
+    fn for_piece(&mut self, tap: Option<usize>) -> (&mut [&'s mut [Vec3]], Option<&mut [&'s mut [DVec3]]>) {
+        let tap =
+            tap.map(|t| self.taps.iter_mut().find(|(tap, _)| *tap == t).expect("the target's tap").1.as_mut_slice());
+        (&mut self.sums, tap)
+    }
+}
+
 /// Each tile's rows of an image `buf` (row-major), tile by tile: the tiles cut every row into
 /// disjoint runs.
 fn tiles_rows<T>(buf: &mut [T], tiling: Tiling) -> Vec<Vec<&mut [T]>> {
@@ -699,16 +721,22 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
         }
         prepared.push(planes.into_iter().map(|p| p.expect("not cancelled")).collect());
     }
-    // Each target's tiles' rows of its sums, and of its taps (by tap).
-    let mut tiles: Vec<(usize, usize, Vec<&mut [Vec3]>, Vec<(usize, Vec<&mut [DVec3]>)>)> =
-        Vec::with_capacity(sums.len() * tiling.count());
+    // A target of the window that no piece of this gathering adds to has no work here.
+    let busy: Vec<bool> = (0..sums.len()).map(|c| pieces.iter().any(|p| p.target == c)).collect();
+    // Each target's tiles' rows of its sums, and of its taps.
+    let mut tiles: Vec<(usize, usize, PartRows)> = Vec::with_capacity(sums.len() * tiling.count());
     for (target, sums) in sums.iter_mut().enumerate() {
-        tiles.extend(tiles_rows(sums, tiling).into_iter().enumerate().map(|(t, rows)| (target, t, rows, Vec::new())));
+        tiles.extend(
+            tiles_rows(sums, tiling)
+                .into_iter()
+                .enumerate()
+                .map(|(t, sums)| (target, t, PartRows { sums, taps: Vec::new() })),
+        );
     }
     for (tap, buf) in taps.iter_mut().enumerate() {
         let Some(target) = tap_target[tap] else { continue };
         for (t, rows) in tiles_rows(buf, tiling).into_iter().enumerate() {
-            tiles[target * tiling.count() + t].3.push((tap, rows));
+            tiles[target * tiling.count() + t].2.taps.push((tap, rows));
         }
     }
     // A tile with more work than its share is cut into parts of at least MIN_TILE_ROWS whole
@@ -723,33 +751,31 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
         pieces.iter().filter(|p| p.target == target).map(|p| p.raster.work[t] as usize).sum::<usize>()
     };
     let per_worker = if tiling.across() > 1 { SPLIT_PER_WORKER } else { 4 };
-    let share = (tiles.iter().map(|(target, t, _, _)| load(*target, *t)).sum::<usize>()
+    let share = (tiles.iter().map(|(target, t, _)| load(*target, *t)).sum::<usize>()
         / (per_worker * crate::schedule::workers()))
     .max(1);
     let mut parts = Vec::with_capacity(tiles.len());
-    for (target, tile, mut rows, mut tap_rows) in tiles {
+    for (target, tile, mut rows) in tiles.into_iter().filter(|(target, _, _)| busy[*target]) {
         let load = load(target, tile);
-        let n = load.div_ceil(share).clamp(1, rows.len().div_ceil(MIN_TILE_ROWS as usize).max(1));
-        let per = rows.len().div_ceil(n).max(1);
+        let n = load.div_ceil(share).clamp(1, rows.sums.len().div_ceil(MIN_TILE_ROWS as usize).max(1));
+        let per = rows.sums.len().div_ceil(n).max(1);
         let mut skip = 0;
-        while !rows.is_empty() {
-            let take = per.min(rows.len());
-            let rest = rows.split_off(take);
-            let taps_rest = tap_rows.iter_mut().map(|(tap, r)| (*tap, r.split_off(take))).collect();
-            parts.push((target, tile, skip as u32, load / n, rows, tap_rows));
+        while !rows.sums.is_empty() {
+            let rest = rows.split_off(per.min(rows.sums.len()));
+            parts.push((target, tile, skip as u32, load / n, rows));
             skip += per;
-            (rows, tap_rows) = (rest, taps_rest);
+            rows = rest;
         }
     }
     // The heaviest first: the last a worker takes are then small ones, and the workers finish
     // together (with 23 bands of rows for 2 workers, in image order one of them idled for 5% of
     // the gathering's wall time).
-    parts.sort_by_key(|&(target, tile, skip, load, _, _)| (std::cmp::Reverse(load), target, tile, skip));
+    parts.sort_by_key(|&(target, tile, skip, load, _)| (std::cmp::Reverse(load), target, tile, skip));
     let section = control.section("tiles");
     let each = parts
         .into_par_iter()
         .with_max_len(1)
-        .map(|(target, tile, skip, _, mut rows, mut tap_rows)| {
+        .map(|(target, tile, skip, _, mut rows)| {
             let stats = section.unit(|| {
                 let mut stats = GatherStats::default();
                 // The part's rays, laid out once for the consecutive pieces along one ray set (a
@@ -761,22 +787,18 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
                     }
                     if padded.as_ref().is_none_or(|(along, _)| *along != piece.rays.as_ptr()) {
                         let (tile_rows, cols) = tiling.tile(tile);
-                        let part = tile_rows.start + skip..tile_rows.start + skip + rows.len() as u32;
+                        let part = tile_rows.start + skip..tile_rows.start + skip + rows.sums.len() as u32;
                         let soa = PaddedRays::new(piece.rays, piece.raster.width as usize, part, cols);
                         padded = Some((piece.rays.as_ptr(), soa));
                     }
                     let soa = &padded.as_ref().expect("made above").1;
                     let with = Gathering { ctx: piece.ctx, weights, kernel };
-                    let tap = piece.tap.map(|t| {
-                        tap_rows.iter_mut().find(|(tap, _)| *tap == t).expect("the target's tap").1.as_mut_slice()
-                    });
                     stats += piece.raster.gather_tile::<D, CONTRIBUTE>(
                         with,
                         prepared,
                         (tile, skip),
                         soa,
-                        &mut rows,
-                        tap,
+                        rows.for_piece(piece.tap),
                         control,
                     );
                     // One report per tile (its first part) and piece, whatever the parts.

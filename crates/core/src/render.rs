@@ -178,7 +178,7 @@ impl GatherSide<'_> {
             (Some(_), Some(_)) => Apart::Pieces,
             (Some(_), None) => Apart::Group,
         };
-        for group in gatherings(&all, sets_at_once, apart) {
+        for group in gatherings(&all, |&(c, p)| (c, &p.spec), sets_at_once, apart) {
             // With an error image on the GPU, each piece is its chunk's only one in the
             // gathering: its sums are its chunk's after less before, told to the spread in piece
             // order.
@@ -235,8 +235,8 @@ impl GatherSide<'_> {
                     match self.spread.as_mut() {
                         Some(spread) => {
                             let (k, _, quarter, _) = group[0].1.spec;
-                            let [a, b] = spread.open_group(k, quarter);
-                            let each = gather_pieces(&pieces, weighting, kernel, sums, &mut [a, b], control)?;
+                            let mut taps = spread.open_group(k, quarter, control);
+                            let each = gather_pieces(&pieces, weighting, kernel, sums, &mut taps, control)?;
                             let mut planes = [0; 2];
                             for (_, p) in group {
                                 planes[p.spec.3.min(1)] += p.spec.1.len();
@@ -251,7 +251,7 @@ impl GatherSide<'_> {
             if let (Apart::Pieces, Some(spread)) = (apart, self.spread.as_mut()) {
                 for (b, &(c, piece)) in before.iter().zip(group) {
                     let (k, ref planes, quarter, half) = piece.spec;
-                    spread.add(k, quarter, half, planes.len(), b, sums[c]);
+                    spread.add((k, quarter, half, planes.len()), b, sums[c], control);
                 }
             }
             for (f, e) in found.iter_mut().zip(each) {
@@ -287,24 +287,27 @@ enum Apart {
     Group,
 }
 
-/// The gatherings of `pieces` (chunk, piece), in order: runs of consecutive pieces that hold at
-/// most `sets` ray sets, told apart for the error image as `apart` says.
-fn gatherings<'p, 'q>(
-    pieces: &'q [(usize, &'p Piece)],
+/// The gatherings of `pieces` (each its chunk and spec by `key`), in order: runs of consecutive
+/// pieces that hold at most `sets_at_once` ray sets, told apart for the error image as `apart`
+/// says.
+fn gatherings<T>(
+    pieces: &[T],
+    key: impl Fn(&T) -> (usize, &PieceSpec),
     sets_at_once: usize,
     apart: Apart,
-) -> Vec<&'q [(usize, &'p Piece)]> {
+) -> Vec<&[T]> {
     let mut out = Vec::new();
     let mut start = 0;
     let (mut sets, mut chunks) = (Vec::new(), Vec::new());
-    for (i, &(c, p)) in pieces.iter().enumerate() {
-        let new_set = !sets.contains(&p.spec.0);
+    for (i, piece) in pieces.iter().enumerate() {
+        let (c, spec) = key(piece);
+        let new_set = !sets.contains(&spec.0);
         let split = match apart {
             Apart::No => false,
             Apart::Pieces => chunks.contains(&c),
             Apart::Group => {
-                let (first_chunk, first) = pieces[start];
-                (first_chunk, first.spec.0, first.spec.2) != (c, p.spec.0, p.spec.2)
+                let (first_chunk, first) = key(&pieces[start]);
+                (first_chunk, first.0, first.2) != (c, spec.0, spec.2)
             }
         };
         if (new_set && sets.len() == sets_at_once) || split {
@@ -313,8 +316,8 @@ fn gatherings<'p, 'q>(
             sets.clear();
             chunks.clear();
         }
-        if !sets.contains(&p.spec.0) {
-            sets.push(p.spec.0);
+        if !sets.contains(&spec.0) {
+            sets.push(spec.0);
         }
         chunks.push(c);
     }
@@ -781,7 +784,7 @@ pub fn render_from(
         crate::partial::finish_with(scene, opts, &partial, &emission)?
     };
     if let Some(mut spread) = spread {
-        spread.close();
+        spread.close(control);
         stats.add_error_image(&film, spread.variance(&emission_variance), &emission_variance)?;
     }
     stats.seconds_rays += t.elapsed().as_secs_f64();
@@ -998,7 +1001,7 @@ pub fn render_in_passes(
         // before it, the first two (section 10.2).
         let used = (next / MIN_PASS_GROUP).clamp(1, ray_sets as usize) as u32;
         if let Some(spread) = &mut gatherer.spread {
-            spread.next_pass();
+            spread.next_pass(control);
         }
         let pass = (0..used).flat_map(|g| {
             let group = plane_group(g, next, used);
@@ -1019,7 +1022,7 @@ pub fn render_in_passes(
         report.planes += next;
         report.seconds_per_plane = pass_start.elapsed().as_secs_f64() / next as f64;
         if let Some(spread) = &mut gatherer.spread {
-            spread.close();
+            spread.close(control);
             let image = Film::finish(width, height, &total, report.planes, &emission)?;
             let error = spread.variance(&emission_variance).map(|v| relative_rms_error(&image, &v, &emission_variance));
             report.black = matches!(error, Some(None));
@@ -1070,6 +1073,40 @@ mod tests {
             assert_eq!((w[0].start, w.last().unwrap().end), (chunks.start, chunks.end));
         }
         assert_eq!(gpu_windows(0..40, 4).len(), 12, "655,360 planes: 12 windows, not 40");
+    }
+
+    /// A render's pieces (four chunks, three ray sets: groups that cross chunks) in gatherings:
+    /// every piece once, in order; with an error image on the CPU, each gathering the whole run
+    /// of one group's pieces in one chunk; on the GPU, no chunk twice; without, at most two ray
+    /// sets.
+    #[test]
+    fn gatherings_hold_what_each_way_of_telling_pieces_apart_needs() {
+        let (planes, sets) = (4 * CHUNK_PLANES, 3);
+        let all: Vec<(usize, PieceSpec)> = chunks(planes)
+            .into_iter()
+            .enumerate()
+            .flat_map(|(c, range)| {
+                pieces(planes, sets, range).map(move |(k, half, p)| (c, (k, p, quarter_of(k, sets), half)))
+            })
+            .collect();
+        let key = |(c, spec): &(usize, PieceSpec)| (*c, (spec.0, spec.2));
+        assert!(all.windows(2).any(|w| key(&w[0]).1 == key(&w[1]).1 && w[0].0 != w[1].0), "a group crosses chunks");
+        for apart in [Apart::No, Apart::Pieces, Apart::Group] {
+            let runs = gatherings(&all, |(c, spec)| (*c, spec), RAY_SETS_PER_GATHERING, apart);
+            assert_eq!(runs.concat(), all, "{apart:?}: every piece once, in order");
+            for run in &runs {
+                let sets: std::collections::BTreeSet<u32> = run.iter().map(|(_, s)| s.0).collect();
+                let chunks: Vec<usize> = run.iter().map(|(c, _)| *c).collect();
+                match apart {
+                    Apart::No => assert!(sets.len() <= RAY_SETS_PER_GATHERING),
+                    Apart::Pieces => assert!(chunks.iter().enumerate().all(|(i, c)| !chunks[..i].contains(c))),
+                    Apart::Group => assert!(run.iter().all(|p| key(p) == key(&run[0])), "{run:?}"),
+                }
+            }
+            if apart == Apart::Group {
+                assert!(runs.windows(2).all(|w| key(w[0].last().unwrap()) != key(&w[1][0])), "whole runs");
+            }
+        }
     }
 
     #[test]

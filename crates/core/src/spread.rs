@@ -10,6 +10,7 @@
 //! further with the quarters' ratio, corrects that. The direct emission's own variance
 //! ([`crate::emission::direct_emission_and_variance`]) is added.
 
+use crate::control::Control;
 use crate::error::Result;
 use crate::film::Film;
 use glam::{DVec3, Vec3};
@@ -63,14 +64,21 @@ impl GroupSpread {
     /// Memory per pixel, in bytes (for the memory rule).
     pub const BYTES_PER_PIXEL: u64 = 8 * 24;
 
-    /// Adds a piece of `planes` planes gathered along ray set `k` in `quarter` (0 to 3) of the
-    /// render and `half` (0 or 1) of its group, whose sums per pixel were `after - before` (the
+    /// Adds a piece `(k, quarter, half, planes)`, `planes` planes gathered along ray set `k` in
+    /// `quarter` (0 to 3) of the render and `half` (0 or 1) of its group, whose sums per pixel
+    /// were `after - before` (the
     /// gather's buffer after it and before: the render's own sums stay bit for bit what they are
     /// without an error image). A piece of another ray set or quarter than the open group's
     /// closes it first.
-    pub fn add(&mut self, k: u32, quarter: usize, half: usize, planes: usize, before: &[Vec3], after: &[Vec3]) {
+    pub fn add(
+        &mut self,
+        (k, quarter, half, planes): (u32, usize, usize, usize),
+        before: &[Vec3],
+        after: &[Vec3],
+        control: Control,
+    ) {
         let half = half.min(1);
-        for ((o, b), a) in self.open_group(k, quarter)[half].iter_mut().zip(before).zip(after) {
+        for ((o, b), a) in self.open_group(k, quarter, control)[half].iter_mut().zip(before).zip(after) {
             *o += a.as_dvec3() - b.as_dvec3();
         }
         self.open_planes[half] += planes;
@@ -80,24 +88,26 @@ impl GroupSpread {
     /// if it is another), for pieces to add their sums per pixel to, `after - before` of the
     /// render's own as [`GroupSpread::add`] adds them (the taps of
     /// [`crate::accel::gather_pieces`]); their planes are told after, [`GroupSpread::add_planes`].
-    pub fn open_group(&mut self, k: u32, quarter: usize) -> &mut [Vec<DVec3>; 2] {
+    pub(crate) fn open_group(&mut self, k: u32, quarter: usize, control: Control) -> [&mut [DVec3]; 2] {
         let quarter = quarter.min(3);
         if self.open_key != Some((k, quarter)) {
-            self.close();
+            self.close(control);
             self.open_key = Some((k, quarter));
         }
-        &mut self.open
+        let [a, b] = &mut self.open;
+        [a, b]
     }
 
     /// Counts `planes` more planes in each half of the open group: those of the pieces added to
     /// [`GroupSpread::open_group`]'s sums.
-    pub fn add_planes(&mut self, planes: [usize; 2]) {
+    pub(crate) fn add_planes(&mut self, planes: [usize; 2]) {
+        debug_assert!(self.open_key.is_some(), "planes of no group");
         self.open_planes[0] += planes[0];
         self.open_planes[1] += planes[1];
     }
 
     /// Closes the open group, if any: the next piece starts another.
-    pub fn close(&mut self) {
+    pub fn close(&mut self, control: Control) {
         let Some((_, quarter)) = self.open_key.take() else { return };
         let [na, nb] = std::mem::take(&mut self.open_planes);
         let n = na + nb;
@@ -112,6 +122,7 @@ impl GroupSpread {
         // In parallel: a render closes a group per ray set, each a pass over five of the image's
         // f64 buffers (5 ms at 640x360 on one core, where a whole render takes 40 on 16).
         let unit = CLOSE_UNIT;
+        let section = control.section("spread");
         self.squares
             .par_chunks_mut(unit)
             .zip(self.within.par_chunks_mut(unit))
@@ -119,15 +130,18 @@ impl GroupSpread {
             .zip(first.par_chunks_mut(unit))
             .zip(second.par_chunks_mut(unit))
             .for_each(|((((s, w), q), a), b)| {
-                for ((((s, w), q), a), b) in s.iter_mut().zip(w).zip(q).zip(a).zip(b) {
-                    let g = *a + *b;
-                    *s += g * g * i_n;
-                    *q += g;
-                    let d = *a * ia - *b * ib;
-                    *w += d * d * i_pair;
-                    (*a, *b) = (DVec3::ZERO, DVec3::ZERO);
-                }
+                section.unit(|| {
+                    for ((((s, w), q), a), b) in s.iter_mut().zip(w).zip(q).zip(a).zip(b) {
+                        let g = *a + *b;
+                        *s += g * g * i_n;
+                        *q += g;
+                        let d = *a * ia - *b * ib;
+                        *w += d * d * i_pair;
+                        (*a, *b) = (DVec3::ZERO, DVec3::ZERO);
+                    }
+                })
             });
+        section.close();
         self.groups += 1;
         self.halved += halved as usize;
         self.planes[quarter] += n;
@@ -137,8 +151,8 @@ impl GroupSpread {
     /// (the passes before the last, the last pass), and the new pass's groups go to quarters 2
     /// and 3 (its first and second half). So the halves are the planes before the last pass
     /// and the last pass, consecutive ranges of the sequence as a render in chunks has them.
-    pub fn next_pass(&mut self) {
-        self.close();
+    pub fn next_pass(&mut self, control: Control) {
+        self.close(control);
         let [q0, q1, q2, q3] = &mut self.quarters;
         for (((a, b), c), d) in q0.iter_mut().zip(q1.iter_mut()).zip(q2.iter_mut()).zip(q3.iter_mut()) {
             *a += *b;
@@ -318,11 +332,11 @@ mod tests {
                         .iter()
                         .map(|b| *b + Vec3::splat((piece as f64 + sigma * (piece as f64).sqrt() * gauss()) as f32))
                         .collect();
-                    spread.add(g as u32, quarter, half, piece, &before, &after);
+                    spread.add((g as u32, quarter, half, piece), &before, &after, Control::none());
                     before = after;
                 }
             }
-            spread.close();
+            spread.close(Control::none());
             let v = spread.variance(&vec![Vec3::ZERO; pixels]).unwrap();
             estimates.extend(v.iter().map(|v| v.x));
             assert_eq!(spread.groups(), 8);
@@ -338,13 +352,13 @@ mod tests {
     #[test]
     fn too_few_groups_give_no_estimate() {
         let mut spread = GroupSpread::new(1);
-        spread.add(0, 0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
-        spread.close();
+        spread.add((0, 0, 0, 10), &[Vec3::ZERO], &[Vec3::ONE], Control::none());
+        spread.close(Control::none());
         assert!(spread.variance(&[Vec3::ZERO]).is_none());
         let mut spread = GroupSpread::new(1);
-        spread.add(0, 0, 0, 10, &[Vec3::ZERO], &[Vec3::ONE]);
-        spread.add(1, 1, 0, 10, &[Vec3::ZERO], &[Vec3::splat(3.0)]);
-        spread.close();
+        spread.add((0, 0, 0, 10), &[Vec3::ZERO], &[Vec3::ONE], Control::none());
+        spread.add((1, 1, 0, 10), &[Vec3::ZERO], &[Vec3::splat(3.0)], Control::none());
+        spread.close(Control::none());
         // Two groups of the first half: taken as independent. Means 0.1 and 0.3 of 20 planes:
         // sigma^2 = (10 0.01 + 10 0.01) / 1 = 0.2, over 20 planes.
         let v = spread.variance(&[Vec3::ZERO]).unwrap()[0];
@@ -356,9 +370,9 @@ mod tests {
     #[test]
     fn a_spread_read_back_is_checked() {
         let mut spread = GroupSpread::new(2);
-        spread.add(3, 1, 0, 10, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
-        spread.close();
-        spread.add(4, 2, 1, 5, &[Vec3::ZERO; 2], &[Vec3::ONE; 2]);
+        spread.add((3, 1, 0, 10), &[Vec3::ZERO; 2], &[Vec3::ONE; 2], Control::none());
+        spread.close(Control::none());
+        spread.add((4, 2, 1, 5), &[Vec3::ZERO; 2], &[Vec3::ONE; 2], Control::none());
         assert_eq!(spread.check(2, 16, 15), Ok(()));
         assert!(spread.check(3, 16, 15).is_err(), "another image size");
         assert!(spread.check(2, 16, 16).is_err(), "other planes");
