@@ -24,8 +24,26 @@ fn parse() -> Cli {
         c.mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
             .mut_subcommands(negatives)
     }
-    let matches = negatives(<Cli as clap::CommandFactory>::command()).get_matches();
+    let mut command = negatives(<Cli as clap::CommandFactory>::command());
+    let matches =
+        command.try_get_matches_from_mut(std::env::args_os()).unwrap_or_else(|e| plainer(e, &mut command).exit());
     <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
+/// A count, seed or index that is no whole number said as such: Rust's own words for `-1` or
+/// `1.5` are "invalid digit found in string".
+fn plainer(e: clap::Error, command: &mut clap::Command) -> clap::Error {
+    use clap::error::{ContextKind, ErrorKind};
+    use std::error::Error;
+    let Some(parse) = e.source().and_then(|s| s.downcast_ref::<std::num::ParseIntError>()) else { return e };
+    let (Some(arg), Some(value)) = (e.get(ContextKind::InvalidArg), e.get(ContextKind::InvalidValue)) else {
+        return e;
+    };
+    let why = match parse.kind() {
+        std::num::IntErrorKind::PosOverflow => "too large for the setting",
+        _ => "expected a whole number, 0 or more",
+    };
+    command.error(ErrorKind::ValueValidation, format!("invalid value '{value}' for '{arg}': {why}"))
 }
 
 fn main() -> ExitCode {

@@ -121,6 +121,21 @@ fn bad_arguments_exit_2() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
         assert!(err.contains(&format!("invalid value '{value}' for '{flag} ")) && !err.contains("tip"), "{err}");
+        // (u32 counts are clap's ranged numbers: "-2 is not in 0..=4294967295".)
+        assert!(!err.contains("invalid digit"), "{err}");
+    }
+    // A count that is no whole number, or too large for its type, is said as such, not in
+    // Rust's words ("invalid digit found in string").
+    let scene = "media_scenes/six_lights.toml";
+    for (args, why) in [
+        (vec!["render", scene, "--planes", "1.5"], "expected a whole number, 0 or more"),
+        (vec!["table", scene, "--reference", "no.exr", "--sweep", "10,x"], "expected a whole number, 0 or more"),
+        (vec!["render", scene, "--seed", "99999999999999999999999"], "too large for the setting"),
+    ] {
+        let o = fogplanes(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(why) && !err.contains("invalid digit"), "{args:?}: {err}");
     }
 }
 
