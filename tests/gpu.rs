@@ -471,6 +471,25 @@ fn gpu_images_match_the_reference() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
+/// The benchmark's plane count (three chunks, 34 pieces) goes to the GPU in at most six
+/// submissions, with an error image too: each piece's sums are told apart by copies taken on
+/// the GPU in order with the work and read back with the chunk's sums (a submission and a
+/// read back a piece before, 34 here), and the images are those without it.
+#[test]
+fn a_gpu_render_is_few_submissions_with_an_error_image_too() {
+    if !have_gpu("a_gpu_render_is_few_submissions_with_an_error_image_too") {
+        return;
+    }
+    let s = scene("media_scenes/six_lights.toml", 32, 18);
+    let given = Overrides { planes: Some(40_960), seed: Some(3), device: Some(Device::GPU), ..Overrides::default() };
+    let (plain, plain_stats) = render(&s, &options(&s, given.clone()), Control::none()).unwrap();
+    let (with, stats) = render(&s, &options(&s, Overrides { stderr: true, ..given }), Control::none()).unwrap();
+    assert!(with.pixels == plain.pixels, "the error image changed the image");
+    assert!(stats.stderr.as_ref().is_some_and(|se| se.all_finite_non_negative() && se.max() > 0.0));
+    assert!(plain_stats.submissions <= 6, "{} submissions without an error image", plain_stats.submissions);
+    assert!(stats.submissions <= 6, "{} submissions with an error image", stats.submissions);
+}
+
 /// Chunks rendered apart on the GPU and merged in any order give its render bit for bit; so does
 /// a render resumed from the nodes it held after its first chunk (a checkpoint), with its error
 /// image; and the render without the error image (whose pieces' sums cross back once a chunk,

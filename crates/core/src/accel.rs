@@ -375,6 +375,23 @@ impl OnGpu {
         self.sums.iter_mut().flatten().try_for_each(GpuSums::submit_pending)
     }
 
+    /// A copy of target `target`'s sums after the gatherings recorded so far, read back with
+    /// the others ([`OnGpu::read_snapshots`]; none where none of its pieces was gathered yet).
+    pub fn snapshot(&mut self, target: usize) -> Result<()> {
+        self.sums[target].as_mut().map_or(Ok(()), GpuSums::snapshot)
+    }
+
+    /// The bytes of every target's snapshots not read yet.
+    pub fn snapshot_bytes(&self) -> u64 {
+        self.sums.iter().flatten().map(GpuSums::snapshot_bytes).sum()
+    }
+
+    /// Target `target`'s snapshots since the last read, in order, each given to `each` as the
+    /// pixels' sums on the GPU (f32 bits).
+    pub fn read_snapshots(&mut self, target: usize, each: &mut dyn FnMut(&[[u32; 3]])) -> Result<()> {
+        self.sums[target].as_mut().map_or(Ok(()), |s| s.read_snapshots(each))
+    }
+
     /// Waits for target `target`'s gatherings, adds its sums on the GPU to `sums` (untouched
     /// where none of its pieces was gathered yet) and returns the hits and the GPU's time of
     /// its gatherings since the last read (so that the reads of a target add up).

@@ -157,16 +157,13 @@ impl GatherSide<'_> {
         let (weighting, kernel) = (self.weighting, self.opts.kernel);
         let all: Vec<(usize, &Piece)> =
             chunks.iter().enumerate().flat_map(|(c, pieces)| pieces.iter().map(move |p| (c, p))).collect();
-        let mut before = Vec::new();
         // On the GPU the chunks' sums stay there from gathering to gathering and cross back once,
-        // added to the sums as they were (`start`); with an error image, after each gathering,
-        // so that the spread sees each piece's sums (and the image is the same bits with it or
-        // without).
+        // added to the sums as they were; with an error image, a copy of a chunk's sums is taken
+        // there after each of its pieces (a snapshot, in order with the work) and read back
+        // with the others, so that the spread sees each piece's sums (and the image is the same
+        // bits with it or without) without a round trip a piece.
         let mut on_gpu = matches!(self.opts.structure(), Accelerator::Gpu(_)).then(|| OnGpu::new(chunks.len()));
-        let start: Vec<Vec<Vec3>> = match (&on_gpu, &self.spread) {
-            (Some(_), Some(_)) => sums.iter().map(|s| s.to_vec()).collect(),
-            _ => Vec::new(),
-        };
+        let mut snapshots = Snapshots::new(chunks.len());
         // Each chunk's hits and GPU time, counted when its sums are read back.
         let mut read = vec![GatherStats::default(); chunks.len()];
         // On the GPU a gathering holds every ray set of its pieces: they are made there from
@@ -179,16 +176,6 @@ impl GatherSide<'_> {
             (Some(_), None) => Apart::Group,
         };
         for group in gatherings(&all, |&(c, p)| (c, &p.spec), sets_at_once, apart) {
-            // With an error image on the GPU, each piece is its chunk's only one in the
-            // gathering: its sums are its chunk's after less before, told to the spread in piece
-            // order.
-            if apart == Apart::Pieces {
-                before.resize_with(group.len(), Vec::new);
-                for (b, &(c, _)) in before.iter_mut().zip(group) {
-                    b.clear();
-                    b.extend_from_slice(sums[c]);
-                }
-            }
             let each = match on_gpu.as_mut() {
                 Some(on_gpu) => {
                     let pieces: Vec<GpuPiece> = group
@@ -208,10 +195,15 @@ impl GatherSide<'_> {
                         made.expect("the maker gives the set's rows").map(RaySet::Made)
                     };
                     let each = gather_pieces_on_gpu(&pieces, weighting, on_gpu, &mut make, control)?;
-                    if self.spread.is_some() {
-                        for &(c, _) in group {
-                            sums[c].copy_from_slice(&start[c]);
-                            read[c] += on_gpu.read_into(c, sums[c])?;
+                    // With an error image each piece is its chunk's only one in the gathering:
+                    // a snapshot after it holds its chunk's sums after it.
+                    if let Some(spread) = self.spread.as_mut() {
+                        for &(c, p) in group {
+                            on_gpu.snapshot(c)?;
+                            snapshots.pieces[c].push(p.spec.clone());
+                        }
+                        if on_gpu.snapshot_bytes() > MAX_SNAPSHOT_BYTES {
+                            snapshots.tell(on_gpu, sums, spread, control)?;
                         }
                     }
                     each
@@ -248,20 +240,18 @@ impl GatherSide<'_> {
                     }
                 }
             };
-            if let (Apart::Pieces, Some(spread)) = (apart, self.spread.as_mut()) {
-                for (b, &(c, piece)) in before.iter().zip(group) {
-                    let (k, ref planes, quarter, half) = piece.spec;
-                    spread.add((k, quarter, half, planes.len()), b, sums[c], control);
-                }
-            }
             for (f, e) in found.iter_mut().zip(each) {
                 *f += e;
             }
         }
-        if let Some(mut on_gpu) = on_gpu.filter(|_| self.spread.is_none()) {
-            // Every chunk's work goes to the GPU before the first is read back.
-            if sums.len() > 1 {
+        if let Some(mut on_gpu) = on_gpu {
+            // Every chunk's work goes to the GPU before the first is read back, its snapshots'
+            // copies and the sums' in one submission.
+            if sums.len() > 1 || self.spread.is_some() {
                 on_gpu.submit_all()?;
+            }
+            if let Some(spread) = self.spread.as_mut() {
+                snapshots.tell(&mut on_gpu, sums, spread, control)?;
             }
             for (c, sums) in sums.iter_mut().enumerate() {
                 read[c] += on_gpu.read_into(c, sums)?;
@@ -271,6 +261,54 @@ impl GatherSide<'_> {
             *f += r;
         }
         Ok((found, t.elapsed().as_secs_f64()))
+    }
+}
+
+/// The most bytes of snapshots of a render's sums on the GPU before they are read back.
+const MAX_SNAPSHOT_BYTES: u64 = 256 << 20;
+
+/// The pieces whose snapshots are taken on the GPU and not read yet, chunk by chunk (each its
+/// pieces in order), and each chunk's sums after the pieces read before (the sums as they were,
+/// before any).
+struct Snapshots {
+    pieces: Vec<Vec<PieceSpec>>,
+    after: Vec<Option<Vec<Vec3>>>,
+}
+
+impl Snapshots {
+    fn new(chunks: usize) -> Self {
+        Snapshots { pieces: vec![Vec::new(); chunks], after: vec![None; chunks] }
+    }
+
+    /// Reads the snapshots back, chunk after chunk (the pieces' order), and tells the spread
+    /// each piece's sums: its chunk's sums as they were plus the GPU's after it, less those
+    /// before it, added pixel by pixel as the chunk's one reading back adds them (the same
+    /// bits as a reading after each piece).
+    fn tell(
+        &mut self,
+        on_gpu: &mut OnGpu,
+        sums: &[&mut [Vec3]],
+        spread: &mut GroupSpread,
+        control: Control,
+    ) -> Result<()> {
+        for (c, pieces) in self.pieces.iter_mut().enumerate() {
+            if pieces.is_empty() {
+                continue;
+            }
+            let before = self.after[c].get_or_insert_with(|| sums[c].to_vec());
+            let mut after = vec![Vec3::ZERO; before.len()];
+            let mut next = pieces.drain(..);
+            on_gpu.read_snapshots(c, &mut |bits| {
+                let Some((k, planes, quarter, half)) = next.next() else { return };
+                for ((a, s), v) in after.iter_mut().zip(sums[c].iter()).zip(bits) {
+                    *a = *s + Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+                }
+                spread.add((k, quarter, half, planes.len()), before, &after, control);
+                std::mem::swap(before, &mut after);
+            })?;
+            debug_assert!(next.next().is_none(), "a snapshot for every piece");
+        }
+        Ok(())
     }
 }
 

@@ -47,6 +47,10 @@ pub struct GpuSums {
     submissions: u64,
     /// The reading back asked for ([`GpuSums::submit_pending`]), not yet done.
     reading: Option<Reading>,
+    /// Copies of the pixels' sums after gatherings ([`GpuSums::snapshot`]), not read yet, and
+    /// the bytes read back of them since the last read.
+    snapshots: Vec<wgpu::Buffer>,
+    bytes_down: u64,
 }
 
 /// A reading back under way: the buffer the sums are copied to, and the gatherings'
@@ -93,7 +97,58 @@ impl GpuSums {
             bytes_up: 0,
             submissions: 0,
             reading: None,
+            snapshots: Vec::new(),
+            bytes_down: 0,
         })
+    }
+
+    /// A copy of the pixels' sums as the work recorded so far leaves them, taken on the GPU in
+    /// order with that work (no submission of its own) and read back with the other copies
+    /// ([`GpuSums::read_snapshots`]): the error image's pieces told apart without a round trip
+    /// each.
+    pub fn snapshot(&mut self) -> Result<()> {
+        assert!(self.reading.is_none(), "a snapshot of sums whose reading is under way");
+        let gpu = self.gpu.clone();
+        let bytes = self.pixels as u64 * 12;
+        let copy = gpu.checked(|| {
+            let copy = gpu.scratch("sums snapshot", bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+            let mut encoder = gpu.device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(&self.image, 0, &copy, 0, bytes);
+            self.pending.push(encoder.finish());
+            copy
+        })?;
+        self.snapshots.push(copy);
+        self.bytes_down += bytes;
+        Ok(())
+    }
+
+    /// The bytes of the snapshots not read yet.
+    pub fn snapshot_bytes(&self) -> u64 {
+        self.snapshots.len() as u64 * self.pixels as u64 * 12
+    }
+
+    /// Submits the work not submitted yet and gives `each` the snapshots taken since the last
+    /// ones were read, in order: each pixel's sums as the GPU held them (f32 bits, r g b).
+    pub fn read_snapshots(&mut self, each: &mut dyn FnMut(&[[u32; 3]])) -> Result<()> {
+        let copies = std::mem::take(&mut self.snapshots);
+        if copies.is_empty() {
+            return Ok(());
+        }
+        let index = self.submit();
+        for copy in &copies {
+            copy.slice(..).map_async(wgpu::MapMode::Read, |_| ());
+        }
+        let polled = self.gpu.device.poll(wgpu::PollType::Wait { submission_index: index, timeout: None });
+        self.gpu.work_errors()?;
+        polled.map_err(|e| Error::Device(format!("waiting for the GPU: {e}")))?;
+        for copy in &copies {
+            let view = copy
+                .slice(..)
+                .get_mapped_range()
+                .map_err(|e| Error::Device(format!("reading the GPU's results back: {e}")))?;
+            each(bytemuck::cast_slice(&view[..self.pixels * 12]));
+        }
+        Ok(())
     }
 
     /// Submits the work not submitted yet, with `then` after it, in one submission.
@@ -221,7 +276,10 @@ impl GpuSums {
         let mut stats = GatherStats {
             device_ns: waited,
             wait_ns,
-            bytes_crossed: std::mem::take(&mut self.bytes_up) + bytes + timestamp_bytes,
+            bytes_crossed: std::mem::take(&mut self.bytes_up)
+                + std::mem::take(&mut self.bytes_down)
+                + bytes
+                + timestamp_bytes,
             submissions: std::mem::take(&mut self.submissions),
             ..GatherStats::default()
         };
