@@ -375,10 +375,10 @@ impl OnGpu {
         self.sums.iter_mut().flatten().try_for_each(GpuSums::submit_pending)
     }
 
-    /// A copy of target `target`'s sums after the gatherings recorded so far, read back with
-    /// the others ([`OnGpu::read_snapshots`]; none where none of its pieces was gathered yet).
+    /// A copy of target `target`'s sums after the gatherings recorded so far (one of its pieces
+    /// at least), read back with the others ([`OnGpu::read_snapshots`]).
     pub fn snapshot(&mut self, target: usize) -> Result<()> {
-        self.sums[target].as_mut().map_or(Ok(()), GpuSums::snapshot)
+        self.sums[target].as_mut().expect("a target gathered into holds its sums").snapshot()
     }
 
     /// The bytes of every target's snapshots not read yet.
