@@ -301,7 +301,7 @@ impl Snapshots {
             on_gpu.read_snapshots(c, &mut |bits| {
                 let Some((k, planes, quarter, half)) = next.next() else { return };
                 for ((a, s), v) in after.iter_mut().zip(sums[c].iter()).zip(bits) {
-                    *a = *s + Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+                    *a = *s + crate::gpu::sums_of_bits(v);
                 }
                 spread.add((k, quarter, half, planes.len()), before, &after, control);
                 std::mem::swap(before, &mut after);

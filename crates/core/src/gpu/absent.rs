@@ -156,4 +156,18 @@ impl GpuSums {
     pub fn read_into(&mut self, _: &mut [Vec3]) -> Result<GatherStats> {
         match *self {}
     }
+    pub fn snapshot(&mut self) -> Result<()> {
+        match *self {}
+    }
+    pub fn snapshot_bytes(&self) -> u64 {
+        match *self {}
+    }
+    pub fn read_snapshots(&mut self, _: &mut dyn FnMut(&[[u32; 3]])) -> Result<()> {
+        match *self {}
+    }
+}
+
+/// A pixel's sums as the GPU holds them (f32 bits, r g b).
+pub fn sums_of_bits(v: &[u32; 3]) -> Vec3 {
+    Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]))
 }

@@ -59,12 +59,14 @@ pub use polygons::reach_on_gpu;
 #[cfg(feature = "gpu")]
 pub use rays::GpuRays;
 #[cfg(feature = "gpu")]
-pub use sums::GpuSums;
+pub use sums::{GpuSums, sums_of_bits};
 
 #[cfg(not(feature = "gpu"))]
 mod absent;
 #[cfg(not(feature = "gpu"))]
-pub use absent::{Gpu, GpuPlanes, GpuRays, GpuSums, Recorded, adapter, adapter_at, adapters, default_adapter};
+pub use absent::{
+    Gpu, GpuPlanes, GpuRays, GpuSums, Recorded, adapter, adapter_at, adapters, default_adapter, sums_of_bits,
+};
 
 /// An adapter as `fogplanes devices` lists it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]

@@ -63,6 +63,12 @@ struct Reading {
     index: Option<wgpu::SubmissionIndex>,
 }
 
+/// A pixel's sums as the GPU holds them (f32 bits, r g b): how a reading back and a snapshot
+/// (`render`'s error image) both add them, the same bits.
+pub fn sums_of_bits(v: &[u32; 3]) -> Vec3 {
+    Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]))
+}
+
 /// Bytes of a `width x height` image's sums on the GPU: 12 a pixel, 16 a tile ([`GpuSums`]).
 pub(super) fn sums_bytes(width: u32, height: u32) -> u64 {
     let tiles = width.div_ceil(super::TILE) as u64 * height.div_ceil(super::TILE) as u64;
@@ -301,7 +307,7 @@ impl GpuSums {
         // Added pixel by pixel in parallel (the same bits: each pixel's one addition).
         use rayon::prelude::*;
         sums.par_iter_mut().zip(back).with_min_len(4096).for_each(|(sum, v)| {
-            *sum += Vec3::new(f32::from_bits(v[0]), f32::from_bits(v[1]), f32::from_bits(v[2]));
+            *sum += sums_of_bits(v);
         });
         let counts: &[[u32; 4]] = bytemuck::cast_slice(counts);
         let word = |lo: u32, hi: u32| lo as u64 | (hi as u64) << 32;
