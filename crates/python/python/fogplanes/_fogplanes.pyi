@@ -40,7 +40,8 @@ class Camera:
     def forward(self) -> Vec3:
         """Unit view direction."""
     @property
-    def right(self) -> Vec3: ...
+    def right(self) -> Vec3:
+        """Unit right vector of the image plane."""
     @property
     def up(self) -> Vec3:
         """Unit up vector of the image plane (orthogonal to forward)."""
@@ -375,7 +376,9 @@ def save_image(path: PathLike, image: npt.ArrayLike, exposure: float | None = No
     `exposure` with an .exr path is a ValueError (an EXR holds linear radiance)."""
 
 # Renders in chunks and references in row bands (the cluster layer: fogplanes.distributed).
-# `**render_kwargs` are the keyword arguments of `render` (not time_budget, not return_stats).
+# `**render_kwargs` are the keyword arguments of `render` but time_budget and target_error (a
+# ValueError unless None: a render in chunks has a plane count) and return_stats, return_stderr
+# and progress (a TypeError; finish_render takes its own return_stats).
 
 class RenderPlan(TypedDict):
     planes: int
