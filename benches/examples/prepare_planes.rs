@@ -18,7 +18,7 @@ use fogplanes::control::Control;
 use fogplanes::gather::GatherContext;
 use fogplanes::gpu::screen_reach;
 use fogplanes::occlusion::occluders_of_polygon;
-use fogplanes::photon_plane::{PlaneSet, sample_plane};
+use fogplanes::photon_plane::{PlaneSet, PlaneSources, sample_plane};
 use fogplanes::raster::{ScreenRaster, Tiling, box_polygon, screen_polygon_of};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
@@ -44,7 +44,7 @@ fn main() -> Result<(), String> {
     let scene = Scene::load(Path::new(path)).map_err(|e| e.to_string())?;
     let (cam, medium) = (&scene.camera, &scene.medium);
     let set = Sampler::default().numbers(1);
-    let lights = scene.light_distribution();
+    let sources = PlaneSources::new(&scene);
     // Timed in pieces, as a render prepares its planes (the benchmark's 40,960 planes are 16
     // pieces of 2,560, one per ray set, each with its own view and raster), each step's results
     // kept in vectors reused from piece to piece (not faulted in anew: the renderer keeps none
@@ -66,7 +66,7 @@ fn main() -> Result<(), String> {
         time(0, "the sampler's numbers", t);
         let t = Instant::now();
         planes.clear();
-        planes.extend(numbers.iter().map(|u| sample_plane(&scene, &lights, *u)));
+        planes.extend(numbers.iter().map(|u| sample_plane(&scene, &sources, *u)));
         time(1, "the plane sampled", t);
         let t = Instant::now();
         world.clear();

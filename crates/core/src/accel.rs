@@ -13,7 +13,7 @@ use crate::gpu::{self, GpuPlanes, GpuRays, GpuSums};
 use crate::kernel::{Aggregate, Gathering, Kernel, RAY_CHUNK, gather_per_ray};
 use crate::limits::PLANE_UNIT;
 use crate::occlusion::occluders_of_polygon;
-use crate::photon_plane::{PhotonPlane, PlaneSet, sample_plane};
+use crate::photon_plane::{PhotonPlane, PlaneSet, PlaneSources, sample_plane};
 use crate::pixel::{PanelRecord, RaySetRecord};
 use crate::raster::{RasterPiece, ScreenRaster, Tiling, box_polygon, screen_polygon_of};
 use crate::scene::Scene;
@@ -180,14 +180,14 @@ impl CpuSide {
         let mut reach = Vec::with_capacity(if on_gpu { range.len() } else { 0 });
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
-        let (lights, numbers) = (scene.light_distribution(), set.sampler.numbers(set.seed));
+        let (sources, numbers) = (PlaneSources::new(scene), set.sampler.numbers(set.seed));
         for start in range.clone().step_by(SAMPLING_PIECE) {
             control.check()?;
             let t = Instant::now();
             let piece = start..(start + SAMPLING_PIECE).min(range.end);
             let _s = crate::trace::span("planes sampled");
             let piece = control.map_units("sample", piece.len(), PLANE_UNIT, |j| {
-                sample_plane(scene, &lights, numbers.plane((piece.start + j) as u64))
+                sample_plane(scene, &sources, numbers.plane((piece.start + j) as u64))
             });
             seconds_sampling += t.elapsed().as_secs_f64();
             drop(_s);

@@ -63,6 +63,10 @@ pub struct PlaneView {
     /// The sweep direction wl times the sign of g (+1 for g = 0), for the phase function
     /// ([`Phase`]): the same for every orientation that makes a hit, like the hit's path.
     pub toward: Vec3,
+    /// `1 / ((1 - g^2) m)`, m the plane's [`PhotonPlane::direction_weight`]: the phase factor's
+    /// constant ([`Phase`]) with the weight of the way the plane's direction was drawn, which
+    /// only a medium that is not isotropic has (docs/mathematics.md section 2.5).
+    pub phase_scale: f32,
     pub frame: PlaneFrame,
     /// power / N: the hit-independent factor of C, the same for every plane of a light (the
     /// raster and the brute-force loop apply it once per light, see [`PlaneJob::gather_block`]).
@@ -109,9 +113,9 @@ pub struct PlaneRecord {
     pub unit: f32,
     pub inv_unit: f32,
     pub light: u32,
-    /// [`PlaneView::toward`], for the phase function.
+    /// [`PlaneView::toward`] and [`PlaneView::phase_scale`], for the phase function.
     pub toward: [f32; 3],
-    pub pad: u32,
+    pub phase_scale: f32,
 }
 
 impl From<&PlaneView> for PlaneRecord {
@@ -143,7 +147,7 @@ impl From<&PlaneView> for PlaneRecord {
             inv_unit: finite(1.0 / unit),
             light: v.light,
             toward: v.toward.to_array(),
-            pad: 0,
+            phase_scale: v.phase_scale,
         }
     }
 }
@@ -203,6 +207,7 @@ impl PlaneView {
             r_axis: b.cross(plane.chord).as_vec3(),
             t_det: b.dot(normal) as f32,
             toward: (sign * plane.direction).as_vec3(),
+            phase_scale: (1.0 / ((1.0 - scene.medium.g * scene.medium.g) * plane.direction_weight)) as f32,
             frame: PlaneFrame::from_cos_sin(plane.width, cos_a, sin_a, plane.p0, plane.q0, light.width, light.height),
             scale: (plane.power / planes_total as f64).as_vec3(),
             scale_max: (plane.power / planes_total as f64).as_vec3().max_element(),
@@ -302,8 +307,6 @@ pub struct Phase {
     pub h: f32,
     /// `(1 - abs(g))^2`, the smallest value of the bracket.
     pub floor: f32,
-    /// `1 / (1 - g^2)`.
-    pub inv_numerator: f32,
 }
 
 impl Phase {
@@ -313,7 +316,6 @@ impl Phase {
             g: g as f32,
             h: h as f32,
             floor: ((1.0 - h) * (1.0 - h)) as f32,
-            inv_numerator: (1.0 / (1.0 - g * g)) as f32,
         }
     }
 
@@ -321,26 +323,27 @@ impl Phase {
         self.g == 0.0
     }
 
-    /// `D' = D / (4 pi rho)` for each ray of the block against a plane whose
-    /// [`PlaneView::toward`] is `toward` (section 1.1), or `d` itself, untouched, in an isotropic
-    /// medium. D' is positive and finite wherever D is (4 pi rho lies in
-    /// `[(1 - |g|) / (1 + |g|)^2, (1 + |g|) / (1 - |g|)^2]`).
+    /// `D' = D / (4 pi rho m)` for each ray of the block against a plane whose
+    /// [`PlaneView::toward`] is `toward` and [`PlaneView::phase_scale`] `scale` (sections 1.1
+    /// and 2.5), or `d` itself, untouched, in an isotropic medium. D' is positive and finite
+    /// wherever D is (4 pi rho lies in `[(1 - |g|) / (1 + |g|)^2, (1 + |g|) / (1 - |g|)^2]`,
+    /// and m in `(0, 1 / (1 - share)]`).
     #[inline(always)]
-    pub fn divide<const L: usize, V: Lanes<L>>(&self, d: V, ray: &RayBlock<V>, toward: Vec3) -> V {
-        if self.is_isotropic() { d } else { d * self.inverse_lanes::<L, V>(ray, toward) }
+    pub fn divide<const L: usize, V: Lanes<L>>(&self, d: V, ray: &RayBlock<V>, toward: Vec3, scale: f32) -> V {
+        if self.is_isotropic() { d } else { d * self.inverse_lanes::<L, V>(ray, toward, scale) }
     }
 
-    /// `1 / (4 pi rho)` for each ray of the block against a plane whose
-    /// [`PlaneView::toward`] is `toward`: `bracket^(3/2) / (1 - g^2)` with
+    /// `1 / (4 pi rho m)` for each ray of the block against a plane whose
+    /// [`PlaneView::toward`] is `toward`: `bracket^(3/2) scale`, `scale = 1 / ((1 - g^2) m)`, with
     /// `bracket = (1 - |g|)^2 + |g| |we + toward|^2`, in `[(1 - |g|)^2, (1 + |g|)^2]` (to
     /// rounding), so the result is positive and finite for |g| <= 0.99.
     #[inline(always)]
-    pub fn inverse_lanes<const L: usize, V: Lanes<L>>(&self, ray: &RayBlock<V>, toward: Vec3) -> V {
+    pub fn inverse_lanes<const L: usize, V: Lanes<L>>(&self, ray: &RayBlock<V>, toward: Vec3, scale: f32) -> V {
         let s = V::splat;
         let (x, y, z) = (ray.x + s(toward.x), ray.y + s(toward.y), ray.z + s(toward.z));
         let squared = z.mul_add(z, y.mul_add(y, x * x));
         let bracket = s(self.h).mul_add(squared, s(self.floor));
-        bracket * bracket.sqrt() * s(self.inv_numerator)
+        bracket * bracket.sqrt() * s(scale)
     }
 }
 
@@ -399,7 +402,7 @@ impl<D: Denominator> PlaneJob<'_, D> {
         let length = (c.t - ray.t0) + c.r;
         // The hit's path (y', x, the eye) is the same for every orientation that makes it, so
         // its phase value is a factor of C and no weight changes (section 1.1).
-        let d = self.phase.divide::<L, V>(d, ray, view.toward);
+        let d = self.phase.divide::<L, V>(d, ray, view.toward, view.phase_scale);
         let contribution = view.contribution::<L, V, GREY>(self.extinction.sigma_t, length, d, lit);
         let channels = if GREY { 1 } else { 3 };
         for (sum, value) in sums.into_iter().zip(contribution).take(channels) {
@@ -854,7 +857,7 @@ mod tests {
                 let side = wl.any_orthonormal_vector();
                 let we = (-wl * theta.cos() + side * theta.sin()).normalize();
                 let ray = RayBlock::one(&CameraRay { dir: we.as_vec3(), t0: 0.0, t1: 1.0 });
-                let inverse = phase.inverse_lanes::<1, f32>(&ray, (sign * wl).as_vec3());
+                let inverse = phase.inverse_lanes::<1, f32>(&ray, (sign * wl).as_vec3(), (1.0 / (1.0 - g * g)) as f32);
                 let want = henyey_greenstein(g, wl.dot(-we)) / PHASE;
                 let got = 1.0 / inverse as f64;
                 assert!(inverse.is_finite() && inverse > 0.0, "g {g} theta {theta}: {inverse}");

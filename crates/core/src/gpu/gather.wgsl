@@ -60,7 +60,7 @@ struct Plane {
     inv_unit: f32,
     light: u32,
     toward: vec3<f32>,
-    pad0: u32,
+    phase_scale: f32,
 };
 
 // occlusion.rs `Occluder`.
@@ -91,7 +91,7 @@ struct Params {
     inv_orientations: f32,
     phase_h: f32,
     phase_floor: f32,
-    phase_inv_numerator: f32,
+    pad0: u32,
     phase_hg: u32,
     // The gathering's planes (`orient`'s table holds K - 1 rows for each).
     planes: u32,
@@ -489,15 +489,16 @@ fn contribution(pl: Plane, length: f32, d: f32) -> vec3<f32> {
     return pl.scale * (e / d);
 }
 
-// 1 / (4 pi rho) of the Henyey-Greenstein phase function for a hit seen along dir on a plane
-// swept along pl.toward / sign(g) (gather.rs `Phase::inverse_lanes`, docs/mathematics.md section
-// 1.1): bracket^(3/2) / (1 - g^2), bracket = (1 - |g|)^2 + |g| |dir + toward|^2, in
+// 1 / (4 pi rho m) of the Henyey-Greenstein phase function for a hit seen along dir on a plane
+// swept along pl.toward / sign(g), m the weight of the way its direction was drawn (gather.rs
+// `Phase::inverse_lanes`, docs/mathematics.md sections 1.1 and 2.5): bracket^(3/2) times
+// pl.phase_scale = 1 / ((1 - g^2) m), bracket = (1 - |g|)^2 + |g| |dir + toward|^2, in
 // [(1 - |g|)^2, (1 + |g|)^2]: positive and finite.
-fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>) -> f32 {
+fn inverse_phase(dir: vec3<f32>, toward: vec3<f32>, scale: f32) -> f32 {
     let v = dir + toward;
     let squared = fma(v.z, v.z, fma(v.y, v.y, v.x * v.x));
     let bracket = fma(params.phase_h, squared, params.phase_floor);
-    return bracket * sqrt(bracket) * params.phase_inv_numerator;
+    return bracket * sqrt(bracket) * scale;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -528,7 +529,7 @@ fn plane_at(base: u32) -> Plane {
     return Plane(
         r0.xyz, r0.w, r1.xyz, r1.w, bitcast<vec3<f32>>(r2.xyz), r2.w, bitcast<vec3<f32>>(r3.xyz), r3.w,
         r4.xyz, r4.w, r5.x, r5.y, r5.z, r5.w, r6.x, r6.y, r6.z, r6.w,
-        r7.x, bitcast<f32>(r7.y), bitcast<f32>(r7.z), r7.w, bitcast<vec3<f32>>(r8.xyz), r8.w,
+        r7.x, bitcast<f32>(r7.y), bitcast<f32>(r7.z), r7.w, bitcast<vec4<f32>>(r8).xyz, bitcast<f32>(r8.w),
     );
 }
 var<workgroup> wg_item: vec4<u32>;
@@ -627,7 +628,7 @@ fn gather(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: v
                     // The phase value divides D (section 1.1); D > 0 is tested after, as the
                     // CPU's D > 0 and finite test drop the same hits.
                     if (params.phase_hg != 0u && d > 0.0) {
-                        d = d * inverse_phase(dir, pl.toward);
+                        d = d * inverse_phase(dir, pl.toward, pl.phase_scale);
                     }
                     sum += contribution(pl, (t - t0) + r, d);
                 }

@@ -169,7 +169,7 @@ impl Gathering<'_> {
             inv_orientations: 1.0 / k as f32,
             phase_h: self.phase.h,
             phase_floor: self.phase.floor,
-            phase_inv_numerator: self.phase.inv_numerator,
+            pad0: 0,
             phase_hg: !self.phase.is_isotropic() as u32,
             planes: self.count,
             regions: 0,

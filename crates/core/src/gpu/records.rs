@@ -34,10 +34,11 @@ pub(super) struct GatherParams {
     pub(super) grey: u32,
     pub(super) orientations: u32,
     pub(super) inv_orientations: f32,
-    /// gather.rs `Phase`: `abs(g)`, `(1 - abs(g))^2`, `1 / (1 - g^2)`, and whether g != 0.
+    /// gather.rs `Phase`: `abs(g)`, `(1 - abs(g))^2`, and whether g != 0 (`1 / (1 - g^2)` is
+    /// each plane's, with its direction's weight: `PlaneRecord::phase_scale`).
     pub(super) phase_h: f32,
     pub(super) phase_floor: f32,
-    pub(super) phase_inv_numerator: f32,
+    pub(super) pad0: u32,
     pub(super) phase_hg: u32,
     /// The gathering's planes (`orient`'s table has K - 1 rows for each).
     pub(super) planes: u32,
@@ -145,14 +146,14 @@ mod tests {
                 "Plane",
                 fields!(PlaneRecord: normal, t_det, a_axis, width, r_axis, occluders_start, normal_perp,
                     occluders_end, scale, scale_max, cos_a, sin_a, p0, q0, light_w, light_h, perp_inv_abs_cos,
-                    perp_inv_sin, perp_cos_positive, unit, inv_unit, light, toward, pad),
+                    perp_inv_sin, perp_cos_positive, unit, inv_unit, light, toward, phase_scale),
             ),
             (GATHER_WGSL, "Occluder", fields!(Occluder: t0, t_a, p0, p_a, q0, q_a, width, height)),
             (
                 GATHER_WGSL,
                 "Params",
                 fields!(GatherParams: width, height, tiles_x, tiles, sigma_t, grey, orientations, inv_orientations,
-                    phase_h, phase_floor, phase_inv_numerator, phase_hg, planes, regions),
+                    phase_h, phase_floor, pad0, phase_hg, planes, regions),
             ),
             (
                 BIN_WGSL,
