@@ -189,7 +189,16 @@ fn every_estimator_matches_quadrature_with_a_henyey_greenstein_medium() {
         let eye = DVec3::new(0.0, eye, 6.0);
         let scene = two_lights_seen_from(g, eye);
         let lobes = fogplanes::photon_plane::PlaneSources::new(&scene).lobes;
-        assert_eq!(lobes.iter().filter(|l| l.is_some()).count(), [2, 0, 2][(g < 0.0) as usize + (eye.y > 2.9) as usize]);
-        run(&Truths::of_cases(&scene, cases_with_the_eyes(eye)), Sampler::default(), &Weighting::all(&[4]), batches, 10_000);
+        assert_eq!(
+            lobes.iter().filter(|l| l.is_some()).count(),
+            [2, 0, 2][(g < 0.0) as usize + (eye.y > 2.9) as usize]
+        );
+        run(
+            &Truths::of_cases(&scene, cases_with_the_eyes(eye)),
+            Sampler::default(),
+            &Weighting::all(&[4]),
+            batches,
+            10_000,
+        );
     }
 }

@@ -312,11 +312,7 @@ pub struct Phase {
 impl Phase {
     pub fn new(g: f64) -> Self {
         let h = g.abs();
-        Phase {
-            g: g as f32,
-            h: h as f32,
-            floor: ((1.0 - h) * (1.0 - h)) as f32,
-        }
+        Phase { g: g as f32, h: h as f32, floor: ((1.0 - h) * (1.0 - h)) as f32 }
     }
 
     pub fn is_isotropic(&self) -> bool {

@@ -418,10 +418,7 @@ mod tests {
     fn lobes() -> Vec<(Lobe, crate::light::RectLight)> {
         let light = s_light();
         let grazing = (0.2 * light.n + (1.0f64 - 0.04).sqrt() * light.u).normalize();
-        [grazing, light.n]
-            .into_iter()
-            .map(|axis| (Lobe { axis, h: 0.9, share: LOBE_SHARE }, light.clone()))
-            .collect()
+        [grazing, light.n].into_iter().map(|axis| (Lobe { axis, h: 0.9, share: LOBE_SHARE }, light.clone())).collect()
     }
 
     fn s_light() -> crate::light::RectLight {
