@@ -68,8 +68,13 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
     // How the planes are cut into pieces moves an image's f32 sums: a part or a checkpoint cut
     // as before 2026-12-02 (each group whole) is another image, refused rather than mixed in.
     const PIECES: &str = "pieces: each group in two halves";
+    // So do the lobes' directions in fog that scatters forward or back (docs/mathematics.md
+    // section 2.5, since 2026-12-02): a part made before them is another image there. An
+    // isotropic medium's planes are as they were, and so are its fingerprints.
+    let lobes =
+        if scene.medium.g != 0.0 { format!(" | lobes {}", crate::photon_plane::LOBE_SHARE) } else { String::new() };
     let description = format!(
-        "fogplanes {} | {PIECES} | {:?} | {:?} | {:?} | planes {} | {} | seed {} | sampler {} | spp {} | centre {} | {}",
+        "fogplanes {} | {PIECES} | {:?} | {:?} | {:?} | planes {} | {} | seed {} | sampler {} | spp {} | centre {} | {}{lobes}",
         env!("CARGO_PKG_VERSION"),
         scene.camera,
         scene.medium,
