@@ -162,10 +162,7 @@ impl Lobe {
             cosine_hemisphere((u1 / c).min(BELOW_ONE), u2, light.u, light.v, n)
         } else {
             let v = ((u1 - c) / self.share).min(BELOW_ONE);
-            let h = self.h;
-            // Inverting the cosine's distribution (pbrt-v4's SampleHenyeyGreenstein).
-            let k = (1.0 - h * h) / (1.0 - h + 2.0 * h * v);
-            let cos = ((1.0 + h * h - k * k) / (2.0 * h)).clamp(-1.0, 1.0);
+            let cos = hg_cosine(self.h, v);
             let sin = (1.0 - cos * cos).max(0.0).sqrt();
             let (t, b) = self.axis.any_orthonormal_pair();
             let (sp, cp) = (2.0 * PI * u2).sin_cos();
@@ -182,6 +179,25 @@ impl Lobe {
         let cosine = cos / PI;
         (w, cosine / (c * cosine + self.share * lobe))
     }
+}
+
+/// The cosine of the angle to the axis of a direction drawn from Henyey-Greenstein's lobe of
+/// `h` by the uniform `v`: the inverse of its distribution,
+///
+/// ```text
+/// cos = (1 + h^2 - ((1 - h^2) / D)^2) / (2 h),   D = 1 + h e,   e = 2 v - 1
+///     = (2 e + h (e^2 + 3) + 2 h^2 e + h^3 (e^2 - 1)) / (2 D^2)
+/// ```
+///
+/// (pbrt-v4's `SampleHenyeyGreenstein` takes the first form). The second, the same after the
+/// division by h, has none to make: at a small h the first subtracts numbers near 1 to leave
+/// one near 2 h e, and below h = 1e-16 leaves 0, every direction on the circle at a right angle
+/// to the axis, where the second gives `e`, the uniform sphere's cosine.
+fn hg_cosine(h: f64, v: f64) -> f64 {
+    let e = 2.0 * v - 1.0;
+    let d = h.mul_add(e, 1.0);
+    let numerator = 2.0 * e + h * (e * e + 3.0) + 2.0 * h * h * e + h * h * h * (e * e - 1.0);
+    (numerator / (2.0 * d * d)).clamp(-1.0, 1.0)
 }
 
 /// Which set of planes: the sampler and the seed that make it. A render's planes are its
@@ -414,11 +430,28 @@ mod tests {
     }
 
     /// A lobe about an axis 0.2 above the light's plane (most of its directions mirrored into
-    /// the front) and one about the normal.
+    /// the front), one about the normal, and one of a g of 1e-300 (a scene may give any).
     fn lobes() -> Vec<(Lobe, crate::light::RectLight)> {
         let light = s_light();
         let grazing = (0.2 * light.n + (1.0f64 - 0.04).sqrt() * light.u).normalize();
-        [grazing, light.n].into_iter().map(|axis| (Lobe { axis, h: 0.9, share: LOBE_SHARE }, light.clone())).collect()
+        [(grazing, 0.9), (light.n, 0.9), (grazing, 1e-300)]
+            .into_iter()
+            .map(|(axis, h)| (Lobe { axis, h, share: LOBE_SHARE }, light.clone()))
+            .collect()
+    }
+
+    /// The lobe's cosine: the ends of [-1, 1] at v = 0 and 1, Henyey-Greenstein's mean cosine
+    /// h (over 100,000 midpoints of v), and the uniform sphere's `2 v - 1` for h near 0, where
+    /// pbrt-v4's form gave 0 below h = 1e-16.
+    #[test]
+    fn the_lobes_cosine_inverts_henyey_greenstein() {
+        for h in [1e-300, 1e-12, 0.3, 0.9, 0.99] {
+            assert!((hg_cosine(h, 0.0) + 1.0).abs() < 1e-12 && (hg_cosine(h, 1.0) - 1.0).abs() < 1e-12, "{h:e}");
+            let n = 100_000;
+            let mean = (0..n).map(|i| hg_cosine(h, (i as f64 + 0.5) / n as f64)).sum::<f64>() / n as f64;
+            assert!((mean - h).abs() < 1e-3, "h {h:e}: mean cosine {mean}");
+        }
+        assert!((hg_cosine(1e-300, 0.3) + 0.4).abs() < 1e-15);
     }
 
     fn s_light() -> crate::light::RectLight {
