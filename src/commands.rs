@@ -149,6 +149,8 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
     outputs.extend(a.schedule_record.as_deref().map(Output::File));
+    let files = outputs.len();
+    outputs.extend(a.watch.checkpoint.as_deref().map(Output::Directory));
     check_outputs(&outputs, &[&a.scene])?;
     if pending.settings().in_passes() && (a.watch.checkpoint.is_some() || a.watch.display_server.is_some()) {
         let flag = if a.watch.checkpoint.is_some() { "--checkpoint" } else { "--display-server" };
@@ -156,7 +158,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
             "{flag}: a render in passes (on a time budget or to a target error) has no chunks to follow: give --planes"
         )));
     }
-    let images: Vec<&Path> = outputs.iter().map(|o| o.path()).collect();
+    let images: Vec<&Path> = outputs[..files].iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
     let r = pending.find_device()?;
     let (scene, opts) = (&r.scene, &r.options);
@@ -436,8 +438,10 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let mut outputs = vec![Output::Image(&output)];
     outputs.extend(a.stderr_image.as_deref().map(Output::Image));
     outputs.extend(a.schedule_record.as_deref().map(Output::File));
+    let files = outputs.len();
+    outputs.extend(a.watch.checkpoint.as_deref().map(Output::Directory));
     check_outputs(&outputs, &reference_inputs(&a))?;
-    let images: Vec<&std::path::Path> = outputs.iter().map(|o| o.path()).collect();
+    let images: Vec<&std::path::Path> = outputs[..files].iter().map(|o| o.path()).collect();
     settings::check_exposure_applies(a.exposure, &images)?;
     start_threads(r.threads)?;
     let passes = if r.options.uniform { 1 } else { 2 };

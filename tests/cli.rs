@@ -493,6 +493,41 @@ fn every_output_is_checked_before_any_work() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A checkpoint directory is kept apart from the outputs before any work: `render -o x.exr
+/// --checkpoint x.exr` made the directory x.exr, rendered, and failed (exit code 1) to move the
+/// image onto it; with `--stderr-image x.exr` the image was written and its error image lost.
+#[test]
+fn a_checkpoint_named_as_an_output_is_refused_before_any_work() {
+    let dir = scratch("checkpoint-output");
+    let (image, stderr, record) = (dir.join("x.exr"), dir.join("se.exr"), dir.join("s.json"));
+    let render = ["render", "media_scenes/six_lights.toml", "--resolution", "16x9", "--planes", "200", "-q"];
+    for (extra, checkpoint) in [
+        (vec![], &image),
+        (vec!["--stderr-image", stderr.to_str().unwrap()], &stderr),
+        (vec!["--stderr-image", stderr.to_str().unwrap()], &image),
+        (vec!["--schedule-record", record.to_str().unwrap()], &record),
+    ] {
+        let mut args = render.to_vec();
+        args.extend(["-o", image.to_str().unwrap(), "--checkpoint", checkpoint.to_str().unwrap()]);
+        args.extend(&extra);
+        let o = fogplanes(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("is named twice as an output") && err.lines().count() == 1, "{args:?}: {err}");
+        assert!(o.stdout.is_empty() && files_in(&dir).is_empty(), "{args:?}: {:?}", files_in(&dir));
+    }
+    let reference = ["reference", "media_scenes/six_lights.toml", "--resolution", "16x9", "--spp", "4", "-q"];
+    let mut args = reference.to_vec();
+    args.extend(["-o", image.to_str().unwrap(), "--stderr-image", stderr.to_str().unwrap()]);
+    args.extend(["--checkpoint", stderr.to_str().unwrap()]);
+    let o = fogplanes(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("is named twice as an output") && err.lines().count() == 1, "{err}");
+    assert!(o.stdout.is_empty() && files_in(&dir).is_empty(), "{:?}", files_in(&dir));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// SIGTERM while the image is being written removes the temporary file as Ctrl-C does: the
 /// output is either its old contents or the whole new image, and nothing is left beside it.
 #[test]

@@ -15,12 +15,17 @@ pub enum Output<'a> {
     Image(&'a Path),
     /// Any other file (Markdown, JSON, SVG, HTML).
     File(&'a Path),
+    /// A directory the command writes its files into (a checkpoint), checked where it is
+    /// opened: here it is only kept apart from the other outputs and the inputs, since
+    /// `render -o x.exr --checkpoint x.exr` made the directory x.exr and failed to move the
+    /// finished image onto it, after the whole render.
+    Directory(&'a Path),
 }
 
 impl Output<'_> {
     pub fn path(&self) -> &Path {
         match self {
-            Output::Image(p) | Output::File(p) => p,
+            Output::Image(p) | Output::File(p) | Output::Directory(p) => p,
         }
     }
 }
@@ -35,6 +40,7 @@ pub fn check_outputs(outputs: &[Output<'_>], inputs: &[&Path]) -> Result<()> {
         match output {
             Output::Image(p) => check_image_output(p)?,
             Output::File(p) => check_writable(p)?,
+            Output::Directory(_) => {}
         }
         let path = output.path();
         let id = identity(path);
