@@ -521,7 +521,13 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
     ImageInfo::check_is_image(image_info.as_ref(), "--stderr")
         .map_err(|e| input(anyhow!("{}: {e}", a.image.display())))?;
     check_reference(image_info.as_ref(), reference_info.as_ref(), &a.reference)?;
-    let m = compare(&image, &reference)?;
+    // Each image's fault named with its file (compare's errors name the role alone).
+    fn named(path: &Path) -> impl Fn(fogplanes::Error) -> Failure + '_ {
+        move |e| input(anyhow!("{}: {e}", path.display()))
+    }
+    image.check_finite("image").map_err(named(&a.image))?;
+    reference.check_finite("reference").map_err(named(&a.reference))?;
+    let m = compare(&image, &reference).map_err(named(&a.reference))?;
     let Some(ref_se_path) = &a.ref_stderr else {
         if a.json {
             say!("{}", serde_json::to_string_pretty(&m).context("cannot format JSON")?);
@@ -531,14 +537,16 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
         return Ok(());
     };
     // Each standard error is checked against what its image records.
-    let load_se = |path: &Path, of: Option<&ImageInfo>| -> Result<Film, Failure> {
+    let load_se = |path: &Path, of: Option<&ImageInfo>, what: &str| -> Result<Film, Failure> {
         let bad = |e: fogplanes::Error| input(anyhow!("{}: {e}", path.display()));
         let (film, info) = Film::load_exr_with_info(path).map_err(bad)?;
         ImageInfo::check_stderr(info.as_ref(), of).map_err(bad)?;
+        fogplanes::metrics::check_stderr(&film, &image, what).map_err(bad)?;
         Ok(film)
     };
-    let ref_se = load_se(ref_se_path, reference_info.as_ref())?;
-    let image_se = a.stderr.as_deref().map(|p| load_se(p, image_info.as_ref())).transpose()?;
+    let ref_se = load_se(ref_se_path, reference_info.as_ref(), "reference's standard error")?;
+    let image_se =
+        a.stderr.as_deref().map(|p| load_se(p, image_info.as_ref(), "image's standard error")).transpose()?;
     let (noisy, z) = compare_noisy(&image, &reference, &ref_se, image_se.as_ref(), a.regions).map_err(input)?;
     if let Some(path) = &a.z_image {
         let compared = format!("{} against {}", a.image.display(), a.reference.display());

@@ -190,11 +190,37 @@ fn compare_refuses_every_crafted_file_with_one_line() {
         assert_refused(&fogplanes(&["compare", &bad, &good]), &format!("compare {bad} good"), case.expected);
         assert_refused(&fogplanes(&["compare", &good, &bad]), &format!("compare good {bad}"), case.expected);
         if case.expected.starts_with("pixel") {
-            // Which of the two holds the bad value is said.
-            assert_refused(&fogplanes(&["compare", &bad, &good]), &bad, "the image holds");
-            assert_refused(&fogplanes(&["compare", &good, &bad]), &bad, "the reference holds");
+            // Which of the two holds the bad value is said, by its file.
+            assert_refused(&fogplanes(&["compare", &bad, &good]), &bad, &format!("{bad}: the image holds"));
+            assert_refused(&fogplanes(&["compare", &good, &bad]), &bad, &format!("{bad}: the reference holds"));
         }
     }
+}
+
+/// A standard error of another size is named by its file and as what it is: `--ref-stderr` or
+/// `--stderr` of another size was "the images differ in size: 4x3 against a 8x6 reference",
+/// naming neither the file nor the standard error; a reference of another size is named too.
+#[test]
+fn compare_names_the_file_of_another_size() {
+    let dir = scratch("compare-size");
+    let good = corpus_path("good_4x3.exr");
+    let other = dir.join("8x6.exr");
+    std::fs::write(&other, craft::rgb_file(8, 6, &ramp(48))).unwrap();
+    let other = other.to_str().unwrap();
+    let o = fogplanes(&["compare", &good, other]);
+    assert_refused(&o, "compare good 8x6", &format!("{other}: the images differ in size"));
+    let o = fogplanes(&["compare", &good, &good, "--ref-stderr", other]);
+    assert_refused(
+        &o,
+        "--ref-stderr 8x6",
+        &format!("{other}: the reference's standard error is 8x6 pixels, the image 4x3"),
+    );
+    let o = fogplanes(&["compare", &good, &good, "--ref-stderr", &good, "--stderr", other]);
+    assert_refused(&o, "--stderr 8x6", &format!("{other}: the image's standard error is 8x6 pixels, the image 4x3"));
+    let nan = corpus_path("nan_pixel.exr");
+    let o = fogplanes(&["compare", &good, &good, "--ref-stderr", &nan]);
+    assert_refused(&o, "--ref-stderr nan", &format!("{nan}: the reference's standard error holds pixel (x 2, y 1)"));
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// A reference holding NaN is refused before anything is rendered or written: every table row

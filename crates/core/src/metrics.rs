@@ -103,6 +103,26 @@ pub struct Region {
     pub mean_z: f64,
 }
 
+/// The largest |z| of [`compare_noisy`]'s z-image: a finite f32, whatever the noise.
+const Z_MAX: f64 = 1e30;
+
+/// Refuses a standard error per pixel, `what` ("reference's standard error"), that is not the
+/// size of `image` or holds what no standard error is (NaN, an infinity, a negative value),
+/// naming the first such pixel.
+pub fn check_stderr(stderr: &Film, image: &Film, what: &str) -> Result<()> {
+    if (stderr.width, stderr.height) != (image.width, image.height) {
+        // Not Error::SizeMismatch, which would call it the reference.
+        return Err(Error::NotComparable(format!(
+            "the {what} is {}x{} pixels, the image {}x{}",
+            stderr.width, stderr.height, image.width, image.height
+        )));
+    }
+    if let Some(bad) = stderr.first_outside(f64::from(f32::MAX)) {
+        return Err(Error::NotComparable(format!("the {what} holds {bad}: a standard error is a non-negative number")));
+    }
+    Ok(())
+}
+
 /// Compares `image` against `reference`, whose standard error per pixel is `reference_stderr`
 /// (and the image's `image_stderr`, if known): the MSE with the reference's noise subtracted,
 /// per-pixel z-scores (returned as an image: z per channel, 0 where both errors are 0 and the
@@ -116,17 +136,9 @@ pub fn compare_noisy(
     regions: usize,
 ) -> Result<(NoisyComparison, Film)> {
     let m = compare(image, reference)?;
-    for (what, e) in std::iter::once(("reference's standard error", reference_stderr))
-        .chain(image_stderr.map(|e| ("image's standard error", e)))
-    {
-        if (e.width, e.height) != (image.width, image.height) {
-            return Err(Error::SizeMismatch { image: (image.width, image.height), reference: (e.width, e.height) });
-        }
-        if let Some(bad) = e.first_outside(f64::from(f32::MAX)) {
-            return Err(Error::NotComparable(format!(
-                "the {what} holds {bad}: a standard error is a non-negative number"
-            )));
-        }
+    check_stderr(reference_stderr, image, "reference's standard error")?;
+    if let Some(e) = image_stderr {
+        check_stderr(e, image, "image's standard error")?;
     }
     let (w, h) = (image.width as usize, image.height as usize);
     let mut z = Film::new(image.width, image.height);
@@ -139,15 +151,18 @@ pub fn compare_noisy(
             let se2 = image_stderr.map_or(0.0, |e| (e.pixels[p][c] as f64).powi(2));
             reference_noise += sr2;
             image_noise += se2;
+            // Held to +-1e30, as where there is no noise: a difference of 3e38 over a
+            // standard error of 1e-45 (2e83) was an infinity in the z-image.
             let zc = if sr2 + se2 > 0.0 {
-                d / (sr2 + se2).sqrt()
+                (d / (sr2 + se2).sqrt()).clamp(-Z_MAX, Z_MAX)
             } else if d == 0.0 {
                 0.0
             } else {
-                d.signum() * 1e30
+                d.signum() * Z_MAX
             };
             z.pixels[p][c] = zc as f32;
-            z2 += zc.min(1e15).powi(2);
+            // Either sign alike (`min` alone let a negative z of 1e30 add 1e60).
+            z2 += zc.clamp(-1e15, 1e15).powi(2);
             beyond += (zc.abs() > 3.0) as usize;
             *flag |= zc.abs() > 2.0;
         }
@@ -306,11 +321,34 @@ mod tests {
         assert!((top.excess - 90.0 * b * b).abs() < 0.1 * 90.0 * b * b && top.mean_z > 15.0, "{top:?}");
         assert!(m.regions.len() <= 5 && m.regions.windows(2).all(|r| r[0].excess >= r[1].excess));
         assert_eq!((z.width, z.height), (w, h));
-        // A standard error of another size, or negative, is refused.
-        assert!(compare_noisy(&image, &reference, &Film::new(3, 3), None, 5).is_err());
+        // A standard error of another size, or negative, is refused, and named as what it is.
+        let e = compare_noisy(&image, &reference, &Film::new(3, 3), None, 5).unwrap_err().to_string();
+        assert!(e.contains("reference's standard error is 3x3 pixels, the image 256x256"), "{e}");
+        let e = compare_noisy(&image, &reference, &ref_se, Some(&Film::new(3, 3)), 5).unwrap_err().to_string();
+        assert!(e.contains("image's standard error is 3x3"), "{e}");
         let mut bad = ref_se.clone();
         bad.pixels[7].y = -1.0;
         let e = compare_noisy(&image, &reference, &bad, None, 5).unwrap_err().to_string();
         assert!(e.contains("reference's standard error") && e.contains("-1"), "{e}");
+    }
+
+    /// A difference over a noise all but 0 is no f32: 3e38 over a standard error of 1e-45 made
+    /// the z-image's pixel infinite, and a negative z escaped mean z^2's cap.
+    #[test]
+    fn the_z_image_is_finite_whatever_the_noise() {
+        let (w, h) = (4u32, 3u32);
+        let mut image = Film::new(w, h);
+        image.pixels[5] = Vec3::new(f32::MAX, 3e38, 0.0);
+        let mut reference = Film::new(w, h);
+        reference.pixels[5].z = 3e38;
+        let tiny = Film { width: w, height: h, pixels: vec![Vec3::splat(1e-45); (w * h) as usize] };
+        for image_se in [None, Some(&tiny)] {
+            let (m, z) = compare_noisy(&image, &reference, &tiny, image_se, 5).unwrap();
+            assert!(z.first_non_finite().is_none(), "{:?}", z.pixels[5]);
+            assert_eq!(z.pixels[5], Vec3::new(1e30, 1e30, -1e30));
+            // Each of the three values counts (1e15)^2, whatever its sign.
+            assert!((m.mean_z2 / (3e30 / 36.0) - 1.0).abs() < 1e-12, "{}", m.mean_z2);
+            assert!(m.regions.iter().all(|r| r.mean_z.is_finite()), "{:?}", m.regions);
+        }
     }
 }
