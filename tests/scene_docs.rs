@@ -405,6 +405,7 @@ fn the_doc_states_the_codes_limits() {
             "MAX_TOTAL_POWER" => MAX_TOTAL_POWER,
             "MAX_VFOV_DEG" => MAX_VFOV_DEG,
             "MAX_BOX_DIAGONAL" => MAX_BOX_DIAGONAL,
+            "MIN_BOX_DIAGONAL" => MIN_BOX_DIAGONAL,
             "MAX_CAMERA_DISTANCE_DIAGONALS" => MAX_CAMERA_DISTANCE_DIAGONALS,
             "MEMORY_BUDGET_BYTES" => MEMORY_BUDGET_BYTES as f64,
             "BYTES_PER_PIXEL" => BYTES_PER_PIXEL as f64,

@@ -77,6 +77,12 @@ pub const MAX_VFOV_DEG: f64 = 179.0;
 /// The largest fog box, by its diagonal in world units: every position is held in f32 relative
 /// to the camera (largest about 3.4e38), and squared lengths in f64.
 pub const MAX_BOX_DIAGONAL: f64 = 1e30;
+/// The smallest fog box, by its diagonal in world units: positions are held in f32 (smallest
+/// normal about 1.2e-38) and a light's edge may be 1e-9 of the diagonal, and a hit's value grows
+/// as one over the box's size, summed in f32 over a chunk. The benchmark scaled to 1e-40 found
+/// no hit (the fog vanished from its image, without a word), and to 1e-37 overflowed a chunk's
+/// sums; at 1e-20 every estimator and accelerator gives the unscaled image.
+pub const MIN_BOX_DIAGONAL: f64 = 1e-20;
 /// The farthest the camera may be from the fog box, in box diagonals: a plane is held in f32
 /// relative to the camera, so the box's detail is kept to about 6e-8 times this distance over
 /// the box's size (a camera 2,900 diagonals away moved a scene's mean by 1.2e-4, 29,000 by

@@ -293,6 +293,15 @@ impl Scene {
             },
         };
         let scale = medium.diagonal();
+        if !(scale >= crate::limits::MIN_BOX_DIAGONAL) {
+            return Err(err(
+                "medium".into(),
+                format!(
+                    "the box's diagonal is {scale:e}; at least {:e} is supported (positions are held in f32): scale the scene up",
+                    crate::limits::MIN_BOX_DIAGONAL
+                ),
+            ));
+        }
         if !(scale <= crate::limits::MAX_BOX_DIAGONAL) {
             return Err(err(
                 "medium".into(),
@@ -597,6 +606,27 @@ radiance = 4
         Scene::parse(text, "test.toml", "test")
     }
 
+    /// [`MINIMAL`] with every length times `s` and its coefficients over `s`: the same image.
+    fn scaled(s: f64) -> String {
+        let v = |x: f64, y: f64, z: f64| format!("[{:e}, {:e}, {:e}]", x * s, y * s, z * s);
+        format!(
+            "[camera]\nposition = {}\nlook_at = {}\nup = [0.0, 1.0, 0.0]\nvfov_deg = 40.0\nresolution = [32, 16]\n\
+             [medium]\nmin = {}\nmax = {}\nsigma_s = [{:e}, {:e}, {:e}]\nsigma_a = {:e}\n\
+             [[light]]\ncorner = {}\nedge_u = {}\nedge_v = {}\nradiance = 4\n",
+            v(0.0, 1.0, 5.0),
+            v(0.0, 1.0, 0.0),
+            v(-2.0, 0.0, -2.0),
+            v(2.0, 2.0, 2.0),
+            0.1 / s,
+            0.2 / s,
+            0.3 / s,
+            0.05 / s,
+            v(-0.5, 1.9, -0.5),
+            v(1.0, 0.0, 0.0),
+            v(0.0, 0.0, 1.0),
+        )
+    }
+
     #[test]
     fn minimal_scene_parses_with_grey_and_rgb_coefficients() {
         let s = parse(MINIMAL).unwrap();
@@ -632,6 +662,12 @@ radiance = 4
         expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 6003.0]"), "camera.position", "box diagonals");
         assert!(parse(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 5900.0]")).is_ok());
         expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 2.0, 1e31]"), "medium", "diagonal");
+        // And at least 1e-20 across: the benchmark scaled to 1e-40 rendered without its fog, and
+        // a box of 1e-300 has a diagonal of 0 in f64.
+        for s in [1e-21, 1e-40, 1e-300] {
+            expect_error(&scaled(s), "medium", "at least 1e-20");
+        }
+        assert!(parse(&scaled(1e-20)).is_ok());
         expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, inf, 5.0]"), "camera.position", "finite");
         expect_error(
             &MINIMAL.replace("look_at = [0.0, 1.0, 0.0]", "look_at = [0.0, 1.0, 5.0]"),
