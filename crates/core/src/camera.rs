@@ -32,11 +32,24 @@ pub struct Camera {
     pub height: u32,
 }
 
+/// `v` ready for glam's `normalize`, which squares it and so fails beyond about 1e154 or below
+/// 1e-154 (an `up` of [0, 1e308, 0] is the direction [0, 1, 0], and was refused as zero): `v`
+/// itself where its largest component lies in [1e-150, 1e150] (the same bits for every
+/// ordinary vector), else `v` over that component. None for zero or a vector not finite.
+pub(crate) fn tamed(v: DVec3) -> Option<DVec3> {
+    let m = v.abs().max_element();
+    if !(m > 0.0 && m.is_finite()) {
+        return None;
+    }
+    Some(if (1e-150..=1e150).contains(&m) { v } else { v / m })
+}
+
 impl Camera {
     /// The scene validates that `look_at != position` and that `up` is not parallel to the view.
     pub fn new(position: DVec3, look_at: DVec3, up: DVec3, vfov_deg: f64, width: u32, height: u32) -> Self {
-        let forward = (look_at - position).normalize();
-        let right = forward.cross(up).normalize();
+        let view = look_at - position;
+        let forward = tamed(view).unwrap_or(view).normalize();
+        let right = tamed(forward.cross(tamed(up).unwrap_or(up))).unwrap_or(DVec3::ZERO).normalize();
         Camera {
             position,
             forward,

@@ -317,11 +317,37 @@ impl Scene {
         let position = vec3("camera.position", c.position)?;
         let look_at = vec3("camera.look_at", c.look_at)?;
         let up = vec3("camera.up", c.up)?;
-        let view = look_at - position;
-        if !(view.length() > 0.0) || !view.length().is_finite() {
-            return Err(err("camera.look_at".into(), "must differ from camera.position".into()));
+        // The camera's distance to the box (0 inside it), in box diagonals.
+        // (Its length taken over its largest component: a camera at 1e308 is 1.7e307 diagonals
+        // away, not an infinity.)
+        let gap = (min - position).max(position - max).max(DVec3::ZERO);
+        let largest = gap.max_element();
+        let away = if largest > 0.0 { largest * (gap / largest).length() / scale } else { 0.0 };
+        if !(away <= crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS) {
+            return Err(err(
+                "camera.position".into(),
+                format!(
+                    "the camera is {away:.6e} box diagonals from the fog box; at most {:e} are supported (planes are held in f32 relative to the camera, which keeps the box's detail to about 6e-8 times that distance over its size): move the camera closer and widen vfov_deg",
+                    crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS
+                ),
+            ));
         }
-        if !(up.length() > 0.0) || view.normalize().cross(up.normalize()).length() < 1e-9 {
+        // Only the directions matter, whatever the vectors' lengths (camera::tamed): a camera
+        // at 1e308 was told that look_at "must differ from camera.position" (its view's length
+        // overflowed), and an up of [0, 1e308, 0] that it "must not be zero". The camera is near
+        // the box (checked above), so that only a look_at near f64's limit overflows the view.
+        let view = look_at - position;
+        if !view.is_finite() {
+            return Err(err(
+                "camera.look_at".into(),
+                "is too far from camera.position: their difference is no finite number".into(),
+            ));
+        }
+        let Some(view) = crate::camera::tamed(view) else {
+            return Err(err("camera.look_at".into(), "must differ from camera.position".into()));
+        };
+        let tamed_up = crate::camera::tamed(up);
+        if tamed_up.is_none_or(|up| view.normalize().cross(up.normalize()).length() < 1e-9) {
             return Err(err(
                 "camera.up".into(),
                 format!("must not be zero or parallel to the view direction, got {:?}", c.up),
@@ -331,17 +357,6 @@ impl Scene {
             return Err(err(
                 "camera.vfov_deg".into(),
                 format!("must lie above 0 and at most {} degrees, got {}", crate::limits::MAX_VFOV_DEG, c.vfov_deg),
-            ));
-        }
-        // The camera's distance to the box (0 inside it), in box diagonals.
-        let away = (min - position).max(position - max).max(DVec3::ZERO).length() / scale;
-        if !(away <= crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS) {
-            return Err(err(
-                "camera.position".into(),
-                format!(
-                    "the camera is {away:.6e} box diagonals from the fog box; at most {:e} are supported (planes are held in f32 relative to the camera, which keeps the box's detail to about 6e-8 times that distance over its size): move the camera closer and widen vfov_deg",
-                    crate::limits::MAX_CAMERA_DISTANCE_DIAGONALS
-                ),
             ));
         }
         check_resolution(c.resolution[0], c.resolution[1]).map_err(|m| err("camera.resolution".into(), m))?;
@@ -675,6 +690,25 @@ radiance = 4
             "differ",
         );
         expect_error(&MINIMAL.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 3.0]"), "camera.up", "parallel");
+        // Only directions matter, whatever their length: an up or a view of 1e308 or 1e-300 is
+        // one (each was refused as zero, or as a look_at equal to the position), and gives the
+        // camera of the unit vector; a camera 1e308 away is named as such.
+        let unit = parse(MINIMAL).unwrap().camera;
+        for (from, to) in [
+            ("up = [0.0, 1.0, 0.0]", "up = [0.0, 1e308, 0.0]"),
+            ("up = [0.0, 1.0, 0.0]", "up = [0.0, 1e-300, 0.0]"),
+            ("up = [0.0, 1.0, 0.0]", "up = [0.0, 5e-324, 0.0]"),
+            ("up = [0.0, 1.0, 0.0]", "up = [1e-320, 1e-300, 0.0]"),
+            ("look_at = [0.0, 1.0, 0.0]", "look_at = [0.0, 1.0, -1e308]"),
+            ("look_at = [0.0, 1.0, 0.0]", "look_at = [0.0, 1.0, 4.9999999999999991]"),
+        ] {
+            let camera = parse(&MINIMAL.replace(from, to)).unwrap_or_else(|e| panic!("{to}: {e}")).camera;
+            for (a, b) in [(camera.forward, unit.forward), (camera.right, unit.right), (camera.up, unit.up)] {
+                assert!((a - b).length() < 1e-15, "{to}: {a} against {b}");
+            }
+        }
+        expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 1e308]"), "camera.position", "box diagonals");
+        expect_error(&MINIMAL.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 0.0]"), "camera.up", "zero");
         expect_error(&MINIMAL.replace("[32, 16]", "[0, 16]"), "camera.resolution", "between 1");
         expect_error(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"), "medium.sigma_a", "non-negative");
         expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"), "medium", "empty");
