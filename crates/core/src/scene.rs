@@ -383,12 +383,24 @@ impl Scene {
             let ev = vec3(&field("edge_v"), l.edge_v)?;
             let radiance = non_negative(&field("radiance"), l.radiance)?;
             for (name, e) in [("edge_u", eu), ("edge_v", ev)] {
-                if !(e.length() > 1e-9 * scale) {
+                // The length over the largest component (|[1e-300, 0, 0]| was 0e0), and no
+                // longer than the box, inside which the light lies: an edge of 1e308 made the
+                // light's frame NaN, and the error named a corner [NaN, NaN, NaN].
+                let largest = e.abs().max_element();
+                let length = if largest > 0.0 { largest * (e / largest).length() } else { 0.0 };
+                if !(length > 1e-9 * scale) {
                     return Err(err(
                         field(name),
                         format!(
-                            "is too short: |{name}| = {:e}, where an edge must be longer than 1e-9 of the box's diagonal ({scale:e})",
-                            e.length()
+                            "is too short: |{name}| = {length:e}, where an edge must be longer than 1e-9 of the box's diagonal ({scale:e})"
+                        ),
+                    ));
+                }
+                if !(length <= scale * (1.0 + 2e-9)) {
+                    return Err(err(
+                        field(name),
+                        format!(
+                            "is longer than the box's diagonal: |{name}| = {length:e} against {scale:e}; the light must lie inside the medium box"
                         ),
                     ));
                 }
@@ -709,6 +721,12 @@ radiance = 4
         }
         expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 1e308]"), "camera.position", "box diagonals");
         expect_error(&MINIMAL.replace("up = [0.0, 1.0, 0.0]", "up = [0.0, 0.0, 0.0]"), "camera.up", "zero");
+        // An edge is named by its length, neither 0 nor NaN, and none is longer than the box.
+        let edge = |e: &str| MINIMAL.replace("edge_u = [1.0, 0.0, 0.0]", &format!("edge_u = {e}"));
+        expect_error(&edge("[1e-300, 0.0, 0.0]"), "light[0] (top).edge_u", "too short: |edge_u| = 1e-300");
+        for long in ["[1e308, 0.0, 0.0]", "[7.0, 0.0, 0.0]", "[1e200, 0.0, 1e200]"] {
+            expect_error(&edge(long), "light[0] (top).edge_u", "longer than the box's diagonal");
+        }
         expect_error(&MINIMAL.replace("[32, 16]", "[0, 16]"), "camera.resolution", "between 1");
         expect_error(&MINIMAL.replace("sigma_a = 0.05", "sigma_a = -0.05"), "medium.sigma_a", "non-negative");
         expect_error(&MINIMAL.replace("max = [2.0, 2.0, 2.0]", "max = [2.0, 0.0, 2.0]"), "medium", "empty");
