@@ -39,14 +39,9 @@ fn planes_and_structure(c: &mut Criterion) {
 
 fn gathering(c: &mut Criterion) {
     let s = scene().with_resolution(160, 90).unwrap();
-    let prepared = PreparedPlanes::new(
-        &s,
-        PlaneSet { sampler: Sampler::default(), seed: 1 },
-        0..40_960,
-        Accelerator::Raster,
-        Control::none(),
-    )
-    .unwrap();
+    let prepared =
+        PreparedPlanes::new(&s, PlaneSet::new(Sampler::default(), 1), 0..40_960, Accelerator::Raster, Control::none())
+            .unwrap();
     let rays = ray_set_rays(&s, 1, 0, false);
     let mut sums = vec![Vec3::ZERO; rays.len()];
     let kernel = Kernel::Auto.resolve().unwrap();

@@ -230,6 +230,12 @@ pub(crate) struct RenderArgs {
     /// default) or independent (the paper's planes). Default: the scene's, else sobol.
     #[arg(long, value_parser = sampler_parser())]
     pub(crate) sampler: Option<Sampler>,
+    /// In fog that scatters forward or back (g != 0), the share of each light's planes swept
+    /// along the phase function's lobe toward the eye, 0 to 1: 0 sweeps every plane by the
+    /// cosine, as the paper does (docs/mathematics.md section 2.5). No matter in isotropic fog.
+    /// Default: the scene's, else 0.5.
+    #[arg(long, value_name = "SHARE", allow_negative_numbers = true)]
+    pub(crate) lobes: Option<f64>,
     /// Camera samples per pixel (ray sets), stratified over the pixel; each gathers its own
     /// share of the N planes, so J of them cost about what one does (default: the scene's, else
     /// 16).
@@ -409,6 +415,11 @@ pub(crate) struct TableArgs {
     /// Plane samplers to measure, comma separated: every estimator gathers each one's planes.
     #[arg(long, value_delimiter = ',', default_value = TABLE_SAMPLERS.as_str(), value_parser = sampler_parser())]
     pub(crate) samplers: Vec<Sampler>,
+    /// In fog that scatters forward or back, the share of each light's planes swept along the
+    /// phase function's lobe, for every render of the table (0: the paper's planes). Default:
+    /// the scene's, else 0.5.
+    #[arg(long, value_name = "SHARE", allow_negative_numbers = true)]
+    pub(crate) lobes: Option<f64>,
     /// Extra estimators for the table: smis-exact and smis-cosine with these K besides 2.
     #[arg(long, value_delimiter = ',', value_name = "K")]
     pub(crate) orientations: Vec<u32>,
@@ -532,6 +543,7 @@ impl From<&RenderArgs> for Overrides {
             planes: a.planes,
             seed: a.seed,
             sampler: a.sampler,
+            lobes: a.lobes,
             spp: a.spp,
             pixel_center: a.pixel_center,
             accelerator: a.accelerator,
@@ -572,6 +584,7 @@ impl From<&TableArgs> for TableOverrides {
             sweep_seeds: Some(a.sweep_seeds),
             equal_time: a.equal_time,
             samplers: Some(a.samplers.clone()),
+            lobes: a.lobes,
             orientations: a.orientations.clone(),
             resolution: a.common.resolution,
             threads: a.common.threads,

@@ -211,6 +211,7 @@ pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
         pixel_center: opts.settings.pixel_center,
         filter: pixel_filter(opts.settings.pixel_center, opts.settings.spp),
         seed: opts.settings.seed,
+        lobes: (scene.medium.g != 0.0).then_some(opts.settings.lobes),
         shared_seconds: results.first().map_or(0.0, |r| r.shared_seconds),
         rows,
         sweep,

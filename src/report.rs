@@ -87,6 +87,10 @@ pub struct Table {
     /// The pixel filter, in words ([`pixel_filter`]); the reference must use the same.
     pub filter: String,
     pub seed: u64,
+    /// The share of each light's planes swept along its lobe, in fog that scatters forward or
+    /// back (none in isotropic fog, where there is no lobe).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lobes: Option<f64>,
     /// Shared by all estimators of the first sampler: plane sampling, structure build, rays.
     pub shared_seconds: f64,
     pub rows: Vec<Row>,
@@ -258,7 +262,8 @@ impl Table {
     /// What was rendered: scene, resolution, rays and seed.
     fn setting(&self) -> String {
         let [w, h] = self.resolution;
-        format!("{} at {w}x{h}, {}, seed {}", self.scene, self.filter, self.seed)
+        let lobes = self.lobes.map_or(String::new(), |s| format!(", lobes {s}"));
+        format!("{} at {w}x{h}, {}, seed {}{lobes}", self.scene, self.filter, self.seed)
     }
 
     /// The line above the table: the setting, the reference, the shared time.
@@ -360,6 +365,7 @@ pub(crate) mod tests {
             pixel_center: false,
             filter: pixel_filter(false, 16),
             seed: 7,
+            lobes: None,
             shared_seconds: 0.5,
             rows: vec![Row {
                 estimator: "smis-exact".into(),

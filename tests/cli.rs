@@ -131,6 +131,19 @@ fn bad_arguments_exit_2() {
         (vec!["render", scene, "--planes", "1.5"], "expected a whole number, 0 or more"),
         (vec!["table", scene, "--reference", "no.exr", "--sweep", "10,x"], "expected a whole number, 0 or more"),
         (vec!["render", scene, "--seed", "99999999999999999999999"], "too large for the setting"),
+        // A share of the planes, told in the library's words with the flag.
+        (
+            vec!["render", scene, "--lobes", "1.5"],
+            "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got 1.5",
+        ),
+        (
+            vec!["render", scene, "--lobes", "-0.5"],
+            "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got -0.5",
+        ),
+        (
+            vec!["table", scene, "--reference", "no.exr", "--lobes", "nan"],
+            "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got NaN",
+        ),
     ] {
         let o = fogplanes(&args);
         let err = String::from_utf8_lossy(&o.stderr);

@@ -62,7 +62,7 @@ fn every_kernel_gives_bit_identical_images() {
 fn planes_prepared_in_pieces_give_the_brute_force_image() {
     for file in ["media_scenes/six_lights.toml", "media_scenes/hard/camera_inside_box.toml"] {
         let s = scene(file, 20, 12);
-        let set = PlaneSet { sampler: Sampler::default(), seed: 3 };
+        let set = PlaneSet::new(Sampler::default(), 3);
         let rays = ray_set_rays(&s, 3, 0, false);
         let gather = |accelerator| {
             let planes = PreparedPlanes::new(&s, set, 0..40_000, accelerator, Control::none()).unwrap();

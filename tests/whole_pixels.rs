@@ -19,7 +19,7 @@ use fogplanes::film::Film;
 use fogplanes::gather::GatherContext;
 use fogplanes::limits::CHUNK_PLANES;
 use fogplanes::partial::{chunks, finish, merge_in_canonical_order};
-use fogplanes::photon_plane::sample_plane_range;
+use fogplanes::photon_plane::{PlaneSet, sample_plane_range};
 use fogplanes::pixel::{plane_group, ray_set_of_plane, ray_set_rays};
 use fogplanes::quadrature::single_scattering;
 use fogplanes::reference::{ReferenceOptions, render_reference};
@@ -101,7 +101,7 @@ fn a_ray_set_per_plane_group_matches_quadrature() {
             for (k, ray) in rays.iter().enumerate() {
                 let group = plane_group(k as u32, planes, ray_sets);
                 let mut ctx = GatherContext::empty(&scene, o);
-                ctx.push_planes(&scene, &sample_plane_range(&scene, sampler, 500 + seed, group), planes);
+                ctx.push_planes(&scene, &sample_plane_range(&scene, PlaneSet::new(sampler, 500 + seed), group), planes);
                 sum += weighting.dispatch(BruteForce { ctx: &ctx, ray });
             }
             tally.add(sum);

@@ -44,7 +44,7 @@ fn main() -> Result<(), String> {
     let scene = Scene::load(Path::new(path)).map_err(|e| e.to_string())?;
     let (cam, medium) = (&scene.camera, &scene.medium);
     let set = Sampler::default().numbers(1);
-    let sources = PlaneSources::new(&scene);
+    let sources = PlaneSources::new(&scene, fogplanes::photon_plane::LOBE_SHARE);
     // Timed in pieces, as a render prepares its planes (the benchmark's 40,960 planes are 16
     // pieces of 2,560, one per ray set, each with its own view and raster), each step's results
     // kept in vectors reused from piece to piece (not faulted in anew: the renderer keeps none
@@ -115,7 +115,7 @@ fn main() -> Result<(), String> {
     );
 
     // The render's own preparation, piece by piece as above, on the pool's threads.
-    let set = PlaneSet { sampler: Sampler::default(), seed: 1 };
+    let set = PlaneSet::new(Sampler::default(), 1);
     let threads = rayon::current_num_threads();
     println!("the render's own preparation (accel::CpuSide::prepare) on {threads} threads, ns a plane:");
     for (name, accelerator) in [("for the GPU", Accelerator::Gpu(0)), ("for the raster", Accelerator::Raster)] {

@@ -207,6 +207,9 @@ def test_scene_fields_are_those_of_the_file():
         assert np.allclose(light.normal, np.cross(d["edge_u"], d["edge_v"]) / light.area)
     r = scene.render
     assert (r.planes, r.estimator, r.orientations, r.seed, r.spp) == (desc["render"]["planes"], "smis-exact", 2, 1, 16)
+    assert (r.sampler, r.lobes) == ("sobol", 0.5) and "lobes=0.5" in repr(r)
+    blocker = fogplanes.load_scene(ROOT / "media_scenes" / "two_lights_one_blocker.toml").render
+    assert (blocker.sampler, blocker.lobes) == ("independent", 0.5)
     assert "six_lights" in repr(scene) and "ceiling" in repr(scene.lights[0])
     smaller = scene.with_resolution(32, 18)
     assert smaller.resolution == (32, 18) and scene.resolution == (640, 360)
@@ -224,6 +227,15 @@ def test_forward_scattering_fog_renders_as_on_the_command_line(tmp_path):
     out = tmp_path / "cli.exr"
     run_cli("render", forward_fog, "--resolution", "64x40", "--planes", "2048", "-q", "-o", out)
     assert_bit_identical(image, fogplanes.load_image(out))
+    # The share of the planes along the lobe, as on the command line; another share is another
+    # image (the same expectation), and so is none, the paper's planes.
+    for lobes in (0.0, 0.25):
+        other = fogplanes.render(forward_fog, resolution=(64, 40), planes=2048, lobes=lobes)
+        run_cli("render", forward_fog, "--resolution", "64x40", "--planes", "2048", "--lobes", lobes, "-q", "-o", out)
+        assert_bit_identical(other, fogplanes.load_image(out))
+        assert not np.array_equal(other, image)
+    assert fogplanes.plan_render(forward_fog, planes=2048, lobes=0.25)["lobes"] == 0.25
+    assert fogplanes.plan_render(forward_fog, planes=2048)["lobes"] == 0.5
 
 
 def test_scene_from_toml_equals_the_file():

@@ -38,6 +38,9 @@ def scene():
         (dict(seed=False), TypeError, r"^seed=False: expected an integer"),
         (dict(threads=True), TypeError, r"^threads=True: expected an integer"),
         (dict(time_budget=True), TypeError, r"^time_budget=True: expected a number, got bool$"),
+        (dict(lobes="half"), TypeError, r"^lobes='half': expected a number, got str$"),
+        (dict(lobes=True), TypeError, r"^lobes=True: expected a number, got bool$"),
+        (dict(lobes=1.5), ValueError, r"^lobes=1.5: the share of the planes swept along the lobe must be between 0 and 1, got 1.5$"),
         (dict(resolution=(True, 6)), TypeError, r"^resolution=True: expected an integer"),
     ],
 )

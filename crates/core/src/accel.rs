@@ -180,7 +180,7 @@ impl CpuSide {
         let mut reach = Vec::with_capacity(if on_gpu { range.len() } else { 0 });
         // The BVH is built over the whole set at once; it keeps the planes while it does.
         let mut all = Vec::new();
-        let (sources, numbers) = (PlaneSources::new(scene), set.sampler.numbers(set.seed));
+        let (sources, numbers) = (PlaneSources::new(scene, set.lobes), set.sampler.numbers(set.seed));
         for start in range.clone().step_by(SAMPLING_PIECE) {
             control.check()?;
             let t = Instant::now();
@@ -754,7 +754,7 @@ mod tests {
         let sets = [0, 1, 0].map(|k| crate::pixel::ray_set_rays(&scene, 2, k, false));
         let pixels = sets[0].len();
         for accelerator in Accelerator::ALL {
-            let set = PlaneSet { sampler: Sampler::default(), seed: 3 };
+            let set = PlaneSet::new(Sampler::default(), 3);
             let prepared: Vec<PreparedPlanes> = [0..700, 700..1500, 1500..1900]
                 .into_iter()
                 .map(|r| PreparedPlanes::new(&scene, set, r, accelerator, Control::none()).unwrap())
@@ -799,7 +799,7 @@ mod tests {
         let band_blocks = (BAND_ROWS * scene.camera.width.div_ceil(crate::kernel::HALF_LANES as u32)) as usize;
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         for accelerator in Accelerator::ALL {
-            let set = PlaneSet { sampler: Sampler::default(), seed: 1 };
+            let set = PlaneSet::new(Sampler::default(), 1);
             let prepared = PreparedPlanes::new(&scene, set, 0..planes, accelerator, Control::none()).unwrap();
             let kernels = if accelerator == Accelerator::Raster { Kernel::available() } else { vec![Kernel::Portable] };
             for kernel in kernels {

@@ -130,6 +130,8 @@ pub enum Setting {
     Planes,
     Seed,
     Sampler,
+    /// The share of each light's planes swept along the phase function's lobe.
+    Lobes,
     Spp,
     Accelerator,
     Kernel,
@@ -152,12 +154,13 @@ pub enum Setting {
 }
 
 impl Setting {
-    pub const ALL: [Setting; 19] = [
+    pub const ALL: [Setting; 20] = [
         Setting::Estimator,
         Setting::Orientations,
         Setting::Planes,
         Setting::Seed,
         Setting::Sampler,
+        Setting::Lobes,
         Setting::Spp,
         Setting::Accelerator,
         Setting::Kernel,
@@ -182,6 +185,7 @@ impl Setting {
             Setting::Planes => "planes",
             Setting::Seed => "seed",
             Setting::Sampler => "sampler",
+            Setting::Lobes => "lobes",
             Setting::Spp => "spp",
             Setting::Accelerator => "accelerator",
             Setting::Kernel => "kernel",
@@ -212,6 +216,7 @@ impl Setting {
             Setting::Planes => "render.planes",
             Setting::Seed => "render.seed",
             Setting::Sampler => "render.sampler",
+            Setting::Lobes => "render.lobes",
             Setting::Spp => "render.spp",
             Setting::Resolution => "camera.resolution",
             _ => return None,

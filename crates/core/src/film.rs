@@ -115,7 +115,7 @@ impl ImageInfo {
     /// [`crate::scene::Scene::fingerprint`]: the scene's content.
     pub const SCENE: &'static str = "scene";
     /// The order fields are printed in; others follow, sorted.
-    const ORDER: [&'static str; 19] = [
+    const ORDER: [&'static str; 20] = [
         "image",
         "fogplanes",
         "scene_name",
@@ -128,6 +128,7 @@ impl ImageInfo {
         "planes",
         "seed",
         "sampler",
+        "lobes",
         "spp",
         "ray_sets",
         "accelerator",

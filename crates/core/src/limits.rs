@@ -129,6 +129,17 @@ pub fn check_spp(spp: u32) -> Result<(), String> {
     Ok(())
 }
 
+/// The share of a light's planes swept along its lobe (docs/mathematics.md section 2.5): 0
+/// (the cosine's planes alone) to 1 (the lobe's alone; every direction's density stays
+/// positive, so the estimate stays unbiased, but the weights of directions far from the lobe
+/// grow large).
+pub fn check_lobes(share: f64) -> Result<(), String> {
+    if !(0.0..=1.0).contains(&share) {
+        return Err(format!("the share of the planes swept along the lobe must be between 0 and 1, got {share}"));
+    }
+    Ok(())
+}
+
 pub fn check_threads(threads: usize) -> Result<(), String> {
     if threads == 0 || threads > MAX_THREADS {
         return Err(format!("the thread count must be between 1 and {MAX_THREADS}, got {threads}"));
@@ -221,6 +232,8 @@ mod tests {
         assert!(check_planes(1).is_ok() && check_planes(MAX_PLANES).is_ok());
         assert!(check_planes(0).is_err() && check_planes(MAX_PLANES + 1).is_err());
         assert!(check_spp(MAX_SPP).is_ok() && check_spp(0).is_err());
+        assert!([0.0, 1e-300, 0.5, 1.0].iter().all(|&s| check_lobes(s).is_ok()));
+        assert!([-0.0 - 1e-300, 1.0 + 1e-15, f64::NAN, f64::INFINITY].iter().all(|&s| check_lobes(s).is_err()));
         assert!(check_resolution(1, MAX_RESOLUTION_SIDE).is_ok() && check_resolution(0, 1).is_err());
         assert!(check_threads(1).is_ok() && check_threads(0).is_err());
         assert!(check_seconds(1e6, MAX_TIME_BUDGET_SECONDS).is_ok());

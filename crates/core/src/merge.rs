@@ -23,6 +23,7 @@ fn recorded_options(scene: &Scene, r: &RenderRecord) -> std::result::Result<Rend
         planes: Some(r.planes as u64),
         seed: Some(r.seed),
         sampler: Some(r.sampler.parse()?),
+        lobes: Some(r.lobes),
         spp: Some(r.spp),
         pixel_center: r.pixel_center,
         accelerator: Some(r.accelerator.parse()?),

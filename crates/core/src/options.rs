@@ -26,6 +26,10 @@ pub struct RenderOptions {
     pub(crate) seed: u64,
     /// Where the planes' random numbers come from.
     pub(crate) sampler: Sampler,
+    /// The share of each light's planes swept along the phase function's lobe in fog that
+    /// scatters forward or back, in [0, 1] (docs/mathematics.md section 2.5; no matter where
+    /// g = 0).
+    pub(crate) lobes: f64,
     /// Camera samples per pixel: ray sets, each gathering its own share of the planes
     /// (docs/mathematics.md section 8.1), so that more cost about as much as one.
     pub(crate) spp: u32,
@@ -59,6 +63,10 @@ impl RenderOptions {
     }
     pub fn sampler(&self) -> Sampler {
         self.sampler
+    }
+    /// The share of each light's planes swept along its lobe ([`crate::photon_plane::Lobe`]).
+    pub fn lobes(&self) -> f64 {
+        self.lobes
     }
     /// Camera samples per pixel as asked (see [`RenderOptions::ray_sets`]).
     pub fn spp(&self) -> u32 {
@@ -114,7 +122,7 @@ impl RenderOptions {
 
     /// The set the planes come from.
     pub fn plane_set(&self) -> PlaneSet {
-        PlaneSet { sampler: self.sampler, seed: self.seed }
+        PlaneSet { sampler: self.sampler, seed: self.seed, lobes: self.lobes }
     }
 
     /// What an image of this render of `scene` records of how it was made ([`ImageInfo`]);
@@ -127,10 +135,10 @@ impl RenderOptions {
                 .with_medium_g(scene.medium.g)
                 .with("estimator", w.estimator.name());
         let info = if w.estimator.has_orientations() { info.with("orientations", w.orientations) } else { info };
-        info.with("planes", planes)
-            .with("seed", self.seed)
-            .with("sampler", self.sampler.name())
-            .with("spp", self.spp)
+        let info = info.with("planes", planes).with("seed", self.seed).with("sampler", self.sampler.name());
+        // The lobes change the planes only where the fog is not isotropic.
+        let info = if scene.medium.g != 0.0 { info.with("lobes", self.lobes) } else { info };
+        info.with("spp", self.spp)
             .with("ray_sets", self.ray_sets())
             .with("accelerator", self.accelerator.name())
             .with("devices", devices)

@@ -56,10 +56,12 @@ pub struct PlaneSources {
 }
 
 impl PlaneSources {
-    pub fn new(scene: &Scene) -> Self {
+    /// The sources of `scene`'s planes, `lobes` of each light's drawn from its lobe (the
+    /// [`PlaneSet`]'s share).
+    pub fn new(scene: &Scene, lobes: f64) -> Self {
         PlaneSources {
             lights: scene.light_distribution(),
-            lobes: (0..scene.lights.len()).map(|i| Lobe::of(scene, i)).collect(),
+            lobes: (0..scene.lights.len()).map(|i| Lobe::of(scene, i, lobes)).collect(),
         }
     }
 }
@@ -105,14 +107,16 @@ pub fn sample_plane(scene: &Scene, sources: &PlaneSources, u: [f64; 5]) -> Photo
 /// The largest f64 below 1, so that a rescaled uniform stays in [0, 1).
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
-/// The share of a light's planes swept along its [`Lobe`]. Measured on the benchmark, forward
-/// fog and the two lights' scene at g = 0.3 to 0.95 (docs/mathematics.md section 2.5): their
-/// MSE fell with every share tried, 0.15 to 0.7; at 0.5 a scene that gains nothing from the lobe
-/// loses at most half its planes, its variance at most doubled.
+/// The share of a light's planes swept along its [`Lobe`] unless a render says otherwise (the
+/// `lobes` setting: 0 sweeps every plane by the cosine, as the paper does). Measured on the
+/// benchmark, forward fog and the two lights' scene at g = 0.3 to 0.95 (docs/mathematics.md
+/// section 2.5): their MSE fell with every share tried, 0.15 to 0.7; at 0.5 a scene that gains
+/// nothing from the lobe loses at most half its planes, its variance at most doubled.
 pub const LOBE_SHARE: f64 = 0.5;
 
 /// A second way for a light to draw its planes' sweep directions, in a medium that scatters
-/// forward or back (docs/mathematics.md section 2.5): [`LOBE_SHARE`] of its planes sweep along
+/// forward or back (docs/mathematics.md section 2.5): a share of its planes (the `lobes` setting,
+/// [`LOBE_SHARE`] by default) sweep along
 /// Henyey-Greenstein's lobe of the medium's |g| about the direction from the light's centre to
 /// the eye (times the sign of g), where the phase function peaks for the rays that look toward
 /// the light; the rest by the cosine, as in an isotropic medium. A direction's density is then
@@ -123,7 +127,7 @@ pub struct Lobe {
     pub axis: DVec3,
     /// The lobe's |g|, in (0, 0.99].
     pub h: f64,
-    /// The share of the light's planes drawn from the lobe, in (0, 1).
+    /// The share of the light's planes drawn from the lobe, in (0, 1].
     pub share: f64,
 }
 
@@ -131,16 +135,16 @@ impl Lobe {
     /// The lobe of light `index`, if it has one: none in an isotropic medium, nor for a light
     /// whose front faces away from the lobe's axis (forward fog seen from behind a light, or
     /// back-scattering fog seen from in front of it), where its directions would all be
-    /// mirrored ones.
-    pub fn of(scene: &Scene, index: usize) -> Option<Lobe> {
+    /// mirrored ones; none where `share`, the share of the light's planes drawn from it, is 0.
+    pub fn of(scene: &Scene, index: usize, share: f64) -> Option<Lobe> {
         let g = scene.medium.g;
-        if g == 0.0 {
+        if g == 0.0 || share <= 0.0 {
             return None;
         }
         let light = &scene.lights[index];
         let center = light.point(0.5 * light.width, 0.5 * light.height);
         let axis = g.signum() * (scene.camera.position - center).normalize_or_zero();
-        (axis.dot(light.n) > 1e-6).then_some(Lobe { axis, h: g.abs(), share: LOBE_SHARE })
+        (axis.dot(light.n) > 1e-6).then_some(Lobe { axis, h: g.abs(), share: share.min(1.0) })
     }
 
     /// Henyey-Greenstein's density over directions (per steradian) at `cos` from the axis.
@@ -200,29 +204,34 @@ fn hg_cosine(h: f64, v: f64) -> f64 {
     (numerator / (2.0 * d * d)).clamp(-1.0, 1.0)
 }
 
-/// Which set of planes: the sampler and the seed that make it. A render's planes are its
-/// set's first N points; any range of them is sampled alike wherever it is ([`sample_plane_range`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which set of planes: the sampler and the seed that make it, and the share of each light's
+/// planes swept along its lobe in fog that scatters forward or back ([`Lobe`]; no matter in
+/// isotropic fog). A render's planes are its set's first N points; any range of them is sampled
+/// alike wherever it is ([`sample_plane_range`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlaneSet {
     pub sampler: Sampler,
     pub seed: u64,
+    /// In [0, 1] ([`LOBE_SHARE`] by default).
+    pub lobes: f64,
 }
 
-/// Samples `n` planes, plane `i` from point `i` of the sampler: the set depends on the seed
-/// only.
+impl PlaneSet {
+    /// The set of `sampler` and `seed` with the default share of lobes.
+    pub fn new(sampler: Sampler, seed: u64) -> Self {
+        PlaneSet { sampler, seed, lobes: LOBE_SHARE }
+    }
+}
+
+/// Samples `n` planes of [`PlaneSet::new`]`(sampler, seed)`, plane `i` from point `i` of the
+/// sampler: the set depends on the seed only.
 pub fn sample_planes(scene: &Scene, sampler: Sampler, n: usize, seed: u64) -> Vec<PhotonPlane> {
-    sample_plane_range(scene, sampler, seed, 0..n)
+    sample_plane_range(scene, PlaneSet::new(sampler, seed), 0..n)
 }
 
-/// Planes `range` of the set that [`sample_planes`] makes (so a large set can be made and
-/// consumed in pieces).
-pub fn sample_plane_range(
-    scene: &Scene,
-    sampler: Sampler,
-    seed: u64,
-    range: std::ops::Range<usize>,
-) -> Vec<PhotonPlane> {
-    let (sources, numbers) = (PlaneSources::new(scene), sampler.numbers(seed));
+/// Planes `range` of `set` (so a large set can be made and consumed in pieces).
+pub fn sample_plane_range(scene: &Scene, set: PlaneSet, range: std::ops::Range<usize>) -> Vec<PhotonPlane> {
+    let (sources, numbers) = (PlaneSources::new(scene, set.lobes), set.sampler.numbers(set.seed));
     (range.start as u64..range.end as u64)
         .into_par_iter()
         .map(|i| sample_plane(scene, &sources, numbers.plane(i)))
@@ -430,13 +439,16 @@ mod tests {
     }
 
     /// A lobe about an axis 0.2 above the light's plane (most of its directions mirrored into
-    /// the front), one about the normal, and one of a g of 1e-300 (a scene may give any).
+    /// the front), one about the normal, and one of a g of 1e-300 (a scene may give any), at
+    /// the default share; and at the ends of the `lobes` setting's range, a share of 0.05 about
+    /// the normal and every plane from the grazing lobe (share 1, no cosine to fall back on).
     fn lobes() -> Vec<(Lobe, crate::light::RectLight)> {
         let light = s_light();
         let grazing = (0.2 * light.n + (1.0f64 - 0.04).sqrt() * light.u).normalize();
-        [(grazing, 0.9), (light.n, 0.9), (grazing, 1e-300)]
+        let s = LOBE_SHARE;
+        [(grazing, 0.9, s), (light.n, 0.9, s), (grazing, 1e-300, s), (light.n, 0.9, 0.05), (grazing, 0.9, 1.0)]
             .into_iter()
-            .map(|(axis, h)| (Lobe { axis, h, share: LOBE_SHARE }, light.clone()))
+            .map(|(axis, h, share)| (Lobe { axis, h, share }, light.clone()))
             .collect()
     }
 
@@ -515,12 +527,12 @@ mod tests {
     #[test]
     fn lobes_only_where_the_phase_function_has_one_in_the_lights_front() {
         let mut s = scene();
-        assert!(PlaneSources::new(&s).lobes.iter().all(Option::is_none));
+        assert!(PlaneSources::new(&s, LOBE_SHARE).lobes.iter().all(Option::is_none));
         assert!(sample_planes(&s, Sampler::default(), 200, 1).iter().all(|p| p.direction_weight == 1.0));
         let mut facing = Vec::new();
         for g in [0.85, -0.85] {
             s.medium.g = g;
-            let lobes = PlaneSources::new(&s).lobes;
+            let lobes = PlaneSources::new(&s, LOBE_SHARE).lobes;
             for (light, lobe) in s.lights.iter().zip(&lobes) {
                 let center = light.point(0.5 * light.width, 0.5 * light.height);
                 let axis = g.signum() * (s.camera.position - center).normalize();
@@ -539,5 +551,16 @@ mod tests {
         let planes = sample_planes(&s, Sampler::default(), 2000, 1);
         assert!(planes.iter().all(|p| facing[0][p.light] || p.direction_weight == 1.0));
         assert!(planes.iter().any(|p| p.direction_weight != 1.0));
+        // A set of no lobes (the `lobes` setting at 0) sweeps every plane by the cosine, as in
+        // isotropic fog: the same directions as the cosine's planes, bit for bit.
+        assert!(PlaneSources::new(&s, 0.0).lobes.iter().all(Option::is_none));
+        let none = sample_plane_range(&s, PlaneSet { lobes: 0.0, ..PlaneSet::new(Sampler::default(), 1) }, 0..2000);
+        s.medium.g = 0.0;
+        let cosine = sample_planes(&s, Sampler::default(), 2000, 1);
+        assert!(none.iter().zip(&cosine).all(|(a, b)| a.direction == b.direction && a.direction_weight == 1.0));
+        // A share given is the lobe's.
+        s.medium.g = 0.85;
+        let lobes = PlaneSources::new(&s, 0.25).lobes;
+        assert!(lobes.iter().flatten().all(|l| l.share == 0.25) && lobes.iter().flatten().count() >= 3);
     }
 }

@@ -6,7 +6,7 @@
 use crate::camera::Camera;
 use crate::light::RectLight;
 use crate::limits::{
-    DEFAULT_PLANES, DEFAULT_RAY_SETS, DEFAULT_SEED, MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_planes,
+    DEFAULT_PLANES, DEFAULT_RAY_SETS, DEFAULT_SEED, MAX_LIGHTS, MAX_SCENE_FILE_BYTES, check_lobes, check_planes,
     check_render_memory, check_resolution, check_spp,
 };
 use crate::medium::{G_MAX, Medium};
@@ -151,6 +151,9 @@ pub struct RenderDesc {
     pub spp: Option<u32>,
     /// `sobol` (the default) or `independent`.
     pub sampler: Option<String>,
+    /// The share of each light's planes swept along the phase function's lobe, in [0, 1]
+    /// ([`crate::photon_plane::LOBE_SHARE`] by default).
+    pub lobes: Option<f64>,
 }
 
 /// Render settings after defaults, validated.
@@ -161,6 +164,7 @@ pub struct RenderDefaults {
     pub seed: u64,
     pub spp: u32,
     pub sampler: Sampler,
+    pub lobes: f64,
 }
 
 /// A validated scene.
@@ -480,7 +484,9 @@ impl Scene {
             Some(name) => name.parse::<Sampler>().map_err(|m| err("render.sampler".into(), m))?,
             None => Sampler::default(),
         };
-        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(DEFAULT_SEED), spp, sampler };
+        let lobes = r.lobes.unwrap_or(crate::photon_plane::LOBE_SHARE);
+        check_lobes(lobes).map_err(|m| err("render.lobes".into(), m))?;
+        let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(DEFAULT_SEED), spp, sampler, lobes };
         check_render_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
 
         Ok(Scene { name: name.to_string(), camera, medium, lights, render, source: None })
@@ -665,6 +671,9 @@ radiance = 4
         assert_eq!(s.render.sampler, Sampler::Sobol);
         let independent = parse(&format!("{MINIMAL}\n[render]\nsampler = \"independent\"\n")).unwrap();
         assert_eq!(independent.render.sampler, Sampler::Independent);
+        assert_eq!(s.render.lobes, crate::photon_plane::LOBE_SHARE);
+        assert_eq!(parse(&format!("{MINIMAL}\n[render]\nlobes = 0\n")).unwrap().render.lobes, 0.0);
+        assert_eq!(parse(&format!("{MINIMAL}\n[render]\nlobes = 0.25\n")).unwrap().render.lobes, 0.25);
     }
 
     fn expect_error(text: &str, field: &str, words: &str) {
@@ -782,6 +791,8 @@ radiance = 4
         expect_error(&format!("{MINIMAL}\n[render]\nplanes = 0\n"), "render.planes", "between 1");
         expect_error(&format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"), "render.estimator", "unknown estimator");
         expect_error(&format!("{MINIMAL}\n[render]\nsampler = \"halton\"\n"), "render.sampler", "unknown sampler");
+        expect_error(&format!("{MINIMAL}\n[render]\nlobes = 1.5\n"), "render.lobes", "between 0 and 1, got 1.5");
+        expect_error(&format!("{MINIMAL}\n[render]\nlobes = nan\n"), "render.lobes", "between 0 and 1");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = [1, 2]"), "light[0].radiance", "three numbers");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = 1e300"), "light", "total power");
     }

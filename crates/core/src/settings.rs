@@ -17,7 +17,7 @@ use crate::film::ImageFormat;
 use crate::gpu::Device;
 use crate::kernel::Kernel;
 use crate::limits::{
-    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_memory, check_planes,
+    MAX_EQUAL_TIME_SECONDS, MAX_TIME_BUDGET_SECONDS, check_exposure, check_lobes, check_memory, check_planes,
     check_render_memory_with, check_resolution, check_seconds, check_spp, check_sweep_seeds, check_threads,
 };
 use crate::options::RenderOptions;
@@ -204,6 +204,8 @@ pub struct Overrides {
     pub planes: Option<u64>,
     pub seed: Option<u64>,
     pub sampler: Option<Sampler>,
+    /// The share of each light's planes swept along the phase function's lobe, in [0, 1].
+    pub lobes: Option<f64>,
     pub spp: Option<u32>,
     pub pixel_center: bool,
     pub accelerator: Option<Accelerator>,
@@ -276,6 +278,8 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
     check_planes(planes).map_err(invalid(Setting::Planes, origin(&given.planes)))?;
     let spp = given.spp.unwrap_or(defaults.spp);
     check_spp(spp).map_err(invalid(Setting::Spp, origin(&given.spp)))?;
+    let lobes = given.lobes.unwrap_or(defaults.lobes);
+    check_lobes(lobes).map_err(invalid(Setting::Lobes, origin(&given.lobes)))?;
     if let Some(seconds) = given.time_budget {
         check_seconds(seconds, MAX_TIME_BUDGET_SECONDS).map_err(from_caller(Setting::TimeBudget))?;
         if given.planes.is_some() {
@@ -322,6 +326,7 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
         weighting,
         seed: given.seed.unwrap_or(defaults.seed),
         sampler: given.sampler.unwrap_or(defaults.sampler),
+        lobes,
         spp,
         pixel_center: given.pixel_center,
         accelerator: given.accelerator.unwrap_or_default(),
@@ -429,6 +434,9 @@ pub struct TableOverrides {
     /// Seconds of each render at equal time (none: no equal-time comparison).
     pub equal_time: Option<f64>,
     pub samplers: Option<Vec<Sampler>>,
+    /// The share of each light's planes swept along the phase function's lobe (`None`: the
+    /// scene's).
+    pub lobes: Option<f64>,
     /// Extra K of smis-cosine and smis-exact besides 2.
     pub orientations: Vec<u32>,
     pub resolution: Option<(u32, u32)>,
@@ -453,6 +461,8 @@ pub struct ResolvedTable {
     /// Every weighting of the table, the baseline among them.
     pub weightings: Vec<Weighting>,
     pub samplers: Vec<Sampler>,
+    /// The share of each light's planes swept along its lobe, for every render of the table.
+    pub lobes: f64,
     pub equal_time: Option<f64>,
     pub exposure: f32,
     pub threads: Option<usize>,
@@ -499,6 +509,8 @@ pub fn check_table(scene: &Scene, given: &TableOverrides) -> Result<Pending<Reso
     for &k in &given.orientations {
         check_orientations(Estimator::SmisExact, k)?;
     }
+    let lobes = given.lobes.unwrap_or(scene.render.lobes);
+    check_lobes(lobes).map_err(invalid(Setting::Lobes, origin(&given.lobes)))?;
     let table = ResolvedTable {
         planes: planes as usize,
         seed: given.seed.unwrap_or(scene.render.seed),
@@ -508,6 +520,7 @@ pub fn check_table(scene: &Scene, given: &TableOverrides) -> Result<Pending<Reso
         sweep_seeds,
         weightings: Weighting::all(&given.orientations),
         samplers,
+        lobes,
         equal_time: given.equal_time,
         exposure: exposure(given.exposure)?,
         threads: threads(given.threads)?,
@@ -527,6 +540,7 @@ impl ResolvedTable {
             weighting,
             seed,
             sampler,
+            lobes: self.lobes,
             spp: self.spp,
             pixel_center: self.pixel_center,
             accelerator: Accelerator::default(),
@@ -580,6 +594,7 @@ impl ResolvedScaling {
             weighting: self.weighting,
             seed: crate::limits::DEFAULT_SEED,
             sampler: self.sampler,
+            lobes: crate::photon_plane::LOBE_SHARE,
             spp: crate::limits::DEFAULT_RAY_SETS,
             pixel_center: false,
             accelerator: Accelerator::default(),
@@ -632,6 +647,7 @@ pub fn check_scaling(given: &ScalingOverrides) -> Result<Pending<ResolvedScaling
 mod tests {
     use super::*;
     use crate::limits::{MAX_PLANES, MAX_RESOLUTION_SIDE};
+    use crate::photon_plane::LOBE_SHARE;
     use crate::scene::tests::MINIMAL;
 
     fn scene(render: &str) -> Scene {
@@ -649,7 +665,7 @@ mod tests {
     #[test]
     fn nothing_given_takes_the_scenes_render_table_and_the_librarys_defaults() {
         let s = scene(
-            "estimator = \"smis-cosine\"\norientations = 4\nplanes = 1500\nseed = 3\nspp = 2\nsampler = \"independent\"\n",
+            "estimator = \"smis-cosine\"\norientations = 4\nplanes = 1500\nseed = 3\nspp = 2\nsampler = \"independent\"\nlobes = 0.25\n",
         );
         let r = resolve_render(&s, &Overrides::default()).unwrap();
         let expected = RenderOptions {
@@ -657,6 +673,7 @@ mod tests {
             weighting: Weighting { estimator: Estimator::SmisCosine, orientations: 4 },
             seed: 3,
             sampler: Sampler::Independent,
+            lobes: 0.25,
             spp: 2,
             pixel_center: false,
             accelerator: Accelerator::Raster,
@@ -675,6 +692,7 @@ mod tests {
             planes: Some(7),
             seed: Some(9),
             sampler: Some(Sampler::Sobol),
+            lobes: Some(0.0),
             spp: Some(5),
             pixel_center: true,
             accelerator: Some(Accelerator::Bvh),
@@ -694,6 +712,7 @@ mod tests {
             weighting: Weighting { estimator: Estimator::CmisExact, orientations: 2 },
             seed: 9,
             sampler: Sampler::Sobol,
+            lobes: 0.0,
             spp: 5,
             pixel_center: true,
             accelerator: Accelerator::Bvh,
@@ -797,6 +816,9 @@ mod tests {
             (Overrides { time_budget: Some(f64::NAN), ..Default::default() }, Setting::TimeBudget),
             (Overrides { time_budget: Some(2e6), ..Default::default() }, Setting::TimeBudget),
             (Overrides { time_budget: Some(1.0), planes: Some(100), ..Default::default() }, Setting::Planes),
+            (Overrides { lobes: Some(-0.1), ..Default::default() }, Setting::Lobes),
+            (Overrides { lobes: Some(1.5), ..Default::default() }, Setting::Lobes),
+            (Overrides { lobes: Some(f64::NAN), ..Default::default() }, Setting::Lobes),
         ];
         for (given, setting) in cases {
             let e = resolve_render(&s, &given).unwrap_err();
@@ -856,6 +878,13 @@ mod tests {
         let t = resolve_table(&s, &TableOverrides::default()).unwrap();
         assert_eq!((t.planes, t.seed, t.pixel_center, t.sweep_seeds), (1234, 7, false, 3));
         assert_eq!(t.sweep, TABLE_SWEEP.map(|n| n as usize));
+        // Every render of the table takes the scene's share of lobes, or the one given.
+        assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, LOBE_SHARE);
+        let t = resolve_table(&scene("lobes = 0.3\n"), &TableOverrides::default()).unwrap();
+        assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, 0.3);
+        let t = resolve_table(&s, &TableOverrides { lobes: Some(0.0), ..Default::default() }).unwrap();
+        assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).plane_set().lobes, 0.0);
+        let t = resolve_table(&s, &TableOverrides::default()).unwrap();
         assert_eq!((t.samplers, t.weightings), (TABLE_SAMPLERS.to_vec(), Weighting::all(&[])));
         for (given, setting) in [
             (TableOverrides { planes: Some(0), ..Default::default() }, Setting::Planes),
@@ -870,6 +899,7 @@ mod tests {
             ),
             (TableOverrides { orientations: vec![3, 0], ..Default::default() }, Setting::Orientations),
             (TableOverrides { exposure: Some(f32::NAN), ..Default::default() }, Setting::Exposure),
+            (TableOverrides { lobes: Some(2.0), ..Default::default() }, Setting::Lobes),
         ] {
             assert_eq!(refused(resolve_table(&s, &given).unwrap_err()).0, setting, "{given:?}");
         }

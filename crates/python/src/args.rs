@@ -122,6 +122,7 @@ pub(crate) fn render_overrides(
             "planes" => o.planes = given.uint(Setting::Planes, value.as_ref())?,
             "seed" => o.seed = given.uint(Setting::Seed, value.as_ref())?,
             "sampler" => o.sampler = given.named(Setting::Sampler, value.as_ref())?,
+            "lobes" => o.lobes = given.float(Setting::Lobes, value.as_ref())?,
             "spp" => o.spp = given.uint32(Setting::Spp, value.as_ref())?,
             "pixel_center" => o.pixel_center = flag("pixel_center", &value)?,
             "accelerator" => o.accelerator = given.named(Setting::Accelerator, value.as_ref())?,

@@ -39,6 +39,7 @@ pub(crate) fn plan_render<'py>(
     d.set_item("orientations", o.weighting().orientations)?;
     d.set_item("seed", o.seed())?;
     d.set_item("sampler", o.sampler().name())?;
+    d.set_item("lobes", o.lobes())?;
     d.set_item("spp", o.spp())?;
     d.set_item("pixel_center", o.pixel_center())?;
     d.set_item("accelerator", o.accelerator().name())?;

@@ -35,7 +35,9 @@ pub(crate) fn load_scene(path: &Bound<'_, PyAny>) -> PyResult<PyScene> {
 /// The arguments are those of `fogplanes render`, and None takes the scene's [render]
 /// default exactly as the command line does (both resolve them in the core): `estimator` (the
 /// scene's, else smis-exact), `planes`, `seed`, `spp`, `sampler` ("sobol" or "independent";
-/// the scene's, else sobol), and `orientations` (the scene's K applies only when the scene's
+/// the scene's, else sobol), `lobes` (in fog that scatters forward or back, the share of each
+/// light's planes swept along the phase function's lobe, 0 to 1: 0 for the paper's planes; the
+/// scene's, else 0.5), and `orientations` (the scene's K applies only when the scene's
 /// estimator is the one rendered). `resolution` is (width, height). Pixels are whole: the mean
 /// over each pixel's square (box filter), with `spp` camera samples per pixel (the scene's, else
 /// 16) sharing the planes; `pixel_center=True` takes the centres. `time_budget` renders for
@@ -61,7 +63,7 @@ pub(crate) fn load_scene(path: &Bound<'_, PyAny>) -> PyResult<PyScene> {
 #[pyo3(signature = (scene, estimator = None, **kwargs))]
 #[pyo3(text_signature = "(scene, estimator=None, *, planes=None, seed=None, spp=None, pixel_center=False, \
     resolution=None, orientations=None, threads=None, accelerator='raster', kernel='auto', device='cpu', \
-    return_stats=False, sampler=None, time_budget=None, target_error=None, return_stderr=False, progress=False)")]
+    return_stats=False, sampler=None, lobes=None, time_budget=None, target_error=None, return_stderr=False, progress=False)")]
 pub(crate) fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,

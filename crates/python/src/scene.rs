@@ -77,6 +77,8 @@ pub(crate) struct PyRenderDefaults {
     pub(crate) orientations: u32,
     pub(crate) seed: u64,
     pub(crate) spp: u32,
+    pub(crate) sampler: String,
+    pub(crate) lobes: f64,
 }
 
 pub(crate) fn fmt3(v: Vec3) -> String {
@@ -127,12 +129,14 @@ impl PyLight {
 impl PyRenderDefaults {
     fn __repr__(&self) -> String {
         format!(
-            "RenderDefaults(planes={}, estimator={}, orientations={}, seed={}, spp={})",
+            "RenderDefaults(planes={}, estimator={}, orientations={}, seed={}, spp={}, sampler={}, lobes={})",
             self.planes,
             py_str(&self.estimator),
             self.orientations,
             self.seed,
-            self.spp
+            self.spp,
+            py_str(&self.sampler),
+            self.lobes
         )
     }
 }
@@ -272,7 +276,7 @@ impl PyScene {
             .collect()
     }
 
-    /// The `[render]` defaults: planes, estimator, orientations, seed, spp.
+    /// The `[render]` defaults: planes, estimator, orientations, seed, spp, sampler, lobes.
     #[getter]
     fn render(&self) -> PyRenderDefaults {
         let r = &self.inner.render;
@@ -282,6 +286,8 @@ impl PyScene {
             orientations: r.weighting.orientations,
             seed: r.seed,
             spp: r.spp,
+            sampler: r.sampler.name().to_string(),
+            lobes: r.lobes,
         }
     }
 

@@ -53,6 +53,10 @@ pub struct RenderRecord {
     pub orientations: u32,
     pub seed: u64,
     pub sampler: String,
+    /// The share of each light's planes swept along its lobe (absent in a part written before
+    /// the share could be set: the default, [`crate::photon_plane::LOBE_SHARE`]).
+    #[serde(default = "default_lobes")]
+    pub lobes: f64,
     pub spp: u32,
     pub pixel_center: bool,
     pub accelerator: String,
@@ -67,6 +71,10 @@ pub struct RenderRecord {
     /// before there was a GPU path: the CPU). Read, never written.
     #[serde(default, skip_serializing)]
     pub device: Option<String>,
+}
+
+fn default_lobes() -> f64 {
+    crate::photon_plane::LOBE_SHARE
 }
 
 impl RenderRecord {

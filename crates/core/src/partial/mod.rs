@@ -69,10 +69,10 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
     // as before 2026-12-02 (each group whole) is another image, refused rather than mixed in.
     const PIECES: &str = "pieces: each group in two halves";
     // So do the lobes' directions in fog that scatters forward or back (docs/mathematics.md
-    // section 2.5, since 2026-12-02): a part made before them is another image there. An
-    // isotropic medium's planes are as they were, and so are its fingerprints.
-    let lobes =
-        if scene.medium.g != 0.0 { format!(" | lobes {}", crate::photon_plane::LOBE_SHARE) } else { String::new() };
+    // section 2.5, since 2026-12-02), and their share: a part made before them is another image
+    // there. An isotropic medium's planes are as they were, whatever the share, and so are its
+    // fingerprints.
+    let lobes = if scene.medium.g != 0.0 { format!(" | lobes {}", opts.lobes) } else { String::new() };
     let description = format!(
         "fogplanes {} | {PIECES} | {:?} | {:?} | {:?} | planes {} | {} | seed {} | sampler {} | spp {} | centre {} | {}{lobes}",
         env!("CARGO_PKG_VERSION"),

@@ -39,6 +39,7 @@ pub fn render_record(o: &RenderOptions, devices: &Devices) -> RenderRecord {
         orientations: o.weighting.orientations,
         seed: o.seed,
         sampler: o.sampler.name().into(),
+        lobes: o.lobes,
         spp: o.spp,
         pixel_center: o.pixel_center,
         accelerator: o.accelerator.name().into(),

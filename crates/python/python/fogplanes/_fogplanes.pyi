@@ -107,6 +107,10 @@ class RenderDefaults:
     def seed(self) -> int: ...
     @property
     def spp(self) -> int: ...
+    @property
+    def sampler(self) -> str: ...
+    @property
+    def lobes(self) -> float: ...
 
 class Scene:
     """A validated scene: camera, fog box, rectangular lights and render defaults. Read-only.
@@ -237,6 +241,7 @@ def render(
     device: str = "cpu",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
+    lobes: float | None = None,
     time_budget: float | None = None,
     target_error: float | None = None,
     return_stderr: Literal[False] = False,
@@ -260,6 +265,9 @@ def render(
     depends on the seed alone. The image is bit-identical to the EXR that `fogplanes render`
     writes for the same arguments. `sampler` is where the planes' random numbers come from:
     "sobol" (randomised quasi-Monte Carlo) or "independent" (None: the scene's, else sobol).
+    `lobes` is, in fog that scatters forward or back (g != 0), the share of each light's planes
+    swept along the phase function's lobe toward the eye, 0 to 1: 0 sweeps every plane by the
+    cosine as the paper does (docs/mathematics.md section 2.5; None: the scene's, else 0.5).
     With `return_stderr=True`, also the estimated standard error of each pixel (as `render
     --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
     `device="gpu"` gathers on the GPU through wgpu (a Vulkan, Metal or DX12 adapter; ValueError
@@ -291,6 +299,7 @@ def render(
     device: str = "cpu",
     return_stats: Literal[True],
     sampler: str | None = None,
+    lobes: float | None = None,
     time_budget: float | None = None,
     target_error: float | None = None,
     return_stderr: Literal[False] = False,
@@ -314,6 +323,7 @@ def render(
     device: str = "cpu",
     return_stats: Literal[False] = False,
     sampler: str | None = None,
+    lobes: float | None = None,
     time_budget: float | None = None,
     target_error: float | None = None,
     return_stderr: Literal[True],
@@ -337,6 +347,7 @@ def render(
     device: str = "cpu",
     return_stats: Literal[True],
     sampler: str | None = None,
+    lobes: float | None = None,
     time_budget: float | None = None,
     target_error: float | None = None,
     return_stderr: Literal[True],
@@ -393,6 +404,8 @@ class RenderPlan(TypedDict):
     orientations: int
     seed: int
     sampler: str
+    #: The share of each light's planes swept along its lobe (no matter where g = 0).
+    lobes: float
     spp: int
     pixel_center: bool
     accelerator: str
