@@ -108,10 +108,11 @@ pub fn sample_plane(scene: &Scene, sources: &PlaneSources, u: [f64; 5]) -> Photo
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
 /// The share of a light's planes swept along its [`Lobe`] unless a render says otherwise (the
-/// `lobes` setting: 0 sweeps every plane by the cosine, as the paper does). Measured on the
-/// benchmark, forward fog and the two lights' scene at g = 0.3 to 0.95 (docs/mathematics.md
-/// section 2.5): their MSE fell with every share tried, 0.15 to 0.7; at 0.5 a scene that gains
-/// nothing from the lobe loses at most half its planes, its variance at most doubled.
+/// `lobes` setting: 0 sweeps every plane by the cosine, as the paper does). Measured from 0 to 1
+/// (docs/mathematics.md section 2.5, `scripts/lobe_shares.sh`): looking toward the lights
+/// through strong forward fog every error falls as the share grows, but a side view's dim pixels
+/// and weak fog lose beyond about 0.5; at 0.5 a pixel that gains nothing from the lobe loses at
+/// most half its planes, its variance at most doubled.
 pub const LOBE_SHARE: f64 = 0.5;
 
 /// A second way for a light to draw its planes' sweep directions, in a medium that scatters
