@@ -188,7 +188,7 @@ fn every_estimator_matches_quadrature_with_a_henyey_greenstein_medium() {
     for (g, batches, eye) in [(0.8, 800, 1.5), (-0.5, 200, 1.5), (-0.8, 800, 3.5)] {
         let eye = DVec3::new(0.0, eye, 6.0);
         let scene = two_lights_seen_from(g, eye);
-        let lobes = fogplanes::photon_plane::PlaneSources::new(&scene, fogplanes::photon_plane::LOBE_SHARE).lobes;
+        let lobes = fogplanes::photon_plane::PlaneSources::new(&scene, fogplanes::limits::DEFAULT_LOBES).lobes;
         assert_eq!(
             lobes.iter().filter(|l| l.is_some()).count(),
             [2, 0, 2][(g < 0.0) as usize + (eye.y > 2.9) as usize]

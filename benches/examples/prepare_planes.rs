@@ -44,7 +44,7 @@ fn main() -> Result<(), String> {
     let scene = Scene::load(Path::new(path)).map_err(|e| e.to_string())?;
     let (cam, medium) = (&scene.camera, &scene.medium);
     let set = Sampler::default().numbers(1);
-    let sources = PlaneSources::new(&scene, fogplanes::photon_plane::LOBE_SHARE);
+    let sources = PlaneSources::new(&scene, fogplanes::limits::DEFAULT_LOBES);
     // Timed in pieces, as a render prepares its planes (the benchmark's 40,960 planes are 16
     // pieces of 2,560, one per ray set, each with its own view and raster), each step's results
     // kept in vectors reused from piece to piece (not faulted in anew: the renderer keeps none

@@ -8,6 +8,7 @@
 //! p(v | alpha) = |s| / A.
 
 use crate::light::{ChordDirection, chord_extent};
+use crate::limits::DEFAULT_LOBES;
 use crate::medium::{Medium, PHASE};
 use crate::sampling::{Discrete, Sampler, cosine_hemisphere};
 use crate::scene::Scene;
@@ -107,17 +108,9 @@ pub fn sample_plane(scene: &Scene, sources: &PlaneSources, u: [f64; 5]) -> Photo
 /// The largest f64 below 1, so that a rescaled uniform stays in [0, 1).
 const BELOW_ONE: f64 = 1.0 - f64::EPSILON / 2.0;
 
-/// The share of a light's planes swept along its [`Lobe`] unless a render says otherwise (the
-/// `lobes` setting: 0 sweeps every plane by the cosine, as the paper does). Measured from 0 to 1
-/// (docs/mathematics.md section 2.5, `scripts/lobe_shares.sh`): looking toward the lights
-/// through strong forward fog every error falls as the share grows, but a side view's dim pixels
-/// and weak fog lose beyond about 0.5; at 0.5 a pixel that gains nothing from the lobe loses at
-/// most half its planes, its variance at most doubled.
-pub const LOBE_SHARE: f64 = 0.5;
-
 /// A second way for a light to draw its planes' sweep directions, in a medium that scatters
 /// forward or back (docs/mathematics.md section 2.5): a share of its planes (the `lobes` setting,
-/// [`LOBE_SHARE`] by default) sweep along
+/// [`DEFAULT_LOBES`] by default) sweep along
 /// Henyey-Greenstein's lobe of the medium's |g| about the direction from the light's centre to
 /// the eye (times the sign of g), where the phase function peaks for the rays that look toward
 /// the light; the rest by the cosine, as in an isotropic medium. A direction's density is then
@@ -213,14 +206,14 @@ fn hg_cosine(h: f64, v: f64) -> f64 {
 pub struct PlaneSet {
     pub sampler: Sampler,
     pub seed: u64,
-    /// In [0, 1] ([`LOBE_SHARE`] by default).
+    /// In [0, 1] ([`DEFAULT_LOBES`] by default).
     pub lobes: f64,
 }
 
 impl PlaneSet {
     /// The set of `sampler` and `seed` with the default share of lobes.
     pub fn new(sampler: Sampler, seed: u64) -> Self {
-        PlaneSet { sampler, seed, lobes: LOBE_SHARE }
+        PlaneSet { sampler, seed, lobes: DEFAULT_LOBES }
     }
 }
 
@@ -446,7 +439,7 @@ mod tests {
     fn lobes() -> Vec<(Lobe, crate::light::RectLight)> {
         let light = s_light();
         let grazing = (0.2 * light.n + (1.0f64 - 0.04).sqrt() * light.u).normalize();
-        let s = LOBE_SHARE;
+        let s = DEFAULT_LOBES;
         [(grazing, 0.9, s), (light.n, 0.9, s), (grazing, 1e-300, s), (light.n, 0.9, 0.05), (grazing, 0.9, 1.0)]
             .into_iter()
             .map(|(axis, h, share)| (Lobe { axis, h, share }, light.clone()))
@@ -528,19 +521,19 @@ mod tests {
     #[test]
     fn lobes_only_where_the_phase_function_has_one_in_the_lights_front() {
         let mut s = scene();
-        assert!(PlaneSources::new(&s, LOBE_SHARE).lobes.iter().all(Option::is_none));
+        assert!(PlaneSources::new(&s, DEFAULT_LOBES).lobes.iter().all(Option::is_none));
         assert!(sample_planes(&s, Sampler::default(), 200, 1).iter().all(|p| p.direction_weight == 1.0));
         let mut facing = Vec::new();
         for g in [0.85, -0.85] {
             s.medium.g = g;
-            let lobes = PlaneSources::new(&s, LOBE_SHARE).lobes;
+            let lobes = PlaneSources::new(&s, DEFAULT_LOBES).lobes;
             for (light, lobe) in s.lights.iter().zip(&lobes) {
                 let center = light.point(0.5 * light.width, 0.5 * light.height);
                 let axis = g.signum() * (s.camera.position - center).normalize();
                 assert_eq!(lobe.is_some(), axis.dot(light.n) > 1e-6, "{} at g = {g}", light.name);
                 if let Some(lobe) = lobe {
                     assert!((lobe.axis - axis).length() < 1e-12);
-                    assert_eq!((lobe.h, lobe.share), (0.85, LOBE_SHARE));
+                    assert_eq!((lobe.h, lobe.share), (0.85, DEFAULT_LOBES));
                 }
             }
             facing.push(lobes.iter().map(Option::is_some).collect::<Vec<_>>());

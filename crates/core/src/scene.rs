@@ -152,7 +152,7 @@ pub struct RenderDesc {
     /// `sobol` (the default) or `independent`.
     pub sampler: Option<String>,
     /// The share of each light's planes swept along the phase function's lobe, in [0, 1]
-    /// ([`crate::photon_plane::LOBE_SHARE`] by default).
+    /// ([`crate::limits::DEFAULT_LOBES`] by default).
     pub lobes: Option<f64>,
 }
 
@@ -484,7 +484,7 @@ impl Scene {
             Some(name) => name.parse::<Sampler>().map_err(|m| err("render.sampler".into(), m))?,
             None => Sampler::default(),
         };
-        let lobes = r.lobes.unwrap_or(crate::photon_plane::LOBE_SHARE);
+        let lobes = r.lobes.unwrap_or(crate::limits::DEFAULT_LOBES);
         check_lobes(lobes).map_err(|m| err("render.lobes".into(), m))?;
         let render = RenderDefaults { planes, weighting, seed: r.seed.unwrap_or(DEFAULT_SEED), spp, sampler, lobes };
         check_render_memory(camera.width, camera.height, planes).map_err(|m| err("camera.resolution".into(), m))?;
@@ -671,7 +671,7 @@ radiance = 4
         assert_eq!(s.render.sampler, Sampler::Sobol);
         let independent = parse(&format!("{MINIMAL}\n[render]\nsampler = \"independent\"\n")).unwrap();
         assert_eq!(independent.render.sampler, Sampler::Independent);
-        assert_eq!(s.render.lobes, crate::photon_plane::LOBE_SHARE);
+        assert_eq!(s.render.lobes, crate::limits::DEFAULT_LOBES);
         assert_eq!(parse(&format!("{MINIMAL}\n[render]\nlobes = 0\n")).unwrap().render.lobes, 0.0);
         assert_eq!(parse(&format!("{MINIMAL}\n[render]\nlobes = 0.25\n")).unwrap().render.lobes, 0.25);
     }

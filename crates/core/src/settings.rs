@@ -594,7 +594,7 @@ impl ResolvedScaling {
             weighting: self.weighting,
             seed: crate::limits::DEFAULT_SEED,
             sampler: self.sampler,
-            lobes: crate::photon_plane::LOBE_SHARE,
+            lobes: crate::limits::DEFAULT_LOBES,
             spp: crate::limits::DEFAULT_RAY_SETS,
             pixel_center: false,
             accelerator: Accelerator::default(),
@@ -646,8 +646,8 @@ pub fn check_scaling(given: &ScalingOverrides) -> Result<Pending<ResolvedScaling
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::limits::DEFAULT_LOBES;
     use crate::limits::{MAX_PLANES, MAX_RESOLUTION_SIDE};
-    use crate::photon_plane::LOBE_SHARE;
     use crate::scene::tests::MINIMAL;
 
     fn scene(render: &str) -> Scene {
@@ -879,7 +879,7 @@ mod tests {
         assert_eq!((t.planes, t.seed, t.pixel_center, t.sweep_seeds), (1234, 7, false, 3));
         assert_eq!(t.sweep, TABLE_SWEEP.map(|n| n as usize));
         // Every render of the table takes the scene's share of lobes, or the one given.
-        assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, LOBE_SHARE);
+        assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, DEFAULT_LOBES);
         let t = resolve_table(&scene("lobes = 0.3\n"), &TableOverrides::default()).unwrap();
         assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, 0.3);
         let t = resolve_table(&s, &TableOverrides { lobes: Some(0.0), ..Default::default() }).unwrap();

@@ -54,7 +54,7 @@ pub struct RenderRecord {
     pub seed: u64,
     pub sampler: String,
     /// The share of each light's planes swept along its lobe (absent in a part written before
-    /// the share could be set: the default, [`crate::photon_plane::LOBE_SHARE`]).
+    /// the share could be set: the default, [`crate::limits::DEFAULT_LOBES`]).
     #[serde(default = "default_lobes")]
     pub lobes: f64,
     pub spp: u32,
@@ -74,7 +74,7 @@ pub struct RenderRecord {
 }
 
 fn default_lobes() -> f64 {
-    crate::photon_plane::LOBE_SHARE
+    crate::limits::DEFAULT_LOBES
 }
 
 impl RenderRecord {
