@@ -789,6 +789,15 @@ radiance = 4
             "inside the medium",
         );
         expect_error(&format!("{MINIMAL}\n[render]\nplanes = 0\n"), "render.planes", "between 1");
+        // A K of the file is named by its key alone, not by the command line's flag.
+        for (render, words) in [
+            ("estimator = \"cmis-exact\"\norientations = 4", "applies to smis-cosine and smis-exact only"),
+            ("orientations = 0", "between 1 and 64, got 0"),
+        ] {
+            let e = parse(&format!("{MINIMAL}\n[render]\n{render}\n")).unwrap_err();
+            assert_eq!(e.field, "render.orientations", "{e}");
+            assert!(e.message.contains(words) && !e.to_string().contains("--orientations"), "{e}");
+        }
         expect_error(&format!("{MINIMAL}\n[render]\nestimator = \"best\"\n"), "render.estimator", "unknown estimator");
         expect_error(&format!("{MINIMAL}\n[render]\nsampler = \"halton\"\n"), "render.sampler", "unknown sampler");
         expect_error(&format!("{MINIMAL}\n[render]\nlobes = 1.5\n"), "render.lobes", "between 0 and 1, got 1.5");

@@ -103,13 +103,6 @@ fn weighting(scene: &Scene, estimator: Option<Estimator>, orientations: Option<u
 /// A K the caller gave applies to `estimator` (K = 2 is every estimator's default, so it
 /// always does) and lies in range.
 fn check_orientations(estimator: Estimator, k: u32) -> Result<()> {
-    if !estimator.has_orientations() && k != 2 {
-        let with: Vec<_> = Estimator::ALL.iter().filter(|e| e.has_orientations()).map(|e| e.name()).collect();
-        return Err(Error::option(
-            Setting::Orientations,
-            format!("the number of orientations applies to {} only, not to {estimator}", with.join(" and ")),
-        ));
-    }
     Weighting::new(estimator, Some(k)).map(|_| ()).map_err(from_caller(Setting::Orientations))
 }
 

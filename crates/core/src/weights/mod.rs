@@ -117,12 +117,15 @@ impl Default for Weighting {
 }
 
 impl Weighting {
+    /// `estimator` with K `orientations` (2 if `None`). The error names no source: the caller
+    /// prefixes the flag, the keyword or the scene's key that gave K (a scene's
+    /// `render.orientations` was told "--orientations applies to ...").
     pub fn new(estimator: Estimator, orientations: Option<u32>) -> Result<Self, String> {
         match orientations {
             None => Ok(Weighting { estimator, orientations: 2 }),
             Some(k) if !estimator.has_orientations() && k != 2 => {
                 let with: Vec<_> = Estimator::ALL.iter().filter(|e| e.has_orientations()).map(|e| e.name()).collect();
-                Err(format!("--orientations applies to {} only, not to {estimator}", with.join(" and ")))
+                Err(format!("the number of orientations applies to {} only, not to {estimator}", with.join(" and ")))
             }
             Some(k) if k == 0 || k > MAX_ORIENTATIONS => {
                 Err(format!("the number of orientations must be between 1 and {MAX_ORIENTATIONS}, got {k}"))
@@ -195,6 +198,12 @@ mod tests {
         assert!("nope".parse::<Estimator>().is_err());
         assert!(Weighting::new(Estimator::SmisExact, Some(0)).is_err());
         assert!(Weighting::new(Estimator::CmisExact, Some(4)).is_err());
+        // Worded for any source (the flag, the keyword, the scene's key), naming none itself.
+        for k in [0, 4, 65] {
+            let e = if k == 4 { Estimator::CmisExact } else { Estimator::SmisExact };
+            let message = Weighting::new(e, Some(k)).unwrap_err();
+            assert!(!message.contains("--") && message.starts_with("the number of orientations"), "{message}");
+        }
         assert_eq!(Weighting::new(Estimator::SmisExact, Some(4)).unwrap().label(), "smis-exact-k4");
     }
 }
