@@ -131,6 +131,10 @@ fn bad_arguments_exit_2() {
         (vec!["render", scene, "--planes", "1.5"], "expected a whole number, 0 or more"),
         (vec!["table", scene, "--reference", "no.exr", "--sweep", "10,x"], "expected a whole number, 0 or more"),
         (vec!["render", scene, "--seed", "99999999999999999999999"], "too large for the setting"),
+        // A value named twice in a list of the table, named (a K was dropped without a word).
+        (vec!["table", scene, "--reference", "no.exr", "--orientations", "2,2"], "--orientations: 2 is named twice"),
+        (vec!["table", scene, "--reference", "no.exr", "--orientations", "4,3,4"], "--orientations: 4 is named twice"),
+        (vec!["table", scene, "--reference", "no.exr", "--sweep", "5120,5120"], "--sweep: 5120 is named twice"),
         // A share of the planes, told in the library's words with the flag.
         (
             vec!["render", scene, "--lobes", "1.5"],

@@ -463,6 +463,13 @@ pub struct ResolvedTable {
     pub device: Device,
 }
 
+/// The first value of `list` that an earlier one repeats. Each of the table's lists names a
+/// value once: a repeated K was dropped without a word, a repeated plane count of the sweep
+/// measured twice.
+fn repeated<T: PartialEq>(list: &[T]) -> Option<&T> {
+    list.iter().enumerate().find(|(i, v)| list[..*i].contains(v)).map(|(_, v)| v)
+}
+
 pub fn resolve_table(scene: &Scene, given: &TableOverrides) -> Result<ResolvedTable> {
     check_table(scene, given)?.find_device()
 }
@@ -487,6 +494,9 @@ pub fn check_table(scene: &Scene, given: &TableOverrides) -> Result<Pending<Reso
         check_planes(n).map_err(from_caller(Setting::Sweep))?;
         check_fits(&scene, n, resolution, (Setting::Sweep, origin(&given.sweep)))?;
     }
+    if let Some(n) = repeated(&sweep) {
+        return Err(Error::option(Setting::Sweep, format!("{n} is named twice")));
+    }
     let sweep_seeds = given.sweep_seeds.unwrap_or(TABLE_SWEEP_SEEDS);
     check_sweep_seeds(sweep_seeds).map_err(from_caller(Setting::SweepSeeds))?;
     if let Some(seconds) = given.equal_time {
@@ -496,11 +506,14 @@ pub fn check_table(scene: &Scene, given: &TableOverrides) -> Result<Pending<Reso
     if samplers.is_empty() {
         return Err(Error::option(Setting::Samplers, "the table needs at least one sampler"));
     }
-    if let Some((_, s)) = samplers.iter().enumerate().find(|(i, s)| samplers[..*i].contains(s)) {
+    if let Some(s) = repeated(&samplers) {
         return Err(Error::option(Setting::Samplers, format!("{s} is named twice")));
     }
     for &k in &given.orientations {
         check_orientations(Estimator::SmisExact, k)?;
+    }
+    if let Some(k) = repeated(&given.orientations) {
+        return Err(Error::option(Setting::Orientations, format!("{k} is named twice")));
     }
     let lobes = given.lobes.unwrap_or(scene.render.lobes);
     check_lobes(lobes).map_err(invalid(Setting::Lobes, origin(&given.lobes)))?;
@@ -891,11 +904,21 @@ mod tests {
                 Setting::Samplers,
             ),
             (TableOverrides { orientations: vec![3, 0], ..Default::default() }, Setting::Orientations),
+            (TableOverrides { sweep: Some(vec![100, 200, 100]), ..Default::default() }, Setting::Sweep),
             (TableOverrides { exposure: Some(f32::NAN), ..Default::default() }, Setting::Exposure),
             (TableOverrides { lobes: Some(2.0), ..Default::default() }, Setting::Lobes),
         ] {
             assert_eq!(refused(resolve_table(&s, &given).unwrap_err()).0, setting, "{given:?}");
         }
+        // A value named twice in a list is refused, naming it: a K was dropped without a word.
+        // K = 2 (the table's own) names what the table measures anyway, once.
+        for ks in [vec![2, 2], vec![4, 3, 4]] {
+            let given = TableOverrides { orientations: ks.clone(), ..Default::default() };
+            let (setting, _, message) = refused(resolve_table(&s, &given).unwrap_err());
+            assert_eq!((setting, message), (Setting::Orientations, format!("{} is named twice", ks[0])), "{ks:?}");
+        }
+        let t = resolve_table(&s, &TableOverrides { orientations: vec![2, 4], ..Default::default() }).unwrap();
+        assert_eq!(t.weightings, Weighting::all(&[4]));
         // No sweep at all is a choice, not an error.
         let t = resolve_table(&s, &TableOverrides { sweep: Some(vec![]), ..Default::default() }).unwrap();
         assert!(t.sweep.is_empty());
