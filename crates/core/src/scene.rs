@@ -590,11 +590,16 @@ pub fn parse_file(text: &str, file: &str) -> Result<SceneFile, SceneError> {
             (line, col)
         })
     };
-    let de = toml::Deserializer::parse(text).map_err(|e| SceneError {
-        file: file.to_string(),
-        position: position_of(e.span()),
-        field: String::new(),
-        message: format!("TOML syntax: {}", e.message().trim()),
+    let de = toml::Deserializer::parse(text).map_err(|e| {
+        let mut message = format!("TOML syntax: {}", e.message().trim());
+        // The reader says "duplicate key" and points at it without naming it: name it (the
+        // key's text, as the file writes it), so that the line says which of a line's keys.
+        if message.ends_with("duplicate key")
+            && let Some(key) = e.span().and_then(|s| text.get(s)).map(str::trim).filter(|k| !k.is_empty())
+        {
+            message = format!("{message} `{key}` (each key is given once in its table)");
+        }
+        SceneError { file: file.to_string(), position: position_of(e.span()), field: String::new(), message }
     })?;
     serde_path_to_error::deserialize(de).map_err(|e| {
         let path = e.path().to_string();
@@ -804,6 +809,23 @@ radiance = 4
         expect_error(&format!("{MINIMAL}\n[render]\nlobes = nan\n"), "render.lobes", "between 0 and 1");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = [1, 2]"), "light[0].radiance", "three numbers");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = 1e300"), "light", "total power");
+    }
+
+    /// A key given twice is named with its line: the reader's "duplicate key" named none, and
+    /// a line such as `position = [0, 1, 5]; up = ...` cannot hold it, but a table's header can.
+    #[test]
+    fn a_duplicate_key_is_named_with_its_line() {
+        for (text, at, key) in [
+            (MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\nvfov_deg = 41.0"), (7, 1), "`vfov_deg`"),
+            (format!("{MINIMAL}\n[render]\nseed = 1\n\"seed\" = 2\n"), (24, 1), "`\"seed\"`"),
+            (format!("{MINIMAL}\n[camera]\nzoom = 1\n"), (22, 2), "`camera`"),
+            (format!("light = 1{MINIMAL}"), (15, 3), "`light`"),
+        ] {
+            let e = parse(&text).unwrap_err();
+            let lines: Vec<&str> = text.lines().collect();
+            assert_eq!(e.position, Some(at), "{e}: line {:?}", lines.get(at.0 - 1));
+            assert!(e.message.contains(&format!("duplicate key {key}")), "{e}");
+        }
     }
 
     #[test]
