@@ -374,3 +374,41 @@ fn a_reference_of_another_pixel_filter_is_refused_and_images_record_how_they_wer
     assert_ok(&fogplanes(&both), "compare with both standard errors");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Kind 10. A part's kernel is checked when read, as its other settings are: a part recording
+/// a kernel no fogplanes has ("bogus", or a name holding an escape sequence) merged with exit
+/// code 0, since nothing reads the kernel. Parts recording different kernels are parts of one
+/// image (every kernel gives the same bits, and `auto` takes each node's widest): an AVX2
+/// node's part and an AVX-512 node's were refused as "parts of different images".
+#[test]
+fn a_parts_kernel_is_checked_and_parts_of_different_kernels_merge() {
+    let dir = scratch("kernel");
+    let scene = scene();
+    let o = render_options(&scene);
+    let [(ma, sa), (mb, sb)] = two_chunks(&scene, &o);
+    let (a, b, out, whole) = (dir.join("a.npz"), dir.join("b.npz"), dir.join("x.exr"), dir.join("whole.exr"));
+    write_render_part(&a, &ma, &sa, vec![6, 8, 3]);
+    write_render_part(&b, &mb, &sb, vec![6, 8, 3]);
+    assert_ok(&fogplanes(&["merge", s(&a), s(&b), "-o", s(&whole), "-q"]), "the parts as written");
+    let with_kernel = |m: &PartMeta, kernel: &str| {
+        let mut m = m.clone();
+        m.render.as_mut().unwrap().kernel = kernel.into();
+        m
+    };
+    for kernel in ["bogus", "", "AVX2", "avx2\u{1b}[2J"] {
+        write_render_part(&b, &with_kernel(&mb, kernel), &sb, vec![6, 8, 3]);
+        for order in [[&a, &b], [&b, &a]] {
+            let o = fogplanes(&["merge", s(order[0]), s(order[1]), "-o", s(&out)]);
+            assert_refused(&o, &format!("kernel {kernel:?}"), &["b.npz: its kernel: unknown kernel"]);
+            assert!(!String::from_utf8_lossy(&o.stderr).contains('\u{1b}'));
+            assert!(!out.exists());
+        }
+    }
+    for kernel in ["portable", "per-hit", "avx2", "avx512", "auto"] {
+        write_render_part(&b, &with_kernel(&mb, kernel), &sb, vec![6, 8, 3]);
+        assert_ok(&fogplanes(&["merge", s(&a), s(&b), "-o", s(&out), "-q"]), &format!("a part of kernel {kernel}"));
+        assert_eq!(Film::load_exr(&out).unwrap().pixels, Film::load_exr(&whole).unwrap().pixels, "{kernel}");
+        std::fs::remove_file(&out).unwrap();
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

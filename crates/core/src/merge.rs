@@ -54,9 +54,13 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     // Each part's recorded scene and settings, not only its fingerprint, are the first's: a
     // band whose recorded width had been changed was stacked as it was, shifting every later
     // row (or indexing past the image).
-    // The device is not a setting of the image: parts of different devices merge.
-    let settings =
-        |r: &Option<RenderRecord>| r.clone().map(|r| RenderRecord { devices: Vec::new(), device: None, ..r });
+    // The device is not a setting of the image: parts of different devices merge. Nor is the
+    // kernel (not in the fingerprint: every kernel gives the same bits), which `auto` makes the
+    // widest of each node's CPU: parts of an AVX-512 node and an AVX2 node were refused as
+    // "parts of different images".
+    let settings = |r: &Option<RenderRecord>| {
+        r.clone().map(|r| RenderRecord { devices: Vec::new(), device: None, kernel: String::new(), ..r })
+    };
     for p in &parts[1..] {
         let (a, b) = (&first.meta, &p.meta);
         if b.kind != a.kind

@@ -512,9 +512,13 @@ pub fn meta(array: &Array) -> std::result::Result<PartMeta, String> {
     check_recorded_seconds(meta.seconds).map_err(|m| format!("its seconds of rendering: {m}"))?;
     match meta.kind {
         PartKind::Render => {
-            if meta.render.is_none() {
+            let Some(render) = &meta.render else {
                 return Err("a render part without render settings".into());
-            }
+            };
+            // The kernel is needed by no merge (every kernel gives the same bits, and parts of
+            // different kernels merge), so nothing else reads it: a name no fogplanes writes
+            // was taken without a word.
+            render.kernel.parse::<crate::kernel::Kernel>().map_err(|m| format!("its kernel: {m}"))?;
             check_planes(meta.total as u64).map_err(|m| format!("its plane count: {m}"))?;
         }
         PartKind::Reference | PartKind::Pilot => {
