@@ -169,6 +169,8 @@ fn every_broken_scene_gives_one_clear_error() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{}: {err}", path.display());
         assert_eq!(err.lines().count(), 1, "{}: one line expected, got:\n{err}", path.display());
+        // Nothing of the file reaches the terminal raw (an escape sequence in a light's name did).
+        assert!(!err.trim_end().chars().any(char::is_control), "{}: {err:?}", path.display());
         assert!(err.contains(path.file_name().unwrap().to_str().unwrap()), "{}: {err}", path.display());
         assert!(files_in(&dir).is_empty(), "{}: an output was written", path.display());
         checked += 1;

@@ -107,15 +107,18 @@ pub struct SceneError {
 }
 
 impl fmt::Display for SceneError {
+    /// One line ([`one_line`]), whatever it quotes of the file: the TOML reader's messages and
+    /// paths quote keys as they are (an unknown key holding an escape sequence reached the
+    /// terminal raw).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
+        write!(f, "{}", one_line(&self.file))?;
         if let Some((line, col)) = self.position {
             write!(f, ":{line}:{col}")?;
         }
         if !self.field.is_empty() {
-            write!(f, ": {}", self.field)?;
+            write!(f, ": {}", one_line(&self.field))?;
         }
-        write!(f, ": {}", self.message)
+        write!(f, ": {}", one_line(&self.message))
     }
 }
 

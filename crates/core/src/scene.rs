@@ -378,6 +378,15 @@ impl Scene {
         }
         let mut lights = Vec::with_capacity(desc.lights.len());
         for (i, l) in desc.lights.iter().enumerate() {
+            // A name is echoed in errors (`light[2] (ceiling).corner`): a control character in it
+            // (an escape sequence, a newline) acted on the terminal, or broke the error's one
+            // line, so it is refused here, at the door, shown escaped.
+            if let Some(name) = l.name.as_deref().filter(|n| n.chars().any(char::is_control)) {
+                return Err(err(
+                    format!("light[{i}].name"),
+                    format!("must not hold control characters (escape sequences, newlines, tabs), got {name:?}"),
+                ));
+            }
             let field = |f: &str| match &l.name {
                 Some(n) => format!("light[{i}] ({n}).{f}"),
                 None => format!("light[{i}].{f}"),
@@ -809,6 +818,36 @@ radiance = 4
         expect_error(&format!("{MINIMAL}\n[render]\nlobes = nan\n"), "render.lobes", "between 0 and 1");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = [1, 2]"), "light[0].radiance", "three numbers");
         expect_error(&MINIMAL.replace("radiance = 4", "radiance = 1e300"), "light", "total power");
+    }
+
+    /// A light's name holding a control character is refused, the name shown escaped: an
+    /// escape sequence in it reached the terminal raw in every error naming the light.
+    #[test]
+    fn a_light_name_holding_control_characters_is_refused() {
+        for name in ["\\u001b[31mred", "two\\nlines", "tab\\there", "bell\\u0007", "del\\u007f", "c1\\u009b2J"] {
+            let text = MINIMAL.replace("name = \"top\"", &format!("name = \"{name}\""));
+            let e = parse(&text).unwrap_err();
+            assert_eq!(e.field, "light[0].name", "{name}: {e}");
+            assert!(e.message.contains("must not hold control characters"), "{name}: {e}");
+            let line = e.to_string();
+            assert!(!line.chars().any(char::is_control), "{name}: {line:?}");
+        }
+        // Any other string is a name: empty, spaced, punctuated, beyond ASCII.
+        for name in ["", "ceiling lamp", "a.b-c_d (2)", "lumière", "灯"] {
+            let text = MINIMAL.replace("name = \"top\"", &format!("name = \"{name}\""));
+            assert_eq!(parse(&text).unwrap_or_else(|e| panic!("{name}: {e}")).lights[0].name, name);
+        }
+    }
+
+    /// Whatever of the file an error quotes stays on its line, escapes and all: an unknown key
+    /// holding an escape sequence was echoed raw by the TOML reader's message.
+    #[test]
+    fn a_scene_error_is_one_line_whatever_it_quotes() {
+        let text = MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\n\"\\u001b[2J\\nx\" = 1");
+        let e = parse(&text).unwrap_err();
+        assert!(e.message.contains("unknown field"), "{e}");
+        let line = e.to_string();
+        assert!(!line.chars().any(char::is_control) && line.contains("\\u{1b}[2J\\nx"), "{line:?}");
     }
 
     /// A key given twice is named with its line: the reader's "duplicate key" named none, and
