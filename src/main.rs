@@ -18,11 +18,24 @@ use std::process::ExitCode;
 
 /// The arguments, every value of every subcommand allowed to start with `-` and a digit: `--seed
 /// -1` is then refused for what it is (not a whole number of the setting's range), where clap took
-/// `-1` for an unknown flag and advised `-- -1`, which a value cannot be.
+/// `-1` for an unknown flag and advised `-- -1`, which a value cannot be. A negative float
+/// (`--lobes -0.5`) reaches the library's range check, which names the flag.
 fn parse() -> Cli {
     fn negatives(c: clap::Command) -> clap::Command {
-        c.mut_args(|a| if a.get_action().takes_values() { a.allow_negative_numbers(true) } else { a })
-            .mut_subcommands(negatives)
+        c.mut_args(|a| {
+            if !a.get_action().takes_values() {
+                return a;
+            }
+            let a = a.allow_negative_numbers(true);
+            // clap reads a u32 as an i64 in a range, which it words itself ("-2 is not in
+            // 0..=4294967295"): read as a u32, it is told as every other count is ([`plainer`]).
+            if a.get_value_parser().type_id() == std::any::TypeId::of::<u32>() {
+                a.value_parser(|s: &str| s.parse::<u32>())
+            } else {
+                a
+            }
+        })
+        .mut_subcommands(negatives)
     }
     let mut command = negatives(<Cli as clap::CommandFactory>::command());
     let matches =

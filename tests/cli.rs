@@ -116,13 +116,17 @@ fn bad_arguments_exit_2() {
     }
     // A negative count is a bad value of its setting, not an unknown flag: clap took `-1` for one
     // and advised `-- -1`, which a value cannot be.
-    for (flag, value) in [("--seed", "-1"), ("--planes", "-5"), ("--spp", "-2"), ("--threads", "-3")] {
+    for (flag, value) in
+        [("--seed", "-1"), ("--planes", "-5"), ("--spp", "-2"), ("--threads", "-3"), ("--orientations", "-1")]
+    {
         let o = fogplanes(&["render", "media_scenes/six_lights.toml", flag, value]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{flag} {value}: {err}");
         assert!(err.contains(&format!("invalid value '{value}' for '{flag} ")) && !err.contains("tip"), "{err}");
-        // (u32 counts are clap's ranged numbers: "-2 is not in 0..=4294967295".)
-        assert!(!err.contains("invalid digit"), "{err}");
+        // Every count in the same words: u32 ones (--spp, --orientations) were clap's ranged
+        // numbers, "-2 is not in 0..=4294967295".
+        assert!(err.contains("': expected a whole number, 0 or more"), "{flag} {value}: {err}");
+        assert!(!err.contains("invalid digit") && !err.contains("is not in"), "{err}");
     }
     // A count that is no whole number, or too large for its type, is said as such, not in
     // Rust's words ("invalid digit found in string").
@@ -131,6 +135,10 @@ fn bad_arguments_exit_2() {
         (vec!["render", scene, "--planes", "1.5"], "expected a whole number, 0 or more"),
         (vec!["table", scene, "--reference", "no.exr", "--sweep", "10,x"], "expected a whole number, 0 or more"),
         (vec!["render", scene, "--seed", "99999999999999999999999"], "too large for the setting"),
+        (vec!["render", scene, "--spp", "4294967296"], "'--spp <J>': too large for the setting"),
+        (vec!["reference", scene, "--spp", "-16"], "'--spp <N>': expected a whole number, 0 or more"),
+        (vec!["table", scene, "--reference", "no.exr", "--sweep-seeds", "-1"], "expected a whole number, 0 or more"),
+        (vec!["table", scene, "--reference", "no.exr", "--orientations", "4,-3"], "expected a whole number, 0 or more"),
         // A value named twice in a list of the table, named (a K was dropped without a word).
         (vec!["table", scene, "--reference", "no.exr", "--orientations", "2,2"], "--orientations: 2 is named twice"),
         (vec!["table", scene, "--reference", "no.exr", "--orientations", "4,3,4"], "--orientations: 4 is named twice"),
