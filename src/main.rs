@@ -38,14 +38,15 @@ fn parse() -> Cli {
         .mut_subcommands(negatives)
     }
     let mut command = negatives(<Cli as clap::CommandFactory>::command());
-    let matches =
-        command.try_get_matches_from_mut(std::env::args_os()).unwrap_or_else(|e| plainer(e, &mut command).exit());
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    let matches = command.try_get_matches_from_mut(&args).unwrap_or_else(|e| plainer(e, &mut command, &args).exit());
     <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }
 
 /// A count, seed or index that is no whole number said as such: Rust's own words for `-1` or
-/// `1.5` are "invalid digit found in string".
-fn plainer(e: clap::Error, command: &mut clap::Command) -> clap::Error {
+/// `1.5` are "invalid digit found in string". The error shows the usage of the subcommand that
+/// `args` names, as clap's own errors do (it showed the root's, `fogplanes <COMMAND>`).
+fn plainer(e: clap::Error, command: &mut clap::Command, args: &[std::ffi::OsString]) -> clap::Error {
     use clap::error::{ContextKind, ErrorKind};
     use std::error::Error;
     let Some(parse) = e.source().and_then(|s| s.downcast_ref::<std::num::ParseIntError>()) else { return e };
@@ -56,7 +57,14 @@ fn plainer(e: clap::Error, command: &mut clap::Command) -> clap::Error {
         std::num::IntErrorKind::PosOverflow => "too large for the setting",
         _ => "expected a whole number, 0 or more",
     };
-    command.error(ErrorKind::ValueValidation, format!("invalid value '{value}' for '{arg}': {why}"))
+    let message = format!("invalid value '{value}' for '{arg}': {why}");
+    // The root takes no values, so that the first argument naming a subcommand is the one
+    // parsed (no value can come before it).
+    let named = args.iter().skip(1).filter_map(|a| a.to_str()).find(|a| command.find_subcommand(a).is_some());
+    match named.and_then(|name| command.find_subcommand_mut(name)) {
+        Some(sub) => sub.error(ErrorKind::ValueValidation, message),
+        None => command.error(ErrorKind::ValueValidation, message),
+    }
 }
 
 fn main() -> ExitCode {

@@ -127,7 +127,13 @@ fn bad_arguments_exit_2() {
         // numbers, "-2 is not in 0..=4294967295".
         assert!(err.contains("': expected a whole number, 0 or more"), "{flag} {value}: {err}");
         assert!(!err.contains("invalid digit") && !err.contains("is not in"), "{err}");
+        // The usage shown is the command's, as with any other error of its arguments (the
+        // reworded ones showed the root's, `fogplanes <COMMAND>`).
+        assert!(err.contains("Usage: fogplanes render [OPTIONS] <SCENE>"), "{flag} {value}: {err}");
     }
+    let o = fogplanes(&["table", "media_scenes/six_lights.toml", "--reference", "r.exr", "--sweep", "10,x"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("Usage: fogplanes table [OPTIONS] --reference <REF> <SCENE>"), "{err}");
     // A count that is no whole number, or too large for its type, is said as such, not in
     // Rust's words ("invalid digit found in string").
     let scene = "media_scenes/six_lights.toml";
