@@ -87,12 +87,20 @@ impl Error {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// `text` on one line: control characters (a newline in a file's name, or in a string a file
-/// holds and an error quotes) written as escapes, so that an error is always one line.
+/// holds and an error quotes) and text-direction overrides written as escapes, so that an error
+/// is always one line, read in its own order.
 pub fn one_line(text: &str) -> String {
-    if !text.chars().any(char::is_control) {
+    let unsafe_char = |c: char| c.is_control() || is_bidi_control(c);
+    if !text.chars().any(unsafe_char) {
         return text.to_string();
     }
-    text.chars().map(|c| if c.is_control() { c.escape_default().to_string() } else { c.to_string() }).collect()
+    text.chars().map(|c| if unsafe_char(c) { c.escape_default().to_string() } else { c.to_string() }).collect()
+}
+
+/// Unicode's bidirectional formatting characters (embeddings, overrides, isolates and marks),
+/// which `char::is_control` does not count: in a terminal they reorder the text after them.
+pub fn is_bidi_control(c: char) -> bool {
+    matches!(c, '\u{200E}' | '\u{200F}' | '\u{061C}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
 }
 
 /// A problem with a scene file or with the render settings derived from it.

@@ -18,6 +18,7 @@ use std::fmt;
 use std::path::Path;
 
 pub use crate::error::SceneError;
+use crate::error::is_bidi_control;
 
 /// An RGB triple that may be written as a single number (grey).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -380,11 +381,14 @@ impl Scene {
         for (i, l) in desc.lights.iter().enumerate() {
             // A name is echoed in errors (`light[2] (ceiling).corner`): a control character in it
             // (an escape sequence, a newline) acted on the terminal, or broke the error's one
-            // line, so it is refused here, at the door, shown escaped.
-            if let Some(name) = l.name.as_deref().filter(|n| n.chars().any(char::is_control)) {
+            // line, and a bidirectional override (U+202E) turned the rest of the line around, so
+            // both are refused here, at the door, shown escaped.
+            if let Some(name) = l.name.as_deref().filter(|n| n.chars().any(|c| c.is_control() || is_bidi_control(c))) {
                 return Err(err(
                     format!("light[{i}].name"),
-                    format!("must not hold control characters (escape sequences, newlines, tabs), got {name:?}"),
+                    format!(
+                        "must not hold control characters (escape sequences, newlines, tabs, text direction), got {name:?}"
+                    ),
                 ));
             }
             let field = |f: &str| match &l.name {
@@ -824,13 +828,22 @@ radiance = 4
     /// escape sequence in it reached the terminal raw in every error naming the light.
     #[test]
     fn a_light_name_holding_control_characters_is_refused() {
-        for name in ["\\u001b[31mred", "two\\nlines", "tab\\there", "bell\\u0007", "del\\u007f", "c1\\u009b2J"] {
+        for name in [
+            "\\u001b[31mred",
+            "two\\nlines",
+            "tab\\there",
+            "bell\\u0007",
+            "del\\u007f",
+            "c1\\u009b2J",
+            "left\\u202Eright",
+            "isolate\\u2067",
+        ] {
             let text = MINIMAL.replace("name = \"top\"", &format!("name = \"{name}\""));
             let e = parse(&text).unwrap_err();
             assert_eq!(e.field, "light[0].name", "{name}: {e}");
             assert!(e.message.contains("must not hold control characters"), "{name}: {e}");
             let line = e.to_string();
-            assert!(!line.chars().any(char::is_control), "{name}: {line:?}");
+            assert!(!line.chars().any(|c| c.is_control() || is_bidi_control(c)), "{name}: {line:?}");
         }
         // Any other string is a name: empty, spaced, punctuated, beyond ASCII.
         for name in ["", "ceiling lamp", "a.b-c_d (2)", "lumière", "灯"] {
@@ -848,6 +861,10 @@ radiance = 4
         assert!(e.message.contains("unknown field"), "{e}");
         let line = e.to_string();
         assert!(!line.chars().any(char::is_control) && line.contains("\\u{1b}[2J\\nx"), "{line:?}");
+        // A right-to-left override in a key quoted back would turn the rest of the line around.
+        let text = MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\n\"a\\u202Eb\" = 1");
+        let line = parse(&text).unwrap_err().to_string();
+        assert!(!line.contains('\u{202E}') && line.contains("a\\u{202e}b"), "{line:?}");
     }
 
     /// A key given twice is named with its line: the reader's "duplicate key" named none, and

@@ -630,12 +630,19 @@ pub fn check_scaling(given: &ScalingOverrides) -> Result<Pending<ResolvedScaling
     for &n in &planes {
         check_planes(n).map_err(from_caller(Setting::Planes))?;
     }
+    // A count or size named twice was measured twice: two points of the study where one was meant.
+    if let Some(n) = repeated(&planes) {
+        return Err(Error::option(Setting::Planes, format!("{n} is named twice")));
+    }
     let resolutions = given.resolutions.clone().unwrap_or_else(|| SCALING_RESOLUTIONS.to_vec());
     for &(w, h) in &resolutions {
         check_resolution(w, h).map_err(from_caller(Setting::Resolutions))?;
         for &n in &planes {
             check_memory(w, h, n).map_err(from_caller(Setting::Resolutions))?;
         }
+    }
+    if let Some((w, h)) = repeated(&resolutions) {
+        return Err(Error::option(Setting::Resolutions, format!("{w}x{h} is named twice")));
     }
     let scaling = ResolvedScaling {
         weighting: Weighting::new(given.estimator.unwrap_or(Estimator::DEFAULT), None)
@@ -934,6 +941,11 @@ mod tests {
                 Setting::Resolutions,
             ),
             (ScalingOverrides { threads: Some(0), ..Default::default() }, Setting::Threads),
+            (ScalingOverrides { planes: Some(vec![1000, 2000, 1000]), ..Default::default() }, Setting::Planes),
+            (
+                ScalingOverrides { resolutions: Some(vec![(16, 9), (32, 18), (16, 9)]), ..Default::default() },
+                Setting::Resolutions,
+            ),
         ] {
             assert_eq!(refused(resolve_scaling(&given).unwrap_err()).0, setting, "{given:?}");
         }
