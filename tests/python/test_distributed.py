@@ -86,6 +86,22 @@ def test_render_is_the_same_bits_for_1_and_2_workers_as_the_local_merge_and_rend
     assert np.all(np.isfinite(one)) and one.mean() > 0
 
 
+def test_forward_fog_with_any_share_of_lobes_is_one_machines_on_two_workers(client):
+    """The lobes' share (`lobes=`) reaches every worker: in fog that scatters forward (g = 0.85)
+    the cluster's image is one machine's at each share, and the shares' images differ."""
+    forward_fog = fogplanes.load_scene(SIX_LIGHTS.parent / "forward_fog.toml")
+    kwargs = dict(resolution=(48, 30), planes=2 * chunk_planes(forward_fog) + 777)
+    images = []
+    for lobes in (0.0, 0.25, None):
+        image = fd.render(forward_fog, client=client, threads=1, chunks_per_task=1, progress=False,
+                          lobes=lobes, **kwargs)
+        assert_bit_identical(image, fogplanes.render(forward_fog, lobes=lobes, **kwargs))
+        images.append(image)
+    for i in range(len(images)):
+        for j in range(i):
+            assert not np.array_equal(images[i], images[j]), (i, j)
+
+
 def test_the_local_clusters_workers_keep_freed_memory_as_the_command_line_does(client, monkeypatch):
     settings = dict(fogplanes.ALLOCATOR_ENVIRONMENT)
     assert set(settings) == {"MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"}
