@@ -235,6 +235,27 @@ pub fn check_memory(width: u32, height: u32, planes: u64) -> Result<(), String> 
 mod tests {
     use super::*;
 
+    /// docs/scenes.md's memory rule, its formula and its figure: at the default planes a square of
+    /// 8,752 pixels a side renders and one of 8,753 is refused.
+    #[test]
+    fn the_memory_rule_is_the_one_the_scene_reference_gives() {
+        let documented = |w: u64, h: u64, planes: u64| {
+            let chunks = planes.div_ceil(16_384);
+            let levels = chunks.ilog2() as u64 + 2;
+            planes.min(262_144) * 512 + w * h * (116 + 24 * levels) + (w * h).max(4_194_304) * 36
+        };
+        let cases =
+            [(8752, 8752, DEFAULT_PLANES), (8753, 8753, DEFAULT_PLANES), (640, 360, 1), (20_000, 3_000, 1 << 20)];
+        for (w, h, planes) in cases {
+            let fits = documented(w, h, planes) <= 16 << 30;
+            assert_eq!(check_render_memory(w as u32, h as u32, planes).is_ok(), fits, "{w}x{h}, {planes}");
+        }
+        assert!(check_render_memory(8752, 8752, DEFAULT_PLANES).is_ok());
+        assert!(check_render_memory(8753, 8753, DEFAULT_PLANES).is_err());
+        let pixels = (16u64 << 30) - 40_960 * 512;
+        assert_eq!((pixels as f64 / (116.0 + 24.0 * 3.0 + 36.0) / 1e7 * 100.0).round() / 100.0, 7.66);
+    }
+
     #[test]
     fn ranges_are_closed_at_both_ends() {
         assert!(check_planes(1).is_ok() && check_planes(MAX_PLANES).is_ok());
