@@ -18,8 +18,9 @@ use std::process::ExitCode;
 
 /// The arguments, every value of every subcommand allowed to start with `-` and a digit: `--seed
 /// -1` is then refused for what it is (not a whole number of the setting's range), where clap took
-/// `-1` for an unknown flag and advised `-- -1`, which a value cannot be. A negative float
-/// (`--lobes -0.5`) reaches the library's range check, which names the flag.
+/// `-1` for an unknown flag and advised `-- -1`, which a value cannot be. A negative float in any
+/// form Rust reads (`--lobes -0.5`, `-1e-3`, `-.5`, `-inf`; clap's own test of a negative number
+/// knows only the first) reaches the library's range check, which names the flag.
 fn parse() -> Cli {
     fn negatives(c: clap::Command) -> clap::Command {
         c.mut_args(|a| {
@@ -27,6 +28,12 @@ fn parse() -> Cli {
                 return a;
             }
             let a = a.allow_negative_numbers(true);
+            let float = [std::any::TypeId::of::<f64>(), std::any::TypeId::of::<f32>()];
+            let a = if float.iter().any(|&t| a.get_value_parser().type_id() == t) {
+                a.allow_hyphen_values(true)
+            } else {
+                a
+            };
             // clap reads a u32 as an i64 in a range, which it words itself ("-2 is not in
             // 0..=4294967295"): read as a u32, it is told as every other count is ([`plainer`]).
             if a.get_value_parser().type_id() == std::any::TypeId::of::<u32>() {

@@ -158,6 +158,17 @@ fn bad_arguments_exit_2() {
             vec!["render", scene, "--lobes", "-0.5"],
             "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got -0.5",
         ),
+        // In every form of a float, not only clap's idea of a negative number (`-1e-3` was an
+        // unknown flag '-1', with the advice '-- -1').
+        (
+            vec!["render", scene, "--lobes", "-1e-3"],
+            "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got -0.001",
+        ),
+        (
+            vec!["render", scene, "--lobes", "-.5"],
+            "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got -0.5",
+        ),
+        (vec!["render", scene, "--time-budget", "-1E-3"], "--time-budget: must be a positive number of seconds"),
         (
             vec!["table", scene, "--reference", "no.exr", "--lobes", "nan"],
             "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got NaN",
@@ -388,15 +399,25 @@ fn a_non_finite_exposure_is_refused_before_any_work() {
             report.to_str().unwrap(),
         ],
     ] {
-        for exposure in ["--exposure=nan", "--exposure=-inf"] {
-            let o = fogplanes(&[&args[..], &small, &[exposure]].concat());
+        for exposure in
+            [&["--exposure=nan"][..], &["--exposure=-inf"], &["--exposure", "-inf"], &["--exposure", "-nan"]]
+        {
+            let o = fogplanes(&[&args[..], &small, exposure].concat());
             let err = String::from_utf8_lossy(&o.stderr);
-            assert_eq!(o.status.code(), Some(2), "{args:?} {exposure}: {err}");
+            assert_eq!(o.status.code(), Some(2), "{args:?} {exposure:?}: {err}");
             assert!(err.starts_with("error: --exposure: must be a finite number of stops"), "{err}");
             assert!(o.stdout.is_empty(), "{args:?}: work was done");
-            assert_eq!(files_in(&dir), ["ref.exr"], "{args:?} {exposure}");
+            assert_eq!(files_in(&dir), ["ref.exr"], "{args:?} {exposure:?}");
         }
     }
+    // A negative exposure in a float's exponent form is a value, not a flag (clap took `-1e-1`
+    // for an unknown flag `-1`).
+    let o = fogplanes(
+        &[&["render", scene, "--planes", "200", "-o", png.to_str().unwrap()][..], &small, &["--exposure", "-1e-1"]]
+            .concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(png.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

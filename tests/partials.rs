@@ -202,6 +202,11 @@ fn the_command_line_renders_in_parts_and_merges_them_into_the_render() {
     assert!(refused(&strs(&with(&["--plane-range", "1:40000", "--partial", &p("y.npz")]))).contains("chunks"));
     assert!(refused(&["merge", &p("whole.exr"), "-o", &p("x.exr")]).contains("not a partial file"));
     assert!(!dir.join("x.exr").exists() && !dir.join("y.npz").exists());
+    // In isotropic fog the lobes' share changes no plane: a part at another share is a part of
+    // the same image (it was refused as one of another).
+    run(&strs(&with(&["--lobes", "0.3", "--plane-range", "32768:40000", "--partial", &p("lobes.npz")])));
+    run(&["merge", &p("a.npz"), &p("lobes.npz"), "-o", &p("merged-lobes.exr"), "-q"]);
+    assert!(load("merged-lobes.exr").pixels == load("whole.exr").pixels);
 }
 
 /// Forward-scattering fog in parts: the merge is the whole render, bit for bit, and a part of
@@ -226,6 +231,19 @@ fn parts_of_forward_scattering_fog_merge_and_another_g_is_refused() {
     let load = |name: &str| Film::load_exr(&dir.join(name)).unwrap();
     assert!(load("merged.exr").pixels == load("whole.exr").pixels);
     assert!(refused(&["merge", &p("a.npz"), &p("other.npz"), "-o", &p("x.exr")]).contains("different images"));
+    assert!(!dir.join("x.exr").exists());
+    // Where the fog scatters forward the lobes' share is the image's: another is refused, and
+    // -0 is 0 (it was another share in the part and the fingerprint).
+    let share = |lobes: &str, range: &str, name: &str| {
+        render("media_scenes/forward_fog.toml", &["--lobes", lobes, "--plane-range", range, "--partial", &p(name)])
+    };
+    share("0.3", "16384:20000", "share.npz");
+    assert!(refused(&["merge", &p("a.npz"), &p("share.npz"), "-o", &p("x.exr")]).contains("different images"));
+    share("0", "0:16384", "zero-a.npz");
+    share("-0", "16384:20000", "zero-b.npz");
+    run(&["merge", &p("zero-a.npz"), &p("zero-b.npz"), "-o", &p("zero.exr"), "-q"]);
+    render("media_scenes/forward_fog.toml", &["--lobes", "0", "-o", &p("zero-whole.exr")]);
+    assert!(load("zero.exr").pixels == load("zero-whole.exr").pixels);
     assert!(!dir.join("x.exr").exists());
 }
 

@@ -27,8 +27,9 @@ pub struct RenderOptions {
     /// Where the planes' random numbers come from.
     pub(crate) sampler: Sampler,
     /// The share of each light's planes swept along the phase function's lobe in fog that
-    /// scatters forward or back, in [0, 1] (docs/mathematics.md section 2.5; no matter where
-    /// g = 0).
+    /// scatters forward or back, in [0, 1] (docs/mathematics.md section 2.5). Resolved
+    /// ([`crate::settings`]) to one value per image: +0 for -0, and the default where g = 0,
+    /// where no light has a lobe, so that parts and checkpoints of one image hold one setting.
     pub(crate) lobes: f64,
     /// Camera samples per pixel: ray sets, each gathering its own share of the planes
     /// (docs/mathematics.md section 8.1), so that more cost about as much as one.

@@ -273,6 +273,7 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
     check_spp(spp).map_err(invalid(Setting::Spp, origin(&given.spp)))?;
     let lobes = given.lobes.unwrap_or(defaults.lobes);
     check_lobes(lobes).map_err(invalid(Setting::Lobes, origin(&given.lobes)))?;
+    let lobes = image_lobes(&scene, lobes);
     if let Some(seconds) = given.time_budget {
         check_seconds(seconds, MAX_TIME_BUDGET_SECONDS).map_err(from_caller(Setting::TimeBudget))?;
         if given.planes.is_some() {
@@ -466,6 +467,14 @@ pub struct ResolvedTable {
 /// The first value of `list` that an earlier one repeats. Each of the table's lists names a
 /// value once: a repeated K was dropped without a word, a repeated plane count of the sweep
 /// measured twice.
+/// The lobes' share as the image knows it: shares that give the same planes are one setting, so
+/// that parts, checkpoints and the fingerprint agree on them (parts of an isotropic render at
+/// two shares, the same image, were refused as different images, and -0 was another share
+/// than 0 in a part, an EXR's header and the fingerprint).
+fn image_lobes(scene: &Scene, lobes: f64) -> f64 {
+    if scene.medium.g == 0.0 { crate::limits::DEFAULT_LOBES } else { lobes + 0.0 }
+}
+
 fn repeated<T: PartialEq>(list: &[T]) -> Option<&T> {
     list.iter().enumerate().find(|(i, v)| list[..*i].contains(v)).map(|(_, v)| v)
 }
@@ -517,6 +526,7 @@ pub fn check_table(scene: &Scene, given: &TableOverrides) -> Result<Pending<Reso
     }
     let lobes = given.lobes.unwrap_or(scene.render.lobes);
     check_lobes(lobes).map_err(invalid(Setting::Lobes, origin(&given.lobes)))?;
+    let lobes = image_lobes(&scene, lobes);
     let table = ResolvedTable {
         planes: planes as usize,
         seed: given.seed.unwrap_or(scene.render.seed),
@@ -667,6 +677,36 @@ mod tests {
         Scene::parse(&format!("{MINIMAL}\n[render]\n{render}"), "test.toml", "test").unwrap()
     }
 
+    /// [`scene`] in fog that scatters forward, where the lobes' share is a setting of the image.
+    fn forward(render: &str) -> Scene {
+        let text = format!("{MINIMAL}\n[render]\n{render}").replace("sigma_a = 0.05", "sigma_a = 0.05\ng = 0.5");
+        Scene::parse(&text, "test.toml", "test").unwrap()
+    }
+
+    /// Shares that give the same planes resolve to one: in isotropic fog every share is the
+    /// default (no light has a lobe), and -0 is 0, so that parts and checkpoints of one image
+    /// agree (isotropic parts at two shares were refused as different images).
+    #[test]
+    fn shares_of_the_lobes_that_give_the_same_planes_are_one_setting() {
+        let share = |s: &Scene, lobes: f64| {
+            let render = resolve_render(s, &Overrides { lobes: Some(lobes), ..Default::default() }).unwrap();
+            let table = resolve_table(s, &TableOverrides { lobes: Some(lobes), ..Default::default() }).unwrap();
+            let from_table = table.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes;
+            assert_eq!(render.options.lobes.to_bits(), from_table.to_bits());
+            render.options.lobes
+        };
+        let (iso, fwd) = (scene(""), forward(""));
+        for lobes in [0.0, -0.0, 0.3, 1.0] {
+            assert_eq!(share(&iso, lobes).to_bits(), DEFAULT_LOBES.to_bits(), "{lobes}");
+        }
+        assert_eq!(share(&fwd, -0.0).to_bits(), 0.0f64.to_bits());
+        assert_eq!((share(&fwd, 0.3), share(&fwd, 1.0)), (0.3, 1.0));
+        assert_eq!(
+            resolve_render(&scene("lobes = 0.3\n"), &Overrides::default()).unwrap().options.lobes,
+            DEFAULT_LOBES
+        );
+    }
+
     /// The setting, origin and message of an error that must be an invalid setting.
     fn refused(e: Error) -> (Setting, Origin, String) {
         match e {
@@ -677,7 +717,7 @@ mod tests {
 
     #[test]
     fn nothing_given_takes_the_scenes_render_table_and_the_librarys_defaults() {
-        let s = scene(
+        let s = forward(
             "estimator = \"smis-cosine\"\norientations = 4\nplanes = 1500\nseed = 3\nspp = 2\nsampler = \"independent\"\nlobes = 0.25\n",
         );
         let r = resolve_render(&s, &Overrides::default()).unwrap();
@@ -893,9 +933,9 @@ mod tests {
         assert_eq!(t.sweep, TABLE_SWEEP.map(|n| n as usize));
         // Every render of the table takes the scene's share of lobes, or the one given.
         assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, DEFAULT_LOBES);
-        let t = resolve_table(&scene("lobes = 0.3\n"), &TableOverrides::default()).unwrap();
+        let t = resolve_table(&forward("lobes = 0.3\n"), &TableOverrides::default()).unwrap();
         assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).lobes, 0.3);
-        let t = resolve_table(&s, &TableOverrides { lobes: Some(0.0), ..Default::default() }).unwrap();
+        let t = resolve_table(&forward(""), &TableOverrides { lobes: Some(0.0), ..Default::default() }).unwrap();
         assert_eq!(t.render_options(Weighting::default(), Sampler::Sobol, 10, 1).plane_set().lobes, 0.0);
         let t = resolve_table(&s, &TableOverrides::default()).unwrap();
         assert_eq!((t.samplers, t.weightings), (TABLE_SAMPLERS.to_vec(), Weighting::all(&[])));
