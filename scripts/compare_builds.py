@@ -12,7 +12,9 @@ unweighted. A configuration is an estimator name, optionally with `:K` orientati
 
 `--new-scene` renders another scene with the new binary (the old one keeps `--scene`): a key the
 old build does not know, such as `[medium] g = 0.8`, measured against the old build's image of
-the same lights and planes (the same hits: g changes a hit's value, not which hits there are).
+the same lights and planes. For the same hits give the new scene `[render] lobes = 0` too: g
+alone changes a hit's value, not which hits there are, but the planes' lobes (docs/mathematics.md
+section 2.5) sweep a share of the planes elsewhere.
 """
 
 import argparse

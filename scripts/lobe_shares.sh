@@ -9,9 +9,11 @@
 #     scripts/lobe_shares.sh [BINARY] SCENE [PLANES] [RESOLUTION] [PAIRS] -- SHARE...
 #     scripts/lobe_shares.sh target/release/fogplanes media_scenes/forward_fog.toml 40960 160x90 6 -- 0.5 0.85
 set -euo pipefail
-bin=${1:-target/release/fogplanes}; scene=${2:?a scene}; planes=${3:-40960}
-resolution=${4:-160x90}; pairs=${5:-6}
-shift $(( $# < 5 ? $# : 5 )); [ "${1:-}" = "--" ] && shift
+# The positional arguments up to `--`, each optional after the scene.
+given=(); while [ $# -gt 0 ] && [ "$1" != "--" ]; do given+=("$1"); shift; done
+[ "${1:-}" = "--" ] && shift
+bin=${given[0]:-target/release/fogplanes}; scene=${given[1]:?usage: scripts/lobe_shares.sh BINARY SCENE [PLANES] [RESOLUTION] [PAIRS] -- SHARE...}
+planes=${given[2]:-40960}; resolution=${given[3]:-160x90}; pairs=${given[4]:-6}
 shares=("$@"); [ ${#shares[@]} -gt 0 ] || shares=(0 0.5 0.85)
 tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
 for share in "${shares[@]}"; do
@@ -19,7 +21,8 @@ for share in "${shares[@]}"; do
     for ((p = 0; p < pairs; p++)); do
         for s in 1 2; do
             "$bin" render "$scene" -e smis-exact --planes "$planes" --resolution "$resolution" \
-                --seed $((2 * p + 100 + s)) --lobes "$share" --quiet -o "$tmp/$s.exr" >/dev/null 2>&1
+                --seed $((2 * p + 100 + s)) --lobes "$share" --quiet -o "$tmp/$s.exr" >"$tmp/log" 2>&1 ||
+                { cat "$tmp/log" >&2; exit 1; }
         done
         out=$("$bin" compare "$tmp/1.exr" "$tmp/2.exr")
         sum=$(awk -v a="$sum" -v b="$(awk '/^MSE/{print $2}' <<<"$out")" 'BEGIN{print a + b}')

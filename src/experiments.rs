@@ -286,7 +286,7 @@ pub fn run_scaling(scene: &Scene, study: &ResolvedScaling, out: &std::path::Path
             });
         }
     }
-    let mut md = format!("{}\n\n{}", scaling_heading(&scene.name, &base), markdown_heading(&SCALING_COLUMNS));
+    let mut md = format!("{}\n\n{}", scaling_heading(scene, &base), markdown_heading(&SCALING_COLUMNS));
     for p in &points {
         md += &format!(
             "| {}x{} | {} | {} | {:.3} | {:.3} | {:.2} | {} |\n",
@@ -307,10 +307,17 @@ pub fn run_scaling(scene: &Scene, study: &ResolvedScaling, out: &std::path::Path
     Ok(md)
 }
 
-/// The line above the scaling table: what every render of the study shared.
-fn scaling_heading(scene: &str, opts: &RenderOptions) -> String {
+/// The line above the scaling table: what every render of the study shared (the lobes' share
+/// where the fog scatters forward or back, as the table's heading names it: it changes the hits).
+fn scaling_heading(scene: &Scene, opts: &RenderOptions) -> String {
+    let lobes = if scene.medium.g != 0.0 {
+        format!(", lobes {}", fogplanes::error::Number(opts.lobes()))
+    } else {
+        String::new()
+    };
     format!(
-        "{scene} with {}, {} planes, {}, seed {}, {} threads",
+        "{} with {}, {} planes, {}, seed {}{lobes}, {} threads",
+        scene.name,
         opts.weighting(),
         opts.sampler(),
         pixel_filter(opts.pixel_center(), opts.ray_sets()),
@@ -334,16 +341,21 @@ mod tests {
             ..Default::default()
         };
         let opts = given.resolve(&scene).unwrap().options;
-        let heading = scaling_heading("fog", &opts);
+        let heading = scaling_heading(&scene, &opts);
         assert!(
             heading.starts_with(&format!(
-                "fog with {}, independent planes, pixel-centre rays, seed 9, ",
+                "six_lights with {}, independent planes, pixel-centre rays, seed 9, ",
                 opts.weighting()
             )),
             "{heading}"
         );
         let given = fogplanes::settings::Overrides { seed: Some(3), ..Default::default() };
-        let heading = scaling_heading("fog", &given.resolve(&scene).unwrap().options);
-        assert!(heading.contains("whole pixels (box filter, 16 ray sets), seed 3, "), "{heading}");
+        let heading = scaling_heading(&scene, &given.resolve(&scene).unwrap().options);
+        assert!(heading.contains("whole pixels (box filter, 16 ray sets), seed 3, ") && !heading.contains("lobes"));
+        // In forward fog the lobes' share changes the hits: the heading names it.
+        let forward = Scene::load(std::path::Path::new("media_scenes/forward_fog.toml")).unwrap();
+        let heading =
+            scaling_heading(&forward, &fogplanes::settings::Overrides::default().resolve(&forward).unwrap().options);
+        assert!(heading.contains(", seed 1, lobes 0.5, "), "{heading}");
     }
 }

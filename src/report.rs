@@ -262,7 +262,7 @@ impl Table {
     /// What was rendered: scene, resolution, rays and seed.
     fn setting(&self) -> String {
         let [w, h] = self.resolution;
-        let lobes = self.lobes.map_or(String::new(), |s| format!(", lobes {s}"));
+        let lobes = self.lobes.map_or(String::new(), |s| format!(", lobes {}", fogplanes::error::Number(s)));
         format!("{} at {w}x{h}, {}, seed {}{lobes}", self.scene, self.filter, self.seed)
     }
 

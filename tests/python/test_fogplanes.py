@@ -209,7 +209,7 @@ def test_scene_fields_are_those_of_the_file():
     assert (r.planes, r.estimator, r.orientations, r.seed, r.spp) == (desc["render"]["planes"], "smis-exact", 2, 1, 16)
     assert (r.sampler, r.lobes) == ("sobol", 0.5) and "lobes=0.5" in repr(r)
     blocker = fogplanes.load_scene(ROOT / "media_scenes" / "two_lights_one_blocker.toml").render
-    assert (blocker.sampler, blocker.lobes) == ("independent", 0.5)
+    assert (blocker.sampler, blocker.lobes) == ("independent", 0.75)
     assert "six_lights" in repr(scene) and "ceiling" in repr(scene.lights[0])
     smaller = scene.with_resolution(32, 18)
     assert smaller.resolution == (32, 18) and scene.resolution == (640, 360)

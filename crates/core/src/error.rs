@@ -278,9 +278,19 @@ pub struct PixelValue {
 impl std::fmt::Display for PixelValue {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let channel = ["R", "G", "B"][self.channel];
-        write!(f, "pixel (x {}, y {}) channel {channel} is ", self.x, self.y)?;
-        // 1e308 as 1e308, not as its 309 digits.
-        let v = self.value;
+        write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, Number(self.value))
+    }
+}
+
+/// A number as a person reads it: 1e308 as `1e308` and 5e-324 as `5e-324`, not as their 309
+/// and 324 digits (Rust's `{}` of an f64 writes every digit); in between as `{}` does. Either
+/// way the shortest digits that read back as the same number.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Number(pub f64);
+
+impl std::fmt::Display for Number {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
         if v.is_finite() && v != 0.0 && !(1e-4..1e16).contains(&v.abs()) {
             write!(f, "{v:e}")
         } else {

@@ -143,6 +143,7 @@ pub fn check_spp(spp: u32) -> Result<(), String> {
 /// grow large).
 pub fn check_lobes(share: f64) -> Result<(), String> {
     if !(0.0..=1.0).contains(&share) {
+        let share = crate::error::Number(share);
         return Err(format!("the share of the planes swept along the lobe must be between 0 and 1, got {share}"));
     }
     Ok(())
@@ -263,6 +264,9 @@ mod tests {
         assert!(check_spp(MAX_SPP).is_ok() && check_spp(0).is_err());
         assert!([0.0, 1e-300, 0.5, 1.0].iter().all(|&s| check_lobes(s).is_ok()));
         assert!([-0.0 - 1e-300, 1.0 + 1e-15, f64::NAN, f64::INFINITY].iter().all(|&s| check_lobes(s).is_err()));
+        // A share far out of range is told in a few digits, not 300.
+        assert!(check_lobes(-1e-300).unwrap_err().ends_with("got -1e-300"));
+        assert!(check_lobes(1e300).unwrap_err().ends_with("got 1e300"));
         assert!(check_resolution(1, MAX_RESOLUTION_SIDE).is_ok() && check_resolution(0, 1).is_err());
         assert!(check_threads(1).is_ok() && check_threads(0).is_err());
         assert!(check_seconds(1e6, MAX_TIME_BUDGET_SECONDS).is_ok());

@@ -138,7 +138,7 @@ impl RenderOptions {
         let info = if w.estimator.has_orientations() { info.with("orientations", w.orientations) } else { info };
         let info = info.with("planes", planes).with("seed", self.seed).with("sampler", self.sampler.name());
         // The lobes change the planes only where the fog is not isotropic.
-        let info = if scene.medium.g != 0.0 { info.with("lobes", self.lobes) } else { info };
+        let info = if scene.medium.g != 0.0 { info.with("lobes", crate::error::Number(self.lobes)) } else { info };
         info.with("spp", self.spp)
             .with("ray_sets", self.ray_sets())
             .with("accelerator", self.accelerator.name())

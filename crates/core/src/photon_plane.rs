@@ -131,6 +131,7 @@ impl Lobe {
     /// back-scattering fog seen from in front of it), where its directions would all be
     /// mirrored ones; none where `share`, the share of the light's planes drawn from it, is 0.
     pub fn of(scene: &Scene, index: usize, share: f64) -> Option<Lobe> {
+        debug_assert!((0.0..=1.0).contains(&share), "a share of {share} (every door checks it)");
         let g = scene.medium.g;
         if g == 0.0 || share <= 0.0 {
             return None;
@@ -499,16 +500,28 @@ mod tests {
     }
 
     /// Every direction is in the light's front and its weight positive, finite and at most
-    /// 1 / (1 - share), for uniforms at their ends too.
+    /// 1 / (1 - share), and at most 2 (1 + h)^2 / (1 - h) (docs/mathematics.md section 2.5:
+    /// `q(w) + q(R w) >= (1 - h) / (2 pi (1 + h)^2)`, the bound that holds where there is no
+    /// cosine to fall back on, at share 1), for uniforms at their ends too, and at each side
+    /// of the choice of way (`u1` at `1 - share`).
     #[test]
     fn a_lobes_directions_are_in_front_with_bounded_weights() {
         let ends = [0.0, 1e-300, 0.25, 0.5 - 1e-16, 0.5, 0.5 + 1e-16, 0.75, BELOW_ONE];
         for (lobe, light) in lobes() {
-            for &u1 in &ends {
+            let way = 1.0 - lobe.share;
+            let u1s = ends
+                .iter()
+                .copied()
+                .chain([way - 1e-15, way, way + 1e-15].into_iter().filter(|u| (0.0..1.0).contains(u)));
+            let bound = (1.0 / (1.0 - lobe.share)).min(2.0 * (1.0 + lobe.h).powi(2) / (1.0 - lobe.h));
+            for u1 in u1s {
                 for &u2 in &ends {
                     let (w, m) = lobe.sample(&light, u1, u2);
                     assert!(w.dot(light.n) > 0.0 && (w.length() - 1.0).abs() < 1e-12, "{u1} {u2}: {w}");
-                    assert!(m > 0.0 && m <= 1.0 / (1.0 - lobe.share) * (1.0 + 1e-12), "{u1} {u2}: weight {m}");
+                    assert!(
+                        m.is_finite() && m > 0.0 && m <= bound * (1.0 + 1e-12),
+                        "{u1} {u2}: weight {m} over {bound}"
+                    );
                 }
             }
         }
