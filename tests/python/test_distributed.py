@@ -540,3 +540,23 @@ def test_a_worker_without_its_adapter_fails_the_job_with_a_clear_error_at_the_cl
                       device="gpu")
     finally:
         cluster.close()
+
+
+def test_a_call_waits_for_a_first_worker_and_names_a_cluster_that_never_has_one(scene, monkeypatch):
+    """A cluster without workers yet (a batch system's jobs still queued, or a loaded machine's
+    workers a moment gone) is waited for: a worker that joins meanwhile renders the image. One
+    that never has any is named, after the wait (it was refused at once)."""
+    kwargs = dict(resolution=(16, 9), planes=300, progress=False)
+    cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address="127.0.0.1:0", env={"RAYON_NUM_THREADS": "1"})
+    try:
+        with Client(cluster) as c:
+            monkeypatch.setattr(fd, "WORKER_WAIT_SECONDS", 1)
+            with pytest.raises(ValueError, match=r"^the Dask cluster has no workers \(none joined in 1 s\)$"):
+                fd.render(scene, client=c, threads=1, **kwargs)
+            monkeypatch.setattr(fd, "WORKER_WAIT_SECONDS", WORKER_RESTART)
+            cluster.scale(1)  # the worker starts in the background, seconds from now
+            image = fd.render(scene, client=c, threads=1, **kwargs)
+            assert_bit_identical(image, fogplanes.render(scene, **{k: v for k, v in kwargs.items() if k != "progress"}))
+    finally:
+        cluster.close()

@@ -90,6 +90,10 @@ __all__ = ["render", "render_future", "reference", "table", "local_client"]
 BAND_ROWS = 16
 #: How many leaf tasks per Dask thread the automatic block size aims at (load balance).
 TASKS_PER_SLOT = 8
+#: Seconds a call waits for a first worker where the cluster has none: a batch system's workers
+#: join after their jobs start, and on a loaded machine a local cluster's may be gone a moment
+#: (CI once found none between a reference and a table on the same client).
+WORKER_WAIT_SECONDS = 60
 
 SceneArg = native.Scene | str | bytes | os.PathLike
 
@@ -222,7 +226,13 @@ def _threads_per_task(client: Client) -> tuple[int, int]:
     if workers is None:  # the client lost its scheduler (it then closes itself)
         raise ValueError(_gone(client))
     if not workers:
-        raise ValueError("the Dask cluster has no workers")
+        try:
+            client.wait_for_workers(1, timeout=WORKER_WAIT_SECONDS)
+        except TimeoutError:
+            raise ValueError(f"the Dask cluster has no workers (none joined in {WORKER_WAIT_SECONDS} s)") from None
+        workers = client.scheduler_info(n_workers=-1).get("workers")
+        if not workers:
+            raise ValueError("the Dask cluster has no workers")
     cores = {address: n for address, n in client.run(_cores, on_error="return").items() if isinstance(n, int)}
     if not cores:
         raise ValueError(f"none of the Dask cluster's {len(workers)} workers answers")
