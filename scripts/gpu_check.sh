@@ -2,7 +2,8 @@
 # The GPU check of issue 37, in one command on a machine with a GPU (a few minutes on an H100):
 # per estimator, the GPU gather's G hits/s (its timestamps) and the render's end-to-end time at
 # 640x360 with 40,960 and 655,360 planes (the benchmark scene, whole pixels), the agreement with
-# the CPU's image (relative MSE, `fogplanes compare`), the GPU time by the work items' size and
+# the CPU's image (relative MSE, `fogplanes compare`), the same for fog that scatters forward
+# (media_scenes/forward_fog.toml at the first count), the GPU time by the work items' size and
 # with the driver's transcendental functions and without wgpu's shader runtime checks, then
 # the CPU renderer's wall time on 1, 2, 4, 8 and all threads, and the machine's threads per core;
 # then the timeline of smis-exact's renders and cmis-exact's first (`FOGPLANES_TRACE=1`: each
@@ -83,6 +84,18 @@ for planes in $P; do
             echo
         fi
     done
+done
+# Fog that scatters forward (media_scenes/forward_fog.toml, g = 0.85, the planes' lobes of
+# docs/mathematics.md section 2.5, their weight in each plane's phase_scale): the GPU against
+# the CPU, smis-exact and cmis-exact, at the first planes count (a second process each).
+for e in smis-exact cmis-exact; do
+    for d in gpu gpu cpu; do
+        timeout 150 "$B" render media_scenes/forward_fog.toml --resolution "$R" -q --planes "$first" -e "$e" \
+            --device "$d" -o "$work/ff_$d.exr" 2>&1 | grep -v XDG_RUNTIME_DIR | grep -v '^wrote' | sed "s/^/forward fog $d $first: /"
+    done
+    printf 'agreement forward fog %s %s: ' "$first" "$e"
+    timeout 60 "$B" compare "$work/ff_gpu.exr" "$work/ff_cpu.exr" | tr '\n' ' ' | tr -s ' '
+    echo
 done
 # The work items' size (docs/gpu.md: a batch's items aim at several waves; the first planes
 # count's size is the default's own), smis-exact and cmis-exact with the first planes count, a
