@@ -160,6 +160,10 @@ pub(crate) struct ScalingArgs {
     /// Where the planes' random numbers come from.
     #[arg(long, default_value = "sobol", value_parser = sampler_parser())]
     pub(crate) sampler: Sampler,
+    /// In fog that scatters forward or back, the share of each light's planes swept along the
+    /// phase function's lobe (it changes the hits; 0: the paper's planes) [default: 0.5].
+    #[arg(long, value_name = "SHARE", allow_negative_numbers = true)]
+    pub(crate) lobes: Option<f64>,
     #[command(flatten)]
     pub(crate) common: CommonArgs,
     #[command(flatten)]
@@ -599,6 +603,7 @@ impl From<&ScalingArgs> for ScalingOverrides {
         ScalingOverrides {
             estimator: Some(a.estimator),
             sampler: Some(a.sampler),
+            lobes: a.lobes,
             planes: Some(a.planes.clone()),
             resolutions: a.resolutions.clone(),
             threads: a.common.threads,

@@ -149,6 +149,10 @@ fn bad_arguments_exit_2() {
         (vec!["table", scene, "--reference", "no.exr", "--orientations", "2,2"], "--orientations: 2 is named twice"),
         (vec!["table", scene, "--reference", "no.exr", "--orientations", "4,3,4"], "--orientations: 4 is named twice"),
         (vec!["table", scene, "--reference", "no.exr", "--sweep", "5120,5120"], "--sweep: 5120 is named twice"),
+        (
+            vec!["scaling", scene, "--lobes", "1.5"],
+            "--lobes: the share of the planes swept along the lobe must be between 0 and 1, got 1.5",
+        ),
         // A share of the planes, told in the library's words with the flag.
         (
             vec!["render", scene, "--lobes", "1.5"],

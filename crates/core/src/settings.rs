@@ -582,6 +582,8 @@ pub const SCALING_RESOLUTIONS: [(u32, u32); 4] = [(160, 90), (320, 180), (640, 3
 pub struct ScalingOverrides {
     pub estimator: Option<Estimator>,
     pub sampler: Option<Sampler>,
+    /// The lobes' share (`None`: the library's default, not the scene's).
+    pub lobes: Option<f64>,
     pub planes: Option<Vec<u64>>,
     pub resolutions: Option<Vec<(u32, u32)>>,
     pub threads: Option<usize>,
@@ -594,6 +596,7 @@ pub struct ScalingOverrides {
 pub struct ResolvedScaling {
     pub weighting: Weighting,
     pub sampler: Sampler,
+    pub lobes: f64,
     pub planes: Vec<usize>,
     pub resolutions: Vec<(u32, u32)>,
     pub threads: Option<usize>,
@@ -610,7 +613,7 @@ impl ResolvedScaling {
             weighting: self.weighting,
             seed: crate::limits::DEFAULT_SEED,
             sampler: self.sampler,
-            lobes: crate::limits::DEFAULT_LOBES,
+            lobes: self.lobes,
             spp: crate::limits::DEFAULT_RAY_SETS,
             pixel_center: false,
             accelerator: Accelerator::default(),
@@ -654,10 +657,16 @@ pub fn check_scaling(given: &ScalingOverrides) -> Result<Pending<ResolvedScaling
     if let Some((w, h)) = repeated(&resolutions) {
         return Err(Error::option(Setting::Resolutions, format!("{w}x{h} is named twice")));
     }
+    // +0 for -0, as image_lobes gives a render (a scaling run writes no image nor part, and its
+    // heading names the share only where the fog is not isotropic).
+    let lobes = given.lobes.unwrap_or(crate::limits::DEFAULT_LOBES);
+    check_lobes(lobes).map_err(from_caller(Setting::Lobes))?;
+    let lobes = lobes + 0.0;
     let scaling = ResolvedScaling {
         weighting: Weighting::new(given.estimator.unwrap_or(Estimator::DEFAULT), None)
             .map_err(from_caller(Setting::Estimator))?,
         sampler: given.sampler.unwrap_or_default(),
+        lobes,
         planes: planes.iter().map(|&n| n as usize).collect(),
         resolutions,
         threads: threads(given.threads)?,
@@ -972,6 +981,9 @@ mod tests {
 
         let c = resolve_scaling(&ScalingOverrides::default()).unwrap();
         assert_eq!((c.weighting, c.sampler), (Weighting::default(), Sampler::Sobol));
+        assert_eq!((c.lobes, c.render_options(100).lobes), (DEFAULT_LOBES, DEFAULT_LOBES));
+        let c = resolve_scaling(&ScalingOverrides { lobes: Some(0.85), ..Default::default() }).unwrap();
+        assert_eq!(c.render_options(100).lobes, 0.85);
         assert_eq!((c.planes.len(), c.resolutions), (SCALING_PLANES.len(), SCALING_RESOLUTIONS.to_vec()));
         for (given, setting) in [
             (ScalingOverrides { planes: Some(vec![0]), ..Default::default() }, Setting::Planes),
@@ -981,6 +993,7 @@ mod tests {
                 Setting::Resolutions,
             ),
             (ScalingOverrides { threads: Some(0), ..Default::default() }, Setting::Threads),
+            (ScalingOverrides { lobes: Some(1.5), ..Default::default() }, Setting::Lobes),
             (ScalingOverrides { planes: Some(vec![1000, 2000, 1000]), ..Default::default() }, Setting::Planes),
             (
                 ScalingOverrides { resolutions: Some(vec![(16, 9), (32, 18), (16, 9)]), ..Default::default() },
