@@ -90,17 +90,19 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 /// holds and an error quotes) and text-direction overrides written as escapes, so that an error
 /// is always one line, read in its own order.
 pub fn one_line(text: &str) -> String {
-    let unsafe_char = |c: char| c.is_control() || is_bidi_control(c);
-    if !text.chars().any(unsafe_char) {
+    if !text.chars().any(acts_on_terminal) {
         return text.to_string();
     }
-    text.chars().map(|c| if unsafe_char(c) { c.escape_default().to_string() } else { c.to_string() }).collect()
+    text.chars().map(|c| if acts_on_terminal(c) { c.escape_default().to_string() } else { c.to_string() }).collect()
 }
 
-/// Unicode's bidirectional formatting characters (embeddings, overrides, isolates and marks),
-/// which `char::is_control` does not count: in a terminal they reorder the text after them.
-pub fn is_bidi_control(c: char) -> bool {
-    matches!(c, '\u{200E}' | '\u{200F}' | '\u{061C}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
+/// A character that acts on a terminal rather than showing: a control character (an escape
+/// sequence's start, a newline), or one of Unicode's bidirectional formatting characters
+/// (embeddings, overrides, isolates, marks), which `char::is_control` does not count and which
+/// reorder the text after them.
+pub fn acts_on_terminal(c: char) -> bool {
+    c.is_control()
+        || matches!(c, '\u{200E}' | '\u{200F}' | '\u{061C}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
 }
 
 /// A problem with a scene file or with the render settings derived from it.

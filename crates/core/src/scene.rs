@@ -18,7 +18,7 @@ use std::fmt;
 use std::path::Path;
 
 pub use crate::error::SceneError;
-use crate::error::is_bidi_control;
+use crate::error::acts_on_terminal;
 
 /// An RGB triple that may be written as a single number (grey).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -383,7 +383,7 @@ impl Scene {
             // (an escape sequence, a newline) acted on the terminal, or broke the error's one
             // line, and a bidirectional override (U+202E) turned the rest of the line around, so
             // both are refused here, at the door, shown escaped.
-            if let Some(name) = l.name.as_deref().filter(|n| n.chars().any(|c| c.is_control() || is_bidi_control(c))) {
+            if let Some(name) = l.name.as_deref().filter(|n| n.chars().any(acts_on_terminal)) {
                 return Err(err(
                     format!("light[{i}].name"),
                     format!(
@@ -843,7 +843,7 @@ radiance = 4
             assert_eq!(e.field, "light[0].name", "{name}: {e}");
             assert!(e.message.contains("must not hold control characters"), "{name}: {e}");
             let line = e.to_string();
-            assert!(!line.chars().any(|c| c.is_control() || is_bidi_control(c)), "{name}: {line:?}");
+            assert!(!line.chars().any(acts_on_terminal), "{name}: {line:?}");
         }
         // Any other string is a name: empty, spaced, punctuated, beyond ASCII.
         for name in ["", "ceiling lamp", "a.b-c_d (2)", "lumière", "灯"] {

@@ -464,9 +464,6 @@ pub struct ResolvedTable {
     pub device: Device,
 }
 
-/// The first value of `list` that an earlier one repeats. Each of the table's lists names a
-/// value once: a repeated K was dropped without a word, a repeated plane count of the sweep
-/// measured twice.
 /// The lobes' share as the image knows it: shares that give the same planes are one setting, so
 /// that parts, checkpoints and the fingerprint agree on them (parts of an isotropic render at
 /// two shares, the same image, were refused as different images, and -0 was another share
@@ -475,6 +472,9 @@ fn image_lobes(scene: &Scene, lobes: f64) -> f64 {
     if scene.medium.g == 0.0 { crate::limits::DEFAULT_LOBES } else { lobes + 0.0 }
 }
 
+/// The first value of `list` that an earlier one repeats. Each of the table's and the scaling
+/// run's lists names a value once: a repeated K was dropped without a word, a repeated plane
+/// count measured twice.
 fn repeated<T: PartialEq>(list: &[T]) -> Option<&T> {
     list.iter().enumerate().find(|(i, v)| list[..*i].contains(v)).map(|(_, v)| v)
 }
