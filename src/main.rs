@@ -51,27 +51,34 @@ fn parse() -> Cli {
 }
 
 /// A count, seed or index that is no whole number said as such: Rust's own words for `-1` or
-/// `1.5` are "invalid digit found in string". The error shows the usage of the subcommand that
-/// `args` names, as clap's own errors do (it showed the root's, `fogplanes <COMMAND>`).
-fn plainer(e: clap::Error, command: &mut clap::Command, args: &[std::ffi::OsString]) -> clap::Error {
-    use clap::error::{ContextKind, ErrorKind};
+/// `1.5` are "invalid digit found in string". Every error of a value (one of these, or clap's
+/// own for a value outside a list, `-e foo`) shows the usage of the subcommand that `args`
+/// names, as clap's errors of a missing or unknown argument do (it showed the root's,
+/// `fogplanes <COMMAND>`, or none).
+fn plainer(mut e: clap::Error, command: &mut clap::Command, args: &[std::ffi::OsString]) -> clap::Error {
+    use clap::error::{ContextKind, ContextValue, ErrorKind};
     use std::error::Error;
-    let Some(parse) = e.source().and_then(|s| s.downcast_ref::<std::num::ParseIntError>()) else { return e };
-    let (Some(arg), Some(value)) = (e.get(ContextKind::InvalidArg), e.get(ContextKind::InvalidValue)) else {
-        return e;
-    };
-    let why = match parse.kind() {
-        std::num::IntErrorKind::PosOverflow => "too large for the setting",
-        _ => "expected a whole number, 0 or more",
-    };
-    let message = format!("invalid value '{value}' for '{arg}': {why}");
     // The root takes no values, so that the first argument naming a subcommand is the one
     // parsed (no value can come before it).
     let named = args.iter().skip(1).filter_map(|a| a.to_str()).find(|a| command.find_subcommand(a).is_some());
-    match named.and_then(|name| command.find_subcommand_mut(name)) {
-        Some(sub) => sub.error(ErrorKind::ValueValidation, message),
-        None => command.error(ErrorKind::ValueValidation, message),
+    let command = match named.and_then(|name| command.find_subcommand_mut(name)) {
+        Some(sub) => sub,
+        None => command,
+    };
+    let parse = e.source().and_then(|s| s.downcast_ref::<std::num::ParseIntError>()).map(|p| p.kind().clone());
+    let (arg, value) = (e.get(ContextKind::InvalidArg).cloned(), e.get(ContextKind::InvalidValue).cloned());
+    if let (Some(kind), Some(arg), Some(value)) = (parse, arg, value) {
+        let why = match kind {
+            std::num::IntErrorKind::PosOverflow => "too large for the setting",
+            _ => "expected a whole number, 0 or more",
+        };
+        return command.error(ErrorKind::ValueValidation, format!("invalid value '{value}' for '{arg}': {why}"));
     }
+    let of_a_value = matches!(e.kind(), ErrorKind::InvalidValue | ErrorKind::ValueValidation);
+    if of_a_value && e.get(ContextKind::Usage).is_none() {
+        e.insert(ContextKind::Usage, ContextValue::StyledStr(command.render_usage()));
+    }
+    e
 }
 
 fn main() -> ExitCode {

@@ -134,6 +134,30 @@ fn bad_arguments_exit_2() {
     let o = fogplanes(&["table", "media_scenes/six_lights.toml", "--reference", "r.exr", "--sweep", "10,x"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("Usage: fogplanes table [OPTIONS] --reference <REF> <SCENE>"), "{err}");
+    // So do clap's own errors of a value, outside a list or refused by a setting's parser (they
+    // showed none), with what they said before.
+    for (args, said, usage) in [
+        (
+            vec!["render", "media_scenes/six_lights.toml", "-e", "foo"],
+            "[possible values: unweighted,",
+            "render [OPTIONS] <SCENE>",
+        ),
+        (
+            vec!["render", "media_scenes/six_lights.toml", "--device", "tpu"],
+            "unknown device \"tpu\"",
+            "render [OPTIONS] <SCENE>",
+        ),
+        (
+            vec!["reference", "media_scenes/six_lights.toml", "--resolution", "10"],
+            "expected WIDTHxHEIGHT",
+            "reference [OPTIONS] <SCENE>",
+        ),
+    ] {
+        let o = fogplanes(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(said) && err.contains(&format!("Usage: fogplanes {usage}")), "{args:?}: {err}");
+    }
     // A count that is no whole number, or too large for its type, is said as such, not in
     // Rust's words ("invalid digit found in string").
     let scene = "media_scenes/six_lights.toml";
