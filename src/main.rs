@@ -65,7 +65,7 @@ fn plainer(mut e: clap::Error, command: &mut clap::Command, args: &[std::ffi::Os
         Some(sub) => sub,
         None => command,
     };
-    let parse = e.source().and_then(|s| s.downcast_ref::<std::num::ParseIntError>()).map(|p| p.kind().clone());
+    let parse = e.source().and_then(|s| s.downcast_ref::<std::num::ParseIntError>()).map(|p| *p.kind());
     let (arg, value) = (e.get(ContextKind::InvalidArg).cloned(), e.get(ContextKind::InvalidValue).cloned());
     if let (Some(kind), Some(arg), Some(value)) = (parse, arg, value) {
         let why = match kind {
