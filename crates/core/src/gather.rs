@@ -869,6 +869,58 @@ mod tests {
         assert!(Phase::new(0.0).is_isotropic() && !Phase::new(1e-3).is_isotropic());
     }
 
+    /// Each channel's contribution carries its own transmittance exp(-sigma_t length) (section
+    /// 2.3), whichever two channels share an extinction: the ratio of two channels of a hit is
+    /// exp(-(sigma_k - sigma_j) length), with the length (t - t0) + r from the hit solved in f64
+    /// here. Only a medium whose three channels are equal may take the grey path's one value.
+    #[test]
+    fn each_channel_keeps_its_extinction_when_two_are_equal() {
+        let text = include_str!("../../../media_scenes/six_lights.toml");
+        let base = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let planes = sample_planes(&base, Sampler::default(), 500, 6);
+        let o = base.camera.position;
+        for sigma_t in [[0.4, 0.4, 0.9], [0.4, 0.9, 0.4], [0.9, 0.4, 0.4], [0.4, 0.4, 0.4]] {
+            let mut scene = base.clone();
+            scene.medium.sigma_s = DVec3::splat(0.3);
+            scene.medium.sigma_a = DVec3::from(sigma_t) - 0.3;
+            let sigma_t = scene.medium.sigma_t();
+            let ctx = GatherContext::new(&scene, &planes, o);
+            let w = crate::weights::Unweighted;
+            let mut checked = 0;
+            for k in 0..400 {
+                let (x, y) = ((k % 20) as f64 * 32.0 + 16.0, (k / 20) as f64 * 18.0 + 9.0);
+                let we = scene.camera.direction(x, y).normalize();
+                let Some((t0, t1)) = scene.camera_segment(o, we).0 else { continue };
+                let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
+                for (p, v) in planes.iter().zip(&ctx.views) {
+                    let Some(c) = ctx.gather_one(&w, v, &ray) else { continue };
+                    // o + t we = y0 + a d + r wl: t from the plane's normal, then r from the
+                    // offset's components along the unit d and wl.
+                    let n = p.chord.cross(p.direction);
+                    let t = (p.origin - o).dot(n) / we.dot(n);
+                    let e = o + t * we - p.origin;
+                    let cos = p.chord.dot(p.direction);
+                    let r = (e.dot(p.direction) - cos * e.dot(p.chord)) / (1.0 - cos * cos);
+                    let length = (t - t0) + r;
+                    if !(c.x > 0.0) || length > 20.0 {
+                        continue;
+                    }
+                    let c = c.as_dvec3();
+                    for (i, j) in [(1, 0), (2, 0), (2, 1)] {
+                        let want = (-(sigma_t[i] - sigma_t[j]) * length).exp();
+                        let got = c[i] / c[j];
+                        assert!(
+                            (got - want).abs() <= 1e-4 * want,
+                            "sigma_t {sigma_t}: channel {i} over {j} {got}, want {want}"
+                        );
+                    }
+                    checked += 1;
+                }
+            }
+            assert!(checked > 1000, "sigma_t {sigma_t}: {checked} hits");
+        }
+    }
+
     #[test]
     fn hit_solves_the_plane_equation() {
         let text = include_str!("../../../media_scenes/six_lights.toml");
