@@ -301,22 +301,26 @@ impl PlaneView {
 /// are unit, so `|we + w|^2 = 2 + 2 we . w`, a sum of squares that is never negative.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Phase {
-    /// g, as the scene gives it (0: isotropic, and the gather takes its isotropic path).
+    /// g, as the scene gives it, in f32.
     pub g: f32,
     /// `abs(g)`.
     pub h: f32,
     /// `(1 - abs(g))^2`, the smallest value of the bracket.
     pub floor: f32,
+    /// Whether the scene's g (f64) is 0: then the gather takes its isotropic path. Not `g` in
+    /// f32, which is 0 for a valid g of 1e-300 whose lights still have lobes: their planes'
+    /// direction weights, in `phase_scale`, would be dropped (the bracket is 1 there).
+    isotropic: bool,
 }
 
 impl Phase {
     pub fn new(g: f64) -> Self {
         let h = g.abs();
-        Phase { g: g as f32, h: h as f32, floor: ((1.0 - h) * (1.0 - h)) as f32 }
+        Phase { g: g as f32, h: h as f32, floor: ((1.0 - h) * (1.0 - h)) as f32, isotropic: g == 0.0 }
     }
 
     pub fn is_isotropic(&self) -> bool {
-        self.g == 0.0
+        self.isotropic
     }
 
     /// `D' = D / (4 pi rho m)` for each ray of the block against a plane whose
@@ -866,7 +870,47 @@ mod tests {
                 assert!(hi / lo > 1e6, "g {g}: the values span {lo} to {hi}");
             }
         }
-        assert!(Phase::new(0.0).is_isotropic() && !Phase::new(1e-3).is_isotropic());
+        assert!(
+            Phase::new(0.0).is_isotropic() && !Phase::new(1e-3).is_isotropic() && !Phase::new(1e-300).is_isotropic()
+        );
+    }
+
+    /// A g too small for f32 (a scene may give 1e-300, docs/mathematics.md section 2.5) still has
+    /// lobes, and each hit on a lobe's plane must carry its direction weight m: there
+    /// 4 pi rho = 1 to within 1e-300, so C is m times the isotropic C of the same hit (sections
+    /// 1.1 and 2.5), to f32 rounding. Taking g as f32, 0, for isotropic dropped m.
+    #[test]
+    fn a_phase_function_too_faint_for_f32_keeps_the_direction_weights() {
+        let text = include_str!("../../../media_scenes/six_lights.toml");
+        let isotropic = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        for g in [1e-300, -1e-300] {
+            let mut faint = isotropic.clone();
+            faint.medium.g = g;
+            let planes = sample_planes(&faint, Sampler::default(), 2000, 4);
+            let o = faint.camera.position;
+            let (ctx, iso) = (GatherContext::new(&faint, &planes, o), GatherContext::new(&isotropic, &planes, o));
+            let w = crate::weights::SmisExactPair;
+            let mut weighted = 0;
+            for k in 0..400 {
+                let (x, y) = ((k % 20) as f64 * 32.0 + 16.0, (k / 20) as f64 * 18.0 + 9.0);
+                let we = faint.camera.direction(x, y).normalize();
+                let Some((t0, t1)) = faint.camera_segment(o, we).0 else { continue };
+                let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
+                for ((p, v), v0) in planes.iter().zip(&ctx.views).zip(&iso.views) {
+                    let (Some(c), Some(c0)) = (ctx.gather_one(&w, v, &ray), iso.gather_one(&w, v0, &ray)) else {
+                        continue;
+                    };
+                    let want = c0.as_dvec3() * p.direction_weight;
+                    assert!(
+                        (c.as_dvec3() - want).abs().max_element() <= 1e-5 * want.max_element(),
+                        "g {g:e}, weight {}: {c} against {want}",
+                        p.direction_weight
+                    );
+                    weighted += (p.direction_weight != 1.0 && c0.max_element() > 0.0) as usize;
+                }
+            }
+            assert!(weighted > 1000, "g {g:e}: {weighted} hits on the lobes' planes");
+        }
     }
 
     /// Each channel's contribution carries its own transmittance exp(-sigma_t length) (section
