@@ -765,14 +765,28 @@ mod tests {
     /// The linear form of the shadow test against the direct one: the f64 ray-rectangle
     /// crossing of the panel (`RectLight::intersect`, which shares no code with it) from the
     /// light vertex along the sweep direction. Only points within a hair of a panel edge or of
-    /// the segment's ends, where f32 rounding decides, may disagree.
+    /// the segment's ends, where f32 rounding decides, may disagree. The scene's square panels,
+    /// and the same scene with panels of unequal sides, one turned about its normal, so that a
+    /// width taken for a height or `u` for `v` shows.
     #[test]
     fn occluders_block_exactly_where_the_panels_are() {
+        let text = include_str!("../../../media_scenes/hard/facing_lights_close.toml");
+        let oblong = text
+            .replace("corner = [-0.5, 1.55, -0.5]", "corner = [-0.5, 1.55, -0.2]")
+            .replace("edge_u = [1.0, 0.0, 0.0]", "edge_u = [0.9, 0.0, 0.3]")
+            .replace("edge_v = [0.0, 0.0, 1.0]", "edge_v = [-0.1, 0.0, 0.3]")
+            .replace("edge_v = [0.0, 0.0, -0.8]", "edge_v = [0.0, 0.0, -0.3]");
+        for (text, sides_apart) in [(text.to_string(), false), (oblong, true)] {
+            let scene = Scene::parse(&text, "facing_lights_close.toml", "s").unwrap();
+            let apart = scene.lights.iter().all(|l| (l.width - l.height).abs() > 0.2 * l.width);
+            assert_eq!(apart, sides_apart, "the panels' sides: {:?}", scene.lights);
+            occluders_block_where_the_panels_of(&scene);
+        }
+    }
+
+    fn occluders_block_where_the_panels_of(scene: &Scene) {
         use rand::{Rng, SeedableRng};
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../media_scenes/hard/facing_lights_close.toml");
-        let scene = Scene::load(&path).unwrap();
-        let planes = sample_planes(&scene, Sampler::Independent, 4000, 3);
+        let planes = sample_planes(scene, Sampler::Independent, 4000, 3);
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(4);
         let (mut blocked, mut checked, mut near) = (0, 0, 0);
         for p in &planes {
