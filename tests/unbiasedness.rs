@@ -102,6 +102,32 @@ fn isotropic_truths() -> &'static Truths<'static> {
     TRUTHS.get_or_init(|| Truths::of(SCENE.get_or_init(|| two_lights(0.0))))
 }
 
+/// The truths of [`two_lights_seen_from`]`(g, eye)` along [`cases_with_the_eyes`], computed once
+/// for the tests that share them (the Henyey-Greenstein media and the lobes' share at its ends
+/// hold their estimators to the same three scenes): each a few CPU seconds of quadrature.
+fn truths_seen_from(g: f64, eye: DVec3) -> &'static Truths<'static> {
+    type Cell = &'static std::sync::OnceLock<Truths<'static>>;
+    static CELLS: std::sync::Mutex<Vec<((u64, [u64; 3]), Cell)>> = std::sync::Mutex::new(Vec::new());
+    let key = (g.to_bits(), eye.to_array().map(f64::to_bits));
+    // The cell found or made under the lock, its truths computed after it: a second test that
+    // wants them waits for the first's.
+    let cell = {
+        let mut cells = CELLS.lock().unwrap();
+        match cells.iter().find(|(k, _)| *k == key) {
+            Some(&(_, cell)) => cell,
+            None => {
+                let cell: Cell = Box::leak(Box::new(std::sync::OnceLock::new()));
+                cells.push((key, cell));
+                cell
+            }
+        }
+    };
+    cell.get_or_init(|| {
+        let scene: &'static Scene = Box::leak(Box::new(two_lights_seen_from(g, eye)));
+        Truths::of_cases(scene, cases_with_the_eyes(eye))
+    })
+}
+
 fn run(truths: &Truths, sampler: Sampler, lobes: f64, weightings: &[Weighting], batches: u64, batch_size: usize) {
     let scene = truths.scene;
     let g = scene.medium.g;
@@ -188,21 +214,10 @@ fn k_orientations_match_quadrature() {
 #[test]
 fn every_estimator_matches_quadrature_with_a_henyey_greenstein_medium() {
     for (g, batches, eye) in [(0.8, 800, 1.5), (-0.5, 200, 1.5), (-0.8, 800, 3.5)] {
-        let eye = DVec3::new(0.0, eye, 6.0);
-        let scene = two_lights_seen_from(g, eye);
-        let lobes = fogplanes::photon_plane::PlaneSources::new(&scene, DEFAULT_LOBES).lobes;
-        assert_eq!(
-            lobes.iter().filter(|l| l.is_some()).count(),
-            [2, 0, 2][(g < 0.0) as usize + (eye.y > 2.9) as usize]
-        );
-        run(
-            &Truths::of_cases(&scene, cases_with_the_eyes(eye)),
-            Sampler::default(),
-            DEFAULT_LOBES,
-            &Weighting::all(&[4]),
-            batches,
-            10_000,
-        );
+        let truths = truths_seen_from(g, DVec3::new(0.0, eye, 6.0));
+        let lobes = fogplanes::photon_plane::PlaneSources::new(truths.scene, DEFAULT_LOBES).lobes;
+        assert_eq!(lobes.iter().filter(|l| l.is_some()).count(), [2, 0, 2][(g < 0.0) as usize + (eye > 2.9) as usize]);
+        run(truths, Sampler::default(), DEFAULT_LOBES, &Weighting::all(&[4]), batches, 10_000);
     }
 }
 
@@ -217,8 +232,7 @@ fn every_estimator_matches_quadrature_with_a_henyey_greenstein_medium() {
 #[test]
 fn every_estimator_matches_quadrature_at_the_ends_of_the_lobes_share() {
     for (g, lobes, batches, eye) in [(0.8, 1.0, 2000, 1.5), (-0.8, 1.0, 800, 3.5), (0.8, 0.05, 400, 1.5)] {
-        let scene = two_lights_seen_from(g, DVec3::new(0.0, eye, 6.0));
-        let cases = cases_with_the_eyes(DVec3::new(0.0, eye, 6.0));
-        run(&Truths::of_cases(&scene, cases), Sampler::default(), lobes, &Weighting::all(&[4]), batches, 10_000);
+        let truths = truths_seen_from(g, DVec3::new(0.0, eye, 6.0));
+        run(truths, Sampler::default(), lobes, &Weighting::all(&[4]), batches, 10_000);
     }
 }
