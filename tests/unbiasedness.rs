@@ -107,7 +107,9 @@ fn isotropic_truths() -> &'static Truths<'static> {
 /// hold their estimators to the same three scenes): each a few CPU seconds of quadrature.
 fn truths_seen_from(g: f64, eye: DVec3) -> &'static Truths<'static> {
     type Cell = &'static std::sync::OnceLock<Truths<'static>>;
-    static CELLS: std::sync::Mutex<Vec<((u64, [u64; 3]), Cell)>> = std::sync::Mutex::new(Vec::new());
+    // A scene's g and eye by their bits, and its truths' cell.
+    type Cells = Vec<((u64, [u64; 3]), Cell)>;
+    static CELLS: std::sync::Mutex<Cells> = std::sync::Mutex::new(Vec::new());
     let key = (g.to_bits(), eye.to_array().map(f64::to_bits));
     // The cell found or made under the lock, its truths computed after it: a second test that
     // wants them waits for the first's.
