@@ -59,6 +59,21 @@ fn on(given: &Overrides, device: Device) -> Overrides {
     Overrides { device: Some(device), ..given.clone() }
 }
 
+/// `planes` planes of `weighting` along the CPU's rays (the GPU gathering the rays the CPU
+/// made, so that only the gather's arithmetic differs), 4 ray sets, seed 3.
+fn along_the_cpus_rays(planes: u64, weighting: &Weighting, pixel_center: bool) -> Overrides {
+    Overrides {
+        planes: Some(planes),
+        estimator: Some(weighting.estimator),
+        orientations: Some(weighting.orientations),
+        seed: Some(3),
+        spp: Some(4),
+        pixel_center,
+        rays_on_cpu: true,
+        ..Overrides::default()
+    }
+}
+
 /// The render of `given` on `device`.
 fn render_on(s: &Scene, given: &Overrides, device: Device) -> (Film, RenderStats) {
     render(s, &options(s, on(given, device)), Control::none()).unwrap()
@@ -111,16 +126,7 @@ fn gpu_agrees_with_the_cpu_for_every_estimator_and_filter() {
         let (s, planes) = (scene(file, w, h), 2048);
         for weighting in Weighting::all(&[4]) {
             for pixel_center in [false, true] {
-                let given = Overrides {
-                    planes: Some(planes),
-                    estimator: Some(weighting.estimator),
-                    orientations: Some(weighting.orientations),
-                    seed: Some(3),
-                    spp: Some(4),
-                    pixel_center,
-                    rays_on_cpu: true,
-                    ..Overrides::default()
-                };
+                let given = along_the_cpus_rays(planes, &weighting, pixel_center);
                 let (c, cs) = render_on(&s, &given, Device::Cpu);
                 let (g, gs) = render_on(&s, &given, Device::GPU);
                 let (fc, fg) = (fog(&s, &given, &c), fog(&s, &given, &g));
@@ -714,7 +720,8 @@ fn gpu_prepared_pieces_are_gathered_again_for_each_weighting() {
 /// or the segment's to rounding, which may be most of a pixel with few hits: docs/gpu.md,
 /// Precision), the pixels that moved beyond f32 rounding (1e-4 relative) at most two for each
 /// such hit and the others within 1e-8. A sweep of every hard scene, estimator and filter at
-/// 8,192 planes measured 1e-17 to 2e-11 with every hit alike (lavapipe, 2026-12).
+/// 8,192 planes measured 1e-15 to 3.3e-11 with every hit alike (lavapipe, 2026-12-03:
+/// docs/gpu_measurements.md, Precision on lavapipe).
 #[test]
 fn gpu_agrees_with_the_cpu_on_the_hard_scenes() {
     if !have_gpu("gpu_agrees_with_the_cpu_on_the_hard_scenes") {
@@ -738,16 +745,7 @@ fn gpu_agrees_with_the_cpu_on_the_hard_scenes() {
         for m in [2 * n, 2 * n + 1] {
             let weighting = &weightings[m % weightings.len()];
             let pixel_center = m % 3 == 1;
-            let given = Overrides {
-                planes: Some(1024),
-                estimator: Some(weighting.estimator),
-                orientations: Some(weighting.orientations),
-                seed: Some(3),
-                spp: Some(4),
-                pixel_center,
-                rays_on_cpu: true,
-                ..Overrides::default()
-            };
+            let given = along_the_cpus_rays(1024, weighting, pixel_center);
             let (c, cs) = render_on(&s, &given, Device::Cpu);
             let (g, gs) = render_on(&s, &given, Device::GPU);
             let (fc, fg) = (fog(&s, &given, &c), fog(&s, &given, &g));
