@@ -14,7 +14,9 @@
 # .gl (the Vulkan loader's packages, `scripts/gpu_check.sh --fetch`), 64 MiB in all (stripped,
 # each binary is about 12 MB). About 5 minutes on an H100 or H200: give it a timeout of 480 s.
 # Dry run on lavapipe (2026-11-28, cores_check left out): `OUT=/tmp/dc GPU_CHECK_RESOLUTION=64x36
-# GPU_CHECK_PLANES="2048 4096" scripts/device_check.sh`, every log whole, 81 s.
+# GPU_CHECK_PLANES="2048 4096" scripts/device_check.sh`, every log whole, 81 s; again on
+# 2026-12-03 (at 3c2c880, without .gl/: no base build, test binary or prepare_planes), gpu_check
+# whole (rc 0) and cores_check cut at its 240 s on 2 cores (rc 124), 284 s.
 # The base build's gpu_check leaves out the settings only this build knows (GPU_CHECK_TUNED=no);
 # the reply ends with this build's GPU time by setting (`gpu tuned`, gpu/mod.rs `Tuning`).
 # Its logs: gpu_check.log and gpu_timeline.log (this build), base/gpu_check.log and
