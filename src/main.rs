@@ -82,7 +82,7 @@ fn plainer(mut e: clap::Error, command: &mut clap::Command, args: &[std::ffi::Os
 }
 
 fn main() -> ExitCode {
-    system::keep_freed_memory();
+    fogplanes::limits::keep_freed_memory();
     // The zero of the timeline `FOGPLANES_TRACE=1` prints (fogplanes::trace).
     drop(fogplanes::trace::span("process started"));
     STARTED.get_or_init(std::time::Instant::now);

@@ -1,5 +1,5 @@
 //! What the operating system tells about this process: CPU time and peak memory, from
-//! `getrusage(RUSAGE_SELF)` (`None` where there is no such call); and how its memory is kept.
+//! `getrusage(RUSAGE_SELF)` (`None` where there is no such call).
 
 /// The process's resource usage so far.
 #[cfg(unix)]
@@ -23,24 +23,6 @@ pub fn cpu_seconds() -> Option<f64> {
 pub fn peak_memory_bytes() -> Option<u64> {
     let maxrss = u64::try_from(usage()?.ru_maxrss).ok()?;
     Some(if cfg!(target_os = "macos") { maxrss } else { maxrss * 1024 })
-}
-
-/// Keeps freed memory in the process (glibc's allocator): large blocks from the heap rather
-/// than each mapped afresh, and free heap kept rather than handed back
-/// ([`fogplanes::limits::MMAP_THRESHOLD`] and [`fogplanes::limits::TRIM_THRESHOLD`] say how
-/// much and why: page faults that otherwise depend on the order of allocations). The cost: the
-/// process keeps what it freed (the benchmark's peak about 63 MB instead of 51 on 2 threads;
-/// not measured on more, where each thread's arena keeps its own). A library leaves
-/// this to its program; the Python module does not set it for its host.
-pub fn keep_freed_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only sets the allocator's parameters (before any thread exists here). A
-    // value it refuses is ignored (it returns 0); either call alone still fixes thresholds that
-    // glibc would otherwise move, which is harmless.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, fogplanes::limits::MMAP_THRESHOLD as libc::c_int);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, fogplanes::limits::TRIM_THRESHOLD as libc::c_int);
-    }
 }
 
 #[cfg(not(unix))]

@@ -7,7 +7,10 @@
 //! Then the render's own preparation, whole (`accel::CpuSide::prepare`, its parallel loops on
 //! the threads of the pool: wall time a plane, and the process's CPU time a plane where the
 //! platform has a clock for it, idle workers' spinning included), for the GPU and for the
-//! raster, piece by piece.
+//! raster, piece by piece. The process keeps the memory it frees as the command line's does
+//! (`fogplanes::limits::keep_freed_memory`): without it each piece's preparation met fresh
+//! pages, and the whole took about 0.9 to 1.1 µs a plane on one thread where the command
+//! line's took about 0.55 (2026-12-03, docs/gpu_measurements.md).
 //!
 //! ```text
 //! RAYON_NUM_THREADS=1 cargo run --release -p fogplanes-bench --example prepare_planes -- SCENE [PLANES [PIECE]]
@@ -27,6 +30,7 @@ use std::path::Path;
 use std::time::Instant;
 
 fn main() -> Result<(), String> {
+    fogplanes::limits::keep_freed_memory();
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
         return Err("usage: prepare_planes SCENE [PLANES [PIECE]]".into());
@@ -117,7 +121,10 @@ fn main() -> Result<(), String> {
     // The render's own preparation, piece by piece as above, on the pool's threads.
     let set = PlaneSet::new(Sampler::default(), 1);
     let threads = rayon::current_num_threads();
-    println!("the render's own preparation (accel::CpuSide::prepare) on {threads} threads, ns a plane:");
+    println!(
+        "the render's own preparation (accel::CpuSide::prepare) on {threads} threads, the command line's \
+         allocator settings, ns a plane:"
+    );
     for (name, accelerator) in [("for the GPU", Accelerator::Gpu(0)), ("for the raster", Accelerator::Raster)] {
         let tiling = Tiling::new(cam.width, cam.height, threads);
         let (wall, cpu) = (Instant::now(), process_cpu_seconds());

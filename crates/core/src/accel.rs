@@ -166,7 +166,7 @@ impl CpuSide {
         // grown piece by piece cost 1.4 times the CPU of its preparation:
         // benches/examples/prepare_planes.rs). Not for the raster: with glibc's own allocator
         // settings (the Python module's; the command line sets its own,
-        // `system::keep_freed_memory`) its reserved views were fresh pages at every piece (a
+        // `limits::keep_freed_memory`) its reserved views were fresh pages at every piece (a
         // render of 655,360 planes at 32x18: 71,700 page faults against 10,400, 0.25 s of
         // system time), where grown ones reuse the heap's; the BVH and the brute force are
         // left as they were.

@@ -47,10 +47,10 @@ pub const PLANE_UNIT: usize = 256;
 /// thresholds, which move with the last block freed, make the reuse of that memory a matter of
 /// the order of allocations (a change that only moved one vector's allocation made a render of
 /// 655,360 planes at 32x18 take 82,550 page faults instead of 10,380; with these settings both
-/// took 6,470). The command line sets both thresholds for itself (`mallopt`); the Python
-/// module leaves its host's allocator alone, and gives them to the workers of the Dask cluster
-/// it starts ([`ALLOCATOR_ENVIRONMENT`]), where Dask's own setting (a trim threshold of 64 KiB)
-/// cost a render of the benchmark about a tenth more CPU time.
+/// took 6,470). The command line sets both thresholds for itself ([`keep_freed_memory`]); the
+/// Python module leaves its host's allocator alone, and gives them to the workers of the Dask
+/// cluster it starts ([`ALLOCATOR_ENVIRONMENT`]), where Dask's own setting (a trim threshold of
+/// 64 KiB) cost a render of the benchmark about a tenth more CPU time.
 pub const MMAP_THRESHOLD: usize = 32 << 20;
 /// Free heap kept rather than handed back, in bytes: twice [`MMAP_THRESHOLD`], as glibc's
 /// moving thresholds keep them (256 MiB gave the same page faults).
@@ -59,6 +59,24 @@ pub const TRIM_THRESHOLD: usize = 64 << 20;
 /// process starts (its tunables' older names, which Dask's nanny also sets).
 pub const ALLOCATOR_ENVIRONMENT: [(&str, usize); 2] =
     [("MALLOC_MMAP_THRESHOLD_", MMAP_THRESHOLD), ("MALLOC_TRIM_THRESHOLD_", TRIM_THRESHOLD)];
+
+/// Sets [`MMAP_THRESHOLD`] and [`TRIM_THRESHOLD`] for this process (glibc's `mallopt`; nothing
+/// elsewhere): large blocks from the heap rather than each mapped afresh, and free heap kept
+/// rather than handed back. The cost: the process keeps what it freed (the benchmark's peak
+/// about 63 MB instead of 51 on 2 threads; not measured on more, where each thread's arena
+/// keeps its own). The library never calls it: a program does, first thing (the command line,
+/// `benches/examples/prepare_planes.rs`, which times the preparation as the command line
+/// runs it); the Python module leaves its host's allocator alone.
+pub fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only sets the allocator's parameters (called before the program starts a
+    // thread). A value it refuses is ignored (it returns 0); either call alone still fixes
+    // thresholds that glibc would otherwise move, which is harmless.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD as libc::c_int);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, TRIM_THRESHOLD as libc::c_int);
+    }
+}
 
 // ---------------------------------------------------------------------------------------------
 // Ranges
