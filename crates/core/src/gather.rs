@@ -724,6 +724,41 @@ mod tests {
     use crate::photon_plane::sample_planes;
     use crate::sampling::Sampler;
 
+    /// The benchmark scene, from the repository's file.
+    fn six_lights() -> Scene {
+        Scene::parse(include_str!("../../../media_scenes/six_lights.toml"), "six_lights.toml", "s").unwrap()
+    }
+
+    /// A camera ray of the tests' grid: its pixel, its direction and entry into the fog box in
+    /// f64, and the ray the gather takes (clipped to the box).
+    struct GridRay {
+        pixel: (f64, f64),
+        we: DVec3,
+        t0: f64,
+        ray: CameraRay,
+    }
+
+    /// The rays through the centres of an n x n grid of cells over the image, row by row, those
+    /// that cross the fog box.
+    fn grid_rays(scene: &Scene, n: usize) -> Vec<GridRay> {
+        let o = scene.camera.position;
+        let cell = |i: usize, size: u32| size as f64 * (i as f64 + 0.5) / n as f64;
+        let pixels = (0..n).flat_map(|j| (0..n).map(move |i| (i, j)));
+        let pixels = pixels.map(|(i, j)| (cell(i, scene.camera.width), cell(j, scene.camera.height)));
+        pixels
+            .filter_map(|(x, y)| {
+                let we = scene.camera.direction(x, y).normalize();
+                let (t0, t1) = scene.camera_segment(o, we).0?;
+                Some(GridRay {
+                    pixel: (x, y),
+                    we,
+                    t0,
+                    ray: CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 },
+                })
+            })
+            .collect()
+    }
+
     /// Culling occluders per plane never drops one that blocks: the same images as testing
     /// every other light at every hit.
     #[test]
@@ -743,21 +778,12 @@ mod tests {
                 assert!(shadowed < planes.len() / 4, "{file}: culling should drop most planes");
             }
             let w = crate::weights::Unweighted;
-            for j in 0..40 {
-                for i in 0..40 {
-                    let (x, y) = (
-                        scene.camera.width as f64 * (i as f64 + 0.5) / 40.0,
-                        scene.camera.height as f64 * (j as f64 + 0.5) / 40.0,
-                    );
-                    let we = scene.camera.direction(x, y).normalize();
-                    let Some((t0, t1)) = scene.camera_segment(o, we).0 else { continue };
-                    let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
-                    assert_eq!(
-                        culled.gather_brute_force(&w, &ray),
-                        all.gather_brute_force(&w, &ray),
-                        "{file} pixel ({x}, {y})"
-                    );
-                }
+            for GridRay { pixel, ray, .. } in grid_rays(&scene, 40) {
+                assert_eq!(
+                    culled.gather_brute_force(&w, &ray),
+                    all.gather_brute_force(&w, &ray),
+                    "{file} pixel {pixel:?}"
+                );
             }
         }
     }
@@ -835,8 +861,7 @@ mod tests {
     fn a_plane_record_carries_the_view_and_no_infinity() {
         assert_eq!(std::mem::size_of::<PlaneRecord>(), 144);
         assert_eq!(std::mem::size_of::<Occluder>(), 32);
-        let text = include_str!("../../../media_scenes/six_lights.toml");
-        let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let scene = six_lights();
         let planes = sample_planes(&scene, Sampler::default(), 200, 2);
         let ctx = GatherContext::new(&scene, &planes, scene.camera.position);
         for v in &ctx.views {
@@ -895,8 +920,7 @@ mod tests {
     /// 1.1 and 2.5), to f32 rounding. Taking g as f32, 0, for isotropic dropped m.
     #[test]
     fn a_phase_function_too_faint_for_f32_keeps_the_direction_weights() {
-        let text = include_str!("../../../media_scenes/six_lights.toml");
-        let isotropic = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let isotropic = six_lights();
         for g in [1e-300, -1e-300] {
             let mut faint = isotropic.clone();
             faint.medium.g = g;
@@ -905,11 +929,7 @@ mod tests {
             let (ctx, iso) = (GatherContext::new(&faint, &planes, o), GatherContext::new(&isotropic, &planes, o));
             let w = crate::weights::SmisExactPair;
             let mut weighted = 0;
-            for k in 0..400 {
-                let (x, y) = ((k % 20) as f64 * 32.0 + 16.0, (k / 20) as f64 * 18.0 + 9.0);
-                let we = faint.camera.direction(x, y).normalize();
-                let Some((t0, t1)) = faint.camera_segment(o, we).0 else { continue };
-                let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
+            for GridRay { ray, .. } in grid_rays(&faint, 20) {
                 for ((p, v), v0) in planes.iter().zip(&ctx.views).zip(&iso.views) {
                     let (Some(c), Some(c0)) = (ctx.gather_one(&w, v, &ray), iso.gather_one(&w, v0, &ray)) else {
                         continue;
@@ -933,8 +953,7 @@ mod tests {
     /// here. Only a medium whose three channels are equal may take the grey path's one value.
     #[test]
     fn each_channel_keeps_its_extinction_when_two_are_equal() {
-        let text = include_str!("../../../media_scenes/six_lights.toml");
-        let base = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let base = six_lights();
         let planes = sample_planes(&base, Sampler::default(), 500, 6);
         let o = base.camera.position;
         for sigma_t in [[0.4, 0.4, 0.9], [0.4, 0.9, 0.4], [0.9, 0.4, 0.4], [0.4, 0.4, 0.4]] {
@@ -945,11 +964,7 @@ mod tests {
             let ctx = GatherContext::new(&scene, &planes, o);
             let w = crate::weights::Unweighted;
             let mut checked = 0;
-            for k in 0..400 {
-                let (x, y) = ((k % 20) as f64 * 32.0 + 16.0, (k / 20) as f64 * 18.0 + 9.0);
-                let we = scene.camera.direction(x, y).normalize();
-                let Some((t0, t1)) = scene.camera_segment(o, we).0 else { continue };
-                let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
+            for GridRay { we, t0, ray, .. } in grid_rays(&scene, 20) {
                 for (p, v) in planes.iter().zip(&ctx.views) {
                     let Some(c) = ctx.gather_one(&w, v, &ray) else { continue };
                     // o + t we = y0 + a d + r wl: t from the plane's normal, then r from the
@@ -981,8 +996,7 @@ mod tests {
 
     #[test]
     fn hit_solves_the_plane_equation() {
-        let text = include_str!("../../../media_scenes/six_lights.toml");
-        let scene = Scene::parse(text, "six_lights.toml", "s").unwrap();
+        let scene = six_lights();
         let planes = sample_planes(&scene, Sampler::default(), 300, 2);
         let o = scene.camera.position;
         let ctx = GatherContext::new(&scene, &planes, o);
