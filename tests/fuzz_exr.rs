@@ -104,6 +104,38 @@ fn the_counter_sees_the_pixel_buffer() {
     assert!(largest >= 256 * 256 * 12, "{largest}");
 }
 
+/// A layer that is not RGB at full resolution is refused before its pixels are reserved: an
+/// 8192 x 8192 header of one channel, or of RGB with R subsampled, in a 266,542-byte PXR24 file
+/// claims few enough samples to pass the check of sizes. The fuzzing found the first: its
+/// image's 12 bytes a pixel, probed before decoding (805 MB), exceeded the module's bound for
+/// the file's size, and the reader then refused the layer for its missing channels.
+#[test]
+fn a_layer_without_full_rgb_is_refused_before_its_pixels_are_reserved() {
+    let window = [0, 0, 8191, 8191];
+    let mut subsampled: Vec<Channel> = ["B", "G", "R"].iter().map(|n| Channel::new(n, craft::HALF)).collect();
+    subsampled[2].sampling = (2, 2);
+    for (channels, says) in [
+        (vec![Channel::new("R", craft::UINT)], "no layer has channels named R, G and B"),
+        (subsampled, "subsampling not supported"),
+    ] {
+        let header = Header {
+            channels,
+            compression: craft::PXR24,
+            data_window: window,
+            display_window: window,
+            line_order: 0,
+            tiles: None,
+        };
+        let mut bytes = craft::header_only(&header, 512);
+        bytes.resize(266_542, 0);
+        check(&bytes).unwrap();
+        let (film, largest) = load(&bytes);
+        let e = film.map(|f| f.width).expect_err("refused");
+        assert!(e.to_string().contains(says), "{e}");
+        assert!(largest < 1 << 20, "{largest} bytes allocated at once");
+    }
+}
+
 /// The promises of the module doc on one file.
 fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
     let (film, largest) = load(bytes);

@@ -655,11 +655,11 @@ impl Film {
             bad(&format!("{}x{} pixels need {gib:.1} GiB, which this machine cannot allocate now", size.0, size.1))
         };
         // Probed (and given back) before decoding, which would otherwise run to the file's end
-        // before the failure could be told.
-        if let Some(h) = meta.headers.iter().max_by_key(|h| h.layer_size.area()) {
-            let size = (h.layer_size.width(), h.layer_size.height());
-            Vec::<Vec3>::new().try_reserve_exact(size.0 * size.1).map_err(|_| unavailable(size))?;
-        }
+        // before the failure could be told; for the layer the reader takes, so that a file
+        // without one is refused before anything is reserved for its pixels.
+        let h = rgb_layer(&meta.headers).map_err(|m| bad(&m))?;
+        let size = (h.layer_size.width(), h.layer_size.height());
+        Vec::<Vec3>::new().try_reserve_exact(size.0 * size.1).map_err(|_| unavailable(size))?;
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |resolution, _| {
@@ -686,6 +686,19 @@ impl Film {
         }
         Ok((film, info))
     }
+}
+
+/// The layer [`Film::load_exr`] reads: the first with channels named R, G and B, as the exr
+/// crate's reader of the first RGBA layer takes it. Its pixel buffer is then bounded by the
+/// file's size: each of its pixels takes the file at least three half samples over the codec's
+/// expansion ([`check_exr_headers`]; subsampled channels are refused with the headers), where a
+/// layer of one channel would claim an image of 12 bytes a pixel for a third of that.
+fn rgb_layer(headers: &[exr::meta::header::Header]) -> std::result::Result<&exr::meta::header::Header, &'static str> {
+    let has = |h: &exr::meta::header::Header, name: &str| h.channels.list.iter().any(|c| c.name == *name);
+    headers
+        .iter()
+        .find(|h| ["R", "G", "B"].iter().all(|n| has(h, n)))
+        .ok_or("no layer has channels named R, G and B (fogplanes reads a linear RGB image)")
 }
 
 /// The headers of an EXR file, read and checked ([`check_exr_headers`]) before any pixel.
