@@ -55,13 +55,15 @@ pub fn direct_emission_with(scene: &Scene, seed: u64, ray_sets: u32, pixel_cente
 /// [`direct_emission`] and, per pixel, an estimate of its variance (docs/mathematics.md section
 /// 10.3), from the differences of neighbouring strata: second differences along the lines of
 /// each jittered grid, differences of consecutive pairs of the ray-set positions. 0 where the
-/// value is exact (no panel, pixel centres).
+/// value is exact (no panel, pixel centres). The variance in f64: a bright panel's square is
+/// beyond f32's range where its value is not (radiance 1e22: 1e44), and it is added to the
+/// spread's f64 variance before the square root of the error image.
 pub fn direct_emission_and_variance(
     scene: &Scene,
     seed: u64,
     ray_sets: u32,
     pixel_center: bool,
-) -> (Vec<Vec3>, Vec<Vec3>) {
+) -> (Vec<Vec3>, Vec<DVec3>) {
     direct_emission_and_variance_in(scene, seed, ray_sets, pixel_center, Control::none())
 }
 
@@ -73,7 +75,7 @@ pub fn direct_emission_and_variance_in(
     ray_sets: u32,
     pixel_center: bool,
     control: Control,
-) -> (Vec<Vec3>, Vec<Vec3>) {
+) -> (Vec<Vec3>, Vec<DVec3>) {
     emission_with_variance(scene, seed, ray_sets, pixel_center, OUTLINE_GRID, control)
 }
 
@@ -84,7 +86,7 @@ fn emission_with_variance(
     pixel_center: bool,
     grid: u32,
     control: Control,
-) -> (Vec<Vec3>, Vec<Vec3>) {
+) -> (Vec<Vec3>, Vec<DVec3>) {
     let cam = &scene.camera;
     let (w, h) = (cam.width, cam.height);
     let footprints = PanelFootprints::new(scene);
@@ -96,13 +98,13 @@ fn emission_with_variance(
             let p = p as u32;
             let (i, j) = (p % w, p / w);
             if !footprints.any_over(i, j) {
-                return (Vec3::ZERO, Vec3::ZERO);
+                return (Vec3::ZERO, DVec3::ZERO);
             }
             let lights = footprints.over(i, j);
             let at = |x: f64, y: f64| emission_at(scene, cam, x, y, lights.clone());
             let (x, y) = (i as f64, j as f64);
             if pixel_center {
-                return (at(x + 0.5, y + 0.5).as_vec3(), Vec3::ZERO);
+                return (at(x + 0.5, y + 0.5).as_vec3(), DVec3::ZERO);
             }
             let mut jitter = Jitter { x, y, rng: rng_for(seed, OUTLINE_STREAM, p as u64) };
             let mean = match meeting(&projected, lights.clone(), i, j) {
@@ -123,7 +125,7 @@ fn emission_with_variance(
                     m
                 }
             };
-            (mean.value().as_vec3(), mean.variance().as_vec3())
+            (mean.value().as_vec3(), mean.variance())
         })
         .into_iter()
         .unzip()

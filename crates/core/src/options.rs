@@ -16,7 +16,7 @@ use crate::sampling::Sampler;
 use crate::scene::Scene;
 use crate::spread::{relative_rms_error, stderr_film};
 use crate::weights::Weighting;
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 
 /// Settings of one render, resolved ([`crate::settings::resolve_render`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -329,7 +329,7 @@ impl RenderStats {
         &mut self,
         image: &Film,
         variance: Option<Vec<DVec3>>,
-        emission_variance: &[Vec3],
+        emission_variance: &[DVec3],
     ) -> Result<()> {
         let variance = variance.ok_or_else(|| {
             Error::option(Setting::Planes, "an error image needs planes in at least two groups: give more planes")

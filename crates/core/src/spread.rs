@@ -203,7 +203,7 @@ impl GroupSpread {
     /// of each pixel (section 10). `None` with fewer than two groups. While one half of the
     /// render has no closed group (the first half of a render's chunks), the groups are taken
     /// as independent (scale 1, which errs high).
-    pub fn variance(&self, emission_variance: &[Vec3]) -> Option<Vec<DVec3>> {
+    pub fn variance(&self, emission_variance: &[DVec3]) -> Option<Vec<DVec3>> {
         let n = self.planes.map(|p| p as f64);
         let total: f64 = n.iter().sum();
         let (h1, h2) = (n[0] + n[1], n[2] + n[3]);
@@ -230,7 +230,7 @@ impl GroupSpread {
         // the groups predict for them if they were independent (eqs. 10.2, 10.3).
         let quartered = n.iter().all(|&q| q > 0.0);
         if !both_halves {
-            return Some((0..sums.len()).map(|p| sigma2(p) / total + emission_variance[p].as_dvec3()).collect());
+            return Some((0..sums.len()).map(|p| sigma2(p) / total + emission_variance[p]).collect());
         }
         let (mut halves, mut halves_iid, mut quarters, mut quarters_iid) = [DVec3::ZERO; 4].into();
         for (p, sum) in sums.iter().enumerate() {
@@ -258,7 +258,7 @@ impl GroupSpread {
         } else {
             f_halves
         };
-        Some((0..sums.len()).map(|p| scale * sigma2(p) / total + emission_variance[p].as_dvec3()).collect())
+        Some((0..sums.len()).map(|p| scale * sigma2(p) / total + emission_variance[p]).collect())
     }
 }
 
@@ -285,10 +285,10 @@ pub struct RelativeError {
 
 /// The relative RMS error of `image` whose pixels have `variance`, of which `emission_variance`
 /// is the direct emission's; `None` for a black image (mean 0), whose relative error is 0/0.
-pub fn relative_rms_error(image: &Film, variance: &[DVec3], emission_variance: &[Vec3]) -> Option<RelativeError> {
+pub fn relative_rms_error(image: &Film, variance: &[DVec3], emission_variance: &[DVec3]) -> Option<RelativeError> {
     let count = 3.0 * variance.len().max(1) as f64;
     let mean_variance = variance.iter().map(|v| v.x + v.y + v.z).sum::<f64>() / count;
-    let mean_emission = emission_variance.iter().map(|v| v.as_dvec3().element_sum()).sum::<f64>() / count;
+    let mean_emission = emission_variance.iter().map(|v| v.element_sum()).sum::<f64>() / count;
     let mean = image.mean();
     // `!(mean > 0)` also takes a NaN mean (a film is checked finite, but say so here too).
     if !(mean > 0.0) {

@@ -469,7 +469,7 @@ pub struct RunningImage {
     width: u32,
     height: u32,
     emission: Vec<Vec3>,
-    emission_variance: Vec<Vec3>,
+    emission_variance: Vec<DVec3>,
 }
 
 impl RunningImage {
@@ -486,11 +486,8 @@ impl RunningImage {
         let closed = spread.planes() as f64;
         let variance = spread.variance(&self.emission_variance)?;
         let scale = closed / planes.max(1) as f64;
-        let scattering: Vec<DVec3> = variance
-            .iter()
-            .zip(&self.emission_variance)
-            .map(|(v, e)| (*v - e.as_dvec3()) * scale + e.as_dvec3())
-            .collect();
+        let scattering: Vec<DVec3> =
+            variance.iter().zip(&self.emission_variance).map(|(v, e)| (*v - *e) * scale + *e).collect();
         stderr_film(self.width, self.height, &scattering).ok()
     }
 
