@@ -404,6 +404,7 @@ fn the_doc_states_the_codes_limits() {
             "MAX_ORIENTATIONS" => MAX_ORIENTATIONS as f64,
             "MAX_TOTAL_POWER" => MAX_TOTAL_POWER,
             "MAX_VFOV_DEG" => MAX_VFOV_DEG,
+            "MIN_VFOV_DEG" => MIN_VFOV_DEG,
             "MAX_BOX_DIAGONAL" => MAX_BOX_DIAGONAL,
             "MIN_BOX_DIAGONAL" => MIN_BOX_DIAGONAL,
             "MAX_CAMERA_DISTANCE_DIAGONALS" => MAX_CAMERA_DISTANCE_DIAGONALS,

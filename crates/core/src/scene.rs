@@ -358,10 +358,15 @@ impl Scene {
                 format!("must not be zero or parallel to the view direction, got {:?}", c.up),
             ));
         }
-        if !(c.vfov_deg > 0.0 && c.vfov_deg <= crate::limits::MAX_VFOV_DEG) {
+        if !(c.vfov_deg >= crate::limits::MIN_VFOV_DEG && c.vfov_deg <= crate::limits::MAX_VFOV_DEG) {
             return Err(err(
                 "camera.vfov_deg".into(),
-                format!("must lie above 0 and at most {} degrees, got {}", crate::limits::MAX_VFOV_DEG, c.vfov_deg),
+                format!(
+                    "must lie between {} and {} degrees, got {}",
+                    crate::limits::MIN_VFOV_DEG,
+                    crate::limits::MAX_VFOV_DEG,
+                    c.vfov_deg
+                ),
             ));
         }
         check_resolution(c.resolution[0], c.resolution[1]).map_err(|m| err("camera.resolution".into(), m))?;
@@ -705,12 +710,16 @@ radiance = 4
         expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 40.0\nzoom = 2"), "camera", "unknown field");
         expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = \"wide\""), "camera.vfov_deg", "invalid type");
         expect_error(&MINIMAL.replace("vfov_deg = 40.0\n", ""), "camera", "missing field");
-        expect_error(
-            &MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"),
-            "camera.vfov_deg",
-            "above 0 and at most 179",
-        );
-        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 179.5"), "camera.vfov_deg", "at most 179");
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = nan"), "camera.vfov_deg", "between 0.001 and 179");
+        for narrow in ["1e-4", "5e-324", "0.0", "-0.0"] {
+            expect_error(
+                &MINIMAL.replace("vfov_deg = 40.0", &format!("vfov_deg = {narrow}")),
+                "camera.vfov_deg",
+                "between 0.001 and 179",
+            );
+        }
+        assert!(parse(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 0.001")).is_ok());
+        expect_error(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 179.5"), "camera.vfov_deg", "and 179 degrees");
         assert!(parse(&MINIMAL.replace("vfov_deg = 40.0", "vfov_deg = 179.0")).is_ok());
         // The camera at most 1000 box diagonals (6,000 units here) from the box, a box at most 1e30 across.
         expect_error(&MINIMAL.replace("[0.0, 1.0, 5.0]", "[0.0, 1.0, 6003.0]"), "camera.position", "box diagonals");

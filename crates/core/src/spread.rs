@@ -337,7 +337,7 @@ mod tests {
                 }
             }
             spread.close(Control::none());
-            let v = spread.variance(&vec![Vec3::ZERO; pixels]).unwrap();
+            let v = spread.variance(&vec![DVec3::ZERO; pixels]).unwrap();
             estimates.extend(v.iter().map(|v| v.x));
             assert_eq!(spread.groups(), 8);
         }
@@ -354,14 +354,14 @@ mod tests {
         let mut spread = GroupSpread::new(1);
         spread.add((0, 0, 0, 10), &[Vec3::ZERO], &[Vec3::ONE], Control::none());
         spread.close(Control::none());
-        assert!(spread.variance(&[Vec3::ZERO]).is_none());
+        assert!(spread.variance(&[DVec3::ZERO]).is_none());
         let mut spread = GroupSpread::new(1);
         spread.add((0, 0, 0, 10), &[Vec3::ZERO], &[Vec3::ONE], Control::none());
         spread.add((1, 1, 0, 10), &[Vec3::ZERO], &[Vec3::splat(3.0)], Control::none());
         spread.close(Control::none());
         // Two groups of the first half: taken as independent. Means 0.1 and 0.3 of 20 planes:
         // sigma^2 = (10 0.01 + 10 0.01) / 1 = 0.2, over 20 planes.
-        let v = spread.variance(&[Vec3::ZERO]).unwrap()[0];
+        let v = spread.variance(&[DVec3::ZERO]).unwrap()[0];
         assert!((v - DVec3::splat(0.01)).abs().max_element() < 1e-12, "{v}");
     }
 
