@@ -23,10 +23,21 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Prints a line to standard output; a closed pipe (`fogplanes ... | head`) is not an error.
+/// Each line as [`fogplanes::error::one_line`] writes it: what it quotes of a name or a file
+/// (an escape sequence, a text-direction override) acts on no terminal.
 macro_rules! say {
     ($($arg:tt)*) => {{
-        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+        let text = format!($($arg)*);
+        let lines: Vec<String> = text.split('\n').map(fogplanes::error::one_line).collect();
+        let _ = writeln!(std::io::stdout().lock(), "{}", lines.join("\n"));
     }};
+}
+
+/// A path as the lines of [`say!`] quote it, a newline in it too written as an escape
+/// ([`fogplanes::error::one_line`]): an output is named after its scene's file by default,
+/// whose name may hold anything.
+fn shown(path: &Path) -> String {
+    fogplanes::error::one_line(&path.display().to_string())
 }
 
 /// An error with the exit code it deserves: 2 for bad input, 1 for everything else.
@@ -177,7 +188,7 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
         let devices = watch.resumed_devices();
         let on =
             if devices.names() == [opts.device_label()] { String::new() } else { format!(" (gathered on {devices})") };
-        say!("resuming from {}: {resumed} of {} planes are done{on}", ck.display(), opts.planes());
+        say!("resuming from {}: {resumed} of {} planes are done{on}", shown(ck), opts.planes());
     }
     let cpu = system::cpu_seconds();
     let (film, stats) = if !r.in_passes() {
@@ -252,9 +263,9 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     if let Some(why) = out_of_reach(&stats, r.target_error) {
         let _ = writeln!(std::io::stderr(), "warning: {why}");
     }
-    say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", output.display(), film.width, film.height, film.mean(), film.max());
+    say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", shown(&output), film.width, film.height, film.mean(), film.max());
     if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
-        say!("wrote {} (standard error: mean {:.3e}, max {:.3e})", path.display(), se.mean(), se.max());
+        say!("wrote {} (standard error: mean {:.3e}, max {:.3e})", shown(path), se.mean(), se.max());
     }
     Ok(())
 }
@@ -299,7 +310,7 @@ fn render_part(
     bar.finish_and_clear();
     save_render_part(part, scene, opts, &partial)?;
     say!("{}", stats.summary());
-    say!("wrote {} (planes {}:{} of {})", part.display(), partial.start, partial.end, partial.planes_total);
+    say!("wrote {} (planes {}:{} of {})", shown(part), partial.start, partial.end, partial.planes_total);
     Ok(())
 }
 
@@ -338,7 +349,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                 }
                 say!(
                     "wrote {} ({}x{}, mean {:.6}, max {:.4})",
-                    a.output.display(),
+                    shown(&a.output),
                     image.width,
                     image.height,
                     image.mean(),
@@ -361,7 +372,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             })?;
             if !a.quiet {
                 say!("merged {} reference bands ({:.3} s of rendering)", a.parts.len(), seconds);
-                say!("wrote {}", a.output.display());
+                say!("wrote {}", shown(&a.output));
             }
         }
         Merged::Pilot { scene, options, pilot, seconds } => {
@@ -373,7 +384,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
             let rows = 0..scene.camera.height;
             save_pilot_part(&a.output, &scene, &options, rows, &pilot, seconds)?;
             if !a.quiet {
-                say!("merged {} pilot bands; wrote {} (for reference --pilot)", a.parts.len(), a.output.display());
+                say!("merged {} pilot bands; wrote {} (for reference --pilot)", a.parts.len(), shown(&a.output));
             }
         }
     }
@@ -396,7 +407,7 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
         let pilot = reference_pilot_rows(scene, opts, rows.clone(), control)?;
         bar.finish_and_clear();
         save_pilot_part(part, scene, opts, rows.clone(), &pilot, start.elapsed().as_secs_f64())?;
-        say!("wrote {} (pilot rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+        say!("wrote {} (pilot rows {}:{} of {})", shown(part), rows.start, rows.end, scene.camera.height);
         return Ok(());
     }
     let counts = match (&a.pilot, opts.uniform) {
@@ -416,7 +427,7 @@ fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std
     let (mean, stderr) = reference_rows(scene, opts, rows.clone(), counts.as_deref(), control)?;
     bar.finish_and_clear();
     save_reference_part(part, scene, opts, rows.clone(), (&mean, &stderr), start.elapsed().as_secs_f64())?;
-    say!("wrote {} (rows {}:{} of {})", part.display(), rows.start, rows.end, scene.camera.height);
+    say!("wrote {} (rows {}:{} of {})", shown(part), rows.start, rows.end, scene.camera.height);
     Ok(())
 }
 
@@ -449,7 +460,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
     let mut watch = ReferenceWatch::start(&a.watch, scene, &r.options, &bar)?;
     if let (Some(ck), 1..) = (&a.watch.checkpoint, watch.units_done()) {
         bar.set_position(watch.units_done());
-        say!("resuming from {}: {} are done", ck.display(), watch.done());
+        say!("resuming from {}: {} are done", shown(ck), watch.done());
     }
     let done = watch.take_done();
     let tick = || bar.inc(1);
@@ -490,7 +501,7 @@ pub(crate) fn cmd_reference(a: ReferenceArgs) -> Result<(), Failure> {
         reference.noise_mse(),
         reference.noise_mse() * 1e4
     );
-    say!("wrote {}", output.display());
+    say!("wrote {}", shown(&output));
     Ok(())
 }
 
@@ -582,7 +593,7 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
         }
     }
     if let Some(path) = &a.z_image {
-        say!("wrote {} (z per pixel and channel)", path.display());
+        say!("wrote {} (z per pixel and channel)", shown(path));
     }
     Ok(())
 }
@@ -674,7 +685,7 @@ pub(crate) fn cmd_info(a: InfoArgs) -> Result<(), Failure> {
     let (info, (w, h)) = read_image_info(&a.image).map_err(input)?;
     match info {
         Some(info) => say!("{}", info.to_string().trim_end()),
-        None => say!("{}: {w}x{h}, no record of how it was made (not written by fogplanes)", a.image.display()),
+        None => say!("{}: {w}x{h}, no record of how it was made (not written by fogplanes)", shown(&a.image)),
     }
     Ok(())
 }
@@ -710,6 +721,6 @@ pub(crate) fn cmd_export(a: ExportArgs) -> Result<(), Failure> {
         ExportFormat::Mitsuba => fogplanes::export::mitsuba_xml(&scene),
     };
     write_file_atomically(&output, text.as_bytes())?;
-    say!("wrote {} ({} lights, {}x{})", output.display(), scene.lights.len(), scene.camera.width, scene.camera.height);
+    say!("wrote {} ({} lights, {}x{})", shown(&output), scene.lights.len(), scene.camera.width, scene.camera.height);
     Ok(())
 }

@@ -111,7 +111,8 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {
-            let _ = writeln!(std::io::stderr(), "error: {:#}", f.error);
+            // One line, whatever it quotes (a path's or a name's escape sequence or newline).
+            let _ = writeln!(std::io::stderr(), "error: {}", fogplanes::error::one_line(&format!("{:#}", f.error)));
             ExitCode::from(f.code)
         }
     }

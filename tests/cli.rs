@@ -665,3 +665,35 @@ fn sigterm_during_a_write_leaves_no_temporary_file() {
     assert!(caught >= 1, "never caught a write under way");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// What a line quotes of a name acts on no terminal: a scene file named with an escape
+/// sequence, a newline and a text-direction override gives its name to the image's record, and
+/// an output path holds the same. `render`'s `wrote` line, `info`'s record and `compare`'s
+/// warning of different scenes write them as escapes, each line whole (they reached the
+/// terminal raw; the error lines already wrote them so).
+#[test]
+fn names_that_act_on_a_terminal_are_written_as_escapes() {
+    use fogplanes::error::acts_on_terminal;
+    let dir = scratch("names");
+    let scene = dir.join("e\u{1b}[31mv\nil\u{202e}.toml");
+    std::fs::copy("media_scenes/six_lights.toml", &scene).unwrap();
+    let out = dir.join("o\u{1b}[2Jx\u{2028}.exr");
+    let small = ["--resolution", "32x18", "--planes", "256"];
+    let o = fogplanes(&[&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap()][..], &small].concat());
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let clean = |text: &str| text.lines().all(|l| !l.chars().any(acts_on_terminal));
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(clean(&stdout) && stdout.lines().count() == 2, "{stdout:?}");
+    assert!(stdout.contains("o\\u{1b}[2Jx\\u{2028}.exr ("), "{stdout}");
+    let info = fogplanes(&["info", out.to_str().unwrap()]);
+    let record = String::from_utf8_lossy(&info.stdout).into_owned();
+    assert!(clean(&record) && record.contains("scene_name: e\\u{1b}[31mv\\nil\\u{202e}\n"), "{record:?}");
+    let other = dir.join("other.exr");
+    let o =
+        fogplanes(&[&["render", "media_scenes/forward_fog.toml", "-o", other.to_str().unwrap()][..], &small].concat());
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = fogplanes(&["compare", out.to_str().unwrap(), other.to_str().unwrap()]);
+    let warned = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(clean(&warned) && warned.contains("different scenes (e\\u{1b}[31mv\\nil\\u{202e} and"), "{warned:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -97,12 +97,16 @@ pub fn one_line(text: &str) -> String {
 }
 
 /// A character that acts on a terminal rather than showing: a control character (an escape
-/// sequence's start, a newline), or one of Unicode's bidirectional formatting characters
+/// sequence's start, a newline), Unicode's line and paragraph separators (which a terminal or
+/// an editor may break the line at), or one of its bidirectional formatting characters
 /// (embeddings, overrides, isolates, marks), which `char::is_control` does not count and which
 /// reorder the text after them.
 pub fn acts_on_terminal(c: char) -> bool {
     c.is_control()
-        || matches!(c, '\u{200E}' | '\u{200F}' | '\u{061C}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
+        || matches!(
+            c,
+            '\u{2028}' | '\u{2029}' | '\u{200E}' | '\u{200F}' | '\u{061C}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}'
+        )
 }
 
 /// A problem with a scene file or with the render settings derived from it.

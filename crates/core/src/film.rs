@@ -249,7 +249,8 @@ impl ImageInfo {
                 // medium's g (recorded where it is not 0).
                 let (g_a, g_b) = (image.get("medium_g").unwrap_or("0"), reference.get("medium_g").unwrap_or("0"));
                 let g = if g_a != g_b { format!(", of medium g {g_a} and {g_b}") } else { String::new() };
-                Some(format!("the image and the reference record different scenes ({name_a} and {name_b}{g})"))
+                let warning = format!("the image and the reference record different scenes ({name_a} and {name_b}{g})");
+                Some(crate::error::one_line(&warning))
             }
             _ => None,
         })
@@ -293,10 +294,13 @@ impl ImageInfo {
 }
 
 impl std::fmt::Display for ImageInfo {
-    /// One `key: value` line per field.
+    /// One `key: value` line per field, each on its line whatever it holds
+    /// ([`crate::error::one_line`]: a scene named after a file whose name holds an escape
+    /// sequence or a newline, or a record forged in a part file, reached the terminal raw).
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use crate::error::one_line;
         for (k, v) in &self.fields {
-            writeln!(f, "{k}: {v}")?;
+            writeln!(f, "{}: {}", one_line(k), one_line(v))?;
         }
         Ok(())
     }
