@@ -142,8 +142,9 @@ pub fn run_table(reference: &Film, opts: &TableOptions) -> Result<String> {
             sampler: r.entry.sampler.to_string(),
             planes: opts.settings.planes,
             hits: stats.hits,
-            tests_per_hit: stats.tests as f64 / stats.hits.max(1) as f64,
-            gather_ns_per_hit: 1e9 * gather / stats.hits.max(1) as f64,
+            // NaN (JSON's null, the table's "-") where there is no hit to divide by.
+            tests_per_hit: if stats.hits > 0 { stats.tests as f64 / stats.hits as f64 } else { f64::NAN },
+            gather_ns_per_hit: if stats.hits > 0 { 1e9 * gather / stats.hits as f64 } else { f64::NAN },
             gather_seconds: gather,
             total_seconds: total,
             metrics: m,

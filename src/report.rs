@@ -231,9 +231,16 @@ impl EqualTimeRow {
             self.plane_passes.to_string(),
             format!("{:.4}", self.metrics.smape_e2()),
             format!("{:.4}", self.metrics.mse_e4()),
-            format!("{:.3}", self.mse_vs_unweighted),
+            figure(self.mse_vs_unweighted, |v| format!("{v:.3}")),
         ]
     }
+}
+
+/// A figure of a table's cell, or `-` where it is no number: an efficiency of an MSE of 0 (a
+/// black scene, or a reference that is the render itself), a ratio of two of them, a time per
+/// hit without hits. JSON holds them as null.
+fn figure(v: f64, cell: impl Fn(f64) -> String) -> String {
+    if v.is_finite() { cell(v) } else { "-".to_string() }
 }
 
 impl Row {
@@ -243,17 +250,21 @@ impl Row {
             self.sampler.clone(),
             self.planes.to_string(),
             format!("{:.3e}", self.hits as f64),
-            format!("{:.2}", self.gather_ns_per_hit),
+            figure(self.gather_ns_per_hit, |v| format!("{v:.2}")),
             format!("{:.3}", self.gather_seconds),
             format!("{:.3}", self.total_seconds),
             format!("{:.4}", self.smape_e2),
             format!("{:.4}", self.mse_e4),
-            format!("{:.4e}", self.efficiency_gather),
-            format!("{:.4e}", self.efficiency_total),
-            format!("{:.3}", self.mse_vs_unweighted),
-            format!("{:.3}", self.gather_time_vs_unweighted),
-            format!("{:.2} / {:.2}", self.efficiency_gather_vs_unweighted, self.efficiency_total_vs_unweighted),
-            self.mse_vs_independent.map_or("-".to_string(), |v| format!("{v:.3}")),
+            figure(self.efficiency_gather, |v| format!("{v:.4e}")),
+            figure(self.efficiency_total, |v| format!("{v:.4e}")),
+            figure(self.mse_vs_unweighted, |v| format!("{v:.3}")),
+            figure(self.gather_time_vs_unweighted, |v| format!("{v:.3}")),
+            format!(
+                "{} / {}",
+                figure(self.efficiency_gather_vs_unweighted, |v| format!("{v:.2}")),
+                figure(self.efficiency_total_vs_unweighted, |v| format!("{v:.2}"))
+            ),
+            self.mse_vs_independent.map_or("-".to_string(), |v| figure(v, |v| format!("{v:.3}"))),
         ]
     }
 }

@@ -697,3 +697,34 @@ fn names_that_act_on_a_terminal_are_written_as_escapes() {
     assert!(clean(&warned) && warned.contains("different scenes (e\\u{1b}[31mv\\nil\\u{202e} and"), "{warned:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A table of a black scene (its one light on the box's ceiling, facing out of the box: every
+/// MSE 0) prints no `inf` or `NaN`: an efficiency of an MSE of 0, a ratio of two of them and a
+/// time per hit without hits are `-` in the Markdown and null in the JSON, and the render's
+/// summary gives no figure per hit.
+#[test]
+fn a_table_of_a_black_scene_prints_no_infinity() {
+    let dir = scratch("black");
+    let scene = dir.join("black.toml");
+    let text = "[camera]\nposition = [0.0, 1.0, 5.0]\nlook_at = [0.0, 1.0, 0.0]\nup = [0.0, 1.0, 0.0]\nvfov_deg = 40.0\n\
+        resolution = [32, 18]\n\n[medium]\nmin = [-2.0, 0.0, -2.0]\nmax = [2.0, 2.0, 2.0]\nsigma_s = 0.1\nsigma_a = 0.05\n\n\
+        [[light]]\ncorner = [-0.5, 2.0, -0.5]\nedge_u = [0.0, 0.0, 1.0]\nedge_v = [1.0, 0.0, 0.0]\nradiance = 4\n";
+    std::fs::write(&scene, text).unwrap();
+    let (reference, out) = (dir.join("ref.exr"), dir.join("table"));
+    let o = fogplanes(&["reference", scene.to_str().unwrap(), "--spp", "4", "-o", reference.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let args = ["--reference", reference.to_str().unwrap(), "--planes", "256", "--no-sweep", "--out"];
+    let o = fogplanes(&[&["table", scene.to_str().unwrap()][..], &args, &[out.to_str().unwrap()]].concat());
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("table.json")).unwrap()).unwrap();
+    assert!(!md.contains("inf") && !md.contains("NaN") && md.contains("| - / - |"), "{md}");
+    let row = &json["rows"][0];
+    assert!(row["hits"] == 0 && row["gather_ns_per_hit"].is_null() && row["efficiency_total"].is_null(), "{row}");
+    let o =
+        fogplanes(&["render", scene.to_str().unwrap(), "--planes", "256", "-o", dir.join("x.exr").to_str().unwrap()]);
+    let summary = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(summary.contains(" 0 hits, gather ") && !summary.contains("ns/hit"), "{summary}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -435,18 +435,18 @@ impl RenderStats {
         } else {
             format!("{} kernel", self.kernel)
         };
+        // Figures per hit only where there are hits (a black scene's were its times over 1).
+        let (per_hit, gather_per_hit) = if self.hits > 0 {
+            (
+                format!(" ({:.0} per ray, {:.2} tests per hit)", self.hits_per_ray(), self.tests_per_hit()),
+                format!("{:.2} ns/hit of gathering, ", self.gather_ns_per_hit()),
+            )
+        } else {
+            (String::new(), String::new())
+        };
         format!(
-            "{}: {} planes, {} rays, {} hits ({:.0} per ray, {:.2} tests per hit), gather {:.3} s ({:.2} ns/hit of gathering, wall, {}), total {:.3} s",
-            self.estimator,
-            self.planes,
-            self.rays,
-            self.hits,
-            self.hits_per_ray(),
-            self.tests_per_hit(),
-            self.seconds_gather,
-            self.gather_ns_per_hit(),
-            gathered_by,
-            self.seconds_total
+            "{}: {} planes, {} rays, {} hits{per_hit}, gather {:.3} s ({gather_per_hit}wall, {}), total {:.3} s",
+            self.estimator, self.planes, self.rays, self.hits, self.seconds_gather, gathered_by, self.seconds_total
         )
     }
 }
