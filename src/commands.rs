@@ -8,6 +8,7 @@ use crate::watch::{ReferenceWatch, RenderWatch};
 use crate::{page, system};
 use anyhow::{Context, Result, anyhow};
 use fogplanes::control::Control;
+use fogplanes::error::Fixed;
 use fogplanes::film::{Film, ImageInfo, read_image_info, write_file_atomically};
 use fogplanes::merge::{Merged, merge_parts};
 use fogplanes::metrics::{compare, compare_noisy};
@@ -263,7 +264,14 @@ pub(crate) fn cmd_render(a: RenderArgs) -> Result<(), Failure> {
     if let Some(why) = out_of_reach(&stats, r.target_error) {
         let _ = writeln!(std::io::stderr(), "warning: {why}");
     }
-    say!("wrote {} ({}x{}, mean {:.6}, max {:.4})", shown(&output), film.width, film.height, film.mean(), film.max());
+    say!(
+        "wrote {} ({}x{}, mean {:.6}, max {:.4})",
+        shown(&output),
+        film.width,
+        film.height,
+        Fixed(film.mean()),
+        Fixed(film.max() as f64)
+    );
     if let (Some(path), Some(se)) = (&a.stderr_image, &stats.stderr) {
         say!("wrote {} (standard error: mean {:.3e}, max {:.3e})", shown(path), se.mean(), se.max());
     }
@@ -352,8 +360,8 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
                     shown(&a.output),
                     image.width,
                     image.height,
-                    image.mean(),
-                    image.max()
+                    Fixed(image.mean()),
+                    Fixed(image.max() as f64)
                 );
             }
         }
@@ -579,17 +587,17 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
         say!("image noise, mean s_e^2             {noise:.6e}");
         say!(
             "excess over both noises             {excess:.6e}  ({:+.1}% of the image's noise)",
-            100.0 * excess / noise.max(f64::MIN_POSITIVE)
+            Fixed(100.0 * excess / noise.max(f64::MIN_POSITIVE))
         );
     }
-    say!("mean z^2                            {:.4}  (1 when the noise explains the difference)", noisy.mean_z2);
+    say!("mean z^2                            {:.4}  (1 when the noise explains the difference)", Fixed(noisy.mean_z2));
     say!("|z| > 3                             {:.3}%  (0.27% for normal noise)", 100.0 * noisy.beyond_3);
     if !noisy.regions.is_empty() {
         say!("regions the noise does not explain (|z| > 2, connected), largest excess first:");
         say!("  {:>17}  {:>6}  {:>11}  {:>11}  {:>7}", "pixels x, y", "count", "excess", "noise", "mean z");
         for r in &noisy.regions {
             let area = format!("{}-{}, {}-{}", r.x0, r.x1, r.y0, r.y1);
-            say!("  {area:>17}  {:>6}  {:>11.4e}  {:>11.4e}  {:>+7.2}", r.pixels, r.excess, r.noise, r.mean_z);
+            say!("  {area:>17}  {:>6}  {:>11.4e}  {:>11.4e}  {:>+7.2}", r.pixels, r.excess, r.noise, Fixed(r.mean_z));
         }
     }
     if let Some(path) = &a.z_image {
@@ -599,8 +607,8 @@ pub(crate) fn cmd_compare(a: CompareArgs) -> Result<(), Failure> {
 }
 
 fn print_metrics(m: &fogplanes::metrics::ErrorMetrics) {
-    say!("SMAPE        {:.6}  (x10^2: {:.4})", m.smape, m.smape_e2());
-    say!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, m.mse_e4());
+    say!("SMAPE        {:.6}  (x10^2: {:.4})", Fixed(m.smape), Fixed(m.smape_e2()));
+    say!("MSE          {:.6e}  (x10^4: {:.4})", m.mse, Fixed(m.mse_e4()));
     say!("relMSE       {:.6e}", m.rel_mse);
     say!("max |error|  {:.6e}", m.max_abs_error);
 }

@@ -305,9 +305,50 @@ impl std::fmt::Display for Number {
     }
 }
 
+/// A number to the decimals of the format's precision, as `{:.6}` writes it, but from 1e9 in
+/// magnitude in scientific form with as many decimals: `{:.6}` of 7.6e19 writes 20 digits before
+/// the point, of 1e300 301 (a scene of radiance 1e22 gives such a mean, a noise of 0 such a
+/// ratio). The format's width, alignment and `+` apply to the whole.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fixed(pub f64);
+
+impl std::fmt::Display for Fixed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (v, digits) = (self.0, f.precision().unwrap_or(6));
+        let body = if v.is_finite() && v.abs() >= 1e9 { format!("{v:.digits$e}") } else { format!("{v:.digits$}") };
+        let body = if f.sign_plus() && !body.starts_with('-') { format!("+{body}") } else { body };
+        let width = f.width().unwrap_or(0);
+        match f.align() {
+            Some(std::fmt::Alignment::Left) => write!(f, "{body:<width$}"),
+            Some(std::fmt::Alignment::Center) => write!(f, "{body:^width$}"),
+            _ => write!(f, "{body:>width$}"),
+        }
+    }
+}
+
 impl std::fmt::Display for NonFinitePixel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let channel = ["R", "G", "B"][self.channel];
         write!(f, "pixel (x {}, y {}) channel {channel} is {}", self.x, self.y, self.value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Fixed;
+
+    /// Fixed decimals below 1e9, scientific from there, with the format's width, alignment
+    /// and sign.
+    #[test]
+    fn a_fixed_number_keeps_its_decimals_and_turns_scientific_when_large() {
+        assert_eq!(format!("{:.6}", Fixed(0.074484)), "0.074484");
+        assert_eq!(format!("{:.4}", Fixed(999_999_999.0)), "999999999.0000");
+        assert_eq!(format!("{:.6}", Fixed(7.6e19)), "7.600000e19");
+        assert_eq!(format!("{:.4}", Fixed(-2e9)), "-2.0000e9");
+        assert_eq!(format!("{:+.1}", Fixed(5.93e300)), "+5.9e300");
+        assert_eq!(format!("{:>+7.2}", Fixed(1.5)), "  +1.50");
+        assert_eq!(format!("{:>+7.2}", Fixed(-1.5)), "  -1.50");
+        assert_eq!(format!("{:<6.1}|", Fixed(2.0)), "2.0   |");
+        assert_eq!(format!("{:.2}", Fixed(f64::INFINITY)), "inf");
     }
 }

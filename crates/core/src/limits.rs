@@ -183,7 +183,10 @@ pub fn check_threads(threads: usize) -> Result<(), String> {
 /// A span of wall time in seconds: positive, finite, at most `max`.
 pub fn check_seconds(seconds: f64, max: f64) -> Result<(), String> {
     if !(seconds > 0.0 && seconds <= max) {
-        return Err(format!("must be a positive number of seconds up to {max:e}, got {seconds}"));
+        return Err(format!(
+            "must be a positive number of seconds up to {max:e}, got {}",
+            crate::error::Number(seconds)
+        ));
     }
     Ok(())
 }

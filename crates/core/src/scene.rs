@@ -293,7 +293,7 @@ impl Scene {
             } else {
                 return Err(err(
                     "medium.g".into(),
-                    format!("must be a finite number in [-{G_MAX}, {G_MAX}], got {}", m.g),
+                    format!("must be a finite number in [-{G_MAX}, {G_MAX}], got {}", crate::error::Number(m.g)),
                 ));
             },
         };
@@ -365,7 +365,7 @@ impl Scene {
                     "must lie between {} and {} degrees, got {}",
                     crate::limits::MIN_VFOV_DEG,
                     crate::limits::MAX_VFOV_DEG,
-                    c.vfov_deg
+                    crate::error::Number(c.vfov_deg)
                 ),
             ));
         }

@@ -287,7 +287,7 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
         if !(r > 0.0 && r < 1.0) {
             return Err(Error::option(
                 Setting::TargetError,
-                format!("must be a relative error between 0 and 1 (0.01 for 1%), got {r}"),
+                format!("must be a relative error between 0 and 1 (0.01 for 1%), got {}", crate::error::Number(r)),
             ));
         }
         if given.planes.is_some() {
