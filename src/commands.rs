@@ -15,7 +15,9 @@ use fogplanes::metrics::{compare, compare_noisy};
 use fogplanes::options::RenderOptions;
 use fogplanes::outputs::{Output, check_outputs};
 use fogplanes::partial::parts::{read_pilot, save_pilot_part, save_reference_part, save_render_part};
-use fogplanes::reference::{reference_counts, reference_pilot_rows, reference_rows, render_reference_from};
+use fogplanes::reference::{
+    band_of_rows, reference_counts, reference_pilot_rows, reference_rows, render_reference_from,
+};
 use fogplanes::render::{Until, progress_units, render_chunk, render_from, render_until};
 use fogplanes::scene::Scene;
 use fogplanes::settings::{self, Overrides, ReferenceOverrides, ScalingOverrides, TableOverrides};
@@ -404,8 +406,7 @@ pub(crate) fn cmd_merge(a: MergeArgs) -> Result<(), Failure> {
 fn reference_part(a: &ReferenceArgs, r: &settings::ResolvedReference, part: &std::path::Path) -> Result<(), Failure> {
     check_partial_output(part, &reference_inputs(a))?;
     let (scene, opts) = (&r.scene, &r.options);
-    let (j0, j1) = a.rows.unwrap_or((0, scene.camera.height as u64));
-    let rows = u32::try_from(j0).unwrap_or(u32::MAX)..u32::try_from(j1).unwrap_or(u32::MAX);
+    let rows = band_of_rows(scene, a.rows.unwrap_or((0, scene.camera.height as u64)))?;
     start_threads(r.threads)?;
     let bar = progress_bar(a.common.quiet, rows.len() as u64, "reference", Unit::Rows);
     let tick = || bar.inc(1);

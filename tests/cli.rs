@@ -215,6 +215,11 @@ fn bad_arguments_exit_2() {
             vec!["reference", scene, "--rows", "0:-8", "--partial", "p.npz"],
             "\"-8\" in \"0:-8\": expected a whole number, 0 or more",
         ),
+        // Quoted as given, not narrowed to the rows' type first (it said "rows 0:4294967295").
+        (
+            vec!["reference", scene, "--rows", "0:18446744073709551615", "--partial", "p.npz", "--uniform"],
+            "rows 0:18446744073709551615 are not a band of the image's 360 rows",
+        ),
     ] {
         let o = fogplanes(&args);
         let err = String::from_utf8_lossy(&o.stderr);

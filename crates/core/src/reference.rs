@@ -440,14 +440,20 @@ pub fn check_counts(scene: &Scene, opts: &ReferenceOptions, counts: &[u32]) -> R
 
 /// The rows `rows` lie in the image and are not empty.
 fn check_rows(scene: &Scene, rows: &std::ops::Range<u32>) -> Result<()> {
+    band_of_rows(scene, (rows.start.into(), rows.end.into())).map(|_| ())
+}
+
+/// Rows `j0..j1` as given (a command line's `--rows J0:J1`), if they are a band of the image:
+/// checked before they are narrowed to the rows' type, so that a refusal quotes them as given.
+pub fn band_of_rows(scene: &Scene, (j0, j1): (u64, u64)) -> Result<std::ops::Range<u32>> {
     let h = scene.camera.height;
-    if rows.start >= rows.end || rows.end > h {
+    if j0 >= j1 || j1 > u64::from(h) {
         return Err(crate::Error::Partial(format!(
-            "rows {}:{} are not a band of the image's {h} rows (0 <= J0 < J1 <= {h})",
-            rows.start, rows.end
+            "rows {j0}:{j1} are not a band of the image's {h} rows (0 <= J0 < J1 <= {h})"
         )));
     }
-    Ok(())
+    // Both at most h, a u32.
+    Ok(j0 as u32..j1 as u32)
 }
 
 /// The adaptive reference's sample count of every pixel from the whole pilot's standard errors
