@@ -279,7 +279,8 @@ def test_files_that_cannot_be_opened_raise_os_errors(tmp_path):
         fogplanes.load_scene(tmp_path)
     with pytest.raises(ValueError, match="cannot read as an EXR image"):
         fogplanes.load_image(SIX_LIGHTS)
-    with pytest.raises(ValueError, match="does not exist"):
+    # An output the file system will not take: its OSError (it was a ValueError).
+    with pytest.raises(FileNotFoundError, match="does not exist"):
         fogplanes.save_image(tmp_path / "no" / "x.exr", np.zeros((2, 2, 3)))
     with pytest.raises(ValueError, match=r"\.exr .* or \.png"):
         fogplanes.save_image(tmp_path / "x.jpg", np.zeros((2, 2, 3)))

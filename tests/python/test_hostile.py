@@ -102,6 +102,12 @@ def test_an_unpickled_partial_holding_sums_no_render_makes_is_refused(scene, val
         (dict(hits=2**64 - 1), "hits, more than one per plane and pixel"),
         (dict(seconds=float("nan")), "seconds"),
         (dict(width=True), "expected"),
+        # Of the right kind but out of its place's range, or no valid Unicode: said so (it said
+        # "width=-1: expected int, got int").
+        (dict(width=-1), r"width=-1: out of range$"),
+        (dict(hits=-1), r"hits=-1: out of range$"),
+        (dict(end=2**64), r"end=18446744073709551616: out of range$"),
+        (dict(fingerprint="\ud800"), r"fingerprint='\\ud800': not valid Unicode text$"),
         (dict(start=1), "not a union of the render's chunks"),
         (dict(devices=[]), "0 devices named"),
         (dict(devices=["cpu\nerror: forged"]), "is not a device's name"),
@@ -181,16 +187,59 @@ def test_a_part_numpy_wrote_still_merges(tmp_path):
     assert np.array_equal(fogplanes.load_image(tmp_path / "ab.exr"), fogplanes.load_image(tmp_path / "cb.exr"))
 
 
-def test_a_scene_path_that_is_no_regular_file_is_refused(tmp_path):
-    """A pipe given as a scene path held the interpreter's lock while the open waited for a
-    writer: every thread froze and Ctrl-C did nothing. It is refused before it is opened (in a
+def test_a_path_that_is_no_regular_file_is_refused(tmp_path):
+    """A pipe given as a scene or image path held the interpreter's lock while the open waited
+    for a writer: every thread froze and Ctrl-C did nothing (load_image: the library refused the
+    pipe, and the choice of the exception opened it). It is refused before it is opened (in a
     subprocess, so that a regression fails here rather than hanging the tests)."""
     fifo = tmp_path / "scene.toml"
     os.mkfifo(fifo)
-    code = ("import fogplanes\n"
-            f"try:\n    fogplanes.load_scene({str(fifo)!r})\nexcept ValueError as e:\n    print(e)\n")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert "not a regular file" in done.stdout and "Scene.from_toml" in done.stdout, done
+    for call, says in [("load_scene", "Scene.from_toml"), ("load_image", "not a regular file")]:
+        code = ("import fogplanes\n"
+                f"try:\n    fogplanes.{call}({str(fifo)!r})\nexcept ValueError as e:\n    print(e)\n")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        assert "not a regular file" in done.stdout and says in done.stdout, (call, done)
+
+
+def test_an_output_the_file_system_refuses_is_its_oserror(tmp_path):
+    """save_image's path, where the file system will not take it: the OSError of why, as a file
+    that cannot be opened is (it was a ValueError); a name of no image format stays one."""
+    image = np.zeros((4, 4, 3), np.float32)
+    (tmp_path / "file").write_text("x")
+    for path, error in [
+        (tmp_path / "missing" / "x.exr", FileNotFoundError),
+        (tmp_path, IsADirectoryError),
+        (tmp_path / "file" / "x.exr", NotADirectoryError),
+        (tmp_path / "x.jpg", ValueError),
+    ]:
+        with pytest.raises(error):
+            fogplanes.save_image(path, image)
+
+
+def test_a_forged_scene_pickle_is_named(scene):
+    """A scene's pickle rebuilt from forged parts: every part of its type, else a ValueError
+    naming it (a resolution of -1 or 2**32 was pyo3's OverflowError naming nothing, (True,
+    True) a 1x1 scene, a lone surrogate a UnicodeEncodeError)."""
+    rebuild, (text, name, file, resolution) = scene.__reduce__()
+    assert rebuild(text, name, file, resolution).resolution == scene.resolution
+    for forged in [(-1, 1), (2**32, 1), (4.0, 4), (True, True), (4,), None]:
+        with pytest.raises(ValueError, match=r"^not the state of a fogplanes\.Scene: resolution="):
+            rebuild(text, name, file, forged)
+    with pytest.raises(ValueError, match="each side must be between 1 and"):
+        rebuild(text, name, file, (0, 4))
+    with pytest.raises(ValueError, match=r"^not the state of a fogplanes\.Scene: text: not valid Unicode"):
+        rebuild(text + "#\ud800", name, file, resolution)
+    with pytest.raises(ValueError, match=r"^not the state of a fogplanes\.Scene: name=5: expected a str"):
+        rebuild(text, 5, file, resolution)
+
+
+def test_scene_text_that_is_no_valid_unicode_is_said_so(scene):
+    """A str holding a lone surrogate (which Python allows) is no text: a ValueError saying so,
+    where it was "text: expected the scene's TOML text (a str), got str"."""
+    for kwargs, arg in [(dict(), "text"), (dict(name="\ud800"), "name"), (dict(file="\ud800"), "file")]:
+        text = scene.source + ("#\ud800" if arg == "text" else "")
+        with pytest.raises(ValueError, match=rf"^{arg}: not valid Unicode text"):
+            fogplanes.Scene.from_toml(text, **kwargs)
 
 
 @pytest.mark.parametrize(

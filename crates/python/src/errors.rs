@@ -3,7 +3,8 @@
 use fogplanes::Error;
 use fogplanes::settings::Setting;
 use pyo3::exceptions::{
-    PyFileNotFoundError, PyIsADirectoryError, PyOSError, PyPermissionError, PyRuntimeError, PyValueError,
+    PyFileNotFoundError, PyIsADirectoryError, PyNotADirectoryError, PyOSError, PyPermissionError, PyRuntimeError,
+    PyValueError,
 };
 use pyo3::prelude::*;
 use std::io::ErrorKind;
@@ -35,14 +36,35 @@ pub(crate) fn os_error(kind: ErrorKind, message: String) -> PyErr {
 }
 
 /// The exception for a file that `read` failed on with `message`: an `OSError` if the file
-/// itself cannot be opened (missing, a directory, unreadable), else `ValueError` (its content).
+/// itself cannot be opened (missing, a directory, unreadable), else `ValueError` (its content,
+/// or what it is: a pipe, a device or a socket, which the library refuses unread and which is
+/// not opened here either: opening a pipe waits for a writer, and `load_image` of one hung,
+/// deaf to Ctrl-C).
 pub(crate) fn file_error(path: &Path, message: String) -> PyErr {
     match std::fs::metadata(path) {
         Err(e) => os_error(e.kind(), message),
         Ok(m) if m.is_dir() => PyIsADirectoryError::new_err(message),
+        Ok(m) if !m.is_file() => PyValueError::new_err(message),
         Ok(_) => match std::fs::File::open(path) {
             Err(e) => os_error(e.kind(), message),
             Ok(_) => PyValueError::new_err(message),
         },
+    }
+}
+
+/// The exception for an output `path` that the library's check of outputs refused with `e`:
+/// the `OSError` of why the file system will not take it where that is plain (its directory
+/// missing, or not a directory; a directory where the file would go), else the library's own
+/// (a name of no image format is a `ValueError`).
+pub(crate) fn output_error(path: &Path, e: Error) -> PyErr {
+    let message = e.to_string();
+    if path.is_dir() {
+        return PyIsADirectoryError::new_err(message);
+    }
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    match std::fs::metadata(parent) {
+        Err(io) => os_error(io.kind(), message),
+        Ok(m) if !m.is_dir() => PyNotADirectoryError::new_err(message),
+        Ok(_) => py_error(e),
     }
 }

@@ -118,6 +118,18 @@ pub(crate) fn integer(name: &str, v: &Bound<'_, PyAny>) -> PyResult<Option<u64>>
     }
 }
 
+/// A text argument `name`: a `str`, else the `TypeError` of [`wrong_type`]; a `str` that is no
+/// valid Unicode (a lone surrogate, which Python's str may hold) a `ValueError` saying so, not
+/// "expected a str, got str".
+pub(crate) fn text(name: &str, v: &Bound<'_, PyAny>) -> PyResult<String> {
+    if !v.is_instance_of::<pyo3::types::PyString>() {
+        return Err(wrong_type(name, v, "a str"));
+    }
+    v.extract::<String>().map_err(|_| {
+        PyValueError::new_err(format!("{name}: not valid Unicode text (it holds a lone surrogate, such as '\\ud800')"))
+    })
+}
+
 /// The `TypeError` for argument `name` given `v` where `what` is asked: `name=repr: expected
 /// what, got type` (`spp=True: expected an integer, got bool`).
 pub(crate) fn wrong_type(name: &str, v: &Bound<'_, PyAny>, what: &str) -> PyErr {

@@ -129,16 +129,23 @@ impl PyPartial {
             let v = state.get_item(k)?;
             let wrong = || -> PyResult<PyErr> {
                 let (repr, type_name) = (v.repr()?, v.get_type().name()?);
-                Ok(PyValueError::new_err(format!(
-                    "not the state of a fogplanes.Partial: {name}={repr}: expected {}, got {type_name}",
-                    // The Rust type as Python names it (the state's fields are these four kinds).
-                    match std::any::type_name::<T>() {
-                        t if t.contains("Vec<") => "a list of str",
-                        t if t.ends_with("String") => "str",
-                        t if t.ends_with("f64") => "float",
-                        _ => "int",
+                // The Rust type as Python names it (the state's fields are these four kinds).
+                let expected = match std::any::type_name::<T>() {
+                    t if t.contains("Vec<") => "a list of str",
+                    t if t.ends_with("String") => "str",
+                    t if t.ends_with("f64") => "float",
+                    _ => "int",
+                };
+                // Of the right kind but not held by its place: an int out of its range, a str
+                // of no valid Unicode (a lone surrogate).
+                let why = match expected {
+                    "int" if v.is_instance_of::<pyo3::types::PyInt>() && !v.is_instance_of::<pyo3::types::PyBool>() => {
+                        "out of range".to_string()
                     }
-                )))
+                    "str" if v.is_instance_of::<pyo3::types::PyString>() => "not valid Unicode text".to_string(),
+                    _ => format!("expected {expected}, got {type_name}"),
+                };
+                Ok(PyValueError::new_err(format!("not the state of a fogplanes.Partial: {name}={repr}: {why}")))
             };
             if v.is_instance_of::<pyo3::types::PyBool>() {
                 return Err(wrong()?);

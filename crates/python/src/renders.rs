@@ -190,7 +190,8 @@ pub(crate) fn save_image(
     let exposure = settings::exposure(stops).map_err(|e| given.error(e))?;
     let film = image_arg(image, "image")?;
     film.check_finite("image").map_err(py_error)?;
-    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)], &[]).map_err(py_error)?;
+    fogplanes::outputs::check_outputs(&[fogplanes::outputs::Output::Image(&path)], &[])
+        .map_err(|e| output_error(&path, e))?;
     settings::check_exposure_applies(stops, &[&path]).map_err(|e| given.error(e))?;
     py.detach(|| film.save(&path, exposure)).map_err(py_error)
 }

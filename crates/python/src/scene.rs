@@ -156,13 +156,14 @@ impl PyScene {
         name: Option<&Bound<'_, PyAny>>,
         file: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let text: String = text.extract().map_err(|_| {
+        if !text.is_instance_of::<pyo3::types::PyString>() {
             let type_name = text.get_type().name().map(|n| n.to_string()).unwrap_or_default();
-            PyTypeError::new_err(format!("text: expected the scene's TOML text (a str), got {type_name}"))
-        })?;
+            return Err(PyTypeError::new_err(format!("text: expected the scene's TOML text (a str), got {type_name}")));
+        }
+        let text = crate::given::text("text", text)?;
         let string = |v: Option<&Bound<'_, PyAny>>, arg: &str, default: &str| match v {
             None => Ok(default.to_string()),
-            Some(v) => v.extract::<String>().map_err(|_| wrong_type(arg, v, "a str")),
+            Some(v) => crate::given::text(arg, v),
         };
         let (name, file) = (string(name, "name", "scene")?, string(file, "file", "<string>")?);
         Scene::parse(&text, &file, &name)
@@ -172,10 +173,36 @@ impl PyScene {
 
     /// The scene made from its text, name, file and resolution: what a pickled scene is
     /// rebuilt with (`__reduce__`).
+    /// The parts are trusted no more than a file (a pickle may be forged): each of its type, a
+    /// `ValueError` naming it otherwise, the resolution's range the scene's own.
     #[staticmethod]
-    fn _from_parts(text: &str, name: &str, file: &str, resolution: (u32, u32)) -> PyResult<Self> {
-        let scene = Scene::parse(text, file, name).map_err(|e| PyValueError::new_err(e.to_string()))?;
-        scene.with_resolution(resolution.0, resolution.1).map(|inner| PyScene { inner }).map_err(py_error)
+    fn _from_parts(
+        text: &Bound<'_, PyAny>,
+        name: &Bound<'_, PyAny>,
+        file: &Bound<'_, PyAny>,
+        resolution: &Bound<'_, PyAny>,
+    ) -> PyResult<Self> {
+        let part = |v: &Bound<'_, PyAny>, what: &str| {
+            crate::given::text(what, v)
+                .map_err(|e| PyValueError::new_err(format!("not the state of a fogplanes.Scene: {}", e.value(v.py()))))
+        };
+        let (text, name, file) = (part(text, "text")?, part(name, "name")?, part(file, "file")?);
+        let side = |v: PyResult<Bound<'_, PyAny>>| -> Option<u32> {
+            v.ok().and_then(|v| integer("resolution", &v).ok().flatten()).and_then(|n| u32::try_from(n).ok())
+        };
+        let sides = resolution
+            .len()
+            .ok()
+            .filter(|&n| n == 2)
+            .and_then(|_| Some((side(resolution.get_item(0))?, side(resolution.get_item(1))?)));
+        let Some((width, height)) = sides else {
+            return Err(PyValueError::new_err(format!(
+                "not the state of a fogplanes.Scene: resolution={}: expected two whole numbers (width, height)",
+                short_repr(resolution)
+            )));
+        };
+        let scene = Scene::parse(&text, &file, &name).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        scene.with_resolution(width, height).map(|inner| PyScene { inner }).map_err(py_error)
     }
 
     /// Pickles as its text, name, file and resolution (not a pointer): a scene travels to
