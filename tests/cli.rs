@@ -215,6 +215,23 @@ fn bad_arguments_exit_2() {
             vec!["reference", scene, "--rows", "0:-8", "--partial", "p.npz"],
             "\"-8\" in \"0:-8\": expected a whole number, 0 or more",
         ),
+        // An error image a budget left one group for: the budget named, not --planes, which a
+        // render on a budget does not take.
+        (
+            vec![
+                "render",
+                scene,
+                "--resolution",
+                "32x18",
+                "--time-budget",
+                "1e-6",
+                "--stderr-image",
+                "se.exr",
+                "-o",
+                "x.exr",
+            ],
+            "--time-budget: an error image needs planes in at least two groups, and the budget ended after",
+        ),
         // Quoted as given, not narrowed to the rows' type first (it said "rows 0:4294967295").
         (
             vec!["reference", scene, "--rows", "0:18446744073709551615", "--partial", "p.npz", "--uniform"],

@@ -1077,7 +1077,17 @@ pub fn render_in_passes(
     stats.planes = report.planes;
     let film = Film::finish(width, height, &total, report.planes, &emission)?;
     if let Some(spread) = spread {
-        stats.add_error_image(&film, spread.variance(&emission_variance), &emission_variance)?;
+        // Too few planes for two groups: the budget's doing here, not a plane count's.
+        let variance = spread.variance(&emission_variance).ok_or_else(|| {
+            Error::option(
+                Setting::TimeBudget,
+                format!(
+                    "an error image needs planes in at least two groups, and the budget ended after {} planes in one: give a longer budget",
+                    report.planes
+                ),
+            )
+        })?;
+        stats.add_error_image(&film, Some(variance), &emission_variance)?;
     }
     stats.seconds_rays += seconds_emission;
     stats.seconds_total = start.elapsed().as_secs_f64();
