@@ -435,3 +435,19 @@ def test_a_count_or_number_of_the_wrong_type_is_named_with_its_value(scene, call
 def test_an_image_argument_that_is_no_array_is_named(scene, call, error, says):
     with pytest.raises(error, match=says):
         call(scene, np.ones((6, 8, 3), dtype=np.float32))
+
+
+def test_an_image_value_beyond_float32_is_named_as_given():
+    """A float64 image's finite value beyond float32's range is named as given, before the
+    conversion made it an infinity (with numpy's RuntimeWarning) refused as one; an exposure
+    beyond it says why it reads as infinite."""
+    import warnings
+    image = np.zeros((4, 4, 3))
+    image[1, 2, 1] = 1e300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for call in (lambda: fogplanes.save_image("never.exr", image), lambda: fogplanes.compare(image, image * 0)):
+            with pytest.raises(ValueError, match=r"^image: pixel \(x 2, y 1\) channel G is 1e300, beyond float32's range"):
+                call()
+    with pytest.raises(ValueError, match=r"got inf \(a number beyond about 3\.4e38 reads as infinite\)$"):
+        fogplanes.save_image("never.png", image * 0, exposure=1e308)

@@ -203,7 +203,9 @@ pub fn check_recorded_seconds(seconds: f64) -> Result<(), String> {
 /// An exposure in stops: any finite number (a NaN would turn every pixel black).
 pub fn check_exposure(stops: f32) -> Result<(), String> {
     if !stops.is_finite() {
-        return Err(format!("must be a finite number of stops, got {stops}"));
+        // An f32: a number beyond about 3.4e38 given as text reads as infinite.
+        let beyond = if stops.is_infinite() { " (a number beyond about 3.4e38 reads as infinite)" } else { "" };
+        return Err(format!("must be a finite number of stops, got {stops}{beyond}"));
     }
     Ok(())
 }

@@ -80,6 +80,37 @@ pub(crate) fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> 
         let dtype = array.getattr("dtype")?.str()?.to_string();
         return Err(PyTypeError::new_err(format!("{what}: expected an array of a real dtype, got dtype {dtype}")));
     }
+    // A float wider than float32 holding a finite value beyond float32's range: named as such
+    // before the conversion, which would make it an infinity (with numpy's RuntimeWarning) and
+    // have it refused as one, a value the caller never gave.
+    if array
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract::<String>())
+        .is_ok_and(|k| k == "f")
+        && array
+            .getattr("dtype")
+            .and_then(|d| d.getattr("itemsize"))
+            .and_then(|n| n.extract::<usize>())
+            .is_ok_and(|n| n > 4)
+    {
+        let np = py.import("numpy")?;
+        let large = np.call_method1("greater", (np.call_method1("abs", (&array,))?, f32::MAX as f64))?;
+        let beyond = np.call_method1("logical_and", (np.call_method1("isfinite", (&array,))?, large))?;
+        if beyond.call_method0("any")?.extract::<bool>()? {
+            let at: Vec<usize> =
+                np.call_method1("argwhere", (beyond,))?.get_item(0)?.call_method0("tolist")?.extract()?;
+            let beyond =
+                || PyValueError::new_err(format!("{what}: holds a value beyond float32's range (about 3.4e38)"));
+            let [y, x, c] = at[..] else { return Err(beyond()) };
+            let value: f64 = array.get_item((y, x, c))?.extract()?;
+            return Err(PyValueError::new_err(format!(
+                "{what}: pixel (x {x}, y {y}) channel {} is {}, beyond float32's range (about 3.4e38)",
+                ["R", "G", "B"][c],
+                fogplanes::error::Number(value)
+            )));
+        }
+    }
     // Something with a shape that numpy cannot read (a Partial has one) is no array either.
     let array = array.extract::<PyArrayLike3<'_, f32, AllowTypeChange>>().map_err(|e: PyErr| {
         if e.is_instance_of::<PyTypeError>(py) || e.is_instance_of::<PyValueError>(py) { not_an_array() } else { e }
