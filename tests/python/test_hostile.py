@@ -145,6 +145,13 @@ def test_given_back_pilots_and_counts_are_what_the_library_makes(scene):
             fogplanes.reference_rows(scene, (0, 3), counts=c, **args)
     with pytest.raises(TypeError, match=r"^counts: expected an array"):
         fogplanes.reference_rows(scene, (0, 3), counts="many", **args)
+    # Another number of dimensions is a wrong shape (it was a TypeError, "got ndarray"); bools
+    # are no counts (True counted one sample).
+    for shaped, shape in [(counts[..., None], r"\(6, 8, 1\)"), (counts[0, 0], r"\(\)")]:
+        with pytest.raises(ValueError, match=rf"^counts: expected shape \(6, 8\), got {shape}$"):
+            fogplanes.reference_rows(scene, (0, 3), counts=shaped, **args)
+    with pytest.raises(TypeError, match=r"^counts: expected whole numbers of samples, got an array of bools$"):
+        fogplanes.reference_rows(scene, (0, 3), counts=counts > 0, **args)
 
 
 def test_counts_are_capped_as_spp_is(scene):

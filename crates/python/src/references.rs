@@ -30,6 +30,21 @@ fn row_pair(rows: &Bound<'_, PyAny>) -> PyResult<(u32, u32)> {
 /// checked before converting: a negative or fractional count is no count, and a cast to uint32
 /// would wrap it). Their range is the core's to check ([`refs::check_counts`]).
 fn counts_arg(counts: &Bound<'_, PyAny>, (w, h): (usize, usize)) -> PyResult<Vec<u32>> {
+    // An array of another number of dimensions is a wrong shape, as a wrong 2-d one is (it was
+    // a TypeError, "got ndarray"); an array of bools holds no counts (True counted one sample).
+    if let Ok(shape) = counts.getattr("shape").and_then(|s| s.extract::<Vec<usize>>())
+        && shape.len() != 2
+    {
+        return Err(PyValueError::new_err(format!("counts: expected shape ({h}, {w}), got {}", shape_text(&shape))));
+    }
+    if counts
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract::<String>())
+        .is_ok_and(|k| k == "b")
+    {
+        return Err(PyTypeError::new_err("counts: expected whole numbers of samples, got an array of bools"));
+    }
     let c: PyArrayLike2<'_, f64, AllowTypeChange> = counts.extract().map_err(|_| {
         let type_name = counts.get_type().name().map(|n| n.to_string()).unwrap_or_default();
         PyTypeError::new_err(format!("counts: expected an array of shape ({h}, {w}), got {type_name}"))
