@@ -137,7 +137,7 @@ pub(crate) struct ExportArgs {
     #[arg(long, short, value_name = "OUT")]
     pub(crate) output: Option<PathBuf>,
     /// Image size WIDTHxHEIGHT written as the file's default, overriding the scene's camera.
-    #[arg(long, value_name = "WxH", value_parser = parse_resolution, allow_hyphen_values = true)]
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
     pub(crate) resolution: Option<(u32, u32)>,
 }
 
@@ -152,7 +152,7 @@ pub(crate) struct ScalingArgs {
     #[arg(long, value_delimiter = ',', default_value = SCALING_PLANES.as_str())]
     pub(crate) planes: Vec<u64>,
     /// Resolutions WxH, comma separated [default: 160x90,320x180,640x360,1280x720].
-    #[arg(long, value_delimiter = ',', value_parser = parse_resolution, allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', value_parser = parse_resolution)]
     pub(crate) resolutions: Option<Vec<(u32, u32)>>,
     /// Output directory (created if missing).
     #[arg(long, value_name = "DIR", default_value = "scaling")]
@@ -185,7 +185,7 @@ pub(crate) struct DeviceArgs {
 #[derive(Args)]
 pub(crate) struct CommonArgs {
     /// Image size WIDTHxHEIGHT, overriding the scene's camera resolution.
-    #[arg(long, value_name = "WxH", value_parser = parse_resolution, allow_hyphen_values = true)]
+    #[arg(long, value_name = "WxH", value_parser = parse_resolution)]
     pub(crate) resolution: Option<(u32, u32)>,
     /// Worker threads (default: all cores).
     #[arg(long, value_name = "T")]
@@ -277,7 +277,7 @@ pub(crate) struct RenderArgs {
     pub(crate) exposure: Option<f32>,
     /// Render only planes A to B (excluded) of the N, for a job array: A and B multiples of
     /// the canonical chunk size or N. Needs --partial; `fogplanes merge` adds the parts.
-    #[arg(long, value_name = "A:B", value_parser = parse_range, allow_hyphen_values = true, requires = "partial", conflicts_with_all = ["time_budget", "target_error"])]
+    #[arg(long, value_name = "A:B", value_parser = parse_range, requires = "partial", conflicts_with_all = ["time_budget", "target_error"])]
     pub(crate) plane_range: Option<(u64, u64)>,
     /// Write the unnormalised sums of the planes rendered (all, or --plane-range) to this .npz
     /// file instead of an image (numpy loads it: `sums` and a JSON `meta`).
@@ -337,7 +337,7 @@ pub(crate) struct ReferenceArgs {
     /// merge` assembles the bands. Without --uniform, the bands share one pilot pass: render its
     /// bands with --pilot-pass, merge them into pilot.npz, then render each band with --pilot
     /// pilot.npz.
-    #[arg(long, value_name = "J0:J1", value_parser = parse_range, allow_hyphen_values = true, requires = "partial")]
+    #[arg(long, value_name = "J0:J1", value_parser = parse_range, requires = "partial")]
     pub(crate) rows: Option<(u64, u64)>,
     /// Write the rows' mean and standard error (or pilot) to this .npz instead of images.
     #[arg(long, value_name = "PART.npz", conflicts_with_all = ["output", "stderr_image"])]
@@ -472,9 +472,9 @@ pub(crate) fn chunk_note() -> String {
     format!("A canonical chunk is {} planes.", fogplanes::limits::CHUNK_PLANES)
 }
 
-/// `WxH`. Its values, and those of [`parse_range`], may start with `-` (`allow_hyphen_values`),
-/// so that `--resolution -5x3` is refused here as a value, where clap took it for an unknown
-/// flag and advised `-- -5x3`.
+/// `WxH`. A value of it, or of [`parse_range`], that starts with `-` and a digit reaches it
+/// (`main.rs`'s `negative_pairs`), so that `--resolution -5x3` is refused here as a value, where
+/// clap took it for an unknown flag and advised `-- -5x3`.
 pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
     Ok((whole(w, s)?, whole(h, s)?))

@@ -521,7 +521,7 @@ fn check_reference(image: Option<&ImageInfo>, reference: Option<&ImageInfo>, pat
     let warning =
         ImageInfo::check_reference(image, reference).map_err(|e| input(anyhow!("{}: {e}", path.display())))?;
     if let Some(w) = warning {
-        let _ = writeln!(std::io::stderr(), "warning: {}: {w}", path.display());
+        let _ = writeln!(std::io::stderr(), "warning: {}: {w}", shown(path));
     }
     Ok(())
 }

@@ -45,9 +45,33 @@ fn parse() -> Cli {
         .mut_subcommands(negatives)
     }
     let mut command = negatives(<Cli as clap::CommandFactory>::command());
-    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    let args = negative_pairs(std::env::args_os().collect());
     let matches = command.try_get_matches_from_mut(&args).unwrap_or_else(|e| plainer(e, &mut command, &args).exit());
     <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
+/// The pairs `WxH` and `A:B` (`--resolution`, `--resolutions`, `--plane-range`, `--rows`) whose
+/// value starts with `-` and a digit, given as `--flag=value`: clap then takes the value as a
+/// value, to be refused by its parser as one ("\"-5\" in \"-5x3\": expected a whole number"),
+/// where it took `-5x3` for an unknown flag (a pair is no number to `allow_negative_numbers`).
+/// A flag after one of these is still a flag: its missing value is said as such.
+fn negative_pairs(args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    const PAIRS: [&str; 4] = ["--resolution", "--resolutions", "--plane-range", "--rows"];
+    let mut out: Vec<std::ffi::OsString> = Vec::with_capacity(args.len());
+    let mut args = args.into_iter().peekable();
+    while let Some(a) = args.next() {
+        let negative = |v: &std::ffi::OsString| {
+            v.to_str().is_some_and(|v| v.strip_prefix('-').is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit())))
+        };
+        match (a.to_str(), args.peek()) {
+            (Some(flag), Some(v)) if PAIRS.contains(&flag) && negative(v) => {
+                let v = args.next().expect("peeked");
+                out.push(format!("{flag}={}", v.to_str().expect("checked")).into());
+            }
+            _ => out.push(a),
+        }
+    }
+    out
 }
 
 /// A count, seed or index that is no whole number said as such: Rust's own words for `-1` or
@@ -94,7 +118,7 @@ fn main() -> ExitCode {
         let left = watch::checkpoint_left();
         let written = fogplanes::film::remove_unfinished_files();
         let note = watch::interrupted_note(left, &written);
-        let _ = writeln!(std::io::stderr(), "\ninterrupted: {note}");
+        let _ = writeln!(std::io::stderr(), "\ninterrupted: {}", fogplanes::error::one_line(&note));
         std::process::exit(130);
     });
     let result = match cli.command {

@@ -3,6 +3,7 @@
 //! [`crate::experiments`] fills them in, [`crate::pictures`] draws them.
 
 use crate::page::html_table;
+use fogplanes::error::Fixed;
 use fogplanes::film::Film;
 use fogplanes::gather::GatherStats;
 use fogplanes::metrics::ErrorMetrics;
@@ -229,8 +230,8 @@ impl EqualTimeRow {
             format!("{:.2}", self.seconds),
             self.planes.to_string(),
             self.plane_passes.to_string(),
-            format!("{:.4}", self.metrics.smape_e2()),
-            format!("{:.4}", self.metrics.mse_e4()),
+            format!("{:.4}", Fixed(self.metrics.smape_e2())),
+            format!("{:.4}", Fixed(self.metrics.mse_e4())),
             figure(self.mse_vs_unweighted, |v| format!("{v:.3}")),
         ]
     }
@@ -253,8 +254,8 @@ impl Row {
             figure(self.gather_ns_per_hit, |v| format!("{v:.2}")),
             format!("{:.3}", self.gather_seconds),
             format!("{:.3}", self.total_seconds),
-            format!("{:.4}", self.smape_e2),
-            format!("{:.4}", self.mse_e4),
+            format!("{:.4}", Fixed(self.smape_e2)),
+            format!("{:.4}", Fixed(self.mse_e4)),
             figure(self.efficiency_gather, |v| format!("{v:.4e}")),
             figure(self.efficiency_total, |v| format!("{v:.4e}")),
             figure(self.mse_vs_unweighted, |v| format!("{v:.3}")),

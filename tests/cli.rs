@@ -232,6 +232,8 @@ fn bad_arguments_exit_2() {
             ],
             "--time-budget: an error image needs planes in at least two groups, and the budget ended after",
         ),
+        // A flag after a pair's flag is a flag: the pair's missing value said as such.
+        (vec!["render", scene, "--resolution", "--planes", "256"], "a value is required for '--resolution <WxH>'"),
         // Quoted as given, not narrowed to the rows' type first (it said "rows 0:4294967295").
         (
             vec!["reference", scene, "--rows", "0:18446744073709551615", "--partial", "p.npz", "--uniform"],
@@ -717,6 +719,10 @@ fn names_that_act_on_a_terminal_are_written_as_escapes() {
     let o = fogplanes(&["compare", out.to_str().unwrap(), other.to_str().unwrap()]);
     let warned = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(clean(&warned) && warned.contains("different scenes (e\\u{1b}[31mv\\nil\\u{202e} and"), "{warned:?}");
+    // The warning's reference path too.
+    let o = fogplanes(&["compare", other.to_str().unwrap(), out.to_str().unwrap()]);
+    let warned = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(clean(&warned) && warned.contains("o\\u{1b}[2Jx\\u{2028}.exr: the image and the reference"), "{warned:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -213,14 +213,19 @@ def test_an_output_the_file_system_refuses_is_its_oserror(tmp_path):
     that cannot be opened is (it was a ValueError); a name of no image format stays one."""
     image = np.zeros((4, 4, 3), np.float32)
     (tmp_path / "file").write_text("x")
-    for path, error in [
-        (tmp_path / "missing" / "x.exr", FileNotFoundError),
-        (tmp_path, IsADirectoryError),
-        (tmp_path / "file" / "x.exr", NotADirectoryError),
-        (tmp_path / "x.jpg", ValueError),
+    (tmp_path / "dir.exr").mkdir()
+    for path, error, says in [
+        (tmp_path / "missing" / "x.exr", FileNotFoundError, "the output directory .* does not exist"),
+        (tmp_path / "dir.exr", IsADirectoryError, "is a directory"),
+        (tmp_path / "file" / "x.exr", NotADirectoryError, "file"),
+        # The name's format is checked first, whatever the directory: the caller's ValueError.
+        (tmp_path / "x.jpg", ValueError, r"must end in \.exr"),
+        (tmp_path / "missing" / "x.jpg", ValueError, r"must end in \.exr"),
+        (tmp_path, ValueError, r"must end in \.exr"),
     ]:
-        with pytest.raises(error):
+        with pytest.raises(error, match=says) as raised:
             fogplanes.save_image(path, image)
+        assert type(raised.value) is error, (path, raised.value)
 
 
 def test_a_forged_scene_pickle_is_named(scene):
@@ -444,7 +449,7 @@ def test_an_image_argument_that_is_no_array_is_named(scene, call, error, says):
         call(scene, np.ones((6, 8, 3), dtype=np.float32))
 
 
-def test_an_image_value_beyond_float32_is_named_as_given():
+def test_an_image_value_beyond_float32_is_named_as_given(tmp_path):
     """A float64 image's finite value beyond float32's range is named as given, before the
     conversion made it an infinity (with numpy's RuntimeWarning) refused as one; an exposure
     beyond it says why it reads as infinite."""
@@ -453,8 +458,12 @@ def test_an_image_value_beyond_float32_is_named_as_given():
     image[1, 2, 1] = 1e300
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for call in (lambda: fogplanes.save_image("never.exr", image), lambda: fogplanes.compare(image, image * 0)):
+        save = lambda: fogplanes.save_image(tmp_path / "never.exr", image)  # noqa: E731
+        for call in (save, lambda: fogplanes.compare(image, image * 0)):
             with pytest.raises(ValueError, match=r"^image: pixel \(x 2, y 1\) channel G is 1e300, beyond float32's range"):
                 call()
-    with pytest.raises(ValueError, match=r"got inf \(a number beyond about 3\.4e38 reads as infinite\)$"):
-        fogplanes.save_image("never.png", image * 0, exposure=1e308)
+    with pytest.raises(ValueError, match=r"got inf \(an infinity, or a number beyond about 3\.4e38\)$"):
+        fogplanes.save_image(tmp_path / "never.png", image * 0, exposure=1e308)
+    # FLT_MAX as written (3.40282347e38) rounds to a finite float32: taken.
+    fogplanes.save_image(tmp_path / "max.exr", np.full((2, 2, 3), 3.40282347e38))
+    assert not (tmp_path / "never.exr").exists()

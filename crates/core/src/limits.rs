@@ -204,7 +204,7 @@ pub fn check_recorded_seconds(seconds: f64) -> Result<(), String> {
 pub fn check_exposure(stops: f32) -> Result<(), String> {
     if !stops.is_finite() {
         // An f32: a number beyond about 3.4e38 given as text reads as infinite.
-        let beyond = if stops.is_infinite() { " (a number beyond about 3.4e38 reads as infinite)" } else { "" };
+        let beyond = if stops.is_infinite() { " (an infinity, or a number beyond about 3.4e38)" } else { "" };
         return Err(format!("must be a finite number of stops, got {stops}{beyond}"));
     }
     Ok(())

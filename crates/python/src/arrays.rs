@@ -95,7 +95,10 @@ pub(crate) fn image_arg(image: &Bound<'_, PyAny>, what: &str) -> PyResult<Film> 
             .is_ok_and(|n| n > 4)
     {
         let np = py.import("numpy")?;
-        let large = np.call_method1("greater", (np.call_method1("abs", (&array,))?, f32::MAX as f64))?;
+        // From f32::MAX and half its last place up a value rounds to an infinity; below, to a
+        // finite float32 (3.40282347e38, FLT_MAX as written, is one).
+        let rounds_to_infinity = f32::MAX as f64 + 2f64.powi(103);
+        let large = np.call_method1("greater_equal", (np.call_method1("abs", (&array,))?, rounds_to_infinity))?;
         let beyond = np.call_method1("logical_and", (np.call_method1("isfinite", (&array,))?, large))?;
         if beyond.call_method0("any")?.extract::<bool>()? {
             let at: Vec<usize> =

@@ -52,11 +52,15 @@ pub(crate) fn file_error(path: &Path, message: String) -> PyErr {
     }
 }
 
-/// The exception for an output `path` that the library's check of outputs refused with `e`:
-/// the `OSError` of why the file system will not take it where that is plain (its directory
-/// missing, or not a directory; a directory where the file would go), else the library's own
-/// (a name of no image format is a `ValueError`).
+/// The exception for an image output `path` that the library's check of outputs refused with
+/// `e`: a name of no image format the caller's `ValueError` (the library checks it first, and
+/// its message says so), else the `OSError` of why the file system will not take it (its
+/// directory missing, or not a directory; a directory where the file would go; else its
+/// directory refused the probe's write: permissions, a read-only file system).
 pub(crate) fn output_error(path: &Path, e: Error) -> PyErr {
+    if fogplanes::film::ImageFormat::from_path(path).is_err() {
+        return py_error(e);
+    }
     let message = e.to_string();
     if path.is_dir() {
         return PyIsADirectoryError::new_err(message);
@@ -65,6 +69,6 @@ pub(crate) fn output_error(path: &Path, e: Error) -> PyErr {
     match std::fs::metadata(parent) {
         Err(io) => os_error(io.kind(), message),
         Ok(m) if !m.is_dir() => PyNotADirectoryError::new_err(message),
-        Ok(_) => py_error(e),
+        Ok(_) => PyOSError::new_err(message),
     }
 }

@@ -79,9 +79,10 @@ impl Given {
         value: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Option<T>> {
         let Some(v) = value else { return Ok(None) };
-        let Ok(v) = v.extract::<String>() else {
+        if !v.is_instance_of::<pyo3::types::PyString>() {
             return Err(wrong_type(setting.keyword(), v, "a name (a str)"));
-        };
+        }
+        let v = text(setting.keyword(), v)?;
         self.reprs.push((setting, py_str(&v)));
         v.parse().map(Some).map_err(|m| self.invalid(setting, m))
     }
