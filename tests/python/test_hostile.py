@@ -29,6 +29,9 @@ def scene():
     [
         # A TypeError that named nothing ("'int' object cannot be converted to 'PyString'").
         (dict(estimator=5), TypeError, r"^estimator=5: expected a name \(a str\), got int$"),
+        # A str of no valid Unicode (a lone surrogate) said so: "expected a name (a str), got str".
+        (dict(estimator="\ud800"), ValueError, r"^estimator: not valid Unicode text"),
+        (dict(device="\ud800"), ValueError, r"^device: not valid Unicode text"),
         (dict(sampler=1.5), TypeError, r"^sampler=1.5: expected a name"),
         (dict(pixel_center="x"), TypeError, r"^pixel_center='x': expected True or False, got str$"),
         (dict(return_stats=1), TypeError, r"^return_stats=1: expected True or False, got int$"),
