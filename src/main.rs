@@ -58,17 +58,17 @@ fn parse() -> Cli {
 fn negative_pairs(args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
     const PAIRS: [&str; 4] = ["--resolution", "--resolutions", "--plane-range", "--rows"];
     let mut out: Vec<std::ffi::OsString> = Vec::with_capacity(args.len());
+    let negative = |v: &std::ffi::OsString| {
+        v.to_str().is_some_and(|v| v.strip_prefix('-').is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit())))
+    };
     let mut args = args.into_iter().peekable();
     while let Some(a) = args.next() {
-        let negative = |v: &std::ffi::OsString| {
-            v.to_str().is_some_and(|v| v.strip_prefix('-').is_some_and(|r| r.starts_with(|c: char| c.is_ascii_digit())))
-        };
-        match (a.to_str(), args.peek()) {
-            (Some(flag), Some(v)) if PAIRS.contains(&flag) && negative(v) => {
-                let v = args.next().expect("peeked");
-                out.push(format!("{flag}={}", v.to_str().expect("checked")).into());
-            }
-            _ => out.push(a),
+        if let Some(flag) = a.to_str().filter(|f| PAIRS.contains(f))
+            && let Some(v) = args.next_if(negative)
+        {
+            out.push(format!("{flag}={}", v.to_string_lossy()).into());
+        } else {
+            out.push(a);
         }
     }
     out
