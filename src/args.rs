@@ -38,8 +38,8 @@ pub(crate) enum Command {
     /// Render a scene with photon planes.
     ///
     /// Samples the planes from the lights, intersects every camera ray with them and weights
-    /// each hit with the chosen estimator. Prints a one-line summary: estimator, planes, hits,
-    /// seconds.
+    /// each hit with the chosen estimator. Prints a summary line (estimator, planes, hits,
+    /// seconds), then a `wrote` line for each file written.
     #[command(after_long_help = chunk_note())]
     Render(RenderArgs),
     /// Render the independent reference (light point + equiangular distance sampling).
@@ -209,7 +209,8 @@ pub(crate) struct WatchArgs {
     /// missing) as it completes; after an interruption (Ctrl-C, a kill), the same command
     /// resumes from it, with the bits of an uninterrupted run. Refused if CK holds another
     /// scene's or other settings' work. A finished job leaves its parts there
-    /// (`fogplanes merge CK/*.npz` reads them): remove CK when done.
+    /// (`fogplanes merge CK/*.npz -o OUT.exr` reads them; an adaptive reference's, CK/rows_*.npz
+    /// without its pilot pass): remove CK when done.
     #[arg(long, value_name = "CK", conflicts_with = "partial")]
     pub(crate) checkpoint: Option<PathBuf>,
 }

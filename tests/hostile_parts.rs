@@ -117,6 +117,7 @@ fn every_option_is_used_or_refused() {
         (vec!["render", SCENE, "--planes", "200", "--exposure", "1", "--partial", "p.npz"], "--exposure"),
         (vec!["reference", SCENE, "--spp", "16", "--exposure", "1", "-o", s(&out)], "--exposure"),
         (vec!["merge", "a.npz", "b.npz", "--exposure", "1", "-o", s(&out)], "--exposure"),
+        (vec!["render", SCENE, "--planes", "200", "--device", "cpu", "--rays-on-cpu", "-o", s(&out)], "--rays-on-cpu"),
     ] {
         let args = if args[0] == "merge" { args } else { [&args[..], &small].concat() };
         assert_refused(&fogplanes(&args), &format!("{args:?}"), &[names]);

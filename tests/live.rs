@@ -601,6 +601,27 @@ fn a_reference_killed_at_random_moments_resumes_to_the_uninterrupted_bits() {
     );
     let load = |name: &str| Film::load_exr(&dir.join(name)).unwrap();
     assert!(same_bits(&load("out.exr"), &load("whole.exr")) && same_bits(&load("out_err.exr"), &load("whole_err.exr")));
+    // The finished checkpoint holds the pilot pass beside the bands: `merge CK/*.npz` says to
+    // leave it out, and the bands alone merge to the image.
+    let mut npz: Vec<PathBuf> = std::fs::read_dir(&ck)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "npz"))
+        .collect();
+    npz.sort();
+    let merged = dir.join("merged.exr");
+    let merge = |parts: &[PathBuf]| {
+        let mut v = vec!["merge", "-o", path(&merged)];
+        v.extend(parts.iter().map(|p| path(p)));
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let e = refused(&strs(&merge(&npz)));
+    assert!(e.contains("pilot.npz is a reference's pilot pass") && e.contains("CK/rows_*.npz"), "{e}");
+    let bands: Vec<PathBuf> =
+        npz.into_iter().filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("rows_")).collect();
+    assert!(bands.len() >= 2, "{bands:?}");
+    succeeded(&fogplanes(&strs(&merge(&bands))), "the bands merged");
+    assert!(same_bits(&load("merged.exr"), &load("whole.exr")));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

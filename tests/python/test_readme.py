@@ -20,6 +20,9 @@ Comment lines just above a block's opening fence steer it:
   (CI's environment has them all).
 - `<!-- file: NAME -->` above a ```toml block: the block is the file NAME that the guide asks
   the reader to save; it is written into the working directory before later blocks run.
+- `<!-- prints: exactly -->`: the block's standard output is the indented block just after it
+  (its sample output, where the output depends on nothing but the inputs), line for line: a
+  sample that no longer holds fails.
 
 Indented code blocks are never run: the two commands at the top of the front page (a full
 build and the whole test suite) and sample outputs are indented. Each block's wall time is
@@ -54,7 +57,7 @@ WALK = [README] + [ROOT / "docs" / name for name in (
     "guide.md", "python.md", "watching.md", "comparison_page.md", "results.md", "cluster.md",
     "mitsuba.md")]
 RUN = ("sh", "bash", "python")
-DIRECTIVE = re.compile(r"<!--\s*(not run|needs|file)\s*:\s*(.*?)\s*-->")
+DIRECTIVE = re.compile(r"<!--\s*(not run|needs|file|prints)\s*:\s*(.*?)\s*-->")
 # The longest any one block may take on a loaded machine before it counts as hung.
 TIMEOUT_SECONDS = 240
 
@@ -66,6 +69,8 @@ class Block:
     line: int  # of the opening fence, 1-based
     text: str
     directives: dict[str, str] = field(default_factory=dict)
+    # The indented block just after the fenced one (a sample output), dedented; None if none.
+    sample: str | None = None
 
     @property
     def id(self) -> str:
@@ -92,7 +97,8 @@ def blocks(markdown: str, page: str = "README.md") -> list[Block]:
                 body.append(lines[i])
                 i += 1
             assert i < len(lines), f"{page} line {start}: a fenced block is not closed"
-            found.append(Block(page, info[0] if info else "", start, "\n".join(body) + "\n", directives))
+            found.append(Block(page, info[0] if info else "", start, "\n".join(body) + "\n", directives,
+                               indented_after(lines, i + 1)))
             directives = {}
         elif m := DIRECTIVE.fullmatch(stripped):
             directives = {**directives, m.group(1): m.group(2)}
@@ -100,6 +106,17 @@ def blocks(markdown: str, page: str = "README.md") -> list[Block]:
             directives = {}
         i += 1
     return found
+
+
+def indented_after(lines: list[str], i: int) -> str | None:
+    """The indented block (four spaces) that follows line i after blank lines, dedented."""
+    while i < len(lines) and not lines[i].strip():
+        i += 1
+    sample = []
+    while i < len(lines) and (lines[i].startswith("    ") or not lines[i].strip()):
+        sample.append(lines[i][4:])
+        i += 1
+    return "\n".join(sample).strip("\n") or None
 
 
 def page_blocks(path: Path) -> list[Block]:
@@ -119,6 +136,8 @@ def test_the_walk_has_blocks_to_run_and_marks_the_rest():
     assert not unknown, f"blocks this test neither runs nor knows: {unknown}"
     for b in BLOCKS:
         assert "file" not in b.directives or b.language not in RUN, f"{b.id}: a file is data, not a command"
+        assert "prints" not in b.directives or (b.directives["prints"] == "exactly" and b.sample), (
+            f"{b.id}: `prints: exactly` needs the sample output indented just after the block")
         assert "not run" not in b.directives or b.directives["not run"], f"{b.id}: say why it is not run"
 
 
@@ -222,3 +241,7 @@ def test_block(block: Block, workdir: Path, request):
         f"{block.where} ({block.language}) exited {result.returncode}\n"
         f"--- block\n{block.text}--- stdout\n{result.stdout}\n--- stderr\n{result.stderr}"
     )
+    if "prints" in block.directives:
+        assert result.stdout.strip("\n") == block.sample, (
+            f"{block.where}: the page's sample output no longer holds\n--- the page\n{block.sample}\n"
+            f"--- printed\n{result.stdout}")

@@ -507,7 +507,15 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&mut std::fs::File) -> R
     let (tmp, mut file) = {
         let mut files = unfinished();
         let tmp = if special { temporary_in(&std::env::temp_dir(), path) } else { temporary_path(&target) };
-        let file = std::fs::File::create(&tmp).map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
+        // Readable too: an EXR's header is read back and its attributes put in order
+        // ([`sort_exr_attributes`]).
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&tmp)
+            .map_err(|e| Error::write(path, format!("cannot write: {e}")))?;
         files.unfinished.push(tmp.clone());
         (tmp, file)
     };
@@ -621,8 +629,9 @@ impl Film {
             }
             Image::from_layer(Layer::new((w, self.height as usize), attributes, Encoding::default(), rgb))
                 .write()
-                .to_unbuffered(file)
-                .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
+                .to_unbuffered(&mut *file)
+                .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))?;
+            sort_exr_attributes(file).map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))
         })
     }
 
@@ -816,6 +825,70 @@ pub fn save_rgb8_png(img: &image::RgbImage, path: &Path) -> Result<()> {
     write_file_atomically(path, &bytes)
 }
 
+/// The attributes of a written single-part EXR's header put in the order of their names. The
+/// `exr` crate writes the custom ones (the record of how an image was made, [`ImageInfo`]) in a
+/// hash map's order, which differs from process to process, so that two runs of one command
+/// wrote the same pixels in files of different bytes. The header keeps its length (the same
+/// attributes, in another order), so the offset table after it stays true; the format leaves
+/// the order free.
+fn sort_exr_attributes(file: &mut std::fs::File) -> std::io::Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    fn bad(what: &str) -> std::io::Error {
+        std::io::Error::other(format!("its header as written: {what}"))
+    }
+    /// The file's first `need` bytes in `head`, read 4 KB at a time.
+    fn more(file: &mut std::fs::File, head: &mut Vec<u8>, need: usize) -> std::io::Result<()> {
+        while head.len() < need {
+            let before = head.len();
+            Read::by_ref(file).take(4096).read_to_end(head)?;
+            if head.len() == before {
+                return Err(bad("it ends inside an attribute"));
+            }
+        }
+        Ok(())
+    }
+    /// The place of the first NUL from `from`.
+    fn nul(file: &mut std::fs::File, head: &mut Vec<u8>, from: usize) -> std::io::Result<usize> {
+        loop {
+            if let Some(k) = head.get(from..).and_then(|rest| rest.iter().position(|&b| b == 0)) {
+                return Ok(from + k);
+            }
+            let len = head.len().max(from);
+            more(file, head, len + 1)?;
+        }
+    }
+    // Magic number and version field, then the attributes: name NUL, type NUL, size (i32, little
+    // endian), value; an empty name ends the header.
+    let mut head = Vec::new();
+    file.seek(SeekFrom::Start(0))?;
+    more(file, &mut head, 8)?;
+    if head[..4] != [0x76, 0x2f, 0x31, 0x01] || head[5] & 0x10 != 0 {
+        return Err(bad("not a single-part EXR"));
+    }
+    let (mut at, mut spans) = (8usize, Vec::new());
+    loop {
+        let name_end = nul(file, &mut head, at)?;
+        if name_end == at {
+            break;
+        }
+        let type_end = nul(file, &mut head, name_end + 1)?;
+        more(file, &mut head, type_end + 5)?;
+        let size = i32::from_le_bytes(head[type_end + 1..type_end + 5].try_into().expect("four bytes"));
+        let size = usize::try_from(size).map_err(|_| bad("a negative size"))?;
+        let end = type_end + 5 + size;
+        more(file, &mut head, end)?;
+        spans.push((at, name_end, end));
+        at = end;
+    }
+    // By name; names are unique in a header.
+    spans.sort_by(|a, b| head[a.0..a.1].cmp(&head[b.0..b.1]));
+    let attributes: Vec<u8> = spans.iter().flat_map(|&(from, _, to)| head[from..to].iter().copied()).collect();
+    debug_assert_eq!(attributes.len(), at - 8);
+    file.seek(SeekFrom::Start(8))?;
+    file.write_all(&attributes)?;
+    file.seek(SeekFrom::End(0)).map(drop)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -925,6 +998,26 @@ mod tests {
         );
         let (back, read) = Film::load_exr_with_info(&with).unwrap();
         assert_eq!((back, read.as_ref()), (film.clone(), Some(&info)));
+        // The same image and record are the same bytes, whatever order the exr crate's hash
+        // map gives its attributes (a new one for each file), and the header is in name order.
+        let bytes = std::fs::read(&with).unwrap();
+        for k in 0..4 {
+            let again = dir.join(format!("again{k}.exr"));
+            film.save_with_info(&again, 0.0, Some(&info)).unwrap();
+            assert!(std::fs::read(&again).unwrap() == bytes, "write {k} differs from the first");
+        }
+        let names: Vec<String> = exr::meta::MetaData::read_from_file(&with, false).unwrap().headers[0]
+            .own_attributes
+            .other
+            .keys()
+            .map(|k| k.to_string())
+            .collect();
+        assert!(names.len() >= 8, "{names:?}");
+        let at =
+            |name: &str| bytes.windows(name.len() + 1).position(|w| w == [name.as_bytes(), &[0]].concat()).unwrap();
+        let mut order: Vec<&String> = names.iter().collect();
+        order.sort_by_key(|n| at(n));
+        assert!(order.windows(2).all(|w| w[0] < w[1]), "{order:?}");
         assert_eq!(read_image_info(&with).unwrap(), (Some(info.clone()), (3, 2)));
         assert_eq!(Film::load_exr_with_info(&without).unwrap(), (film, None));
         assert_eq!(info.to_string().lines().next(), Some("image: render"));

@@ -63,6 +63,20 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged> {
     };
     for p in &parts[1..] {
         let (a, b) = (&first.meta, &p.meta);
+        // An adaptive reference's checkpoint holds its pilot pass beside its bands: `CK/*.npz`
+        // names both, and only the bands are the image.
+        if let Some((pilot, band)) = match (a.kind, b.kind) {
+            (PartKind::Pilot, PartKind::Reference) => Some((first, p)),
+            (PartKind::Reference, PartKind::Pilot) => Some((p, first)),
+            _ => None,
+        } {
+            return Err(Error::Partial(format!(
+                "{} is a reference's pilot pass and {} a band of its image: merge the bands alone \
+                 (of a checkpoint CK, CK/rows_*.npz)",
+                pilot.path.display(),
+                band.path.display()
+            )));
+        }
         if b.kind != a.kind
             || b.fingerprint != a.fingerprint
             || b.total != a.total

@@ -314,6 +314,13 @@ pub fn check_render(scene: &Scene, given: &Overrides) -> Result<Pending<Resolved
     check_render_memory_with(scene.camera.width, scene.camera.height, held, extra)
         .map_err(invalid(Setting::Resolution, origin(&given.resolution)))?;
     let kernel = given.kernel.unwrap_or_default().resolve()?;
+    if given.rays_on_cpu && given.device == Some(Device::Cpu) {
+        // Not left unused without a word: it moves a GPU render's ray sets.
+        return Err(Error::option(
+            Setting::Device,
+            "cpu with --rays-on-cpu: that makes a GPU render's ray sets on the CPU, where a CPU render makes its own (give --device gpu, or leave it out)",
+        ));
+    }
     let wanted = wanted_device(given.device, given.accelerator.is_some() || given.kernel.is_some())?;
     let options = RenderOptions {
         planes: planes as usize,

@@ -320,6 +320,8 @@ pub(crate) fn finish_render<'py>(
         rays: film.pixels.len() as u64 * o.ray_sets() as u64,
         hits: p.hits,
         seconds_total: p.seconds,
+        // The partials' devices, where one render's stats name its own ("; " is in no name).
+        device: p.devices.names().join("; "),
         devices: p.devices.clone(),
         ..Default::default()
     };

@@ -52,7 +52,8 @@ pub(crate) fn load_scene(path: &Bound<'_, PyAny>) -> PyResult<PyScene> {
 /// `return_stderr=True`, also the estimated standard error of each pixel (as `render
 /// --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
 /// `device="gpu"` gathers on the GPU through wgpu (ValueError without an adapter), `"auto"` on
-/// the GPU when one is found; the image agrees with the CPU's within f32 rounding (docs/gpu.md).
+/// a GPU when one is found (not an emulated adapter such as lavapipe, which `devices()` lists
+/// too; else the CPU); the image agrees with the CPU's within f32 rounding (docs/gpu.md).
 /// `progress=True` shows a progress bar on standard error (a line per tenth when it is not a
 /// terminal, as in a notebook or a log).
 ///

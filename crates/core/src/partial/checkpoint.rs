@@ -17,7 +17,8 @@
 //! the nodes it added into them; a kill between the two leaves those as well, which the next
 //! opening removes, and a kill between a window's files leaves the window before's nodes and
 //! spread, which the next opening resumes from. Every file is a part
-//! of the job's image (`fogplanes merge CK/*.npz` reads a finished one), read back through
+//! of the job's image (`fogplanes merge CK/*.npz -o OUT.exr` reads a finished one, a reference's
+//! `CK/rows_*.npz` without its pilot pass), read back through
 //! [`read_part`] and trusted no more than any part: its kind, its fingerprint (the scene and
 //! every setting that changes the image) and its shape are checked, and a directory holding
 //! another job's parts or anything else is refused, naming it.

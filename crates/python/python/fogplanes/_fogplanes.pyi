@@ -15,8 +15,9 @@ KERNELS: Final[tuple[str, ...]]
 SAMPLERS: Final[tuple[str, ...]]
 #: How rays find planes: raster, bvh, brute-force.
 ACCELERATORS: Final[tuple[str, ...]]
-#: The processors that gather: cpu, gpu (through wgpu: Vulkan, Metal, DX12), auto (the GPU when
-#: an adapter is found, else the CPU). docs/gpu.md says what is identical where.
+#: The processors that gather: cpu, gpu (through wgpu: Vulkan, Metal, DX12), auto (a GPU when
+#: one is found, not an emulated adapter such as lavapipe, else the CPU). docs/gpu.md says what
+#: is identical where.
 DEVICES: Final[tuple[str, ...]]
 #: glibc's allocator settings a render's process runs best with, as the environment variables
 #: glibc reads when a process starts (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_: bytes, as
@@ -162,7 +163,8 @@ class RenderStats(TypedDict):
 
     estimator: str
     kernel: str
-    #: The device that gathered: "cpu", or "gpu: " and the adapter's name.
+    #: The device that gathered: "cpu", or "gpu: " and the adapter's name (of `finish_render`
+    #: and `fogplanes.distributed.render`: the partials' `devices`, joined by "; ").
     device: str
     #: The devices whose gathering the image holds, each once (a `finish_render` of partials
     #: gathered on several devices names them all).
@@ -271,7 +273,8 @@ def render(
     With `return_stderr=True`, also the estimated standard error of each pixel (as `render
     --stderr-image`); with `return_stats=True`, also the stats: (image[, stderr][, stats]).
     `device="gpu"` gathers on the GPU through wgpu (a Vulkan, Metal or DX12 adapter; ValueError
-    without one), `"gpu:N"` on adapter N of `devices()`, `"auto"` on the GPU when one is found;
+    without one), `"gpu:N"` on adapter N of `devices()`, `"auto"` on a GPU when one is found
+    (not an emulated adapter such as lavapipe, which `devices()` lists too; else the CPU);
     the image agrees with the CPU's within f32 rounding (docs/gpu.md), and the stats' "device"
     says which gathered.
     `progress=True` shows progress on standard error (one line redrawn on a terminal, else a

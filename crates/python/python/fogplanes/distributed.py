@@ -437,7 +437,8 @@ def render(scene: SceneArg, estimator: str | None = None, *, client: Client | No
     `progress`: a text progress bar on stderr. `retries`: how many times a task that raises is
     retried (an integer >= 0). `chunks_per_task`: canonical chunks rendered by one task, a
     power of two (None: enough tasks for TASKS_PER_SLOT per Dask thread). The other arguments
-    are `fogplanes.render`'s (`time_budget` excepted: a distributed render has a plane count).
+    are `fogplanes.render`'s but `time_budget`, `target_error` (a distributed render has a plane
+    count) and `return_stderr` (it makes no error image).
     Bad arguments raise ValueError or TypeError naming them before any cluster starts."""
     kwargs = dict(render_kwargs, estimator=estimator)
     _common(client, workers, threads, progress, retries)
@@ -580,22 +581,30 @@ def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | Non
     back, one dict per render: estimator, planes, seed, smape, mse, rel_mse, max_abs, hits,
     seconds (the render's wall time on its worker). The reference (an image, a path, or the
     (image, stderr) pair of `reference`) is sent to every worker once. `estimators` default to
-    every estimator, `planes` and `seeds` to the scene's; the other keyword arguments are
-    `fogplanes.render`'s. `scene`, `client`, `workers`, `threads`, `progress`, `retries` as in
-    `render`; the reference must have the renders' shape (height, width, 3)."""
+    every estimator, `planes` and `seeds` to the scene's (a row's `planes` and `seed` are those
+    it rendered, the scene's where none was given; its `estimator` is the render's label, such
+    as "smis-exact-k4" with `orientations=4`); the other keyword arguments are
+    `fogplanes.render`'s but `time_budget`, `target_error` (each render has a plane count),
+    `return_stats` and `return_stderr` (a row holds the numbers). `scene`, `client`, `workers`,
+    `threads`, `progress`, `retries` as in `render`; the reference must have the renders' shape
+    (height, width, 3)."""
     scene = _scene(scene)
     _common(client, workers, threads, progress, retries)
     for axis in ("estimator", "seed"):  # the sweep's own: a single one is a list of one
         if axis in render_kwargs:
             raise TypeError(f"unexpected keyword argument '{axis}': table sweeps {axis}s= (one or a list)")
+    for key in ("time_budget", "target_error"):
+        if render_kwargs.get(key) is not None:
+            raise ValueError(f"{key}: each of a table's renders has a plane count; give planes= (one or a list)")
     kwargs = _render_kwargs(render_kwargs)
     runs = [(e, n, s) for e in _listed("estimators", estimators, native.ESTIMATORS, str, "a name (a str)")
             for n in _listed("planes", planes, [None], numbers.Integral, "an integer")
             for s in _listed("seeds", seeds, [None], numbers.Integral, "an integer")]
     shapes = set()
-    for e, n, s in runs:  # every setting checked before any cluster
-        run = _render_kwargs(dict(estimator=e, planes=n, seed=s))
-        shapes.add(tuple(native.plan_render(scene, **run, **kwargs)["shape"]))
+    for k, (e, n, s) in enumerate(runs):  # every setting checked before any cluster
+        plan = native.plan_render(scene, **_render_kwargs(dict(estimator=e, planes=n, seed=s)), **kwargs)
+        shapes.add(tuple(plan["shape"]))
+        runs[k] = (e, n, plan["seed"])  # the scene's seed, where none is given, named in its row
     _check_threads(scene, threads)
     if isinstance(reference, tuple) and len(reference) == 2:  # reference()'s (image, stderr)
         reference = reference[0]
@@ -615,7 +624,10 @@ def table(scene: SceneArg, reference: Any, estimators: str | Iterable[str] | Non
     _check_image(ref, "reference")
     stem = f"{tokenize(scene, ref, kwargs)}-{_call_id()}"
     with _session(client, workers, threads) as (c, per_task, _):
-        shared_ref = c.scatter(ref, broadcast=True, hash=True)
+        # A key of this call's own (hash=False: a random one), not one of the reference's content,
+        # which every call with that reference shared: a call that released it took it from
+        # the tasks of the next ("lost dependencies").
+        shared_ref = c.scatter(ref, broadcast=True, hash=False)
         rows = [c.submit(_row, scene, shared_ref, e, n, s, per_task, kwargs, retries=retries,
                          key=f"fogplanes-table-{stem}-{e}-{n}-{s}") for e, n, s in runs]
         try:
