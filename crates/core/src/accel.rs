@@ -1,5 +1,5 @@
 //! The planes of a render prepared for gathering, behind one interface whatever the
-//! intersection structure (docs/mathematics.md section 6): a set's planes are sampled in pieces,
+//! intersection structure (the raster, the BVH, the brute force or the GPU): a set's planes are sampled in pieces,
 //! each plane's constants prepared for rays from the camera ([`GatherContext`]), and the
 //! structure chosen by [`Accelerator`] built over them; [`PreparedPlanes::gather`] then runs one
 //! weighting through the structure's [`Aggregate::gather`].
