@@ -55,8 +55,11 @@ fn scene(file: &str, w: u32, h: u32) -> Scene {
     Scene::load(&path).unwrap().with_resolution(w, h).unwrap()
 }
 
+/// `given` on `device`: on the CPU without `rays_on_cpu`, which moves a GPU render's ray sets
+/// and is refused for the CPU (a CPU render makes its own there).
 fn on(given: &Overrides, device: Device) -> Overrides {
-    Overrides { device: Some(device), ..given.clone() }
+    let rays_on_cpu = given.rays_on_cpu && device != Device::Cpu;
+    Overrides { device: Some(device), rays_on_cpu, ..given.clone() }
 }
 
 /// `planes` planes of `weighting` along the CPU's rays (the GPU gathering the rays the CPU
