@@ -426,7 +426,7 @@ fn tuned_gpu_renders_keep_the_image_and_say_how_they_were_made() {
 /// items' size fixed the same pixels, bit for bit (each piece's sums added to a pixel as they
 /// were alone, the two halves of a group too, side by side along one ray set); with
 /// smis-exact at K = 5 and the orientations' table too, whose rows are the joined planes', and
-/// with 48 ray sets, whose pieces are binned in two batches of a round (a batch's items were
+/// with 48 ray sets, whose 96 pieces are binned in three batches of a round (a batch's items were
 /// once bounded by its tiles, not its tiles' segments, and 48 sets lost a tenth of the hits).
 #[test]
 fn a_chunks_pieces_are_gathered_in_one_dispatch_with_the_same_bits() {

@@ -23,7 +23,9 @@ fn against_quadrature(scene: &Scene, (i, j): (u32, u32), seed: (u64, u64), rel_t
     let lights = scene.light_distribution();
     let cam = &scene.camera;
     let we = cam.direction(i as f64 + 0.5, j as f64 + 0.5).normalize();
-    let Some((t0, t1)) = scene.camera_segment(cam.position, we).0 else { return Vec::new() };
+    let Some((t0, t1)) = scene.camera_segment(cam.position, we).0 else {
+        panic!("pixel ({i}, {j}) does not cross the fog: a test pixel must")
+    };
     let truth = single_scattering(scene, cam.position, we, rel_tol);
     let mut rng = rng_for(99, seed.0, seed.1);
     let mut estimate = [MeanEstimate::default(); 3];
@@ -65,29 +67,47 @@ fn reference_samples_match_quadrature_at_pixel_centres() {
 #[test]
 fn reference_image_reports_a_standard_error_that_shrinks_with_samples() {
     let scene = six_lights().with_resolution(32, 18).unwrap();
-    let opts = |spp| ReferenceOptions { spp, uniform: true, seed: 3, pixel_center: true };
-    let (a, b) = (
-        render_reference(&scene, &opts(64), Control::none()).unwrap(),
-        render_reference(&scene, &opts(1024), Control::none()).unwrap(),
-    );
-    assert!(a.mean.all_finite_non_negative() && b.mean.all_finite_non_negative());
+    // Each image its own seed: with one, the smaller image's samples are the first of the
+    // larger's (the same replicate shifts), and the two are not independent (E z^2 about 15/17
+    // at 64 and 1024 spp, where 1 is the truth; the bound of 1.5 once held for that alone).
+    let opts = |spp, seed| ReferenceOptions { spp, uniform: true, seed, pixel_center: true };
+    let [a, b, c] = [(64, 3), (256, 5), (1024, 4)]
+        .map(|(spp, seed)| render_reference(&scene, &opts(spp, seed), Control::none()).unwrap());
+    assert!([&a, &b, &c].iter().all(|r| r.mean.all_finite_non_negative()));
     // The standard error falls as 1 / sqrt(spp): a factor 4 for 16x the samples, within 25%.
-    let ratio = a.noise_mse().sqrt() / b.noise_mse().sqrt();
+    let ratio = a.noise_mse().sqrt() / c.noise_mse().sqrt();
     assert!((3.0..5.0).contains(&ratio), "ratio {ratio}");
-    // The images agree within their errors: mean squared z-score near 1.
-    let mut z2 = 0.0;
+    // The images at 256 and 1024 spp agree within their errors, from both sides: z^2 of each
+    // pixel's channel, against chi-square with one degree of freedom (its standard errors from
+    // 16 replicates: t^2 with about 30 degrees of freedom, mean 1.07, median 0.47). About 576
+    // independent values (the channels share their paths): the median within 4 of its
+    // standard deviations, 1 / (2 f(0.455) sqrt(576)) = 0.044, and the mean within 4 of
+    // sqrt(2 / 576) = 0.059 of 1.07. An error overstated 3 times gives a mean near 0.12 and a
+    // median near 0.05; one understated 1.25 times a mean near 1.67. (At 64 spp, 4 samples a
+    // replicate, the mean is 1.6 to 1.7: the heavy tails of pixels near the panels, with the
+    // median still 0.47 to 0.49; at 256 spp, 16 samples a replicate, 1.10 to 1.18 over seeds
+    // 3, 5 and 6.)
+    let mut z2: Vec<f64> = Vec::new();
     for ((ma, mb), (sa, sb)) in
-        a.mean.pixels.iter().zip(&b.mean.pixels).zip(a.stderr.pixels.iter().zip(&b.stderr.pixels))
+        b.mean.pixels.iter().zip(&c.mean.pixels).zip(b.stderr.pixels.iter().zip(&c.stderr.pixels))
     {
-        for c in 0..3 {
-            let s2 = sa[c] * sa[c] + sb[c] * sb[c];
+        for k in 0..3 {
+            let s2 = sa[k] * sa[k] + sb[k] * sb[k];
             if s2 > 0.0 {
-                z2 += ((ma[c] - mb[c]) * (ma[c] - mb[c]) / s2) as f64;
+                z2.push(((ma[k] - mb[k]) * (ma[k] - mb[k]) / s2) as f64);
             }
         }
     }
-    let mean_z2 = z2 / (3.0 * a.mean.pixels.len() as f64);
-    assert!(mean_z2 < 1.5, "mean squared z {mean_z2}");
+    let n = z2.len();
+    let mean_z2 = z2.iter().sum::<f64>() / n.max(1) as f64;
+    z2.sort_by(|x, y| x.total_cmp(y));
+    let median_z2 = z2.get(n / 2).copied().unwrap_or(f64::NAN);
+    println!("z^2 over {n} pixel channels: mean {mean_z2:.3}, median {median_z2:.3}; noise ratio {ratio:.3}");
+    assert!(n > b.mean.pixels.len(), "{n} pixel channels with an error");
+    assert!(
+        (0.83..1.31).contains(&mean_z2) && (0.29..0.65).contains(&median_z2),
+        "z^2: mean {mean_z2}, median {median_z2}"
+    );
 }
 
 #[test]

@@ -79,9 +79,12 @@ impl Estimator {
                 ("smis-cosine", "eq. 27, cosine weight", "width(alpha, y') mean_k |det(alpha_k)|", true)
             }
             Estimator::SmisExact => ("smis-exact", "eq. 27, exact densities", "mean_k g(alpha_k)", true),
-            Estimator::CmisExact => {
-                ("cmis-exact", "eq. 24, not in the paper: closed form", "(1/pi) integral of g over [0, pi)", false)
-            }
+            Estimator::CmisExact => (
+                "cmis-exact",
+                "eq. 24, not evaluated in the paper: closed form",
+                "(1/pi) integral of g over [0, pi)",
+                false,
+            ),
         };
         EstimatorInfo { name, source, denominator, orientations }
     }
