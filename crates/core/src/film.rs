@@ -627,7 +627,12 @@ impl Film {
             if let Some(info) = info {
                 attributes.other = info.attributes();
             }
-            Image::from_layer(Layer::new((w, self.height as usize), attributes, Encoding::default(), rgb))
+            // The blocks in increasing order: under `Unspecified` (the default) the crate writes
+            // each block as its thread finishes compressing it, so that a render's EXR of
+            // 640x360 came out in other bytes at every run (the offset table and the blocks in
+            // another order; the same pixels).
+            let encoding = Encoding { line_order: exr::meta::attribute::LineOrder::Increasing, ..Encoding::default() };
+            Image::from_layer(Layer::new((w, self.height as usize), attributes, encoding, rgb))
                 .write()
                 .to_unbuffered(&mut *file)
                 .map_err(|e| Error::write(path, format!("cannot write EXR: {e}")))?;
@@ -999,13 +1004,24 @@ mod tests {
         let (back, read) = Film::load_exr_with_info(&with).unwrap();
         assert_eq!((back, read.as_ref()), (film.clone(), Some(&info)));
         // The same image and record are the same bytes, whatever order the exr crate's hash
-        // map gives its attributes (a new one for each file), and the header is in name order.
+        // map gives its attributes (a new one for each file) and its threads finish the blocks
+        // (64 x 64 tiles: 60 of them here), and the header is in name order.
         let bytes = std::fs::read(&with).unwrap();
+        let mut large = Film::new(640, 360);
+        for (k, p) in large.pixels.iter_mut().enumerate() {
+            *p = Vec3::new((k % 977) as f32 * 1e-3, (k % 13) as f32, 0.5);
+        }
+        let first = dir.join("large.exr");
+        large.save_with_info(&first, 0.0, Some(&info)).unwrap();
+        let large_bytes = std::fs::read(&first).unwrap();
         for k in 0..4 {
             let again = dir.join(format!("again{k}.exr"));
             film.save_with_info(&again, 0.0, Some(&info)).unwrap();
             assert!(std::fs::read(&again).unwrap() == bytes, "write {k} differs from the first");
+            large.save_with_info(&again, 0.0, Some(&info)).unwrap();
+            assert!(std::fs::read(&again).unwrap() == large_bytes, "the large image's write {k} differs");
         }
+        assert_eq!(Film::load_exr(&first).unwrap(), large);
         let names: Vec<String> = exr::meta::MetaData::read_from_file(&with, false).unwrap().headers[0]
             .own_attributes
             .other
