@@ -374,7 +374,7 @@ fn whole_pixel_images_match_the_reference() {
 }
 
 /// Every estimator's image against the reference, block by block as above: the tests above
-/// render the default, smis-exact with the pair; here the other five, and the two with
+/// render the default, smis-exact with the pair; here the other four, and the two with
 /// orientations at K = 4 and K = 64, through the raster, the vector kernel and the pixel filter
 /// as a render takes them (tests/unbiasedness.rs holds each weight to quadrature ray by ray, and
 /// tests/hard_scenes.rs each image's mean alone). 64 plane sets each: unweighted's and the
