@@ -202,6 +202,10 @@ fn run(truths: &Truths, sampler: Sampler, lobes: f64, weightings: &[Weighting], 
         .collect();
     let mut failures = Vec::new();
     for (i, (case, _, truth)) in truths.rays.iter().enumerate() {
+        // Each line's start: the scene, the sampler, the case, the weighting and the channel.
+        let label = |w: &Weighting, c: usize| {
+            format!("g {g:+.1} {sampler:>11} lobes {lobes:<4} {:>16} {:>18} ch{c}:", case.name, w.label())
+        };
         let mut tallies = vec![MeanRgb::default(); weightings.len()];
         for batch in &estimates {
             for (tally, &estimate) in tallies.iter_mut().zip(&batch[i]) {
@@ -214,9 +218,8 @@ fn run(truths: &Truths, sampler: Sampler, lobes: f64, weightings: &[Weighting], 
                 let (mean, se, z) = (estimate.mean(), estimate.stderr(), estimate.z(want, 0.0));
                 let tail = largest_share(estimates.iter().map(|b| f64::from(b[i][j][c])), mean);
                 let line = format!(
-                    "g {g:+.1} {sampler:>11} lobes {lobes:<4} {:>16} {:>18} ch{c}: quadrature {want:.6e}, estimate {mean:.6e} +- {se:.2e} ({:.2}%), z = {z:+.2}, largest batch {:.0}% of the variance",
-                    case.name,
-                    w.label(),
+                    "{} quadrature {want:.6e}, estimate {mean:.6e} +- {se:.2e} ({:.2}%), z = {z:+.2}, largest batch {:.0}% of the variance",
+                    label(w, c),
                     100.0 * se / want,
                     100.0 * tail
                 );
@@ -250,9 +253,8 @@ fn run(truths: &Truths, sampler: Sampler, lobes: f64, weightings: &[Weighting], 
                 let (d, want) = (difference.0[c], truth[c]);
                 let (mean, se, z) = (d.mean(), d.stderr(), d.z(0.0, 0.0));
                 let line = format!(
-                    "g {g:+.1} {sampler:>11} lobes {lobes:<4} {:>16} {:>18} ch{c}: less {}, {mean:+.2e} +- {se:.2e} ({:.3}% of the quadrature), z = {z:+.2}",
-                    case.name,
-                    w.label(),
+                    "{} less {}, {mean:+.2e} +- {se:.2e} ({:.3}% of the quadrature), z = {z:+.2}",
+                    label(w, c),
                     weightings[base].label(),
                     100.0 * se / want
                 );
