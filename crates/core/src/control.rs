@@ -108,6 +108,41 @@ impl<'a> Control<'a> {
         unsafe { out.set_len(len + n) };
     }
 
+    /// [`Control::map_units`] for an `f` that makes two values: the firsts and the seconds,
+    /// each written in place (an `unzip` after the loop, serial, moved a 640x360 image's
+    /// emission and variance in 10 ms, a quarter of the emission's time on one thread and more
+    /// than half of it on two).
+    pub fn map_units_pair<A: Send, B: Send>(
+        &self,
+        label: &'static str,
+        n: usize,
+        unit: usize,
+        f: impl Fn(usize) -> (A, B) + Sync + Send,
+    ) -> (Vec<A>, Vec<B>) {
+        use rayon::prelude::*;
+        let unit = unit.max(1);
+        let section = self.section(label);
+        let (mut firsts, mut seconds) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let parts = firsts.spare_capacity_mut()[..n].par_chunks_mut(unit);
+        parts.zip(seconds.spare_capacity_mut()[..n].par_chunks_mut(unit)).enumerate().for_each(|(u, (a, b))| {
+            section.unit(|| {
+                for (i, (a, b)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
+                    let (x, y) = f(u * unit + i);
+                    a.write(x);
+                    b.write(y);
+                }
+            })
+        });
+        section.close();
+        // SAFETY: the loop wrote all n elements of both (each chunk pair all of its own, the
+        // chunks of both cut alike), or it panicked and this line is not reached.
+        unsafe {
+            firsts.set_len(n);
+            seconds.set_len(n);
+        }
+        (firsts, seconds)
+    }
+
     /// `out[i] = f(i)` for every `i`, in parallel: units of `unit` consecutive indices, as
     /// [`Control::map_units`], written in place.
     pub fn fill_units<T: Send>(&self, label: &'static str, out: &mut [T], unit: usize, f: impl Fn(usize) -> T + Sync) {
@@ -227,5 +262,36 @@ mod tests {
         cancel.store(true, Ordering::Relaxed);
         assert!(control.is_cancelled() && matches!(control.check(), Err(Error::Cancelled)));
         assert!(Control::with_cancel(&cancel).is_cancelled() && !Control::with_progress(&progress).is_cancelled());
+    }
+
+    /// The pair map gives what `map_units` and an unzip give, in order: counts that are and are
+    /// not whole units, none, a unit larger than the count, on one thread and on eight; and it
+    /// drops what it made (a value that counts its drops).
+    #[test]
+    fn map_units_pair_is_map_units_unzipped() {
+        struct Counted<'a>(usize, &'a AtomicUsize);
+        impl Drop for Counted<'_> {
+            fn drop(&mut self) {
+                self.1.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        for threads in [1, 8] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                for (n, unit) in [(0, 4), (1, 4), (7, 4), (640, 64), (1000, 7), (5, 100)] {
+                    let f = |i: usize| (i as u32 * 3, format!("{i}"));
+                    let (a, b) = Control::none().map_units_pair("test", n, unit, f);
+                    let (x, y): (Vec<u32>, Vec<String>) =
+                        Control::none().map_units("test", n, unit, f).into_iter().unzip();
+                    assert_eq!((a, b), (x, y), "{n} in units of {unit} on {threads} threads");
+                    let dropped = AtomicUsize::new(0);
+                    let (a, b) = Control::none()
+                        .map_units_pair("test", n, unit, |i| (Counted(i, &dropped), Counted(i, &dropped)));
+                    assert!(a.iter().zip(&b).enumerate().all(|(i, (a, b))| a.0 == i && b.0 == i));
+                    drop((a, b));
+                    assert_eq!(dropped.load(Ordering::Relaxed), 2 * n);
+                }
+            });
+        }
     }
 }

@@ -93,42 +93,39 @@ fn emission_with_variance(
     let outline = if pixel_center { vec![false; (w * h) as usize] } else { outline_pixels(scene) };
     let projected = projected_panels(scene);
     let ray_sets = ray_sets.max(1);
-    control
-        .map_units("emission", (w * h) as usize, w as usize, |p| {
-            let p = p as u32;
-            let (i, j) = (p % w, p / w);
-            if !footprints.any_over(i, j) {
-                return (Vec3::ZERO, DVec3::ZERO);
+    control.map_units_pair("emission", (w * h) as usize, w as usize, |p| {
+        let p = p as u32;
+        let (i, j) = (p % w, p / w);
+        if !footprints.any_over(i, j) {
+            return (Vec3::ZERO, DVec3::ZERO);
+        }
+        let lights = footprints.over(i, j);
+        let at = |x: f64, y: f64| emission_at(scene, cam, x, y, lights.clone());
+        let (x, y) = (i as f64, j as f64);
+        if pixel_center {
+            return (at(x + 0.5, y + 0.5).as_vec3(), DVec3::ZERO);
+        }
+        let mut jitter = Jitter { x, y, rng: rng_for(seed, OUTLINE_STREAM, p as u64) };
+        let mean = match meeting(&projected, lights.clone(), i, j) {
+            Meeting::None => Mean::pairs(),
+            Meeting::One(l, region) => covered(scene, l, &region, &mut jitter),
+            Meeting::Several if outline[p as usize] => {
+                let mut m = Mean::grid(grid);
+                jitter.grid(grid, |x, y| m.add(at(x, y)));
+                m
             }
-            let lights = footprints.over(i, j);
-            let at = |x: f64, y: f64| emission_at(scene, cam, x, y, lights.clone());
-            let (x, y) = (i as f64, j as f64);
-            if pixel_center {
-                return (at(x + 0.5, y + 0.5).as_vec3(), DVec3::ZERO);
+            // No outline crosses the pixel: the same panel is first along all its rays.
+            Meeting::Several => {
+                let mut m = Mean::pairs();
+                for k in 0..ray_sets {
+                    let (sx, sy) = ray_set_position(seed, p as u64, k);
+                    m.add(at(x + sx, y + sy));
+                }
+                m
             }
-            let mut jitter = Jitter { x, y, rng: rng_for(seed, OUTLINE_STREAM, p as u64) };
-            let mean = match meeting(&projected, lights.clone(), i, j) {
-                Meeting::None => Mean::pairs(),
-                Meeting::One(l, region) => covered(scene, l, &region, &mut jitter),
-                Meeting::Several if outline[p as usize] => {
-                    let mut m = Mean::grid(grid);
-                    jitter.grid(grid, |x, y| m.add(at(x, y)));
-                    m
-                }
-                // No outline crosses the pixel: the same panel is first along all its rays.
-                Meeting::Several => {
-                    let mut m = Mean::pairs();
-                    for k in 0..ray_sets {
-                        let (sx, sy) = ray_set_position(seed, p as u64, k);
-                        m.add(at(x + sx, y + sy));
-                    }
-                    m
-                }
-            };
-            (mean.value().as_vec3(), mean.variance())
-        })
-        .into_iter()
-        .unzip()
+        };
+        (mean.value().as_vec3(), mean.variance())
+    })
 }
 
 /// The mean of samples taken one per stratum, and its variance from the differences of

@@ -70,8 +70,14 @@ impl Film {
     }
 
     /// Refuses an image holding a NaN or infinite value, naming the first one; `image` says
-    /// which image it is ("image", "reference").
+    /// which image it is ("image", "reference"). The pixels are scanned in parallel, and again
+    /// in order only to name the first one (serial, the scan was 0.4 ms of a 640x360 image's
+    /// finishing, on the path of every render).
     pub fn check_finite(&self, image: &'static str) -> Result<()> {
+        use rayon::prelude::*;
+        if self.pixels.par_iter().all(|p| p.is_finite()) {
+            return Ok(());
+        }
         match self.first_non_finite() {
             Some(pixel) => Err(Error::NonFinitePixel { image, pixel }),
             None => Ok(()),

@@ -787,10 +787,11 @@ pub fn render_from(
             }
         }
     }
-    // The direct emission (its own parallel loop over the pixels), after the chunks; on the
-    // GPU beside the last window's gathering, in the CPU's wait for the GPU, and the gather's
-    // pipelines made beside the first window's preparation (one task: the preparation keeps
-    // the other workers).
+    // The direct emission (its own parallel loop over the pixels) beside the last window's
+    // gathering: on the GPU in the CPU's wait for the GPU, on the CPU in the workers that the
+    // window's last tiles leave idle (it was a serial phase after the chunks). On the GPU the
+    // gather's pipelines are made beside the first window's preparation (one task: the
+    // preparation keeps the other workers).
     let emission = |control: Control| {
         let t = Instant::now();
         let _s = crate::trace::span("direct emission");
@@ -799,14 +800,14 @@ pub fn render_from(
     };
     let (mut emitted, mut compiled) = (None, Ok(()));
     let chunks_rendered = crate::trace::span("chunks rendered");
+    let mut emit = |control: Control| emitted = Some(emission(control));
     let partial = if matches!(opts.structure(), Accelerator::Gpu(_)) {
-        let mut emit = |control: Control| emitted = Some(emission(control));
         rayon::in_place_scope(|s| {
             s.spawn(|_| compiled = opts.structure().compile(opts.weighting));
             chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer, Some(&mut emit))
         })
     } else {
-        chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer, None)
+        chunks.render_from(opts.weighting, 0..opts.planes, resume.held, observer, Some(&mut emit))
     };
     drop(chunks_rendered);
     let partial = partial?;
