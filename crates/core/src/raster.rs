@@ -397,28 +397,50 @@ impl ScreenRaster {
     /// For each row of `first_row..first_row + rows` (at most [`BAND_ROWS`]), the columns
     /// `[first, last]` whose pixel squares may meet polygon `i`, if any: the polygon's x-range
     /// within the row's strip `[row - m, row + 1 + m]`, grown by m = [`SPAN_MARGIN`]. One walk
-    /// over the edges serves the whole band, its rows as lanes (two AVX registers): the scalar
-    /// walk, row by row, took a tenth of the gathering's instructions.
+    /// over the edges serves all the rows, as lanes: the scalar walk, row by row, took a tenth of
+    /// the gathering's instructions. As many lanes as the rows need, 4, 8 or 16 (half an AVX
+    /// register, one or two): a part of a heavy band (4 to 8 rows, [`gather_pieces`]) walks each
+    /// plane's edges once per part, and with all 16 lanes for 4 rows the walk was 10% of the
+    /// render's CPU at 16 workers, against 7% at one. Each lane is its own row's arithmetic: the
+    /// same spans whatever the lanes.
     fn spans(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
         #[cfg(target_arch = "x86_64")]
         if Kernel::Avx2.is_available() {
             // SAFETY: the CPU has the features of `spans_avx2`, just checked.
             return unsafe { self.spans_avx2(i, first_row, rows) };
         }
-        self.spans_in_lanes(i, first_row, rows)
+        self.spans_sized(i, first_row, rows)
     }
 
-    /// [`ScreenRaster::spans`] with the band's sixteen rows in two AVX registers (the same
-    /// operations: the same bits); with SSE's four lanes it took 7% of the benchmark's CPU time.
+    /// [`ScreenRaster::spans`] with the rows in AVX registers (the same operations: the same
+    /// bits); with SSE's four lanes for a band's sixteen rows it took 7% of the benchmark's CPU
+    /// time.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn spans_avx2(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
-        self.spans_in_lanes(i, first_row, rows)
+        self.spans_sized(i, first_row, rows)
     }
 
+    /// [`ScreenRaster::spans_in_lanes`] in the fewest of 4, 8 and 16 lanes that hold `rows`.
     #[inline(always)]
-    fn spans_in_lanes(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
-        const R: usize = BAND_ROWS as usize;
+    fn spans_sized(&self, i: usize, first_row: u32, rows: u32) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
+        match rows {
+            0..=4 => self.spans_in_lanes::<4>(i, first_row, rows),
+            5..=8 => self.spans_in_lanes::<8>(i, first_row, rows),
+            _ => self.spans_in_lanes::<{ BAND_ROWS as usize }>(i, first_row, rows),
+        }
+    }
+
+    /// The walk of [`ScreenRaster::spans`] with `R` rows as lanes, `rows` of them wanted (at
+    /// most `R`).
+    #[inline(always)]
+    fn spans_in_lanes<const R: usize>(
+        &self,
+        i: usize,
+        first_row: u32,
+        rows: u32,
+    ) -> [Option<(u32, u32)>; BAND_ROWS as usize] {
+        debug_assert!(rows as usize <= R && R <= BAND_ROWS as usize, "{rows} rows in {R} lanes");
         let poly = &self.vertices[self.offsets[i] as usize..self.offsets[i + 1] as usize];
         let mut lo = [f32::INFINITY; R];
         let mut hi = [f32::NEG_INFINITY; R];
@@ -448,7 +470,7 @@ impl ScreenRaster {
                 hi[j] = if meets { max(hi[j], max(xa, xb)) } else { hi[j] };
             }
         }
-        let mut out = [None; R];
+        let mut out = [None; BAND_ROWS as usize];
         for j in 0..rows as usize {
             if lo[j] > hi[j] || hi[j] + SPAN_MARGIN < 0.0 {
                 continue;
@@ -516,9 +538,20 @@ impl ScreenRaster {
         let band_row = tile_rows.start;
         // Spans kept by the binning when bands are cut into tiles ([`BandBins`]), else walked.
         let stored = self.tiling.across() > 1;
-        for &k in &self.tiles[tile] {
+        let list = &self.tiles[tile];
+        for (n, &k) in list.iter().enumerate() {
             if control.is_cancelled() {
                 return stats;
+            }
+            // What a plane a few places on will read first, asked of memory now: a tile's
+            // planes are a sparse pick of the piece's, and the first read of each one's view
+            // missed the caches (half of this loop's own time at 655,360 planes, `perf
+            // annotate`). Its polygon's vertices, asked for too, made the render slower (a
+            // fifth of the span walk's time is their first read; cause not found).
+            if let Some(&ahead) = list.get(n + PREFETCH_AHEAD) {
+                let plane = bins.records[ahead as usize].plane as usize;
+                prefetch(&ctx.views[plane]);
+                prefetch(&prepared[plane]);
             }
             let record = &bins.records[k as usize];
             let plane = record.plane;
@@ -818,6 +851,31 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
     found
 }
 
+/// How many planes of a tile's list ahead of the one gathered [`ScreenRaster::gather_tile`]
+/// asks memory for: its view and its weights' constants.
+const PREFETCH_AHEAD: usize = 4;
+
+/// Asks for the cache lines of `value` (a hint: no fault, no effect on any value); nothing
+/// for a zero-sized one, whose address is no memory's.
+#[inline(always)]
+fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let (start, len) = (value as *const T as *const u8, std::mem::size_of::<T>());
+        // A byte in every line from the first byte's to the last's.
+        let skew = start as usize % 64;
+        for offset in (0..if len == 0 { 0 } else { skew + len }).step_by(64) {
+            let line = start.wrapping_sub(skew).wrapping_add(offset);
+            // SAFETY: a prefetch reads nothing the program sees and cannot fault; SSE is part
+            // of x86_64's baseline.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(line as *const i8) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
+}
+
 /// The planes that may cover a band of rows, each with its spans there: what the band's tiles
 /// gather.
 #[derive(Default)]
@@ -951,6 +1009,46 @@ mod tests {
             println!("{name}: {shadowing} of 20,000 planes may be shadowed, {extra} masks grown");
             assert!(shadowing > 0, "{name}: no plane to test");
         }
+    }
+
+    /// The span walk gives each row the same columns whatever the lanes it runs in: a part's
+    /// rows in 4 or 8 lanes, a band's in 16, and each row alone, for the benchmark's planes
+    /// over every start row of the image and every count of rows; and the rows asked for only.
+    #[test]
+    fn spans_are_the_same_in_every_width() {
+        use crate::photon_plane::sample_planes;
+        let text = include_str!("../../../media_scenes/six_lights.toml");
+        let scene =
+            crate::scene::Scene::parse(text, "six_lights", "six_lights").unwrap().with_resolution(96, 54).unwrap();
+        let camera = &scene.camera;
+        let planes = sample_planes(&scene, Default::default(), 300, 5);
+        let raster = ScreenRaster::build(camera, &planes, &scene.medium);
+        let mut found = 0;
+        for i in 0..planes.len() {
+            for first_row in 0..camera.height {
+                let most = BAND_ROWS.min(camera.height - first_row);
+                // Row by row, in the widest lanes: the reference for every width.
+                let single: Vec<_> = (0..most).map(|j| raster.spans_in_lanes::<16>(i, first_row + j, 1)[0]).collect();
+                found += single.iter().flatten().count();
+                for rows in 1..=most {
+                    let want: Vec<_> = single[..rows as usize]
+                        .iter()
+                        .copied()
+                        .chain(std::iter::repeat_n(None, (BAND_ROWS - rows) as usize))
+                        .collect();
+                    assert_eq!(raster.spans(i, first_row, rows).to_vec(), want, "plane {i} rows {first_row} + {rows}");
+                    assert_eq!(
+                        raster.spans_sized(i, first_row, rows).to_vec(),
+                        want,
+                        "plane {i} rows {first_row} + {rows}"
+                    );
+                    if rows <= 8 {
+                        assert_eq!(raster.spans_in_lanes::<8>(i, first_row, rows).to_vec(), want);
+                    }
+                }
+            }
+        }
+        assert!(found > 1000, "{found} spans");
     }
 
     /// Every pixel lies in exactly one tile, whatever the image and the workers; the benchmark's
