@@ -539,16 +539,19 @@ impl ScreenRaster {
         // Spans kept by the binning when bands are cut into tiles ([`BandBins`]), else walked.
         let stored = self.tiling.across() > 1;
         let list = &self.tiles[tile];
+        // What a plane a few places on will read first, asked of memory now, where the piece's
+        // views outgrow a core's cache: a tile's planes are a sparse pick of the piece's, and
+        // the first read of each one's view missed the caches (half of this loop's own time at
+        // 655,360 planes, `perf annotate`). Below that (the benchmark's pieces of 2,560 planes,
+        // 350 kB of views) the prefetches cost 4% and found the views there already. Its
+        // polygon's vertices, asked for too, made the render slower (a fifth of the span walk's
+        // time is their first read; cause not found).
+        let far = std::mem::size_of_val(&ctx.views[..]) > PREFETCH_VIEWS_FROM;
         for (n, &k) in list.iter().enumerate() {
             if control.is_cancelled() {
                 return stats;
             }
-            // What a plane a few places on will read first, asked of memory now: a tile's
-            // planes are a sparse pick of the piece's, and the first read of each one's view
-            // missed the caches (half of this loop's own time at 655,360 planes, `perf
-            // annotate`). Its polygon's vertices, asked for too, made the render slower (a
-            // fifth of the span walk's time is their first read; cause not found).
-            if let Some(&ahead) = list.get(n + PREFETCH_AHEAD) {
+            if let Some(&ahead) = list.get(n + PREFETCH_AHEAD).filter(|_| far) {
                 let plane = bins.records[ahead as usize].plane as usize;
                 prefetch(&ctx.views[plane]);
                 prefetch(&prepared[plane]);
@@ -854,6 +857,10 @@ pub fn gather_pieces<D: Denominator, const CONTRIBUTE: bool>(
 /// How many planes of a tile's list ahead of the one gathered [`ScreenRaster::gather_tile`]
 /// asks memory for: its view and its weights' constants.
 const PREFETCH_AHEAD: usize = 4;
+
+/// The size of a piece's views from which [`ScreenRaster::gather_tile`] prefetches (1 MiB:
+/// about 7,700 planes).
+const PREFETCH_VIEWS_FROM: usize = 1 << 20;
 
 /// Asks for the cache lines of `value` (a hint: no fault, no effect on any value); nothing
 /// for a zero-sized one, whose address is no memory's.
