@@ -569,16 +569,19 @@ impl Scene {
 
     /// Whether a light panel other than `except` blocks the segment from light point `y` to `x`.
     pub fn blocked(&self, y: DVec3, x: DVec3, except: usize) -> bool {
+        self.blocked_by(y, x, (0..self.lights.len()).filter(|&k| k != except))
+    }
+
+    /// Whether one of the light panels `lights` blocks the segment from `y` to `x` (its ends
+    /// left out, to a billionth of its length): [`Scene::blocked`] among a subset.
+    pub fn blocked_by(&self, y: DVec3, x: DVec3, mut lights: impl Iterator<Item = usize>) -> bool {
         let d = x - y;
         let len = d.length();
         if len == 0.0 {
             return false;
         }
         let dir = d / len;
-        self.lights
-            .iter()
-            .enumerate()
-            .any(|(k, l)| k != except && l.intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
+        lights.any(|k| self.lights[k].intersect(y, dir, 1e-9 * len, len * (1.0 - 1e-9)).is_some())
     }
 
     /// Light choice by power, P_l proportional to A_l luminance(Le_l) (docs/mathematics.md
