@@ -23,7 +23,7 @@ use fogplanes::partial::{chunks, finish, merge_in_canonical_order};
 use fogplanes::photon_plane::{PlaneSet, sample_plane_range};
 use fogplanes::pixel::{plane_group, ray_set_of_plane, ray_set_rays};
 use fogplanes::quadrature::single_scattering;
-use fogplanes::reference::{ReferenceOptions, render_reference};
+use fogplanes::reference::{ReferenceImage, ReferenceOptions, render_reference};
 use fogplanes::render::{render, render_chunk, render_in_passes};
 use fogplanes::sampling::Sampler;
 use fogplanes::scene::Scene;
@@ -258,6 +258,34 @@ fn light_at(corner: DVec3, side: f64, radiance: f64) -> String {
     )
 }
 
+/// The reference that [`against_reference`] holds renders to (4,096 samples a pixel, seed
+/// 17), rendered once per scene and pixel filter in this process and shared: the reference
+/// renderer gives the same bits each time, and the benchmark at 32x18 is the reference of a
+/// dozen tests here and in tests/gpu.rs (about a CPU second each).
+fn reference_of(scene: &Scene, pixel_center: bool) -> &'static ReferenceImage {
+    type Cell = &'static std::sync::OnceLock<ReferenceImage>;
+    // A scene by its description (every field, printed), the filter, and its reference's cell.
+    static CELLS: std::sync::Mutex<Vec<((String, bool), Cell)>> = std::sync::Mutex::new(Vec::new());
+    let key = (format!("{scene:?}"), pixel_center);
+    // The cell found or made under the lock, its reference rendered after it: a second test
+    // that wants it waits for the first's.
+    let cell = {
+        let mut cells = CELLS.lock().unwrap_or_else(|p| p.into_inner());
+        match cells.iter().find(|(k, _)| *k == key) {
+            Some(&(_, cell)) => cell,
+            None => {
+                let cell: Cell = Box::leak(Box::new(std::sync::OnceLock::new()));
+                cells.push((key, cell));
+                cell
+            }
+        }
+    };
+    cell.get_or_init(|| {
+        let opts = ReferenceOptions { spp: 4096, uniform: false, seed: 17, pixel_center };
+        render_reference(scene, &opts, Control::none()).unwrap()
+    })
+}
+
 /// The image mean and the means of blocks of pixels over `seeds` plane sets, against the
 /// reference's (its standard errors from its replicates): every |z| within 4.5. Returns the
 /// lines printed.
@@ -268,12 +296,7 @@ pub(crate) fn against_reference(
     seeds: u64,
     image: &dyn Fn(u64) -> Film,
 ) -> Vec<String> {
-    let reference = render_reference(
-        scene,
-        &ReferenceOptions { spp: 4096, uniform: false, seed: 17, pixel_center },
-        Control::none(),
-    )
-    .unwrap();
+    let reference = reference_of(scene, pixel_center);
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     const BLOCK: usize = 8;
     let blocks_x = w.div_ceil(BLOCK);
