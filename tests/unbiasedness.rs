@@ -21,7 +21,7 @@ use fogplanes::weights::{Estimator, Weighting};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::common::{BruteForce, MeanRgb, TWO_LIGHTS};
+use crate::common::{BruteForce, MeanRgb, Memo, TWO_LIGHTS};
 
 struct Case {
     name: &'static str,
@@ -112,25 +112,9 @@ fn isotropic_truths() -> &'static Truths<'static> {
 /// for the tests that share them (the Henyey-Greenstein media and the lobes' share at its ends
 /// hold their estimators to the same three scenes): each a few CPU seconds of quadrature.
 fn truths_seen_from(g: f64, eye: DVec3) -> &'static Truths<'static> {
-    type Cell = &'static std::sync::OnceLock<Truths<'static>>;
-    // A scene's g and eye by their bits, and its truths' cell.
-    type Cells = Vec<((u64, [u64; 3]), Cell)>;
-    static CELLS: std::sync::Mutex<Cells> = std::sync::Mutex::new(Vec::new());
-    let key = (g.to_bits(), eye.to_array().map(f64::to_bits));
-    // The cell found or made under the lock, its truths computed after it: a second test that
-    // wants them waits for the first's.
-    let cell = {
-        let mut cells = CELLS.lock().unwrap();
-        match cells.iter().find(|(k, _)| *k == key) {
-            Some(&(_, cell)) => cell,
-            None => {
-                let cell: Cell = Box::leak(Box::new(std::sync::OnceLock::new()));
-                cells.push((key, cell));
-                cell
-            }
-        }
-    };
-    cell.get_or_init(|| {
+    // A scene by its g and eye, their bits.
+    static TRUTHS: Memo<(u64, [u64; 3]), Truths<'static>> = Memo::new();
+    TRUTHS.get((g.to_bits(), eye.to_array().map(f64::to_bits)), || {
         let scene: &'static Scene = Box::leak(Box::new(two_lights_seen_from(g, eye)));
         Truths::of_cases(scene, cases_with_the_eyes(eye))
     })

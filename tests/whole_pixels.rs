@@ -31,7 +31,7 @@ use fogplanes::settings::Overrides;
 use fogplanes::weights::Weighting;
 use glam::{DVec3, Vec3};
 
-use crate::common::{BruteForce, MeanEstimate, MeanRgb, TWO_LIGHTS};
+use crate::common::{BruteForce, MeanEstimate, MeanRgb, Memo, TWO_LIGHTS};
 
 /// Two panels crossing each other (the line where they meet is an outline), and a strip reaching
 /// from the far wall to behind the camera (its outline crosses the camera's plane).
@@ -263,24 +263,9 @@ fn light_at(corner: DVec3, side: f64, radiance: f64) -> String {
 /// renderer gives the same bits each time, and the benchmark at 32x18 is the reference of a
 /// dozen tests here and in tests/gpu.rs (about a CPU second each).
 fn reference_of(scene: &Scene, pixel_center: bool) -> &'static ReferenceImage {
-    type Cell = &'static std::sync::OnceLock<ReferenceImage>;
-    // A scene by its description (every field, printed), the filter, and its reference's cell.
-    static CELLS: std::sync::Mutex<Vec<((String, bool), Cell)>> = std::sync::Mutex::new(Vec::new());
-    let key = (format!("{scene:?}"), pixel_center);
-    // The cell found or made under the lock, its reference rendered after it: a second test
-    // that wants it waits for the first's.
-    let cell = {
-        let mut cells = CELLS.lock().unwrap_or_else(|p| p.into_inner());
-        match cells.iter().find(|(k, _)| *k == key) {
-            Some(&(_, cell)) => cell,
-            None => {
-                let cell: Cell = Box::leak(Box::new(std::sync::OnceLock::new()));
-                cells.push((key, cell));
-                cell
-            }
-        }
-    };
-    cell.get_or_init(|| {
+    // A scene by its description (every field, printed), and the filter.
+    static REFERENCES: Memo<(String, bool), ReferenceImage> = Memo::new();
+    REFERENCES.get((format!("{scene:?}"), pixel_center), || {
         let opts = ReferenceOptions { spp: 4096, uniform: false, seed: 17, pixel_center };
         render_reference(scene, &opts, Control::none()).unwrap()
     })

@@ -62,6 +62,35 @@ impl WithDenominator for BruteForce<'_> {
     }
 }
 
+/// Values computed once per key for the process, each kept for its lifetime: the first test
+/// that asks for a key's value makes it, and a second that wants it meanwhile waits for it,
+/// while values of other keys are made beside it (the lock is held only to find or add the
+/// key's cell). For costly values that tests share, made the same way each time.
+pub struct Memo<K, V: 'static> {
+    cells: std::sync::Mutex<Vec<(K, &'static std::sync::OnceLock<V>)>>,
+}
+
+impl<K: PartialEq, V> Memo<K, V> {
+    pub const fn new() -> Self {
+        Memo { cells: std::sync::Mutex::new(Vec::new()) }
+    }
+
+    pub fn get(&self, key: K, make: impl FnOnce() -> V) -> &'static V {
+        let cell = {
+            let mut cells = self.cells.lock().unwrap_or_else(|p| p.into_inner());
+            match cells.iter().find(|(k, _)| *k == key) {
+                Some(&(_, cell)) => cell,
+                None => {
+                    let cell: &'static std::sync::OnceLock<V> = Box::leak(Box::new(std::sync::OnceLock::new()));
+                    cells.push((key, cell));
+                    cell
+                }
+            }
+        };
+        cell.get_or_init(make)
+    }
+}
+
 /// Running sums of independent estimates of one quantity.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MeanEstimate {
