@@ -172,11 +172,12 @@ pub fn single_scattering(scene: &Scene, o: DVec3, we: DVec3, rel_tol: f64) -> DV
     let Some((t0, t1)) = scene.camera_segment(o, we).0 else {
         return DVec3::ZERO;
     };
+    let extinction = Extinction::of(scene);
     let mut out = DVec3::ZERO;
     for (li, light) in scene.lights.iter().enumerate() {
         let outer = |t: f64| -> [f64; 3] {
-            let at = LightAt { scene, light: li, x: o + t * we, we };
-            let (tr, value) = (transmittance(scene, t - t0), at.integral(rel_tol, Shadows::Culled));
+            let at = LightAt { scene, extinction, light: li, x: o + t * we, we };
+            let (tr, value) = (extinction.transmittance(t - t0), at.integral(rel_tol, Shadows::Culled));
             std::array::from_fn(|c| tr[c] * value[c])
         };
         let values = integrate_each(outer, t0, t1, rel_tol, 0.0);
@@ -187,13 +188,22 @@ pub fn single_scattering(scene: &Scene, o: DVec3, we: DVec3, rel_tol: f64) -> DV
     out
 }
 
-/// `exp(-sigma_t s)` channel by channel; one exponential where the medium is grey.
-fn transmittance(scene: &Scene, s: f64) -> [f64; 3] {
-    let sigma_t = scene.medium.sigma_t().to_array();
-    if sigma_t[0] == sigma_t[1] && sigma_t[1] == sigma_t[2] {
-        [(-sigma_t[0] * s).exp(); 3]
-    } else {
-        sigma_t.map(|st| (-st * s).exp())
+/// The medium's extinction channel by channel, read once for a ray's integrals.
+#[derive(Clone, Copy, Debug)]
+struct Extinction {
+    sigma_t: [f64; 3],
+    grey: bool,
+}
+
+impl Extinction {
+    fn of(scene: &Scene) -> Self {
+        let sigma_t = scene.medium.sigma_t().to_array();
+        Extinction { sigma_t, grey: sigma_t[0] == sigma_t[1] && sigma_t[1] == sigma_t[2] }
+    }
+
+    /// `exp(-sigma_t s)` channel by channel; one exponential where the medium is grey.
+    fn transmittance(self, s: f64) -> [f64; 3] {
+        if self.grey { [(-self.sigma_t[0] * s).exp(); 3] } else { self.sigma_t.map(|st| (-st * s).exp()) }
     }
 }
 
@@ -210,6 +220,7 @@ enum Shadows {
 /// One light seen from a point `x` of a camera ray of direction `we`.
 struct LightAt<'a> {
     scene: &'a Scene,
+    extinction: Extinction,
     light: usize,
     x: DVec3,
     we: DVec3,
@@ -221,7 +232,7 @@ impl LightAt<'_> {
     /// light over the squared distance, visibility through the other panels, and the phase
     /// function, by nested adaptive quadrature over its two coordinates.
     fn integral(&self, rel_tol: f64, shadows: Shadows) -> [f64; 3] {
-        let &LightAt { scene, light: li, x, we } = self;
+        let &LightAt { scene, extinction, light: li, x, we } = self;
         let light = &scene.lights[li];
         let others = match shadows {
             Shadows::Culled => possible_blockers(scene, li, x),
@@ -240,7 +251,7 @@ impl LightAt<'_> {
                 // The phase function at the scattering angle between the light's travel (y to
                 // x) and the way to the eye (-we): section 1.1.
                 let phase = scene.medium.phase(to_x / d, -we);
-                transmittance(scene, d).map(|tr| tr * cos / d2 * phase)
+                extinction.transmittance(d).map(|tr| tr * cos / d2 * phase)
             };
             integrate_each(f, 0.0, light.height, rel_tol * 0.1, 0.0).map(|q| q.value)
         };
@@ -378,7 +389,7 @@ mod tests {
                 let x = m.min + DVec3::from_array(std::array::from_fn(|_| rng.random::<f64>())) * (m.max - m.min);
                 let we = (scene.camera.position - x).normalize();
                 for light in 0..scene.lights.len() {
-                    let at = LightAt { scene: &scene, light, x, we };
+                    let at = LightAt { scene: &scene, extinction: Extinction::of(&scene), light, x, we };
                     let (culled, all) = (at.integral(1e-4, Shadows::Culled), at.integral(1e-4, Shadows::All));
                     assert_eq!(
                         culled.map(f64::to_bits),
