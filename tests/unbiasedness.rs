@@ -127,18 +127,8 @@ fn largest_share(samples: impl Iterator<Item = f64>, mean: f64) -> f64 {
     largest / sum
 }
 
-/// Whether the camera ray may cross the plane: the crossing test of [`PlaneView::cross`] (the
-/// ray's distance `t` in `[t0, t1]`, `0 <= a <= width` along the chord, `r > 0` in front of the
-/// light) in f64 from the plane itself, each bound widened by a thousandth of the scene's
-/// lengths, and every plane the ray runs nearly parallel to kept, so that no plane the gather's
-/// f32 test finds is left out: a view of each plane for each ray was a fifth of this file's
-/// time. Tested against that test below.
-fn may_cross(plane: &PhotonPlane, origin: DVec3, ray: &CameraRay) -> bool {
-    Crossable::of(plane).may_cross(origin, ray)
-}
-
-/// A plane's part of [`may_cross`], made once for all the rays that test it: its normal and
-/// the normal's length (two cross products and a square root of each test's five).
+/// A plane as [`Crossable::may_cross`] tests it, made once for all the rays that test it: its
+/// normal and the normal's length (two cross products and a square root of each test's five).
 struct Crossable<'a> {
     plane: &'a PhotonPlane,
     normal: DVec3,
@@ -151,8 +141,13 @@ impl<'a> Crossable<'a> {
         Crossable { plane, normal, normal_length: normal.length() }
     }
 
-    /// [`may_cross`]: each bound tested as soon as its coordinate is known, since most planes
-    /// fail the first (the ray's `t`).
+    /// Whether the camera ray may cross the plane: the crossing test of [`PlaneView::cross`]
+    /// (the ray's distance `t` in `[t0, t1]`, `0 <= a <= width` along the chord, `r > 0` in
+    /// front of the light) in f64 from the plane itself, each bound widened by a thousandth of
+    /// the scene's lengths, and every plane the ray runs nearly parallel to kept, so that no
+    /// plane the gather's f32 test finds is left out: a view of each plane for each ray was a
+    /// fifth of this file's time. Each bound is tested as soon as its coordinate is known, since
+    /// most planes fail the first (the ray's `t`). Tested against the gather's test below.
     fn may_cross(&self, origin: DVec3, ray: &CameraRay) -> bool {
         let (plane, normal) = (self.plane, self.normal);
         let dir = ray.dir.as_dvec3();
@@ -184,9 +179,9 @@ fn run(truths: &Truths, sampler: Sampler, lobes: f64, weightings: &[Weighting], 
     // alone, in their order and with the whole set's N, so that each plane's view, and the sum
     // light by light over its hits, is the one of the whole set (the same bits: the gather tests
     // each plane's crossing itself, and a plane the ray misses adds nothing). The planes it may
-    // cross are found once per ray ([`may_cross`]), rather than once per weighting, where most
-    // planes miss; and the lights that may shadow a plane only for the planes a ray may cross
-    // (the rays of the test below keep about 1% of them), once for the batch.
+    // cross are found once per ray ([`Crossable::may_cross`]), rather than once per weighting,
+    // where most planes miss; and the lights that may shadow a plane only for the planes a ray
+    // may cross (the rays of the test below keep about 1% of them), once for the batch.
     let estimates: Vec<Vec<Vec<_>>> = (0..batches)
         .into_par_iter()
         .map(|batch| {
@@ -349,12 +344,12 @@ fn every_estimator_matches_quadrature_at_the_ends_of_the_lobes_share() {
     }
 }
 
-/// [`may_cross`] keeps every plane that the gather's crossing test finds, along each case's ray
-/// (the nearly parallel one and the one under the light included) and a thousand more rays from
-/// the eye and from inside the box, in every direction, over the planes of each scene that
-/// [`run`] is given (both samplers, g from -0.8 to 0.8, the lobes' share at both its ends, the
-/// eye below and above the light's plane); and it keeps few planes more than those, or it would
-/// save nothing.
+/// [`Crossable::may_cross`] keeps every plane that the gather's crossing test finds, along each
+/// case's ray (the nearly parallel one and the one under the light included) and a thousand
+/// more rays from the eye and from inside the box, in every direction, over the planes of each
+/// scene that [`run`] is given (both samplers, g from -0.8 to 0.8, the lobes' share at both its
+/// ends, the eye below and above the light's plane); and it keeps few planes more than those, or
+/// it would save nothing.
 #[test]
 fn may_cross_keeps_every_plane_the_gather_crosses() {
     use rand::{Rng, SeedableRng};
@@ -371,6 +366,7 @@ fn may_cross_keeps_every_plane_the_gather_crosses() {
         let eye = DVec3::new(0.0, eye, 6.0);
         let scene = two_lights_seen_from(g, eye);
         let planes = sample_plane_range(&scene, PlaneSet { sampler, seed: 11, lobes }, 0..4000);
+        let crossable: Vec<Crossable> = planes.iter().map(Crossable::of).collect();
         let mut rays: Vec<(DVec3, DVec3)> = cases_with_the_eyes(eye).into_iter().map(|c| (c.origin, c.dir)).collect();
         for _ in 0..1000 {
             let origin = if rng.random_bool(0.5) {
@@ -386,9 +382,9 @@ fn may_cross_keeps_every_plane_the_gather_crosses() {
             let Some((t0, t1)) = scene.camera_segment(origin, we).0 else { continue };
             let ray = CameraRay { dir: we.as_vec3(), t0: t0 as f32, t1: t1 as f32 };
             let one = RayBlock::one(&ray);
-            for plane in &planes {
+            for (plane, crossable) in planes.iter().zip(&crossable) {
                 let hit = PlaneView::new(plane, &scene, origin, planes.len(), (0, 0)).cross::<1, f32>(&one).hit;
-                let may = may_cross(plane, origin, &ray);
+                let may = crossable.may_cross(origin, &ray);
                 assert!(
                     may || !hit,
                     "a plane of light {} the ray from {origin} along {we} crosses is left out",
